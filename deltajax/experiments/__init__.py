@@ -1,0 +1,1 @@
+"""Experiments runnable with ``python -m deltajax.run experiment=<module name>``."""

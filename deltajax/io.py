@@ -1,0 +1,214 @@
+"""HDF5 results (SPEC §5): one self-describing file per run, written atomically; plain-NumPy loader.
+
+Layout: root attributes (version, git commit, resolved config as YAML, experiment, seed, precision,
+backend/device, start/end time); one group per kind of result (``robot``, ``workspace``, ``boundary``,
+``dynamics``, ``ga``, ``pareto``, ``refine``, ``bench``, nested groups allowed with "a/b" names). Every dataset
+has a ``units`` attribute and every dimension is an HDF5 dimension scale, so that
+``xarray.open_dataset(path, group=..., engine="h5netcdf")`` opens each group.
+
+Writes are atomic: the whole file is written to ``<name>.tmp`` and renamed over the old one, so a reader
+(or a killed run) never sees a half-written file. Host-side only; never call inside jit.
+"""
+
+from __future__ import annotations
+
+import datetime as _dt
+import os
+import subprocess
+from pathlib import Path
+from typing import Any, Mapping, Optional, Sequence
+
+import h5py
+import numpy as np
+
+__all__ = ["ResultsFile", "load", "git_commit", "RESERVED_NAMES"]
+
+RESERVED_NAMES = ("attrs", "units")
+
+
+def git_commit(cwd: Optional[os.PathLike] = None) -> str:
+    """The current git commit of the deltajax checkout (or of ``cwd``), '' when not in a repository."""
+    here = Path(cwd) if cwd is not None else Path(__file__).resolve().parent
+    try:
+        out = subprocess.run(["git", "rev-parse", "HEAD"], cwd=here, capture_output=True, text=True, timeout=5)
+    except (OSError, subprocess.SubprocessError):
+        return ""
+    return out.stdout.strip() if out.returncode == 0 else ""
+
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+class _Var:
+    __slots__ = ("data", "units", "dims", "attrs")
+
+    def __init__(self, data, units, dims, attrs):
+        self.data, self.units, self.dims, self.attrs = data, units, dims, attrs
+
+
+class ResultsFile:
+    """Stage results in memory and write them atomically to ``path`` on :meth:`flush`.
+
+    Example::
+
+        res = ResultsFile(run_dir / "results.h5", attrs={"experiment": "demo"})
+        res.put_axis("workspace", "z", z, units="m")
+        res.put("workspace", "volume", v, units="m^3")
+        res.put("workspace", "reachable", mask, units="1", dims=("x", "y", "z"))
+        res.flush()
+    """
+
+    def __init__(self, path: os.PathLike, attrs: Optional[Mapping[str, Any]] = None):
+        self.path = Path(path)
+        self.attrs: dict[str, Any] = {"start_time": _now()}
+        self.attrs.update(attrs or {})
+        self._groups: dict[str, dict[str, _Var]] = {}
+        self._group_attrs: dict[str, dict[str, Any]] = {}
+
+    # -- staging ---------------------------------------------------------------------------------------------
+    def put(self, group: str, name: str, data: Any, *, units: str, dims: Optional[Sequence[str]] = None,
+            attrs: Optional[Mapping[str, Any]] = None) -> None:
+        """Stage dataset ``group/name``.
+
+        Args:
+            group: group path, e.g. ``"workspace"`` or ``"workspace/fixed"``.
+            name: dataset name (not ``attrs``/``units``).
+            data: array-like (converted with ``np.asarray``; JAX arrays are copied to host).
+            units: SI units string ("m", "rad", "N m", "1" for dimensionless).
+            dims: names of the dimensions; each must be an axis staged with :meth:`put_axis` in the same group,
+                or is created as an index axis of the right length. ``None``: ``<name>_dim<i>`` index axes.
+            attrs: extra attributes.
+        """
+        if name in RESERVED_NAMES or "/" in name:
+            raise ValueError(f"dataset name {name!r} is reserved or contains '/'")
+        arr = np.asarray(data)
+        if arr.dtype.kind == "U":
+            arr = arr.astype(object)
+        if dims is None:
+            dims = tuple(f"{name}_dim{i}" for i in range(arr.ndim))
+        dims = tuple(dims)
+        if len(dims) != arr.ndim:
+            raise ValueError(f"{group}/{name}: {len(dims)} dims for an array of rank {arr.ndim}")
+        g = self._groups.setdefault(group, {})
+        for d, n in zip(dims, arr.shape):
+            if d in g and d != name:
+                if g[d].data.shape != (n,):
+                    raise ValueError(f"{group}/{name}: axis {d!r} has length {g[d].data.shape}, data has {n}")
+            elif d != name:
+                g[d] = _Var(np.arange(n), "1", (d,), {"index_axis": 1})
+        g[name] = _Var(arr, units, dims, dict(attrs or {}))
+
+    def put_axis(self, group: str, name: str, values: Any, *, units: str,
+                 attrs: Optional[Mapping[str, Any]] = None) -> None:
+        """Stage a 1-D coordinate axis (an HDF5 dimension scale) named ``name`` in ``group``."""
+        arr = np.asarray(values)
+        if arr.ndim != 1:
+            raise ValueError(f"axis {group}/{name} must be 1-D, got shape {arr.shape}")
+        self.put(group, name, arr, units=units, dims=(name,), attrs=attrs)
+
+    def set_attrs(self, group: Optional[str] = None, **attrs: Any) -> None:
+        """Set root attributes (``group=None``) or attributes of a group."""
+        if group is None:
+            self.attrs.update(attrs)
+        else:
+            self._group_attrs.setdefault(group, {}).update(attrs)
+
+    def has(self, group: str, name: Optional[str] = None) -> bool:
+        """Whether a group (or a dataset in it) has been staged."""
+        return group in self._groups and (name is None or name in self._groups[group])
+
+    # -- writing ---------------------------------------------------------------------------------------------
+    def flush(self, *, final: bool = False) -> Path:
+        """Write everything staged so far atomically; ``final=True`` also records the end time."""
+        if final:
+            self.attrs["end_time"] = _now()
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = self.path.with_name(self.path.name + ".tmp")
+        with h5py.File(tmp, "w") as f:
+            for k, v in self.attrs.items():
+                f.attrs[k] = _attr_value(v)
+            for gname, variables in self._groups.items():
+                g = f.require_group(gname)
+                for k, v in self._group_attrs.get(gname, {}).items():
+                    g.attrs[k] = _attr_value(v)
+                self._write_group(g, variables)
+            for gname, gattrs in self._group_attrs.items():
+                if gname not in self._groups:
+                    g = f.require_group(gname)
+                    for k, v in gattrs.items():
+                        g.attrs[k] = _attr_value(v)
+        os.replace(tmp, self.path)
+        return self.path
+
+    @staticmethod
+    def _write_group(g: h5py.Group, variables: dict[str, _Var]) -> None:
+        axes = {n for n, v in variables.items() if v.dims == (n,)}
+        dsets = {}
+        for n, v in variables.items():
+            data = v.data
+            if data.dtype == object:
+                dset = g.create_dataset(n, data=data.astype(h5py.string_dtype()))
+            else:
+                dset = g.create_dataset(n, data=data)
+            dset.attrs["units"] = v.units
+            for k, a in v.attrs.items():
+                if k == "index_axis":
+                    continue
+                dset.attrs[k] = _attr_value(a)
+            dsets[n] = dset
+        for n in axes:
+            dsets[n].make_scale(n)
+        for n, v in variables.items():
+            if n in axes:
+                continue
+            for i, d in enumerate(v.dims):
+                dsets[n].dims[i].attach_scale(dsets[d])
+
+
+def _attr_value(v: Any) -> Any:
+    if v is None:
+        return ""
+    if isinstance(v, (str, bytes, int, float, bool, np.generic, np.ndarray)):
+        return v
+    if isinstance(v, (list, tuple)):
+        try:
+            return np.asarray(v)
+        except Exception:  # noqa: BLE001 - ragged lists are stored as their repr
+            return repr(v)
+    return str(v)
+
+
+def _read_group(g: h5py.Group) -> dict[str, Any]:
+    out: dict[str, Any] = {"attrs": {k: _py(v) for k, v in g.attrs.items()}, "units": {}}
+    for k, item in g.items():
+        if isinstance(item, h5py.Group):
+            out[k] = _read_group(item)
+        else:
+            data = item[()]
+            if item.dtype.kind == "O" or h5py.check_string_dtype(item.dtype) is not None:
+                data = item.asstr()[()]
+            out[k] = data
+            if "units" in item.attrs:
+                out["units"][k] = _py(item.attrs["units"])
+    return out
+
+
+def _py(v: Any) -> Any:
+    if isinstance(v, bytes):
+        return v.decode()
+    if isinstance(v, np.generic):
+        return v.item()
+    return v
+
+
+def load(path: os.PathLike) -> dict[str, Any]:
+    """Load a results file as plain Python/NumPy.
+
+    Returns:
+        A dict with ``"attrs"`` (root attributes; ``attrs["config"]`` is the resolved YAML), ``"units"`` and
+        one dict per group, each holding its datasets as NumPy arrays, its own ``"attrs"`` and ``"units"``
+        (dataset name -> units string), and nested groups as dicts.
+    """
+    with h5py.File(path, "r") as f:
+        return _read_group(f)

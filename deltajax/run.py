@@ -1,0 +1,156 @@
+"""Command-line entry point (Hydra): ``python -m deltajax.run experiment=NAME key=value ...``.
+
+This is the only module that reads configuration, switches precision and picks the output directory.
+Experiments live in ``deltajax/experiments/<name>.py`` and expose ``run(ctx: RunContext) -> None``; their
+settings live in ``configs/experiment/<name>.yaml`` (``# @package _global_``, with ``experiment.name``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import importlib
+import os
+import sys
+import time
+from pathlib import Path
+from typing import Any, Iterable, Optional
+
+import hydra
+from omegaconf import DictConfig, OmegaConf
+
+CONFIG_DIR = os.environ.get("DELTAJAX_CONFIG_DIR", str(Path(__file__).resolve().parent.parent / "configs"))
+
+__all__ = ["RunContext", "main", "run_experiment", "CONFIG_DIR"]
+
+
+@dataclasses.dataclass
+class RunContext:
+    """What an experiment gets: config, output directory, results file, robots and helpers.
+
+    Attributes:
+        cfg: the resolved config (OmegaConf).
+        run_dir: the run's output directory (Hydra's), where results.h5 and plots go.
+        results: the run's :class:`deltajax.io.ResultsFile` (flushed at the end; flush it yourself to checkpoint).
+        robot: the fixed robot built from ``cfg.robot`` (validated).
+        recon: the reconfigurable robot, or ``None`` if ``cfg.robot.R_range`` is null.
+    """
+
+    cfg: DictConfig
+    run_dir: Path
+    results: Any
+    robot: Any
+    recon: Any
+
+    @property
+    def dtype(self):
+        import jax.numpy as jnp
+
+        return jnp.float64 if self.cfg.precision == "float64" else jnp.float32
+
+    def progress(self, iterable: Optional[Iterable] = None, *, total: Optional[int] = None, desc: str = ""):
+        """A tqdm progress bar (to stderr), disabled with ``progress=false``."""
+        from tqdm.auto import tqdm
+
+        return tqdm(iterable, total=total, desc=desc, disable=not self.cfg.get("progress", True),
+                    file=sys.stderr, mininterval=1.0)
+
+    def savefig(self, fig, name: str) -> Optional[Path]:
+        """Save a matplotlib figure as ``<run_dir>/<name>.png`` (if ``plots=true``) and close it."""
+        import matplotlib.pyplot as plt
+
+        path = None
+        if self.cfg.get("plots", True):
+            path = self.run_dir / f"{name}.png"
+            fig.savefig(path, dpi=120, bbox_inches="tight")
+        plt.close(fig)
+        return path
+
+    def log(self, msg: str) -> None:
+        print(f"[deltajax] {msg}", flush=True)
+
+
+def _validate_top(cfg: DictConfig) -> None:
+    from .config import ConfigError
+
+    if cfg.get("precision") not in ("float64", "float32"):
+        raise ConfigError(f"precision must be 'float64' or 'float32', got {cfg.get('precision')!r}")
+    seed = cfg.get("seed")
+    if not isinstance(seed, int) or isinstance(seed, bool):
+        raise ConfigError(f"seed must be an integer, got {seed!r}")
+    if "experiment" not in cfg or "name" not in cfg.experiment:
+        raise ConfigError("experiment.name is missing: pick one with experiment=NAME")
+
+
+def execute(cfg: DictConfig, run_dir: Path) -> Path:
+    """Run the experiment described by ``cfg`` into ``run_dir``; returns the results path."""
+    from .config import robot_from_config
+
+    _validate_top(cfg)
+    name = cfg.experiment.name
+    try:
+        module = importlib.import_module(f"deltajax.experiments.{name}")
+    except ModuleNotFoundError as e:
+        if e.name == f"deltajax.experiments.{name}":
+            raise SystemExit(f"unknown experiment {name!r} (no deltajax/experiments/{name}.py)") from None
+        raise
+    robot, recon = robot_from_config(cfg.robot)  # validated before anything compiles
+
+    import jax
+
+    jax.config.update("jax_enable_x64", cfg.precision == "float64")
+    from . import __version__
+    from .io import ResultsFile, git_commit
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    dev = jax.devices()[0]
+    attrs = {
+        "deltajax_version": __version__,
+        "git_commit": git_commit(),
+        "config": OmegaConf.to_yaml(cfg, resolve=True),
+        "experiment": name,
+        "seed": int(cfg.seed),
+        "precision": str(cfg.precision),
+        "backend": jax.default_backend(),
+        "device": f"{dev.platform}:{getattr(dev, 'device_kind', '')} x{jax.device_count()}",
+        "jax_version": jax.__version__,
+    }
+    results = ResultsFile(run_dir / "results.h5", attrs=attrs)
+    ctx = RunContext(cfg=cfg, run_dir=run_dir, results=results, robot=robot, recon=recon)
+    t0 = time.perf_counter()
+    module.run(ctx)
+    results.set_attrs(wall_time_s=time.perf_counter() - t0)
+    path = results.flush(final=True)
+    ctx.log(f"wrote {path}")
+    return path
+
+
+@hydra.main(config_path=CONFIG_DIR, config_name="config", version_base="1.3")
+def main(cfg: DictConfig) -> None:
+    """Hydra entry point."""
+    from hydra.core.hydra_config import HydraConfig
+
+    execute(cfg, Path(HydraConfig.get().runtime.output_dir))
+
+
+def run_experiment(name: str, overrides: Iterable[str] = (), run_dir: Optional[os.PathLike] = None) -> Path:
+    """Run an experiment from Python with the same configs as the CLI (Hydra compose API).
+
+    Args:
+        name: experiment name (``configs/experiment/<name>.yaml``).
+        overrides: Hydra overrides, e.g. ``["robot.forearm=0.45", "plots=false"]``.
+        run_dir: output directory (default: a fresh directory under ``outputs/<name>/``).
+
+    Returns:
+        Path of the written results.h5.
+    """
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose(config_name="config", overrides=[f"experiment={name}", *overrides])
+    if run_dir is None:
+        run_dir = Path("outputs") / name / time.strftime("%Y-%m-%d_%H-%M-%S")
+    return execute(cfg, Path(run_dir))
+
+
+if __name__ == "__main__":
+    main()
