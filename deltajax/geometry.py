@@ -228,7 +228,7 @@ def to_z_up(p: Any) -> jax.Array:
     right-handed, so chain 0 stays on +x. Apply to the last axis of any batch.
     """
     p = jnp.asarray(p)
-    return p * jnp.asarray([1.0, -1.0, -1.0], dtype=p.dtype)
+    return jnp.concatenate([p[..., :1], -p[..., 1:]], axis=-1)
 
 
 def from_z_up(p: Any) -> jax.Array:

@@ -304,8 +304,7 @@ def classify_singularity(robot: Delta, p: Float[Array, "3"], theta: Float[Array,
     sx = jnp.linalg.svd(Jx, compute_uv=False)
     jx_rank = jnp.sum(sx > rank_tol * jnp.maximum(sx[0], 1e-300)).astype(jnp.int32)
     jq_rank = jnp.sum(jnp.abs(diag) > rank_tol * robot.upper_arm).astype(jnp.int32)
-    sq = jnp.linalg.svd(Jq / jnp.concatenate([jnp.ones((1,), Jq.dtype), jnp.full((3,), 1.0, Jq.dtype)
-                                               * robot.upper_arm]), compute_uv=False)
+    sq = jnp.linalg.svd(homogenise(Jq, robot.upper_arm), compute_uv=False)
     jq_full_rank = jnp.sum(sq > rank_tol * jnp.maximum(sq[0], 1e-300)).astype(jnp.int32)
 
     ind = indices(robot, p, theta)

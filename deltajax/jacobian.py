@@ -62,7 +62,7 @@ def jacobian(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]) -> Fl
 def homogenise(J: Float[Array, "3 4"], length: Float[Array, ""] | float) -> Float[Array, "3 4"]:
     """Homogenised Jacobian: the theta-columns (units of length) divided by ``length`` (paper §3, L1)."""
     scale = jnp.concatenate([jnp.ones((1,), J.dtype), jnp.full((J.shape[1] - 1,), 1.0, J.dtype) / length])
-    return J * scale
+    return J * scale[None, :]
 
 
 def _resolve_length(robot: Delta, length: Optional[float]):
