@@ -12,4 +12,9 @@ from .jacobian import Jacobians, homogenise, jacobian, jacobians
 from .kinematics import (FKResult, IKCosSin, IKResult, elbows, fk, forearm_units, ik, ik_cos_sin,
                          passive_angles)
 
+from . import dynamics, trajectory
+from .dynamics import CycleMetrics, Limits, Torques, cycle_metrics, cycle_profile, inverse_dynamics
+from .mass import MassModel
+from .trajectory import Cycle, adept_cycle, ga_paper_motion
+
 __version__ = "0.1.0"

@@ -1,0 +1,623 @@
+"""Inverse dynamics of the (reconfigurable) Delta robot, single configuration (vmap for batches).
+
+Model: :mod:`deltajax.mass` (lumped masses; forearm split between elbow and platform; z down, gravity +z).
+Generalised coordinates q = (R, theta_1, theta_2, theta_3): R is the reconfiguration joint that moves the
+three A_i radially together (the robot's ``base_radius`` is R at the current instant), theta the actuated
+arm angles. Generalised forces: ``tau`` (N m, about the motor axes, positive in the +theta = downward sense,
+at the gearbox output) and ``force_R`` (N, total radial force of the R actuator, positive outward).
+
+Three independent formulations (tested to agree to 1e-9 in float64):
+
+* ``method="lagrange"`` (GA paper §2.6, derived here since its formulas are garbled): the Lagrangian in the
+  redundant coordinates (p, R, theta) with the three loop constraints
+  Gamma_i = |C_i - B_i|^2 - L2^2 = 0 and multipliers lambda. Per chain, with I = arm inertia about the motor
+  axis (reflected rotor included), s = first moment m_a c + m_e L1, m_R = radial mass, M = platform mass:
+
+      T = sum_i [ m_R Rdot^2 / 2 - s sin(th_i) Rdot thdot_i + I thdot_i^2 / 2 ] + M |pdot|^2 / 2
+      V = - g sum_i s sin(th_i) - M g p_z                         (z down)
+
+  giving  M (pddot - g e_z) = sum_i lambda_i dGamma_i/dp   (3 equations -> lambda), then
+  tau_i   = I thddot_i - s sin(th_i) Rddot - g s cos(th_i) - lambda_i dGamma_i/dth_i,
+  force_R = 3 m_R Rddot - s sum_i (sin th_i thddot_i + cos th_i thdot_i^2) - sum_i lambda_i dGamma_i/dR.
+* ``method="virtual_work"`` (d'Alembert + Jacobian transpose): inertial-minus-gravity forces of every lumped
+  body from its point acceleration, mapped by the partial velocities of the arms, plus the platform's
+  ``J^T F = Jq^T Jx^-T M (pddot - g e_z)`` with ``Jx, Jq`` from :func:`deltajax.jacobians`.
+* ``method="autodiff"``: Euler-Lagrange equations of the *reduced* Lagrangian L(q, qdot) with the platform
+  position from the forward kinematics, differentiated by JAX (no IK, no Jacobians, no hand algebra).
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float
+
+from .geometry import Delta
+from .jacobian import jacobians
+from .kinematics import _from_chain_frames, fk, ik, to_chain_frames
+
+__all__ = [
+    "Motion",
+    "Torques",
+    "joint_motion",
+    "platform_motion",
+    "inverse_dynamics",
+    "inverse_dynamics_motion",
+    "gravity_torques",
+    "energy",
+    "energy_from_joints",
+    "METHODS",
+    "Limits",
+    "CycleProfile",
+    "CycleMetrics",
+    "cycle_profile",
+    "cycle_metrics",
+    "within_limits",
+    "min_cycle_time_bisection",
+]
+
+METHODS = ("virtual_work", "lagrange", "autodiff")
+
+
+class Motion(NamedTuple):
+    """Kinematic state of the whole robot at one instant (base frame, SI units).
+
+    Attributes:
+        p, p_dot, p_ddot: platform centre position (m), velocity (m/s), acceleration (m/s^2).
+        theta, theta_dot, theta_ddot: actuated angles (rad), rates (rad/s), accelerations (rad/s^2).
+        R_dot, R_ddot: reconfiguration joint rate (m/s) and acceleration (m/s^2); R itself is the robot's
+            ``base_radius``.
+        ok: kinematics solved, within joint limits and away from singularities (Jx and Jq invertible).
+    """
+
+    p: Float[Array, "3"]
+    p_dot: Float[Array, "3"]
+    p_ddot: Float[Array, "3"]
+    theta: Float[Array, "3"]
+    theta_dot: Float[Array, "3"]
+    theta_ddot: Float[Array, "3"]
+    R_dot: Float[Array, ""]
+    R_ddot: Float[Array, ""]
+    ok: Bool[Array, ""]
+
+
+class Torques(NamedTuple):
+    """Actuator efforts.
+
+    Attributes:
+        tau: arm torques (N m), positive in the +theta (downward) sense, at the gearbox output.
+        force_R: total force of the R actuator along +R (outward), N.
+        ok: the motion was valid (see :class:`Motion`); efforts are NaN otherwise.
+    """
+
+    tau: Float[Array, "3"]
+    force_R: Float[Array, ""]
+    ok: Bool[Array, ""]
+
+
+def _require_mass(robot: Delta):
+    if robot.mass is None:
+        raise ValueError("robot.mass is None: dynamics needs a mass model (e.g. presets.franco2026(with_mass=True)"
+                         " or a `mass:` block in the robot config)")
+    return robot.mass
+
+
+def _chain_terms(robot: Delta, p, theta):
+    """Loop vectors w_i = C_i - B_i (chain frames), unit u (local, base) and Jq diagonal d_i = L1 sin th2 sin th3."""
+    L1 = robot.upper_arm
+    loc = to_chain_frames(p)
+    w = jnp.stack([loc[:, 0] + robot.platform_radius - robot.base_radius - L1 * jnp.cos(theta), loc[:, 1],
+                   loc[:, 2] - L1 * jnp.sin(theta)], axis=-1)
+    u = w / robot.forearm
+    d = L1 * (u[:, 2] * jnp.cos(theta) - u[:, 0] * jnp.sin(theta))
+    return w, u, d
+
+
+def _validity(robot: Delta, u_local, d, tol):
+    """Away from type-1 (Jq) and type-2 (Jx) singularities, relative tolerance ``tol``."""
+    det_jx = jnp.linalg.det(_from_chain_frames(u_local))
+    return (jnp.abs(det_jx) > tol) & jnp.all(jnp.abs(d) > tol * robot.upper_arm)
+
+
+def _elbow_rates(robot: Delta, theta, theta_dot, theta_ddot, R_dot, R_ddot):
+    """Elbow velocity and acceleration in the chain frames (rows = chains)."""
+    L1 = robot.upper_arm
+    c, s = jnp.cos(theta), jnp.sin(theta)
+    zero = jnp.zeros_like(theta)
+    b_dot = jnp.stack([R_dot - L1 * s * theta_dot, zero, L1 * c * theta_dot], axis=-1)
+    b_ddot = jnp.stack([R_ddot - L1 * c * theta_dot ** 2 - L1 * s * theta_ddot, zero,
+                        -L1 * s * theta_dot ** 2 + L1 * c * theta_ddot], axis=-1)
+    return b_dot, b_ddot
+
+
+def joint_motion(robot: Delta, p: Float[Array, "3"], p_dot: Float[Array, "3"], p_ddot: Float[Array, "3"],
+                 R_dot=0.0, R_ddot=0.0, *, branch: str = "outer", singular_tol: float = 1e-9) -> Motion:
+    """Joint positions, rates and accelerations for a platform motion (IK + closed-form loop derivatives).
+
+    Differentiating |C_i - B_i|^2 = L2^2 once and twice (w = C_i - B_i in chain i's frame, u = w / L2):
+    ``u.pdot = u_x Rdot + d_i thdot_i`` and
+    ``u.pddot + |wdot|^2 / L2 = u_x Rddot - L1 thdot^2 (u_x cos th + u_z sin th) + d_i thddot_i``,
+    with d_i = L1 (u_z cos th - u_x sin th) = L1 sin th2 sin th3 (the Jq diagonal).
+
+    Args:
+        robot: the robot at the current base radius R.
+        p, p_dot, p_ddot: platform position, velocity, acceleration (base frame, SI).
+        R_dot, R_ddot: reconfiguration rate and acceleration (m/s, m/s^2).
+        branch: IK branch.
+        singular_tol: relative threshold on |det Jx| and |d_i| / L1 below which the sample is flagged.
+
+    Returns:
+        :class:`Motion`; ``ok`` False (and NaN joint values) where unreachable, outside limits or singular.
+    """
+    p, p_dot, p_ddot = (jnp.asarray(a) for a in (p, p_dot, p_ddot))
+    dtype = jnp.result_type(p.dtype, robot.upper_arm.dtype)
+    R_dot = jnp.asarray(R_dot, dtype)
+    R_ddot = jnp.asarray(R_ddot, dtype)
+    sol = ik(robot, p, branch=branch)
+    theta = jnp.where(sol.ok, sol.theta, 0.0)
+    w, u, d = _chain_terms(robot, p, theta)
+    ok = sol.ok & _validity(robot, u, d, singular_tol)
+    d_safe = jnp.where(jnp.abs(d) > 0, d, 1.0)
+    pd_loc = to_chain_frames(p_dot)
+    pdd_loc = to_chain_frames(p_ddot)
+    theta_dot = (jnp.sum(u * pd_loc, axis=-1) - u[:, 0] * R_dot) / d_safe
+    b_dot, _ = _elbow_rates(robot, theta, theta_dot, jnp.zeros_like(theta), R_dot, R_ddot)
+    w_dot = pd_loc - b_dot
+    L1 = robot.upper_arm
+    c, s = jnp.cos(theta), jnp.sin(theta)
+    theta_ddot = (jnp.sum(u * pdd_loc, axis=-1) + jnp.sum(w_dot * w_dot, axis=-1) / robot.forearm
+                  - u[:, 0] * R_ddot + L1 * theta_dot ** 2 * (u[:, 0] * c + u[:, 2] * s)) / d_safe
+    nan = jnp.asarray(jnp.nan, dtype)
+    return Motion(p=p, p_dot=p_dot, p_ddot=p_ddot, theta=jnp.where(ok, theta, nan),
+                  theta_dot=jnp.where(ok, theta_dot, nan), theta_ddot=jnp.where(ok, theta_ddot, nan),
+                  R_dot=R_dot, R_ddot=R_ddot, ok=ok)
+
+
+def platform_motion(robot: Delta, theta: Float[Array, "3"], theta_dot: Float[Array, "3"],
+                    theta_ddot: Float[Array, "3"], R_dot=0.0, R_ddot=0.0, *, mode: str = "lower",
+                    singular_tol: float = 1e-9) -> Motion:
+    """Platform position, velocity and acceleration for a joint motion (FK + the same loop derivatives).
+
+    ``Jx pdot = b1``, ``Jx pddot = b2`` with b1_i = u_i.Bdot_i and b2_i = u_i.Bddot_i - |wdot_i|^2 / L2
+    (u_i, Bdot_i in chain i's frame).
+    """
+    theta, theta_dot, theta_ddot = (jnp.asarray(a) for a in (theta, theta_dot, theta_ddot))
+    dtype = jnp.result_type(theta.dtype, robot.upper_arm.dtype)
+    R_dot = jnp.asarray(R_dot, dtype)
+    R_ddot = jnp.asarray(R_ddot, dtype)
+    fwd = fk(robot, theta, mode=mode)
+    p = jnp.where(fwd.ok, fwd.p, jnp.asarray([0.0, 0.0, 1.0], dtype) * robot.forearm)
+    w, u, d = _chain_terms(robot, p, theta)
+    ok = fwd.ok & _validity(robot, u, d, singular_tol)
+    Jx = _from_chain_frames(u)
+    Jx_safe = jnp.where(ok, Jx, jnp.eye(3, dtype=dtype))
+    b_dot, b_ddot = _elbow_rates(robot, theta, theta_dot, theta_ddot, R_dot, R_ddot)
+    p_dot = jnp.linalg.solve(Jx_safe, jnp.sum(u * b_dot, axis=-1))
+    w_dot = to_chain_frames(p_dot) - b_dot
+    rhs2 = jnp.sum(u * b_ddot, axis=-1) - jnp.sum(w_dot * w_dot, axis=-1) / robot.forearm
+    p_ddot = jnp.linalg.solve(Jx_safe, rhs2)
+    nan = jnp.asarray(jnp.nan, dtype)
+    return Motion(p=jnp.where(ok, p, nan), p_dot=jnp.where(ok, p_dot, nan), p_ddot=jnp.where(ok, p_ddot, nan),
+                  theta=theta, theta_dot=theta_dot, theta_ddot=theta_ddot, R_dot=R_dot, R_ddot=R_ddot, ok=ok)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Formulation 1: Lagrange equations in (p, R, theta) with multipliers
+# ---------------------------------------------------------------------------------------------------------
+def _lagrange(robot: Delta, m: Motion):
+    mm = _require_mass(robot)
+    L1, g = robot.upper_arm, mm.gravity
+    th, thd, thdd = m.theta, m.theta_dot, m.theta_ddot
+    c, s = jnp.cos(th), jnp.sin(th)
+    I_arm = mm.arm_inertia(L1)
+    s_arm = mm.arm_first_moment(L1)
+    M = mm.moving_mass()
+    ez = jnp.asarray([0.0, 0.0, 1.0], th.dtype)
+    lhs_theta = I_arm * thdd - s_arm * s * m.R_ddot - g * s_arm * c
+    lhs_R = 3.0 * mm.radial_mass() * m.R_ddot - s_arm * jnp.sum(s * thdd + c * thd ** 2)
+    lhs_p = M * (m.p_ddot - g * ez)
+    # Constraint gradients of Gamma_i = |w_i|^2 - L2^2, w_i = rot_i(p) + (r - R - L1 cos th, 0, -L1 sin th).
+    loc = to_chain_frames(m.p)
+    w = jnp.stack([loc[:, 0] + robot.platform_radius - robot.base_radius - L1 * c, loc[:, 1],
+                   loc[:, 2] - L1 * s], axis=-1)
+    dG_dp = 2.0 * _from_chain_frames(w)                       # (3 constraints, 3 coords), base frame
+    dG_dR = -2.0 * w[:, 0]                                    # (3,)
+    dG_dth = 2.0 * L1 * (w[:, 0] * s - w[:, 2] * c)           # (3,) diagonal
+    lam = jnp.linalg.solve(dG_dp.T, lhs_p)
+    tau = lhs_theta - lam * dG_dth
+    force_R = lhs_R - jnp.sum(lam * dG_dR)
+    return tau, force_R
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Formulation 2: virtual work (d'Alembert) with the Jacobian transpose
+# ---------------------------------------------------------------------------------------------------------
+def _virtual_work(robot: Delta, m: Motion):
+    mm = _require_mass(robot)
+    L1, g = robot.upper_arm, mm.gravity
+    th, thd, thdd = m.theta, m.theta_dot, m.theta_ddot
+    c, s = jnp.cos(th), jnp.sin(th)
+    zero = jnp.zeros_like(th)
+    g_loc = jnp.stack([zero, zero, g + zero], axis=-1)
+    tau = (mm.upper_arm_inertia_factor * mm.upper_arm_mass * L1 * L1
+           + mm.gear_ratio ** 2 * mm.rotor_inertia) * thdd   # rotation of the arm and the rotor
+    force_R = 3.0 * mm.carriage_mass * m.R_ddot
+    for mass, arm in ((mm.upper_arm_mass, mm.upper_arm_com_fraction * L1), (mm.elbow_point_mass(), L1)):
+        acc = jnp.stack([m.R_ddot - arm * (c * thd ** 2 + s * thdd), zero,
+                         arm * (-s * thd ** 2 + c * thdd)], axis=-1)
+        force = mass * (acc - g_loc)                                 # what the arm must supply to the point
+        partial_theta = jnp.stack([-arm * s, zero, arm * c], axis=-1)  # d(point)/d(theta_i), chain frame
+        tau = tau + jnp.sum(force * partial_theta, axis=-1)
+        force_R = force_R + jnp.sum(force[:, 0])                     # d(point)/dR = e_x (chain frame)
+    ez = jnp.asarray([0.0, 0.0, 1.0], th.dtype)
+    F = _require_mass(robot).moving_mass() * (m.p_ddot - g * ez)
+    jac = jacobians(robot, m.p, th)
+    Q = jac.Jq.T @ jnp.linalg.solve(jac.Jx.T, F)                     # J^T F with J = Jx^-1 Jq
+    return tau + Q[1:], force_R + Q[0]
+
+
+def inverse_dynamics_motion(robot: Delta, motion: Motion, *, method: str = "virtual_work") -> Torques:
+    """Actuator efforts for a full kinematic state (see :func:`joint_motion`, :func:`platform_motion`).
+
+    Args:
+        robot: robot with a mass model, at the current base radius R.
+        motion: the kinematic state.
+        method: ``"virtual_work"`` (default, fastest) or ``"lagrange"``.
+
+    Returns:
+        :class:`Torques` (NaN where ``motion.ok`` is False).
+    """
+    if method == "virtual_work":
+        tau, fR = _virtual_work(robot, motion)
+    elif method == "lagrange":
+        tau, fR = _lagrange(robot, motion)
+    else:
+        raise ValueError(f"method must be 'virtual_work' or 'lagrange' for a Motion, got {method!r}")
+    nan = jnp.asarray(jnp.nan, tau.dtype)
+    return Torques(tau=jnp.where(motion.ok, tau, nan), force_R=jnp.where(motion.ok, fR, nan), ok=motion.ok)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Formulation 3: autodiff of the reduced Lagrangian (FK-based, no hand algebra)
+# ---------------------------------------------------------------------------------------------------------
+def _points(robot: Delta, q):
+    """Positions (base frame) of the lumped bodies as functions of q = (R, theta): com, elbow, carriage, P."""
+    R, theta = q[0], q[1:]
+    mm = robot.mass
+    L1 = robot.upper_arm
+    rob = robot.with_base_radius(R)
+    c_arm = mm.upper_arm_com_fraction * L1
+    zero = jnp.zeros_like(theta)
+    com = _from_chain_frames(jnp.stack([R + c_arm * jnp.cos(theta), zero, c_arm * jnp.sin(theta)], axis=-1))
+    elbow = _from_chain_frames(jnp.stack([R + L1 * jnp.cos(theta), zero, L1 * jnp.sin(theta)], axis=-1))
+    carriage = _from_chain_frames(jnp.stack([R + zero, zero, zero], axis=-1))
+    p = fk(rob, theta).p
+    return com, elbow, carriage, p
+
+
+def _energies(robot: Delta, q, qd):
+    mm = _require_mass(robot)
+    L1 = robot.upper_arm
+    pos, vel = jax.jvp(lambda qq: _points(robot, qq), (q,), (qd,))
+    masses = (mm.upper_arm_mass, mm.elbow_point_mass(), mm.carriage_mass, mm.moving_mass())
+    T = 0.5 * (mm.upper_arm_inertia_factor * mm.upper_arm_mass * L1 * L1
+               + mm.gear_ratio ** 2 * mm.rotor_inertia) * jnp.sum(qd[1:] ** 2)
+    V = jnp.zeros((), q.dtype)
+    for mass, x, v in zip(masses, pos, vel):
+        T = T + 0.5 * mass * jnp.sum(v * v)
+        V = V - mass * mm.gravity * jnp.sum(x[..., 2])
+    return T, V
+
+
+def _autodiff(robot: Delta, theta, theta_dot, theta_ddot, R_dot, R_ddot):
+    dtype = theta.dtype
+    q = jnp.concatenate([jnp.reshape(robot.base_radius, (1,)).astype(dtype), theta])
+    qd = jnp.concatenate([jnp.reshape(R_dot, (1,)).astype(dtype), theta_dot])
+    qdd = jnp.concatenate([jnp.reshape(R_ddot, (1,)).astype(dtype), theta_ddot])
+
+    def lagrangian(q_, qd_):
+        T, V = _energies(robot, q_, qd_)
+        return T - V
+
+    dL_dqd = jax.grad(lagrangian, argnums=1)
+    # d/dt dL/dqd = (d2L/dqd2) qdd + (d2L/dqd dq) qd
+    _, ddt = jax.jvp(lambda a, b: dL_dqd(a, b), (q, qd), (qd, qdd))
+    Q = ddt - jax.grad(lagrangian, argnums=0)(q, qd)
+    return Q[1:], Q[0]
+
+
+def inverse_dynamics(robot: Delta, theta: Float[Array, "3"], theta_dot: Float[Array, "3"],
+                     theta_ddot: Float[Array, "3"], R_dot=0.0, R_ddot=0.0, *, method: str = "virtual_work",
+                     mode: str = "lower") -> Torques:
+    """Inverse dynamics tau(theta, thetadot, thetaddot) (+ the R force when R moves), one configuration.
+
+    Args:
+        robot: robot with a mass model (``robot.mass``), at the current base radius R (``recon.at(R)``).
+        theta, theta_dot, theta_ddot: actuated angles (rad), rates (rad/s), accelerations (rad/s^2).
+        R_dot, R_ddot: reconfiguration rate (m/s) and acceleration (m/s^2); 0 for a fixed Delta.
+        method: ``"virtual_work"``, ``"lagrange"`` or ``"autodiff"`` (see the module docstring).
+        mode: FK assembly mode for the platform position.
+
+    Returns:
+        :class:`Torques`.
+    """
+    if method not in METHODS:
+        raise ValueError(f"method must be one of {METHODS}, got {method!r}")
+    motion = platform_motion(robot, theta, theta_dot, theta_ddot, R_dot, R_ddot, mode=mode)
+    if method != "autodiff":
+        return inverse_dynamics_motion(robot, motion, method=method)
+    _require_mass(robot)
+    th = motion.theta
+    tau, fR = _autodiff(robot, th, motion.theta_dot, motion.theta_ddot, motion.R_dot, motion.R_ddot)
+    nan = jnp.asarray(jnp.nan, tau.dtype)
+    return Torques(tau=jnp.where(motion.ok, tau, nan), force_R=jnp.where(motion.ok, fR, nan), ok=motion.ok)
+
+
+def gravity_torques(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]) -> Torques:
+    """Static holding efforts at rest (platform at ``p``, arms at ``theta``)."""
+    z3 = jnp.zeros_like(jnp.asarray(theta))
+    zp = jnp.zeros_like(jnp.asarray(p))
+    w, u, d = _chain_terms(robot, p, theta)
+    ok = jnp.all(jnp.isfinite(theta)) & _validity(robot, u, d, 1e-9)
+    zero = jnp.zeros((), z3.dtype)
+    motion = Motion(p=p, p_dot=zp, p_ddot=zp, theta=theta, theta_dot=z3, theta_ddot=z3, R_dot=zero,
+                    R_ddot=zero, ok=ok)
+    return inverse_dynamics_motion(robot, motion)
+
+
+def energy(robot: Delta, motion: Motion) -> tuple[Float[Array, ""], Float[Array, ""]]:
+    """(kinetic, potential) energy (J) of the lumped model for a kinematic state (closed form).
+
+    Potential energy is -sum m g z (z down) with the base plane z = 0 as reference.
+    """
+    mm = _require_mass(robot)
+    L1 = robot.upper_arm
+    s, thd = jnp.sin(motion.theta), motion.theta_dot
+    s_arm = mm.arm_first_moment(L1)
+    M = mm.moving_mass()
+    T = (jnp.sum(0.5 * mm.radial_mass() * motion.R_dot ** 2 - s_arm * s * motion.R_dot * thd
+                 + 0.5 * mm.arm_inertia(L1) * thd ** 2) + 0.5 * M * jnp.sum(motion.p_dot ** 2))
+    V = -mm.gravity * (s_arm * jnp.sum(s) + M * motion.p[2])
+    return T, V
+
+
+def energy_from_joints(robot: Delta, theta, theta_dot, R_dot=0.0) -> tuple[Float[Array, ""], Float[Array, ""]]:
+    """(kinetic, potential) energy (J) from joint values only, via FK and autodiff of the body positions."""
+    theta = jnp.asarray(theta)
+    dtype = jnp.result_type(theta.dtype, robot.upper_arm.dtype)
+    q = jnp.concatenate([jnp.reshape(robot.base_radius, (1,)).astype(dtype), theta.astype(dtype)])
+    qd = jnp.concatenate([jnp.reshape(jnp.asarray(R_dot, dtype), (1,)), jnp.asarray(theta_dot, dtype)])
+    return _energies(robot, q, qd)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Along trajectories: profiles, designer metrics, minimum cycle time under limits
+# ---------------------------------------------------------------------------------------------------------
+def _limit_leaf(x):
+    return jnp.asarray(x, dtype=jnp.result_type(float))
+
+
+class Limits(eqx.Module):
+    """Actuator limits at the arm side (gearbox output): |tau_i| <= torque, |thetadot_i| <= speed.
+
+    Attributes:
+        torque: N m (scalar or per actuator (3,)); ``inf`` for none.
+        speed: rad/s (scalar or (3,)); ``inf`` for none. Motor-side values: divide by the gear ratio.
+        force_R: N, limit on |force_R| of the reconfiguration actuator (``inf``: none).
+        speed_R: m/s, limit on |Rdot| (``inf``: none).
+    """
+
+    torque: jax.Array = eqx.field(converter=_limit_leaf)
+    speed: jax.Array = eqx.field(converter=_limit_leaf, default=float("inf"))
+    force_R: jax.Array = eqx.field(converter=_limit_leaf, default=float("inf"))
+    speed_R: jax.Array = eqx.field(converter=_limit_leaf, default=float("inf"))
+
+    def __check_init__(self):
+        for name in ("torque", "speed", "force_R", "speed_R"):
+            v = getattr(self, name)
+            if isinstance(v, jax.core.Tracer):
+                continue
+            a = np.asarray(v)
+            if a.ndim > 1 or (a.ndim == 1 and a.shape[0] != 3) or np.any(np.isnan(a)) or np.any(a <= 0):
+                raise ValueError(f"Limits.{name} must be > 0 (scalar or 3 values, inf allowed), got {a!r}")
+
+
+class CycleProfile(NamedTuple):
+    """Joint and effort profiles along a cycle at one duration (K samples; rows = samples).
+
+    ``tau = tau_inertial_unit / T^2 + tau_gravity`` exactly (likewise ``force_R``), where the unit terms are
+    the inertial efforts at T = 1 s: all velocity-product and acceleration terms scale as 1/T^2.
+    """
+
+    t: Float[Array, "K"]
+    p: Float[Array, "K 3"]
+    p_dot: Float[Array, "K 3"]
+    p_ddot: Float[Array, "K 3"]
+    theta: Float[Array, "K 3"]
+    theta_dot: Float[Array, "K 3"]
+    theta_ddot: Float[Array, "K 3"]
+    R: Float[Array, "K"]
+    R_dot: Float[Array, "K"]
+    tau: Float[Array, "K 3"]
+    force_R: Float[Array, "K"]
+    tau_gravity: Float[Array, "K 3"]
+    force_R_gravity: Float[Array, "K"]
+    tau_inertial_unit: Float[Array, "K 3"]
+    force_R_inertial_unit: Float[Array, "K"]
+    ok: Bool[Array, "K"]
+
+
+class CycleMetrics(NamedTuple):
+    """What a designer asks of a cycle (one design, one cycle).
+
+    Attributes:
+        peak_torque: max_t |tau_i| at the cycle's nominal duration (N m), per actuator.
+        rms_torque: sqrt(mean_t tau_i^2) at the nominal duration (N m), trapezoidal rule in time.
+        peak_speed: max_t |thetadot_i| at the nominal duration (rad/s).
+        cycle_time: minimum duration of the cycle meeting all limits (s); ``inf`` if the static (gravity)
+            efforts alone exceed a limit.
+        ok: every sample reachable and non-singular, and a finite cycle time exists.
+        peak_acceleration: max_t |thetaddot_i| at the nominal duration (rad/s^2).
+        peak_force_R: max_t |force_R| at the nominal duration (N).
+        cycles_per_minute: 60 / cycle_time.
+        reachable: every sample reachable, within joint limits and non-singular.
+        n_bad: number of samples that are not.
+    Every field is NaN when ``reachable`` is False (no silent numbers).
+    """
+
+    peak_torque: Float[Array, "3"]
+    rms_torque: Float[Array, "3"]
+    peak_speed: Float[Array, "3"]
+    cycle_time: Float[Array, ""]
+    ok: Bool[Array, ""]
+    peak_acceleration: Float[Array, "3"]
+    peak_force_R: Float[Array, ""]
+    cycles_per_minute: Float[Array, ""]
+    reachable: Bool[Array, ""]
+    n_bad: jax.Array
+
+
+def _sample(robot: Delta, cycle, k_x, k_dx, k_ddx, k_R, k_dR, k_ddR, method):
+    """One sample of a cycle at T = 1: motion, full efforts and static efforts."""
+    rob = robot if k_R is None else robot.with_base_radius(k_R)
+    dR = jnp.zeros((), k_x.dtype) if k_dR is None else k_dR
+    ddR = jnp.zeros((), k_x.dtype) if k_ddR is None else k_ddR
+    if cycle.space == "cartesian":
+        motion = joint_motion(rob, k_x, k_dx, k_ddx, dR, ddR)
+    else:
+        motion = platform_motion(rob, k_x, k_dx, k_ddx, dR, ddR)
+    full = inverse_dynamics_motion(rob, motion, method=method)
+    zero3 = jnp.zeros_like(motion.theta)
+    static = Motion(p=motion.p, p_dot=zero3, p_ddot=zero3, theta=motion.theta, theta_dot=zero3,
+                    theta_ddot=zero3, R_dot=jnp.zeros_like(dR), R_ddot=jnp.zeros_like(dR), ok=motion.ok)
+    grav = inverse_dynamics_motion(rob, static, method=method)
+    R = rob.base_radius * jnp.ones((), k_x.dtype)
+    return motion, full, grav, R, dR
+
+
+def cycle_profile(robot: Delta, cycle, duration: Any = None, *, method: str = "virtual_work") -> CycleProfile:
+    """Joint motion and actuator efforts along ``cycle`` at ``duration`` (default: its nominal one).
+
+    Args:
+        robot: robot with a mass model; its base radius is used unless the cycle carries an R profile.
+        cycle: :class:`deltajax.trajectory.Cycle`.
+        duration: cycle time T (s).
+        method: inverse-dynamics formulation (``"virtual_work"`` or ``"lagrange"``).
+    """
+    _require_mass(robot)
+    T = cycle.duration if duration is None else jnp.asarray(duration, cycle.duration.dtype)
+    has_R = cycle.R is not None
+    args = (cycle.x, cycle.dx, cycle.ddx) + ((cycle.R, cycle.dR, cycle.ddR) if has_R else ())
+
+    def one(*a):
+        x, dx, ddx = a[:3]
+        R, dR, ddR = a[3:] if has_R else (None, None, None)
+        return _sample(robot, cycle, x, dx, ddx, R, dR, ddR, method)
+
+    motion, full, grav, R, dR = jax.vmap(one)(*args)
+    a_tau = full.tau - grav.tau
+    a_fR = full.force_R - grav.force_R
+    inv_T2 = 1.0 / (T * T)
+    return CycleProfile(
+        t=cycle.u * T, p=motion.p, p_dot=motion.p_dot / T, p_ddot=motion.p_ddot * inv_T2, theta=motion.theta,
+        theta_dot=motion.theta_dot / T, theta_ddot=motion.theta_ddot * inv_T2, R=R, R_dot=dR / T,
+        tau=a_tau * inv_T2 + grav.tau, force_R=a_fR * inv_T2 + grav.force_R, tau_gravity=grav.tau,
+        force_R_gravity=grav.force_R, tau_inertial_unit=a_tau, force_R_inertial_unit=a_fR, ok=motion.ok)
+
+
+def _min_duration_torque(a, g, limit):
+    """Smallest T with |a / T^2 + g| <= limit elementwise (a, g broadcast with limit); inf if |g| > limit.
+
+    With x = 1 / T^2 >= 0 the feasible set of each constraint is [0, (limit - sign(a) g) / |a|].
+    """
+    feasible = jnp.all(jnp.abs(g) <= limit)
+    denom = limit - jnp.sign(a) * g
+    ratio = jnp.where(jnp.abs(a) > 0, jnp.abs(a) / jnp.where(denom > 0, denom, 1.0), 0.0)
+    T2 = jnp.max(jnp.where(jnp.isinf(limit), 0.0, ratio))
+    return jnp.where(feasible, jnp.sqrt(T2), jnp.inf)
+
+
+def _trapezoid_mean(y, axis=0):
+    n = y.shape[axis]
+    w = jnp.ones((n,), y.dtype).at[0].set(0.5).at[-1].set(0.5) / (n - 1)
+    return jnp.tensordot(w, y, axes=([0], [axis]))
+
+
+def cycle_metrics(robot: Delta, cycle, limits: Limits, *, method: str = "virtual_work") -> CycleMetrics:
+    """Peak/RMS torque, peak speed and minimum cycle time of one design on one cycle (pure, vmappable).
+
+    The minimum cycle time is exact for the sampled profile: efforts scale as ``a / T^2 + g`` and speeds as
+    ``theta' / T``, so each sample and actuator bounds T from below in closed form (the 1-D time-scaling
+    problem that a bisection on T would solve; :func:`min_cycle_time_bisection` is that cross-check). Peaks
+    between samples are missed: use enough samples (a few hundred per cycle).
+
+    Args:
+        robot: robot with a mass model (vmap over a batch of designs).
+        cycle: :class:`deltajax.trajectory.Cycle` (vmap over a batch of trajectories).
+        limits: :class:`Limits`.
+        method: inverse-dynamics formulation.
+
+    Returns:
+        :class:`CycleMetrics`.
+    """
+    prof = cycle_profile(robot, cycle, method=method)
+    reachable = jnp.all(prof.ok)
+    n_bad = jnp.sum(~prof.ok)
+    T = cycle.duration
+    safe = lambda x: jnp.where(prof.ok[:, None] if x.ndim == 2 else prof.ok, x, 0.0)  # noqa: E731
+    tau = safe(prof.tau)
+    thd_unit = safe(prof.theta_dot) * T
+    peak_torque = jnp.max(jnp.abs(tau), axis=0)
+    rms_torque = jnp.sqrt(_trapezoid_mean(tau * tau))
+    peak_speed = jnp.max(jnp.abs(thd_unit), axis=0) / T
+    peak_acc = jnp.max(jnp.abs(safe(prof.theta_ddot)), axis=0)
+    peak_fR = jnp.max(jnp.abs(safe(prof.force_R)))
+    tq = jnp.broadcast_to(limits.torque, (3,))
+    sp = jnp.broadcast_to(limits.speed, (3,))
+    T_tau = _min_duration_torque(safe(prof.tau_inertial_unit), safe(prof.tau_gravity), tq)
+    T_fR = _min_duration_torque(safe(prof.force_R_inertial_unit), safe(prof.force_R_gravity), limits.force_R)
+    T_speed = jnp.max(jnp.where(jnp.isinf(sp), 0.0, jnp.max(jnp.abs(thd_unit), axis=0) / sp))
+    R_speed = jnp.max(jnp.abs(safe(prof.R_dot))) * T
+    T_Rspeed = jnp.where(jnp.isinf(limits.speed_R), 0.0, R_speed / limits.speed_R)
+    cycle_time = jnp.maximum(jnp.maximum(T_tau, T_fR), jnp.maximum(T_speed, T_Rspeed))
+    nan = jnp.asarray(jnp.nan, tau.dtype)
+    nan_if = lambda x: jnp.where(reachable, x, nan)  # noqa: E731
+    cycle_time = nan_if(cycle_time)
+    return CycleMetrics(
+        peak_torque=nan_if(peak_torque), rms_torque=nan_if(rms_torque), peak_speed=nan_if(peak_speed),
+        cycle_time=cycle_time, ok=reachable & jnp.isfinite(cycle_time), peak_acceleration=nan_if(peak_acc),
+        peak_force_R=nan_if(peak_fR), cycles_per_minute=60.0 / cycle_time, reachable=reachable, n_bad=n_bad)
+
+
+def within_limits(profile: CycleProfile, limits: Limits, rtol: float = 0.0) -> jax.Array:
+    """Do all efforts and speeds of a profile respect ``limits`` (with relative slack ``rtol``)?"""
+    tq = jnp.broadcast_to(limits.torque, (3,)) * (1 + rtol)
+    sp = jnp.broadcast_to(limits.speed, (3,)) * (1 + rtol)
+    return (jnp.all(jnp.abs(profile.tau) <= tq) & jnp.all(jnp.abs(profile.theta_dot) <= sp)
+            & jnp.all(jnp.abs(profile.force_R) <= limits.force_R * (1 + rtol))
+            & jnp.all(jnp.abs(profile.R_dot) <= limits.speed_R * (1 + rtol)))
+
+
+def min_cycle_time_bisection(robot: Delta, cycle, limits: Limits, *, T_low: float = 1e-3, T_high: float = 100.0,
+                             n_iter: int = 60, method: str = "virtual_work") -> jax.Array:
+    """Minimum cycle time by bisection on T, re-evaluating the full profile at every step (slow; a check).
+
+    Feasibility is monotone in T (efforts a / T^2 + g move toward the static g as T grows, speeds fall), so
+    bisection on [T_low, T_high] converges; returns ``inf`` if T_high is infeasible.
+    """
+    def feasible(T):
+        return within_limits(cycle_profile(robot, cycle, T, method=method), limits)
+
+    def body(_, lohi):
+        lo, hi = lohi
+        mid = jnp.sqrt(lo * hi)
+        f = feasible(mid)
+        return jnp.where(f, lo, mid), jnp.where(f, mid, hi)
+
+    dtype = cycle.duration.dtype
+    lo, hi = jax.lax.fori_loop(0, n_iter, body, (jnp.asarray(T_low, dtype), jnp.asarray(T_high, dtype)))
+    return jnp.where(feasible(jnp.asarray(T_high, dtype)), hi, jnp.inf)

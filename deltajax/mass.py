@@ -1,0 +1,213 @@
+"""Mass model of a (reconfigurable) Delta robot, as a frozen pytree carried by ``Delta.mass``.
+
+Lumped-parameter model (per chain; the three chains are identical), frame z down (SPEC §1), so gravity
+acts along +z and the potential energy of a mass m at height z is ``V = -m g z``:
+
+* **Upper arm** A_i B_i, a rigid body rotating about the motor axis (the chain's local y axis): mass
+  ``upper_arm_mass``, centre of mass at ``upper_arm_com_fraction * L1`` from A_i along the arm, inertia about
+  its centre of mass ``upper_arm_inertia_factor * m * L1**2`` (1/12 for a uniform slender rod). Fractions
+  (not metres) keep the model meaningful when an optimiser changes L1.
+* **Motor/gearbox**: rotor inertia ``rotor_inertia`` on the motor side and ``gear_ratio`` n (motor speed =
+  n * arm speed), reflected to the arm as n**2 * rotor_inertia. Torques and speeds are reported at the arm
+  (gearbox output); divide the torque by n (and multiply the speed by n) for motor-side values.
+* **Forearm** (the parallelogram, both rods, as one link of mass ``forearm_mass``): split into two point
+  masses, ``forearm_elbow_fraction`` s at the elbow B_i and 1 - s at the platform. We use **s = 1/2** by
+  default: it is the only split that keeps the total mass *and* the centre of mass of a uniform rod (so the
+  gravity torques are exact) and it makes the kinetic energy exact for the rod's translation; it
+  overestimates only the rod's own rotational energy (m/8 |v_C - v_B|^2 instead of m/24 |v_C - v_B|^2), which
+  the GA paper (§2.6) and Codourey's simplified model neglect anyway since the forearms are light (GA paper
+  Table 3: 41 g against 1.59 kg for the upper arm). The 2/3-1/3 split seen in the literature matches
+  the kinetic energy of a rod pivoting about one end (1/3 at the free end) but puts the centre of mass in
+  the wrong place. Set the fraction in the config to use another split.
+* ``elbow_mass``: extra point mass at each elbow (joint hardware), kg.
+* **Platform** (travelling plate) ``platform_mass`` plus ``payload_mass``, a translating point mass at P.
+* **Reconfiguration carriage** ``carriage_mass`` per chain: everything the R actuator moves radially that does
+  not rotate with the arm (motor and gearbox housing, slider, the share of the R drive reflected as a
+  translating mass). The upper arm, elbow mass and forearm share move radially too (their kinetic energy
+  contains Rdot); this mass only adds m_c Rdot^2 / 2 per chain. Irrelevant when R is fixed.
+* ``gravity``: g (m/s^2), along +z (downward).
+
+The R actuator moves the three A_i together (one scalar R; its generalised force is the total radial force).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, Mapping, Optional
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+__all__ = ["MassModel", "mass_from_config", "MASS_FIELDS", "STANDARD_GRAVITY"]
+
+STANDARD_GRAVITY = 9.80665
+
+#: (field, unit, lower bound kind) for validation and config parsing. "pos" > 0, "nonneg" >= 0, "frac" in [0,1],
+#: "ratio" >= 1 ... see _check.
+MASS_FIELDS = (
+    ("upper_arm_mass", "kg", "nonneg"),
+    ("upper_arm_com_fraction", "1", "frac"),
+    ("upper_arm_inertia_factor", "1", "nonneg"),
+    ("rotor_inertia", "kg m^2", "nonneg"),
+    ("gear_ratio", "1", "pos"),
+    ("elbow_mass", "kg", "nonneg"),
+    ("forearm_mass", "kg", "nonneg"),
+    ("forearm_elbow_fraction", "1", "frac"),
+    ("platform_mass", "kg", "nonneg"),
+    ("payload_mass", "kg", "nonneg"),
+    ("carriage_mass", "kg", "nonneg"),
+    ("gravity", "m/s^2", "nonneg"),
+)
+
+
+def _leaf(x: Any) -> jax.Array:
+    return jnp.asarray(x, dtype=jnp.result_type(float))
+
+
+def _check(name: str, kind: str, value: Any) -> Optional[str]:
+    """Return an error message if a concrete scalar ``value`` is invalid for ``kind``, else None."""
+    if isinstance(value, jax.core.Tracer):
+        return None
+    arr = jnp.asarray(value)
+    if arr.ndim != 0:
+        return None  # batched designs: validated by whoever built the batch
+    v = float(arr)
+    if not math.isfinite(v):
+        return f"{name} must be a finite number, got {v!r}"
+    if kind == "nonneg" and v < 0:
+        return f"{name} must be >= 0, got {v!r}"
+    if kind == "pos" and not v > 0:
+        return f"{name} must be > 0, got {v!r}"
+    if kind == "frac" and not 0.0 <= v <= 1.0:
+        return f"{name} must be in [0, 1], got {v!r}"
+    return None
+
+
+class MassError(ValueError):
+    """Invalid mass model; the message names the field and the value."""
+
+
+class MassModel(eqx.Module):
+    """Lumped mass model of a Delta robot (see the module docstring for the modelling choices).
+
+    Attributes (all array leaves, SI units):
+        upper_arm_mass: kg, per arm.
+        upper_arm_com_fraction: centre of mass of the upper arm from A_i, as a fraction of L1.
+        upper_arm_inertia_factor: inertia about the centre of mass / (m L1^2) (1/12: uniform rod).
+        rotor_inertia: motor rotor (+ gearbox input) inertia, motor side, kg m^2.
+        gear_ratio: n = motor speed / arm speed (1: direct drive).
+        elbow_mass: extra lumped mass at each elbow, kg.
+        forearm_mass: one forearm (both parallelogram rods), kg.
+        forearm_elbow_fraction: share of the forearm mass lumped at the elbow (rest at the platform).
+        platform_mass: travelling plate, kg.
+        payload_mass: payload carried by the platform, kg.
+        carriage_mass: per chain, mass moved radially by the R actuator that does not rotate with the arm, kg.
+        gravity: g along +z (down), m/s^2.
+    """
+
+    upper_arm_mass: jax.Array = eqx.field(converter=_leaf)
+    upper_arm_com_fraction: jax.Array = eqx.field(converter=_leaf, default=0.5)
+    upper_arm_inertia_factor: jax.Array = eqx.field(converter=_leaf, default=1.0 / 12.0)
+    rotor_inertia: jax.Array = eqx.field(converter=_leaf, default=0.0)
+    gear_ratio: jax.Array = eqx.field(converter=_leaf, default=1.0)
+    elbow_mass: jax.Array = eqx.field(converter=_leaf, default=0.0)
+    forearm_mass: jax.Array = eqx.field(converter=_leaf, default=0.0)
+    forearm_elbow_fraction: jax.Array = eqx.field(converter=_leaf, default=0.5)
+    platform_mass: jax.Array = eqx.field(converter=_leaf, default=0.0)
+    payload_mass: jax.Array = eqx.field(converter=_leaf, default=0.0)
+    carriage_mass: jax.Array = eqx.field(converter=_leaf, default=0.0)
+    gravity: jax.Array = eqx.field(converter=_leaf, default=STANDARD_GRAVITY)
+
+    def __check_init__(self):
+        for name, _unit, kind in MASS_FIELDS:
+            msg = _check(name, kind, getattr(self, name))
+            if msg is not None:
+                raise MassError(msg)
+
+    # -- lumped quantities used by the dynamics (per chain) -------------------------------------------------
+    def elbow_point_mass(self) -> jax.Array:
+        """Point mass at each elbow: elbow hardware + the elbow share of the forearm (kg)."""
+        return self.elbow_mass + self.forearm_elbow_fraction * self.forearm_mass
+
+    def moving_mass(self) -> jax.Array:
+        """Translating point mass at the platform centre P: plate + payload + 3 forearm shares (kg)."""
+        return self.platform_mass + self.payload_mass + 3.0 * (1.0 - self.forearm_elbow_fraction) * self.forearm_mass
+
+    def arm_inertia(self, L1: jax.Array) -> jax.Array:
+        """Inertia of one chain's rotating parts about the motor axis, reflected rotor included (kg m^2)."""
+        c = self.upper_arm_com_fraction * L1
+        m = self.upper_arm_mass
+        return (self.upper_arm_inertia_factor * m * L1 * L1 + m * c * c + self.elbow_point_mass() * L1 * L1
+                + self.gear_ratio * self.gear_ratio * self.rotor_inertia)
+
+    def arm_first_moment(self, L1: jax.Array) -> jax.Array:
+        """First moment of the rotating point masses about the motor axis, m_a c + m_e L1 (kg m)."""
+        return self.upper_arm_mass * self.upper_arm_com_fraction * L1 + self.elbow_point_mass() * L1
+
+    def radial_mass(self) -> jax.Array:
+        """Mass per chain moved radially by the R actuator: arm + elbow share + carriage (kg)."""
+        return self.upper_arm_mass + self.elbow_point_mass() + self.carriage_mass
+
+    def with_payload(self, payload_mass: Any) -> "MassModel":
+        """The same model carrying ``payload_mass`` (kg)."""
+        return eqx.tree_at(lambda m: m.payload_mass, self, _leaf(payload_mass))
+
+
+def mass_from_config(mass_cfg: Mapping[str, Any], geometry_kwargs: Optional[Mapping[str, Any]] = None,
+                     prefix: str = "robot.mass") -> MassModel:
+    """Build a :class:`MassModel` from a ``mass:`` config block, validating every field first.
+
+    Fields: those of :class:`MassModel` (``upper_arm_mass`` required, the others default as documented) plus,
+    instead of ``upper_arm_inertia_factor``, an absolute ``upper_arm_inertia`` (kg m^2 about the upper arm's
+    centre of mass), converted with the config's ``upper_arm`` length L1 (taken from ``geometry_kwargs``).
+
+    Args:
+        mass_cfg: mapping (OmegaConf or dict).
+        geometry_kwargs: the robot's geometry (``upper_arm`` in m) for the inertia conversion.
+        prefix: dotted path used in error messages.
+
+    Raises:
+        deltajax.config.ConfigError: unknown, missing, non-numeric or out-of-range field; the message names
+            ``<prefix>.<field>`` and the value.
+    """
+    from .config import ConfigError
+
+    known = {name for name, _u, _k in MASS_FIELDS} | {"upper_arm_inertia"}
+    keys = list(mass_cfg.keys())
+    for k in keys:
+        if k not in known:
+            raise ConfigError(f"{prefix}.{k} is not a mass-model field (known: {sorted(known)})")
+    kinds = {name: kind for name, _u, kind in MASS_FIELDS}
+    values: dict[str, float] = {}
+    for k in keys:
+        v = mass_cfg[k]
+        if v is None:
+            continue
+        if isinstance(v, bool):
+            raise ConfigError(f"{prefix}.{k} must be a number, got {v!r}")
+        try:
+            f = float(v)
+        except (TypeError, ValueError):
+            raise ConfigError(f"{prefix}.{k} must be a number, got {v!r}") from None
+        msg = _check(k, kinds.get(k, "nonneg"), f)
+        if msg is not None:
+            raise ConfigError(f"{prefix}.{msg}")
+        values[k] = f
+    if "upper_arm_mass" not in values:
+        raise ConfigError(f"{prefix}.upper_arm_mass is required")
+    if "upper_arm_inertia" in values:
+        if "upper_arm_inertia_factor" in values:
+            raise ConfigError(f"{prefix}: give upper_arm_inertia or upper_arm_inertia_factor, not both")
+        inertia = values.pop("upper_arm_inertia")
+        L1 = None if geometry_kwargs is None else geometry_kwargs.get("upper_arm")
+        m = values["upper_arm_mass"]
+        if L1 is None or not float(L1) > 0:
+            raise ConfigError(f"{prefix}.upper_arm_inertia needs the robot's upper_arm length, got {L1!r}")
+        if inertia > 0 and m == 0:
+            raise ConfigError(f"{prefix}.upper_arm_inertia={inertia!r} kg m^2 needs upper_arm_mass > 0")
+        values["upper_arm_inertia_factor"] = 0.0 if m == 0 else inertia / (m * float(L1) ** 2)
+    try:
+        return MassModel(**values)
+    except MassError as e:  # pragma: no cover - already checked field by field
+        raise ConfigError(f"{prefix}.{e}") from None
