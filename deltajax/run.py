@@ -93,11 +93,11 @@ def execute(cfg: DictConfig, run_dir: Path) -> Path:
         if e.name == f"deltajax.experiments.{name}":
             raise SystemExit(f"unknown experiment {name!r} (no deltajax/experiments/{name}.py)") from None
         raise
-    robot, recon = robot_from_config(cfg.robot)  # validated before anything compiles
-
     import jax
 
+    # Precision first: the robot's array leaves take the default float dtype when they are built.
     jax.config.update("jax_enable_x64", cfg.precision == "float64")
+    robot, recon = robot_from_config(cfg.robot)  # validated before anything compiles
     from . import __version__
     from .io import ResultsFile, git_commit
 
