@@ -1,0 +1,276 @@
+"""Boundary-search paper: workspace boundary of its Table 1 robot by Conti et al.'s bisection and the paper's
+continuation variant, Test-Pose call counts, pyramid-sector volumes, a dense check of every ray for
+re-entry (the workspace is not star-shaped from the centre) and an independent Cartesian grid volume.
+
+Writes group ``boundary``:
+
+* ``boundary`` attrs: centre, eps, rho_max, grid volume / centroid / step, the paper's numbers.
+* ``boundary/step_<s>deg/<method>`` (method ``conti`` or ``continuation``): axes ``azimuth`` and ``polar``
+  (rad, dimension scales), ``radius_in`` / ``radius_out`` / ``radius`` (m, the bracket and its midpoint),
+  ``calls`` (Test-Pose calls per ray), ``ok``, the dense-sampling results ``n_exits``, ``first_exit``,
+  ``last_exit``; attrs: total calls, warm/compile time, sector volumes for every rule, ray-integrated volume,
+  volume in doubt.
+* ``boundary/centre_sweep``: axis ``centre_z`` (m): sector volume and calls of both methods per centre.
+
+Plots: ``boundary_slice.png`` (the plane y = 0: reachable region, centre, both boundaries, re-entering rays)
+and ``boundary_surface.png`` (3-D boundary points, non-star rays highlighted).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from ..config import ConfigError
+from ..workspace import boundary as B
+
+PAPER = dict(calls_conti_2deg=148239, calls_continuation_2deg=79500, time_conti_1deg_s=589.1236,
+             time_continuation_1deg_s=246.647, volume_m3=46.3936, eps=0.01)
+
+
+def _check(e) -> dict:
+    """Validate ``experiment.*`` before anything compiles; return plain Python values."""
+    def num(key, positive=True):
+        v = e.get(key)
+        try:
+            f = float(v)
+        except (TypeError, ValueError):
+            raise ConfigError(f"experiment.{key} must be a number, got {v!r}") from None
+        if not math.isfinite(f) or (positive and f <= 0):
+            raise ConfigError(f"experiment.{key} must be a finite{' positive' if positive else ''} number, got {v!r}")
+        return f
+
+    out = dict(eps=num("eps"), rho_max=num("rho_max"), grid_h=num("grid_h"))
+    if out["rho_max"] <= out["eps"]:
+        raise ConfigError(f"experiment.rho_max must exceed experiment.eps, got {out['rho_max']} <= {out['eps']}")
+    centre = list(e.get("centre") or [])
+    if len(centre) != 3:
+        raise ConfigError(f"experiment.centre must be [x, y, z] (m), got {centre!r}")
+    out["centre"] = [float(c) for c in centre]
+    steps = list(e.get("steps_deg") or [])
+    if not steps:
+        raise ConfigError("experiment.steps_deg must list at least one angular step (deg)")
+    for s in steps:
+        try:
+            B.angle_grid(float(s))
+        except (ValueError, TypeError) as err:
+            raise ConfigError(f"experiment.steps_deg: {err}") from None
+    out["steps_deg"] = [float(s) for s in steps]
+    if e.get("predictor") not in B.PREDICTORS:
+        raise ConfigError(f"experiment.predictor must be one of {B.PREDICTORS}, got {e.get('predictor')!r}")
+    out["predictor"] = str(e.predictor)
+    if e.get("volume_rule") not in B.VOLUME_RULES:
+        raise ConfigError(f"experiment.volume_rule must be one of {B.VOLUME_RULES}, got {e.get('volume_rule')!r}")
+    out["volume_rule"] = str(e.volume_rule)
+    n = e.get("profile_samples")
+    if not isinstance(n, int) or isinstance(n, bool) or n < 2:
+        raise ConfigError(f"experiment.profile_samples must be an integer >= 2, got {n!r}")
+    out["profile_samples"] = n
+    box = e.get("grid_box")
+    try:
+        box = [[float(a), float(b)] for a, b in box]
+        assert len(box) == 3 and all(b > a for a, b in box)
+    except Exception:  # noqa: BLE001 - any malformed box gets the same message
+        raise ConfigError(f"experiment.grid_box must be [[x0, x1], [y0, y1], [z0, z1]] (m), got {box!r}") from None
+    for (a, b), name in zip(box, "xyz"):
+        k = (b - a) / out["grid_h"]
+        if abs(k - round(k)) > 1e-6 * k:
+            raise ConfigError(f"experiment.grid_box {name} side ({a}, {b}) m is not a whole number of "
+                              f"experiment.grid_h = {out['grid_h']} m")
+    out["grid_box"] = box
+    out["centre_sweep_z"] = [float(z) for z in (e.get("centre_sweep_z") or [])]
+    out["sweep_step_deg"] = num("sweep_step_deg")
+    out["half_space"] = bool(e.get("half_space", True))
+    reps = e.get("timing_repeats", 3)
+    if not isinstance(reps, int) or reps < 1:
+        raise ConfigError(f"experiment.timing_repeats must be an integer >= 1, got {reps!r}")
+    out["timing_repeats"] = reps
+    return out
+
+
+def _timed_search(robot, p, step, method, reps):
+    """Run one search: first call (compile + run) and the best of ``reps`` warm calls (s)."""
+    def go():
+        return B.boundary_search(robot, p["centre"], step_deg=step, eps=p["eps"], rho_max=p["rho_max"],
+                                 method=method, predictor=p["predictor"], half_space=p["half_space"])
+
+    t0 = time.perf_counter()
+    res = jax.block_until_ready(go())
+    first = time.perf_counter() - t0
+    warm = []
+    for _ in range(reps):
+        t0 = time.perf_counter()
+        res = jax.block_until_ready(go())
+        warm.append(time.perf_counter() - t0)
+    return res, min(warm), first - min(warm)
+
+
+def _volumes(res, prof, polar, azimuth, rule):
+    """Sector volumes of the bracket ends and midpoint, and the dense-sampling volumes (m^3)."""
+    w = B.vertex_weights(polar, azimuth)
+    r_in, r_out, r_mid = (np.asarray(x) for x in (res.radius_in, res.radius_out, res.radius))
+    vols = {f"volume_{rl}_{which}": B.sector_volume(r, polar, azimuth, rl)
+            for rl in B.VOLUME_RULES for which, r in (("in", r_in), ("mid", r_mid), ("out", r_out))}
+    vols["volume_sector"] = vols[f"volume_{rule}_mid"]
+    vols["volume_ray_integral"] = float(np.sum(w * np.asarray(prof.vol_integrand)))
+    vols["volume_missed"] = float(np.sum(w * np.asarray(prof.vol_missed)))
+    vols["volume_false"] = float(np.sum(w * np.asarray(prof.vol_false)))
+    vols["volume_first_exit"] = B.sector_volume(np.asarray(prof.first_exit), polar, azimuth, rule)
+    vols["volume_last_exit"] = B.sector_volume(np.asarray(prof.last_exit), polar, azimuth, rule)
+    return vols
+
+
+def run(ctx) -> None:
+    p = _check(ctx.cfg.experiment)
+    robot = ctx.robot
+    res_file = ctx.results
+    g0 = "boundary"
+    res_file.set_attrs(g0, centre=np.asarray(p["centre"]), centre_units="m", eps=p["eps"], eps_units="m",
+                       rho_max=p["rho_max"], rho_max_units="m", predictor=p["predictor"],
+                       half_space=p["half_space"], volume_rule=p["volume_rule"],
+                       bisection_calls_per_ray=B.bisection_calls(p["rho_max"], p["eps"]),
+                       **{f"paper_{k}": v for k, v in PAPER.items()})
+    ctx.log(f"centre {p['centre']} m, eps {p['eps']} m, rho_max {p['rho_max']} m "
+            f"({B.bisection_calls(p['rho_max'], p['eps'])} bisection calls per ray)")
+
+    # Independent check: Cartesian grid volume (cell-centred, z > 0).
+    t0 = time.perf_counter()
+    gv = B.grid_volume(robot, p["grid_h"], p["grid_box"], half_space=p["half_space"],
+                       progress=lambda it, total: ctx.progress(it, total=total, desc="grid volume"))
+    res_file.set_attrs(g0, grid_volume=gv.volume, grid_volume_units="m^3", grid_count=gv.count, grid_h=gv.h,
+                       grid_shape=np.asarray(gv.shape), grid_centroid=gv.centroid, grid_time_s=time.perf_counter() - t0)
+    ctx.log(f"grid volume (h = {gv.h} m, {gv.shape}): {gv.volume:.4f} m^3, centroid {np.round(gv.centroid, 4)} m")
+    res_file.flush()
+
+    keep = {}
+    for step in p["steps_deg"]:
+        for method in B.METHODS:
+            res, warm, compile_s = _timed_search(robot, p, step, method, p["timing_repeats"])
+            prof = B.ray_profiles(robot, res, rho_max=p["rho_max"], n_samples=p["profile_samples"],
+                                  half_space=p["half_space"])
+            polar, azimuth = np.asarray(res.polar), np.asarray(res.azimuth)
+            vols = _volumes(res, prof, polar, azimuth, p["volume_rule"])
+            calls = np.asarray(res.calls)
+            g = f"{g0}/step_{step:g}deg/{method}"
+            res_file.put_axis(g, "azimuth", azimuth, units="rad",
+                              attrs={"description": "azimuth theta from +x (the paper's theta), inclusive 0..360 deg"})
+            res_file.put_axis(g, "polar", polar, units="rad",
+                              attrs={"description": "polar angle phi from +z (down, into the workspace; the paper's "
+                                                    "phi); elevation above the horizontal = 90 deg - phi"})
+            dims = ("azimuth", "polar")
+            res_file.put(g, "radius_in", res.radius_in, units="m", dims=dims,
+                         attrs={"description": "last radius tested reachable"})
+            res_file.put(g, "radius_out", res.radius_out, units="m", dims=dims,
+                         attrs={"description": "first radius tested unreachable"})
+            res_file.put(g, "radius", res.radius, units="m", dims=dims, attrs={"description": "bracket midpoint"})
+            res_file.put(g, "calls", calls, units="1", dims=dims, attrs={"description": "Test-Pose calls per ray"})
+            res_file.put(g, "ok", np.asarray(res.ok), units="1", dims=dims)
+            res_file.put(g, "n_exits", np.asarray(prof.n_exits), units="1", dims=dims,
+                         attrs={"description": "inside->outside transitions along the densely sampled ray"})
+            res_file.put(g, "first_exit", np.asarray(prof.first_exit), units="m", dims=dims)
+            res_file.put(g, "last_exit", np.asarray(prof.last_exit), units="m", dims=dims)
+            non_star = np.asarray(prof.n_exits) > 1
+            stats = dict(calls_total=int(calls.sum()), calls_per_ray_mean=float(calls.mean()),
+                         calls_per_ray_max=int(calls.max()), n_rays=int(calls.size),
+                         all_ok=bool(np.all(np.asarray(res.ok))), time_warm_s=warm, time_compile_s=compile_s,
+                         n_rays_non_star=int(non_star.sum()),
+                         n_rays_reentry_beyond=int(np.asarray(prof.reentry_beyond).sum()),
+                         n_rays_hole_before=int(np.asarray(prof.hole_before).sum()), **vols)
+            res_file.set_attrs(g, **stats, volume_units="m^3")
+            keep[(step, method)] = (res, prof)
+            ctx.log(f"{step:g} deg {method:12s}: {stats['calls_total']} calls "
+                    f"({stats['calls_per_ray_mean']:.3f}/ray), warm {warm * 1e3:.1f} ms, compile {compile_s:.2f} s; "
+                    f"sector V = {vols['volume_sector']:.4f} m^3 ({p['volume_rule']}, midpoint), "
+                    f"ray-integral V = {vols['volume_ray_integral']:.4f}; non-star rays {stats['n_rays_non_star']}; "
+                    f"in doubt: +{vols['volume_false']:.4f} (unreachable inside), -{vols['volume_missed']:.4f} "
+                    f"(reachable outside)")
+        res_file.flush()
+
+    # Sector volume against the (unknown) centre of the paper: both methods, a sweep of centres on the axis.
+    if p["centre_sweep_z"]:
+        zs = np.asarray(p["centre_sweep_z"])
+        rows = {m: ([], []) for m in B.METHODS}
+        for z in ctx.progress(zs, total=len(zs), desc="centre sweep"):
+            c = (p["centre"][0], p["centre"][1], float(z))
+            for m in B.METHODS:
+                r = B.boundary_search(robot, c, step_deg=p["sweep_step_deg"], eps=p["eps"], rho_max=p["rho_max"],
+                                      method=m, predictor=p["predictor"], half_space=p["half_space"])
+                ok = bool(np.all(np.asarray(r.ok)))
+                rows[m][0].append(B.sector_volume(np.asarray(r.radius_in), np.asarray(r.polar),
+                                                  np.asarray(r.azimuth), p["volume_rule"]) if ok else np.nan)
+                rows[m][1].append(int(np.asarray(r.calls).sum()))
+        gs = f"{g0}/centre_sweep"
+        res_file.put_axis(gs, "centre_z", zs, units="m")
+        for m in B.METHODS:
+            res_file.put(gs, f"volume_{m}", np.asarray(rows[m][0]), units="m^3", dims=("centre_z",),
+                         attrs={"description": f"{p['volume_rule']} sector volume of radius_in"})
+            res_file.put(gs, f"calls_{m}", np.asarray(rows[m][1]), units="1", dims=("centre_z",))
+        res_file.set_attrs(gs, step_deg=p["sweep_step_deg"])
+        for z, vc, cc, vn, cn in zip(zs, *rows["conti"], *rows["continuation"]):
+            ctx.log(f"centre z = {z:.3f}: conti V = {vc:.4f} ({cc} calls), continuation V = {vn:.4f} ({cn} calls)")
+
+    if ctx.cfg.get("plots", True):
+        step = min(p["steps_deg"])
+        _plot(ctx, robot, p, keep[(step, "conti")], keep[(step, "continuation")], step)
+
+
+def _plot(ctx, robot, p, conti, cont, step):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    res_c, prof_c = conti
+    res_n, _ = cont
+    polar, azimuth = np.asarray(res_c.polar), np.asarray(res_c.azimuth)
+    centre = np.asarray(p["centre"])
+    # Slice y = 0 through the centre: the azimuths 0 (x > 0) and 180 deg (x < 0).
+    xs = np.linspace(-3.0, 3.0, 301)
+    zs = np.linspace(-0.5, 4.5, 251)
+    X, Z = np.meshgrid(xs, zs, indexing="xy")
+    pts = np.stack([X.ravel(), np.full(X.size, centre[1]), Z.ravel()], -1)
+    mask = np.asarray(jax.jit(jax.vmap(lambda q: B.test_pose(robot, q, p["half_space"])))(jnp.asarray(pts)))
+    fig, ax = plt.subplots(figsize=(7, 6))
+    ax.contourf(X, Z, mask.reshape(X.shape).astype(float), levels=[0.5, 1.5], colors=["#cde3f5"])
+    ax.contour(X, Z, mask.reshape(X.shape).astype(float), levels=[0.5], colors=["#5a8fbf"], linewidths=0.8)
+    for az_deg, sgn in ((0.0, 1.0), (180.0, -1.0)):
+        j = int(np.argmin(np.abs(np.rad2deg(azimuth) - az_deg)))
+        for res, style, label in ((res_c, "r-", "Conti bisection"), (res_n, "k--", "continuation")):
+            r = np.asarray(res.radius)[j]
+            ax.plot(centre[0] + sgn * r * np.sin(polar), centre[2] + r * np.cos(polar), style, lw=1.2,
+                    label=label if az_deg == 0.0 else None)
+        bad = np.asarray(prof_c.n_exits)[j] > 1
+        for i in np.flatnonzero(bad):
+            e = np.asarray(prof_c.last_exit)[j, i]
+            ax.plot([centre[0], centre[0] + sgn * e * np.sin(polar[i])], [centre[2], centre[2] + e * np.cos(polar[i])],
+                    color="orange", lw=0.4, alpha=0.6)
+    ax.plot(centre[0], centre[2], "k+", ms=10, label="centre C")
+    R = float(robot.base_radius)
+    ax.plot([R, -0.5 * R], [0.0, 0.0], "ks", ms=4, label="actuated joints A_i (projected)")
+    ax.invert_yaxis()
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("z (m, down)")
+    ax.set_title(f"Slice y = 0: workspace (blue), boundaries at {step:g} deg; orange: rays that re-enter")
+    ax.legend(loc="lower right", fontsize=8)
+    ctx.savefig(fig, "boundary_slice")
+
+    d = np.asarray(B.ray_directions(polar, azimuth))
+    q = centre + np.asarray(res_n.radius)[..., None] * d
+    ns = np.asarray(prof_c.n_exits) > 1
+    fig = plt.figure(figsize=(7, 6))
+    ax = fig.add_subplot(projection="3d")
+    sel = ~ns
+    ax.scatter(q[sel, 0][::7], q[sel, 1][::7], q[sel, 2][::7], s=0.5, c=q[sel, 2][::7], cmap="viridis")
+    ax.scatter(q[ns, 0], q[ns, 1], q[ns, 2], s=2, c="orange", label="rays that leave and re-enter")
+    ax.invert_zaxis()
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_zlabel("z (m, down)")
+    ax.set_title("Boundary (continuation) seen from C")
+    ax.legend(loc="upper left", fontsize=8)
+    ctx.savefig(fig, "boundary_surface")
