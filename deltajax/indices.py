@@ -35,6 +35,7 @@ __all__ = [
     "classify_singularity",
     "MATRICES",
     "INDEX_NAMES",
+    "point_indices",
 ]
 
 MATRICES = ("theta3x3", "full3x4")
@@ -239,6 +240,33 @@ def indices(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], *, mat
     ind = indices_from_singular_values(s, b_v=b_v, b_f=b_f, beta=beta)
     manip = jnp.sqrt(jnp.abs(jnp.linalg.det(J @ J.T)))
     return ind._replace(manipulability=manip, imi=1.0 / manip)
+
+
+def point_indices(robot: Delta, p: Float[Array, "3"], *, branch: str = "outer", b_v: float = 2.0,
+                  b_f: float = 4.2, beta: float = 0.5, length: Optional[float] = None):
+    """IK and all indices of one point in the hot-path form (the workspace/benchmark kernel).
+
+    No inverse trig and no SVD: cos/sin of theta come from the algebraic IK, the Jacobians from them, the
+    singular values from :func:`singular_values_closed_form`. Equals ``indices(robot, p, ik(robot, p).theta)``
+    (theta3x3 matrix) to rounding, with NaN indices where the point is not reachable.
+
+    Returns:
+        (``IKCosSin``, :class:`Indices`).
+    """
+    from .kinematics import ik_cos_sin, to_chain_frames
+
+    cs = ik_cos_sin(robot, p, branch=branch)
+    L = _resolve_length(robot, length)
+    loc = to_chain_frames(jnp.asarray(p, cs.cos.dtype))
+    L1 = robot.upper_arm
+    ux = (loc[:, 0] + robot.platform_radius - robot.base_radius - L1 * cs.cos) / robot.forearm
+    uz = (loc[:, 2] - L1 * cs.sin) / robot.forearm
+    u_local = jnp.stack([ux, loc[:, 1] / robot.forearm, uz], axis=-1)
+    Jx = _from_chain_frames(u_local)
+    dhat = (L1 / L) * (uz * cs.cos - ux * cs.sin)
+    s = singular_values_closed_form(Jx, dhat)
+    s = jnp.where(jnp.all(cs.ok), s, jnp.nan)
+    return cs, indices_from_singular_values(s, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L ** 3)
 
 
 class Singularity(NamedTuple):

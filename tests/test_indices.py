@@ -185,3 +185,18 @@ def test_singularity_types_2_3_4():
     p0 = jnp.array([0.0, 0.0, 0.35])
     s0 = dj.classify_singularity(REC.robot, p0, dj.ik(REC.robot, p0).theta)
     assert not bool(s0.singular) and int(s0.jx_rank) == 3 and int(s0.jq_rank) == 3 and int(s0.jq_full_rank) == 3
+
+
+def test_point_indices_hot_path_equals_reference():
+    key = jax.random.PRNGKey(1)
+    p = jax.random.uniform(key, (500, 3), minval=jnp.array([-0.35, -0.35, 0.05]), maxval=jnp.array([0.35, 0.35, 0.6]))
+    robot = REC.at(0.3)
+    cs, fast = jax.vmap(lambda q: dj.point_indices(robot, q))(p)
+    ref = jax.vmap(lambda q: dj.indices(robot, q, dj.ik(robot, q).theta, sv_method="svd"))(p)
+    ok = np.asarray(cs.ok).all(axis=1)
+    assert ok.sum() > 100 and (~ok).sum() > 10
+    good = ok & (np.asarray(ref.inv_cond) > 1e-3)
+    for name in ("inv_cond", "sigma_min_v", "sigma_min_f", "omega_v", "omega_f", "k_tilde"):
+        np.testing.assert_allclose(np.asarray(getattr(fast, name))[good], np.asarray(getattr(ref, name))[good],
+                                   rtol=1e-9, atol=1e-12)
+        assert np.isnan(np.asarray(getattr(fast, name))[~ok]).all()
