@@ -7,7 +7,8 @@ choice: ``jax.config.update("jax_enable_x64", True)``; the CLI does it from ``pr
 from . import presets
 from .geometry import CHAIN_ANGLES, Delta, GeometryError, ReconfigurableDelta, from_z_up, to_z_up
 from .indices import (INDEX_NAMES, Indices, Singularity, classify_singularity, indices,
-                      indices_from_singular_values, k_tilde, sigma_tilde, singular_values)
+                      indices_from_singular_values, k_tilde, point_indices, sigma_tilde,
+                      singular_values)
 from .jacobian import Jacobians, homogenise, jacobian, jacobians
 from .kinematics import (FKResult, IKCosSin, IKResult, elbows, fk, forearm_units, ik, ik_cos_sin,
                          passive_angles)
