@@ -1,0 +1,22 @@
+"""Workspace engine: grids, reachable volumes, index fields, redundancy resolution, statistics.
+
+Pure, jit/vmap-able functions (one robot; vmap over designs with ``in_axes=(0, None)``)::
+
+    make_grid(x, y, z, h) -> Grid                      # host object; grid.points(start, stop) -> (n, 3)
+    reachable_mask(robot, points) -> bool[N]
+    reachable_fraction(robot, points) -> float
+    reconfigurable_reachable(recon, points) -> bool[N] # some R sample reaches
+    index_fields(robot, points, b_v=, b_f=, beta=) -> (ok[N], {index name: float[N]})   NaN outside
+    resolve_redundancy(recon, points, criterion="k_tilde", b_v=, b_f=, beta=) -> Redundancy(k, R, value, ok, indices)
+
+Host drivers (NumPy in/out, chunked, progress, checkpoint/resume)::
+
+    resolve_redundancy_host(recon, points, criterion, mode="fast" | "exact", ...)
+    evaluate_fixed(robot, grid, ...), evaluate_reconfigurable(recon, grid, ...), index_stats(...)
+"""
+
+from .grid import (FIELD_NAMES, Grid, franco2026_grid, index_fields, make_grid, point_indices, reachable_fraction,
+                   reachable_mask)
+from .redundancy import (Redundancy, feasible_window, reach_interval, reconfigurable_reachable, resolve_redundancy,
+                         resolve_redundancy_host, sample_value)
+from . import boundary

@@ -1,0 +1,240 @@
+"""Workspace grids and the per-point kernels evaluated on them (pure, jit/vmap-able).
+
+Grid rule (SPEC §1): inclusive end points, coordinates built from integer indices, never by accumulating a
+float ``arange``. The franco2026 grid is x, y = -0.4 + 0.002 i (i = 0..400), z = 0.002 k (k = 0..299);
+we compute each coordinate as ``h * (i + i0)`` with the integer offset ``i0 = lo / h`` whenever ``lo`` is a
+whole number of steps, so that a grid symmetric about 0 is *bit-for-bit* symmetric (y -> -y maps grid
+points onto grid points exactly; redundancy resolution relies on it, see :mod:`.redundancy`).
+
+Public functions (single robot; vmap over a population of designs with ``in_axes=(0, None)``)::
+
+    grid = make_grid(x=(-0.4, 0.4), y=(-0.4, 0.4), z=(0.0, 0.598), h=0.002)   # Grid (host object)
+    pts  = grid.points(start, stop)                 # float64[n, 3], flat C order (x slowest, z fastest)
+    reachable_mask(robot, points)      -> bool[N]   # IK ok for all chains, theta within limits
+    reachable_fraction(robot, points)  -> float[]   # mean of the mask
+    point_indices(robot, p, ...)       -> (ok, Indices)    # one point: the fast algebraic kernel
+    index_fields(robot, points, ...)   -> (ok[N], {name: float[N]})  # NaN outside the workspace
+
+The kernel ``point_indices`` is the algebraic one of SPEC §7: cos/sin of the actuated angles straight from
+:func:`deltajax.ik_cos_sin` (no inverse trig), the homogenised theta-block M = Jx^-1 diag(sin th2 sin th3)
+and its singular values by :func:`deltajax.indices.singular_values_closed_form` (no SVD). It agrees with
+``dj.indices(robot, p, dj.ik(robot, p).theta)`` to rounding (tested), and it evaluates every point at its
+mirror image (x, |y|, z): the robot is symmetric under y -> -y (chain 0 on the x axis, chains 1 and 2 swap),
+so this is exact in real arithmetic and makes every field bit-for-bit mirror-symmetric.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Optional, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float
+
+from ..geometry import Delta
+from ..indices import INDEX_NAMES, Indices, indices_from_singular_values, singular_values_closed_form
+from ..kinematics import _from_chain_frames, ik_cos_sin, to_chain_frames
+
+__all__ = [
+    "Grid",
+    "make_grid",
+    "franco2026_grid",
+    "reachable_mask",
+    "reachable_fraction",
+    "point_indices",
+    "index_fields",
+    "FIELD_NAMES",
+]
+
+#: Scalar index fields produced by :func:`index_fields` (the core's :data:`deltajax.INDEX_NAMES`).
+FIELD_NAMES = tuple(INDEX_NAMES)
+
+
+def _axis(lo: float, hi: float, h: float, name: str) -> np.ndarray:
+    """Inclusive axis lo, lo + h, ..., hi built from integer indices (m)."""
+    lo, hi, h = float(lo), float(hi), float(h)
+    for k, v in ((f"{name}[0]", lo), (f"{name}[1]", hi), ("h", h)):
+        if not math.isfinite(v):
+            raise ValueError(f"grid {k} must be finite, got {v!r}")
+    if not h > 0:
+        raise ValueError(f"grid spacing h must be > 0 m, got {h!r}")
+    if not hi >= lo:
+        raise ValueError(f"grid {name} range is empty: ({lo!r}, {hi!r})")
+    n_float = (hi - lo) / h
+    n = round(n_float)
+    if abs(n_float - n) > 1e-6 * max(1.0, n_float):
+        raise ValueError(f"grid {name} range ({lo!r}, {hi!r}) m is not a whole number of h={h!r} m steps "
+                         f"({n_float:.6f}); inclusive end points need (hi - lo) / h integer")
+    i = np.arange(n + 1, dtype=np.int64)
+    off = lo / h
+    if abs(off - round(off)) <= 1e-9 * max(1.0, abs(off)):
+        return h * (i + round(off)).astype(np.float64)  # symmetric ranges stay exactly symmetric
+    return lo + h * i.astype(np.float64)
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Grid:
+    """A rectangular grid of platform positions (host object; shapes are static).
+
+    Attributes:
+        x, y, z: the axes (m, base frame, z down), inclusive end points.
+        h: spacing (m), the same on all axes.
+        bounds: the enclosing box ((x0, x1), (y0, y1), (z0, z1)) (m) used for the paper's volume
+            count / N * V_box; by default the grid's own end points.
+    """
+
+    x: np.ndarray
+    y: np.ndarray
+    z: np.ndarray
+    h: float
+    bounds: tuple
+
+    @property
+    def shape(self) -> tuple[int, int, int]:
+        return (len(self.x), len(self.y), len(self.z))
+
+    @property
+    def n_points(self) -> int:
+        return int(np.prod(self.shape))
+
+    @property
+    def box_volume(self) -> float:
+        """V_box of the enclosing box (m^3)."""
+        (a, b), (c, d), (e, f) = self.bounds
+        return float((b - a) * (d - c) * (f - e))
+
+    @property
+    def mirror_symmetric(self) -> bool:
+        """Whether y -> -y maps the grid onto itself bit-for-bit."""
+        return bool(np.array_equal(self.y, -self.y[::-1]))
+
+    def points(self, start: int = 0, stop: Optional[int] = None) -> np.ndarray:
+        """Points ``start:stop`` of the flattened grid (C order: x slowest, z fastest), float64[n, 3] (m)."""
+        stop = self.n_points if stop is None else min(int(stop), self.n_points)
+        idx = np.arange(int(start), stop, dtype=np.int64)
+        return self.points_at(idx)
+
+    def points_at(self, flat_index: np.ndarray) -> np.ndarray:
+        """Points at the given flat indices, float64[n, 3] (m)."""
+        nx, ny, nz = self.shape
+        flat_index = np.asarray(flat_index, dtype=np.int64)
+        i, rem = np.divmod(flat_index, ny * nz)
+        j, k = np.divmod(rem, nz)
+        return np.stack([self.x[i], self.y[j], self.z[k]], axis=-1)
+
+    def mirror_index(self, flat_index: np.ndarray) -> np.ndarray:
+        """Flat index of the mirror image (x, -y, z) of each point (requires :attr:`mirror_symmetric`)."""
+        nx, ny, nz = self.shape
+        i, rem = np.divmod(np.asarray(flat_index, dtype=np.int64), ny * nz)
+        j, k = np.divmod(rem, nz)
+        return (i * ny + (ny - 1 - j)) * nz + k
+
+    def volume_count(self, count: int) -> float:
+        """Volume as count * h^3 (m^3)."""
+        return float(count) * self.h ** 3
+
+    def volume_box(self, count: int) -> float:
+        """Volume as the paper's count / N * V_box (m^3)."""
+        return float(count) / self.n_points * self.box_volume
+
+
+def make_grid(x: Sequence[float], y: Sequence[float], z: Sequence[float], h: float,
+              bounds: Optional[Sequence[Sequence[float]]] = None) -> Grid:
+    """Build a grid with inclusive end points.
+
+    Args:
+        x, y, z: (lo, hi) of each axis (m); (hi - lo) must be a whole number of steps.
+        h: spacing (m).
+        bounds: enclosing box for :meth:`Grid.volume_box` (default: the end points).
+
+    Raises:
+        ValueError: naming the axis and values when a range is empty, not finite or not a multiple of h.
+    """
+    ax = _axis(x[0], x[1], h, "x"), _axis(y[0], y[1], h, "y"), _axis(z[0], z[1], h, "z")
+    if bounds is None:
+        bounds = ((float(x[0]), float(x[1])), (float(y[0]), float(y[1])), (float(z[0]), float(z[1])))
+    bounds = tuple((float(a), float(b)) for a, b in bounds)
+    return Grid(x=ax[0], y=ax[1], z=ax[2], h=float(h), bounds=bounds)
+
+
+def franco2026_grid(h: float = 0.002, *, paper_box: bool = True) -> Grid:
+    """The grid of Franco-López 2026 §6.1: x, y in [-0.4, 0.4], z = 0, h, ..., 0.6 - h (m).
+
+    At h = 0.002 this is the paper's 401 x 401 x 300 grid. The paper's box is x, y in [-0.4, 0.4],
+    z in [0, 0.6] (V_box = 0.384 m^3) while its z samples stop at 0.598; ``paper_box=False`` uses the
+    grid's own end points instead.
+    """
+    nz = round(0.6 / h)
+    z_hi = (nz - 1) * h
+    bounds = ((-0.4, 0.4), (-0.4, 0.4), (0.0, 0.6)) if paper_box else None
+    return make_grid((-0.4, 0.4), (-0.4, 0.4), (0.0, z_hi), h, bounds=bounds)
+
+
+# -- kernels (pure) ------------------------------------------------------------------------------------------
+
+def _canonical(p: Float[Array, "3"]) -> Float[Array, "3"]:
+    """The mirror image (x, |y|, z): exact for the y -> -y symmetric robot, see the module docstring."""
+    return jnp.stack([p[0], jnp.abs(p[1]), p[2]])
+
+
+def reachable_point(robot: Delta, p: Float[Array, "3"]) -> Bool[Array, ""]:
+    """IK solvable for all chains with every theta inside the joint limits (one point)."""
+    return jnp.all(ik_cos_sin(robot, _canonical(jnp.asarray(p))).ok)
+
+
+def reachable_mask(robot: Delta, points: Float[Array, "n 3"]) -> Bool[Array, "n"]:
+    """Reachable mask of ``points`` (m, base frame) for one robot; pure, jit/vmap-able.
+
+    Vmap over designs: ``jax.vmap(reachable_mask, in_axes=(0, None))(robots, points)``.
+    """
+    return jax.vmap(reachable_point, in_axes=(None, 0))(robot, jnp.asarray(points))
+
+
+def reachable_fraction(robot: Delta, points: Float[Array, "n 3"]) -> Float[Array, ""]:
+    """Fraction of ``points`` that are reachable (multiply by the box volume for a volume)."""
+    m = reachable_mask(robot, points)
+    return jnp.mean(m.astype(jnp.result_type(float)))
+
+
+def point_indices(robot: Delta, p: Float[Array, "3"], *, b_v: float = 2.0, b_f: float = 4.2,
+                  beta: float = 0.5) -> tuple[Bool[Array, ""], Indices]:
+    """Reachability and all indices (theta3x3, homogenised by L1) at one point, algebraic kernel.
+
+    Args:
+        robot: the robot (R = ``robot.base_radius``).
+        p: platform centre (m, base frame).
+        b_v, b_f, beta: parameters of k~.
+
+    Returns:
+        (ok, indices): ``ok`` is reachability within joint limits; the indices are NaN where not ok.
+    """
+    p = _canonical(jnp.asarray(p))
+    cs = ik_cos_sin(robot, p)
+    ok = jnp.all(cs.ok)
+    c = jnp.where(ok, cs.cos, 1.0)
+    s = jnp.where(ok, cs.sin, 0.0)
+    loc = to_chain_frames(p)
+    L1, L2 = robot.upper_arm, robot.forearm
+    u = jnp.stack([loc[:, 0] + robot.platform_radius - robot.base_radius - L1 * c, loc[:, 1],
+                   loc[:, 2] - L1 * s], axis=-1) / L2  # unit forearm vectors, chain-local frames
+    Jx = _from_chain_frames(u)
+    dhat = u[:, 2] * c - u[:, 0] * s  # sin th2 sin th3 (homogenised: L1 sin th2 sin th3 / L1)
+    sv = singular_values_closed_form(Jx, dhat)
+    ind = indices_from_singular_values(sv, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L1 ** 3)
+    nan = jnp.asarray(jnp.nan, sv.dtype)
+    ind = Indices(*(jnp.where(ok, v, nan) for v in ind))
+    return ok, ind
+
+
+def index_fields(robot: Delta, points: Float[Array, "n 3"], *, b_v: float = 2.0, b_f: float = 4.2,
+                 beta: float = 0.5) -> tuple[Bool[Array, "n"], dict]:
+    """Reachable mask and every scalar index at ``points`` (NaN outside the workspace); pure.
+
+    Returns:
+        (ok[n], {name: float[n]} for name in :data:`FIELD_NAMES`).
+    """
+    ok, ind = jax.vmap(lambda q: point_indices(robot, q, b_v=b_v, b_f=b_f, beta=beta))(jnp.asarray(points))
+    return ok, {name: getattr(ind, name) for name in FIELD_NAMES}
