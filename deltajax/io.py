@@ -212,3 +212,41 @@ def load(path: os.PathLike) -> dict[str, Any]:
     """
     with h5py.File(path, "r") as f:
         return _read_group(f)
+
+
+# -- sweeps and analysis (additive; the merge and summary logic lives in deltajax.sweep) ----------------------
+def open_xarray(path: os.PathLike, group: str):
+    """Open one group of a results file as an in-memory :class:`xarray.Dataset` (SPEC §5).
+
+    Gridded datasets come with their named dimensions and coordinate axes (the HDF5 dimension scales), each
+    variable with its ``units`` attribute; scalars are 0-d variables. The file is closed on return.
+
+    Example::
+
+        ws = open_xarray(run_dir / "results.h5", "workspace")
+        area_vs_z = ws.reachable.sum(("x", "y")) * float(ws.attrs["h"]) ** 2      # m^2 per z level
+    """
+    import xarray as xr
+
+    with xr.open_dataset(path, group=group, engine="h5netcdf") as ds:
+        return ds.load()
+
+
+def merge_shards(paths: Sequence[os.PathLike], out: Optional[os.PathLike] = None) -> Path:
+    """Merge the results files of the N shards of one job into one file identical to a single run.
+
+    See :func:`deltajax.sweep.merge_shards` (``python -m deltajax.merge <sweep dir>`` merges a whole sweep).
+    """
+    from .sweep import merge_shards as _merge
+
+    return _merge(paths, out)
+
+
+def summarize_sweep(sweep_dir: os.PathLike) -> dict:
+    """Write ``summary.csv`` and ``summary.json`` indexing a sweep's runs; see :func:`deltajax.sweep.summarize_sweep`."""
+    from .sweep import summarize_sweep as _summarize
+
+    return _summarize(sweep_dir)
+
+
+__all__ += ["open_xarray", "merge_shards", "summarize_sweep"]

@@ -1,0 +1,360 @@
+"""Experiment ``workspace_grid``: reachability and every index on a grid, shardable across jobs and devices.
+
+    python -m deltajax.run experiment=workspace_grid experiment.grid.h=0.002          # one process
+    python -m deltajax.run -m experiment=workspace_grid n_shards=4 shard=0,1,2,3     # 4 jobs, merged at the end
+
+The grid (inclusive end points, :func:`deltajax.workspace.make_grid`) is cut into chunks of whole x-planes
+(``experiment.chunk_points`` points each, padded to a fixed shape so that one compilation serves all of
+them). Each chunk is split over this process's JAX devices (``jax.sharding``; on a CPU node the
+:class:`deltajax.sweep.WorkerEnv` callback exposes one host device per CPU). With ``n_shards=N`` the chunks
+are divided among N jobs; ``shard=i`` computes the i-th contiguous block of x-planes. Because the shard
+boundaries fall on chunk boundaries, every point is computed in the same chunk position with the same
+compiled code as in a single run, and the per-plane partial statistics are reduced by the same NumPy code
+(:func:`reduce_shards`), so merged shards (:func:`deltajax.sweep.merge_shards`) equal a single run bit for
+bit.
+
+Results, group ``workspace`` (dims x, y, z; SPEC §5):
+``reachable`` (uint8), the fields listed in ``experiment.store`` (NaN outside the workspace), per-plane
+statistics ``plane_count`` (x) and ``plane_n/_sum/_min/_max`` (x, index) over the reachable points with a
+finite value, and the scalars ``count``, ``volume`` (count h^3), ``volume_box`` (count / N V_box),
+``fraction`` and ``<index>_min/_max/_mean``. Checkpoints every ``experiment.checkpoint_s`` seconds; with
+``experiment.resume=true`` a rerun into the same directory continues from the last checkpoint.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import time
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+
+from ..config import ConfigError
+
+GROUP = "workspace"
+REDUCER = "deltajax.experiments.workspace_grid:reduce_shards"
+
+__all__ = ["run", "reduce_shards", "GridPlan", "plan_chunks", "make_evaluator", "plane_statistics"]
+
+
+# ---------------------------------------------------------------------------------------------------------
+# configuration
+# ---------------------------------------------------------------------------------------------------------
+def _grid_from_config(g: Mapping[str, Any]):
+    from ..workspace import make_grid
+
+    def pair(key):
+        v = g.get(key)
+        try:
+            lo, hi = (float(t) for t in v)
+        except (TypeError, ValueError):
+            raise ConfigError(f"experiment.grid.{key} must be [lo, hi] in m, got {v!r}") from None
+        return lo, hi
+
+    h = g.get("h")
+    if not isinstance(h, (int, float)) or isinstance(h, bool) or not h > 0:
+        raise ConfigError(f"experiment.grid.h must be a positive number (m), got {h!r}")
+    bounds = g.get("bounds")
+    if bounds is not None:
+        try:
+            bounds = [[float(a), float(b)] for a, b in bounds]
+            assert len(bounds) == 3
+        except (TypeError, ValueError, AssertionError):
+            raise ConfigError(f"experiment.grid.bounds must be null or [[x0,x1],[y0,y1],[z0,z1]] (m), "
+                              f"got {g.get('bounds')!r}") from None
+    try:
+        return make_grid(pair("x"), pair("y"), pair("z"), float(h), bounds=bounds)
+    except ValueError as e:
+        raise ConfigError(f"experiment.grid: {e}") from None
+
+
+class GridPlan:
+    """Chunks of whole x-planes and the slice of them one shard computes (host-side bookkeeping)."""
+
+    def __init__(self, shape: Sequence[int], chunk_points: int, n_devices: int, shard: int, n_shards: int):
+        nx, ny, nz = (int(s) for s in shape)
+        self.shape = (nx, ny, nz)
+        self.plane = ny * nz
+        self.planes_per_chunk = max(1, min(nx, int(chunk_points) // self.plane))
+        self.n_chunks = math.ceil(nx / self.planes_per_chunk)
+        if not 1 <= n_shards <= self.n_chunks:
+            raise ConfigError(f"n_shards must be in 1..{self.n_chunks} (the grid has {self.n_chunks} chunks of "
+                              f"{self.planes_per_chunk} x-planes; lower experiment.chunk_points for more), "
+                              f"got {n_shards!r}")
+        if not 0 <= shard < n_shards:
+            raise ConfigError(f"shard must be in 0..{n_shards - 1} (n_shards={n_shards}), got {shard!r}")
+        self.shard, self.n_shards = shard, n_shards
+        self.chunk0 = shard * self.n_chunks // n_shards
+        self.chunk1 = (shard + 1) * self.n_chunks // n_shards
+        self.x_start = self.chunk0 * self.planes_per_chunk
+        self.x_stop = min(nx, self.chunk1 * self.planes_per_chunk)
+        # fixed padded length: one compilation, and a multiple of the device count for even sharding
+        n = self.planes_per_chunk * self.plane
+        self.chunk_len = -(-n // n_devices) * n_devices
+
+    def chunk_planes(self, c: int) -> tuple[int, int]:
+        """Global x-plane range [a, b) of chunk ``c``."""
+        a = c * self.planes_per_chunk
+        return a, min(self.shape[0], a + self.planes_per_chunk)
+
+
+def plan_chunks(shape, chunk_points, n_devices=1, shard=0, n_shards=1) -> GridPlan:
+    """See :class:`GridPlan`."""
+    return GridPlan(shape, chunk_points, n_devices, shard, n_shards)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# device kernel
+# ---------------------------------------------------------------------------------------------------------
+def make_evaluator(n_devices: int, *, b_v: float, b_f: float, beta: float):
+    """A jitted ``f(robot, points[n, 3]) -> (ok[n], values[n, n_index])`` sharded over ``n_devices`` devices.
+
+    ``n`` must be a multiple of ``n_devices``; the points are split along their first axis, the robot is
+    replicated. Per-point results do not depend on the split (elementwise kernel).
+    """
+    import jax
+    import jax.numpy as jnp
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
+
+    from ..workspace import FIELD_NAMES, index_fields
+
+    devices = jax.local_devices()[:n_devices]
+    mesh = Mesh(np.asarray(devices), ("d",))
+    rows = NamedSharding(mesh, P("d", None))
+    flat = NamedSharding(mesh, P("d"))
+    repl = NamedSharding(mesh, P())
+
+    def f(robot, pts):
+        ok, fields = index_fields(robot, pts, b_v=b_v, b_f=b_f, beta=beta)
+        return ok, jnp.stack([fields[n] for n in FIELD_NAMES], axis=-1)
+
+    jf = jax.jit(f, out_shardings=(flat, rows))
+
+    def evaluate(robot, pts):
+        robot = jax.device_put(robot, repl)
+        return jf(robot, jax.device_put(pts, rows))
+
+    return evaluate
+
+
+# ---------------------------------------------------------------------------------------------------------
+# statistics (NumPy, shared by the single run and the shard merge so that both are bit-identical)
+# ---------------------------------------------------------------------------------------------------------
+def plane_statistics(ok: np.ndarray, values: np.ndarray) -> dict[str, np.ndarray]:
+    """Per-x-plane partial statistics.
+
+    Args:
+        ok: bool[k, m] reachability of the k planes' m points.
+        values: float[k, m, n_index].
+
+    Returns:
+        ``plane_count`` int64[k] and ``plane_n`` (int64), ``plane_sum``, ``plane_min``, ``plane_max``
+        [k, n_index] over the reachable points whose value is finite (min/max are +inf/-inf for none).
+    """
+    finite = ok[..., None] & np.isfinite(values)
+    return {
+        "plane_count": ok.sum(axis=1, dtype=np.int64),
+        "plane_n": finite.sum(axis=1, dtype=np.int64),
+        "plane_sum": np.where(finite, values, 0.0).sum(axis=1),
+        "plane_min": np.where(finite, values, np.inf).min(axis=1),
+        "plane_max": np.where(finite, values, -np.inf).max(axis=1),
+    }
+
+
+def _summary(planes: Mapping[str, np.ndarray], names: Sequence[str], h: float, n_points: int,
+             box_volume: float) -> dict[str, np.ndarray]:
+    count = np.int64(planes["plane_count"].sum())
+    n = planes["plane_n"].sum(axis=0)
+    total = planes["plane_sum"].sum(axis=0)
+    vmin = planes["plane_min"].min(axis=0)
+    vmax = planes["plane_max"].max(axis=0)
+    out = {
+        "count": count,
+        "volume": np.float64(count * h ** 3),
+        "volume_box": np.float64(count / n_points * box_volume),
+        "fraction": np.float64(count / n_points),
+    }
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mean = np.where(n > 0, total / np.maximum(n, 1), np.nan)
+    nan = np.asarray(np.nan, total.dtype)
+    for i, name in enumerate(names):  # NaN when no reachable point has a finite value
+        out[f"{name}_min"] = np.where(n[i] > 0, vmin[i], nan)
+        out[f"{name}_max"] = np.where(n[i] > 0, vmax[i], nan)
+        out[f"{name}_mean"] = mean[i].astype(total.dtype)
+    return out
+
+
+def reduce_shards(data: Mapping[str, np.ndarray], shard_attrs: Sequence[Mapping[str, Any]]):
+    """``shard_reduce`` of group ``workspace``: recompute the whole-grid scalars from the merged planes."""
+    a0 = shard_attrs[0]
+    names = [str(s) for s in data["index"]]
+    scalars = _summary(data, names, float(a0["h"]), int(a0["n_points"]), float(a0["box_volume"]))
+    planes_done = sum(int(a["planes_done"]) for a in shard_attrs)
+    return scalars, {"planes_done": planes_done, "complete": int(planes_done == int(a0["shard_axis_size"]))}
+
+
+# ---------------------------------------------------------------------------------------------------------
+# the experiment
+# ---------------------------------------------------------------------------------------------------------
+def _int(cfg, key: str, field: str, lo: int = None) -> int:
+    v = cfg.get(key)
+    if not isinstance(v, int) or isinstance(v, bool) or (lo is not None and v < lo):
+        raise ConfigError(f"{field} must be an integer{'' if lo is None else f' >= {lo}'}, got {v!r}")
+    return v
+
+
+def run(ctx) -> None:
+    import jax
+
+    from ..workspace import FIELD_NAMES
+
+    cfg = ctx.cfg
+    ex = cfg.experiment
+    grid = _grid_from_config(ex.grid)
+    shard = _int(cfg, "shard", "shard", 0)
+    n_shards = _int(cfg, "n_shards", "n_shards", 1)
+    chunk_points = _int(ex, "chunk_points", "experiment.chunk_points", 1)
+    store = list(ex.get("store") or [])
+    for name in store:
+        if name not in FIELD_NAMES:
+            raise ConfigError(f"experiment.store: {name!r} is not an index; choose from {list(FIELD_NAMES)}")
+    dev_cfg = ex.get("devices", "all")
+    n_avail = jax.local_device_count()
+    if dev_cfg in ("all", None):
+        n_dev = n_avail
+    elif isinstance(dev_cfg, int) and not isinstance(dev_cfg, bool) and 1 <= dev_cfg <= n_avail:
+        n_dev = dev_cfg
+    else:
+        raise ConfigError(f"experiment.devices must be 'all' or an integer in 1..{n_avail}, got {dev_cfg!r}")
+    params = {k: float(ex.get(k)) for k in ("b_v", "b_f", "beta")}
+    plan = GridPlan(grid.shape, chunk_points, n_dev, shard, n_shards)
+    nx, ny, nz = grid.shape
+    xs = slice(plan.x_start, plan.x_stop)
+    n_local = plan.x_stop - plan.x_start
+    n_idx = len(FIELD_NAMES)
+    dtype = np.dtype(ctx.dtype)
+
+    # a key for resuming: everything that determines the numbers (the shard is checked separately)
+    key = json.dumps({"grid": [grid.x[0], grid.x[-1], grid.y[0], grid.y[-1], grid.z[0], grid.z[-1], grid.h],
+                      "robot": {k: str(v) for k, v in ctx.cfg.robot.items()}, "params": params,
+                      "chunk": plan.planes_per_chunk, "store": store,
+                      "precision": str(cfg.precision)}, sort_keys=True)
+    reach = np.zeros((n_local, ny, nz), np.uint8)
+    fields = {name: np.full((n_local, ny, nz), np.nan, dtype) for name in store}
+    planes = {"plane_count": np.zeros(n_local, np.int64), "plane_n": np.zeros((n_local, n_idx), np.int64),
+              "plane_sum": np.zeros((n_local, n_idx), dtype), "plane_min": np.full((n_local, n_idx), np.inf, dtype),
+              "plane_max": np.full((n_local, n_idx), -np.inf, dtype)}
+    done = 0  # planes of this shard finished
+    if ex.get("resume", True) and ctx.results.path.exists():
+        done = _resume(ctx, key, plan.x_start, plan.x_stop, reach, fields, planes)
+
+    def stage(planes_done: int) -> None:
+        r = ctx.results
+        r.put_axis(GROUP, "x", grid.x[xs], units="m")
+        r.put_axis(GROUP, "y", grid.y, units="m")
+        r.put_axis(GROUP, "z", grid.z, units="m")
+        r.put_axis(GROUP, "index", np.asarray(FIELD_NAMES, dtype=object), units="1")
+        r.put(GROUP, "reachable", reach, units="1", dims=("x", "y", "z"),
+              attrs={"description": "IK solvable for all chains with theta within limits"})
+        for name in store:
+            r.put(GROUP, name, fields[name], units="1", dims=("x", "y", "z"),
+                  attrs={"description": f"{name} (theta3x3, homogenised by L1); NaN outside the workspace"})
+        r.put(GROUP, "plane_count", planes["plane_count"], units="1", dims=("x",))
+        for k in ("plane_n", "plane_sum", "plane_min", "plane_max"):
+            r.put(GROUP, k, planes[k], units="1", dims=("x", "index"))
+        for k, v in _summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume).items():
+            r.put(GROUP, k, v, units={"count": "1", "volume": "m^3", "volume_box": "m^3"}.get(k, "1"), dims=())
+        r.set_attrs(GROUP, shard_axis="x", shard=shard, n_shards=n_shards, shard_start=plan.x_start,
+                    shard_stop=plan.x_stop, shard_axis_size=nx, shard_reduce=REDUCER, planes_done=planes_done,
+                    complete=int(planes_done == n_local), resume_key=key, h=grid.h, n_points=grid.n_points,
+                    box_volume=grid.box_volume, b_v=params["b_v"], b_f=params["b_f"], beta=params["beta"],
+                    chunk_planes=plan.planes_per_chunk,
+                    description="fixed-R workspace grid: reachability, indices and their statistics")
+
+    evaluate = make_evaluator(n_dev, **params)
+    robot = ctx.robot
+    first = plan.chunk0 + done // plan.planes_per_chunk
+    ctx.log(f"workspace_grid: grid {nx}x{ny}x{nz} = {grid.n_points} points, shard {shard}/{n_shards} "
+            f"x[{plan.x_start}:{plan.x_stop}], {plan.chunk1 - first} chunks of {plan.planes_per_chunk} planes "
+            f"on {n_dev} device(s)")
+    t_ckpt = time.monotonic()
+    t0 = time.perf_counter()
+    n_eval = 0
+    every = float(ex.get("checkpoint_s", 60.0))
+    for c in ctx.progress(range(first, plan.chunk1), total=plan.chunk1 - first, desc="workspace_grid"):
+        a, b = plan.chunk_planes(c)
+        idx = np.arange(a * plan.plane, b * plan.plane, dtype=np.int64)
+        pad = np.full(plan.chunk_len - idx.size, idx[0], np.int64)
+        pts = grid.points_at(np.concatenate([idx, pad])).astype(dtype)
+        ok, vals = evaluate(robot, pts)
+        ok = np.asarray(ok)[: idx.size].reshape(b - a, plan.plane)
+        vals = np.asarray(vals)[: idx.size].reshape(b - a, plan.plane, n_idx)
+        n_eval += idx.size
+        la, lb = a - plan.x_start, b - plan.x_start
+        reach[la:lb] = ok.reshape(b - a, ny, nz)
+        for name in store:
+            fields[name][la:lb] = vals[..., FIELD_NAMES.index(name)].reshape(b - a, ny, nz)
+        for k, v in plane_statistics(ok, vals).items():
+            planes[k][la:lb] = v
+        done = lb
+        if time.monotonic() - t_ckpt > every and c + 1 < plan.chunk1:
+            stage(done)
+            ctx.results.flush()
+            t_ckpt = time.monotonic()
+    elapsed = time.perf_counter() - t0
+    stage(done)
+    ctx.results.set_attrs(points_evaluated=n_eval, points_per_s=n_eval / elapsed if elapsed > 0 else 0.0,
+                          devices_used=n_dev, worker_env=os.environ.get("DELTAJAX_WORKER_ENV", ""))
+    s = _summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume)
+    ctx.log(f"shard {shard}/{n_shards}: {int(s['count'])} reachable points, volume {float(s['volume']):.6g} m^3 "
+            f"(count h^3), {float(s['volume_box']):.6g} m^3 (count/N V_box); "
+            f"{n_eval / max(elapsed, 1e-9) / 1e6:.2f} M points/s")
+    if cfg.get("plots", True) and n_shards == 1:
+        _plot(ctx, grid, reach)
+
+
+def _resume(ctx, key, start, stop, reach, fields, planes) -> int:
+    import h5py
+
+    try:
+        with h5py.File(ctx.results.path, "r") as f:
+            g = f.get(GROUP)
+            same_shard = g is not None and [int(g.attrs.get(k, -1)) for k in ("shard_start", "shard_stop")] \
+                == [start, stop]
+            if g is None or g.attrs.get("resume_key") != key or not same_shard:
+                ctx.log("results.h5 exists but is from a different job: starting afresh")
+                return 0
+            done = int(g.attrs["planes_done"])
+            reach[:done] = g["reachable"][:done]
+            for name in fields:
+                fields[name][:done] = g[name][:done]
+            for k in planes:
+                planes[k][:done] = g[k][:done]
+    except (OSError, KeyError) as e:
+        ctx.log(f"cannot resume from {ctx.results.path} ({e}): starting afresh")
+        return 0
+    ctx.log(f"resuming: {done} x-planes already done")
+    return done
+
+
+def _plot(ctx, grid, reach) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    area = reach.sum(axis=(0, 1)) * grid.h ** 2
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.6))
+    a1.plot(grid.z, area)
+    a1.set_xlabel("z (m, down)")
+    a1.set_ylabel("reachable area (m$^2$)")
+    j = int(np.argmin(np.abs(grid.y)))
+    a2.imshow(reach[:, j, :].T, origin="upper", aspect="equal",
+              extent=(grid.x[0], grid.x[-1], grid.z[-1], grid.z[0]), cmap="Greys")
+    a2.set_xlabel("x (m)")
+    a2.set_ylabel("z (m)")
+    a2.set_title(f"reachable, y = {grid.y[j]:.3f} m")
+    fig.tight_layout()
+    ctx.savefig(fig, "workspace_grid")

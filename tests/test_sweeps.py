@@ -1,0 +1,223 @@
+"""Sweeps through the real CLI: joblib and submitit_local multiruns, sharded jobs merged exactly, resume,
+the analysis script; plus the pure bookkeeping (CPU sizing, shard plans) as properties.
+
+The CLI runs share a JAX persistent compilation cache (warmed by the single reference run), so the sweep
+jobs do not recompile the grid kernel; the two sweeps and the resume run go concurrently.
+"""
+
+import importlib.util
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+from deltajax.config import ConfigError
+from deltajax.experiments.workspace_grid import GridPlan
+from deltajax.sweep import ShardError, _read_tree, merge_shards, resolve_worker_cpus
+
+REPO = Path(__file__).resolve().parent.parent
+TINY = ["experiment=workspace_grid", "plots=false", "progress=false", "experiment.grid.h=0.1",
+        "experiment.grid.z=[0.0,0.6]", "experiment.chunk_points=100", "hydra.callbacks.worker_env.cpus=1"]
+TIMEOUT = 240
+
+
+def _cli(args, tmp, env):
+    return subprocess.Popen([sys.executable, "-m", "deltajax.run", *args], cwd=tmp, env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+
+
+def _finish(proc, what):
+    out, _ = proc.communicate(timeout=TIMEOUT)
+    assert proc.returncode == 0, f"{what} failed (rc {proc.returncode}):\n{out[-4000:]}"
+    return out
+
+
+@pytest.fixture(scope="module")
+def sweeps(tmp_path_factory):
+    """Run everything once: single reference run, then joblib sweep, submitit_local sharded sweep and a
+    resumed run concurrently."""
+    tmp = tmp_path_factory.mktemp("sweeps")
+    env = dict(os.environ, JAX_COMPILATION_CACHE_DIR=str(tmp / "jax_cache"), HYDRA_FULL_ERROR="1",
+               PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env.pop("XLA_FLAGS", None)
+    single = tmp / "single"
+    _finish(_cli([*TINY, f"hydra.run.dir={single}"], tmp, env), "single run")
+    # a checkpoint of the same job cut after 4 x-planes: the resumed run must finish it identically
+    resume = tmp / "resume"
+    resume.mkdir()
+    shutil.copy(single / "results.h5", resume / "results.h5")
+    with h5py.File(resume / "results.h5", "r+") as f:
+        g = f["workspace"]
+        g.attrs["planes_done"] = 4
+        g.attrs["complete"] = 0
+        g["reachable"][4:] = 0
+        g["k_tilde"][4:] = np.nan
+        for k in ("plane_count", "plane_n", "plane_sum"):
+            g[k][4:] = 0
+        g["count"][()] = -1
+    procs = {
+        "joblib": _cli(["-m", *TINY, "robot.forearm=0.35,0.4", "hydra/launcher=joblib", "hydra.launcher.n_jobs=2",
+                        f"hydra.sweep.dir={tmp / 'joblib'}"], tmp, env),
+        "submitit": _cli(["-m", *TINY, "n_shards=2", "shard=0,1", "hydra/launcher=slurm_local",
+                          f"hydra.sweep.dir={tmp / 'submitit'}"], tmp, env),
+        "resume": _cli([*TINY, "experiment.checkpoint_s=0", f"hydra.run.dir={resume}"], tmp, env),
+    }
+    logs = {k: _finish(p, k) for k, p in procs.items()}
+    return {"tmp": tmp, "single": single / "results.h5", "resume": resume / "results.h5", "logs": logs}
+
+
+def _assert_identical(a_path, b_path, same_config=True):
+    """Same groups, datasets (bit for bit, NaN = NaN), units, dimensions, group attributes and config."""
+    a, b = _read_tree(a_path), _read_tree(b_path)
+    assert a[2].keys() == b[2].keys()
+    for g in b[2]:
+        assert a[2][g].keys() == b[2][g].keys(), g
+        for n, d in b[2][g].items():
+            e = a[2][g][n]
+            assert e.data.dtype == d.data.dtype and e.data.shape == d.data.shape, (g, n)
+            if d.data.dtype.kind == "f":
+                assert np.array_equal(e.data, d.data, equal_nan=True), (g, n)
+            else:
+                assert np.array_equal(e.data, d.data), (g, n)
+            assert (e.units, e.dims, e.attrs) == (d.units, d.dims, d.attrs), (g, n)
+        assert a[1][g].keys() == b[1][g].keys()
+        for k, v in b[1][g].items():
+            assert np.array_equal(np.asarray(a[1][g][k]), np.asarray(v)), (g, k)
+    assert (a[0]["config"] == b[0]["config"]) == same_config
+
+
+@pytest.mark.slow
+def test_joblib_multirun(sweeps):
+    sweep = sweeps["tmp"] / "joblib"
+    runs = {}
+    for d in (sweep / "0", sweep / "1"):
+        with h5py.File(d / "results.h5", "r") as f:
+            assert f.attrs["end_time"]
+            env = json.loads(f.attrs["worker_env"])
+            assert env["cpus"] == 1 and env["PJRT_NPROC"] == "1" and env["host_devices"] == 1
+            assert f.attrs["device"].endswith("x1")
+            runs[d.name] = int(f["workspace/count"][()])
+    # forearm 0.4 is the preset: that job is the single reference run; a shorter forearm reaches less
+    _assert_identical(sweep / "1" / "results.h5", sweeps["single"])
+    assert 0 < runs["0"] < runs["1"]
+    rows = json.loads((sweep / "summary.json").read_text())["runs"]
+    assert [(r["run"], r["status"], r["overrides"]["robot.forearm"]) for r in rows] == [("0", "ok", "0.35"),
+                                                                                        ("1", "ok", "0.4")]
+    assert [r["metrics"]["workspace/count"] for r in rows] == [runs["0"], runs["1"]]
+    header = (sweep / "summary.csv").read_text().splitlines()[0]
+    assert "robot.forearm" in header and "workspace/volume [m^3]" in header
+    assert not (sweep / "merged").exists()  # nothing sharded
+
+
+@pytest.mark.slow
+def test_submitit_local_shards_merge_to_single_run(sweeps):
+    sweep = sweeps["tmp"] / "submitit"
+    assert any((sweep / ".submitit").glob("*/*_result.pkl"))  # the submitit path really ran
+    counts, ranges = [], []
+    for s in ("0", "1"):
+        with h5py.File(sweep / s / "results.h5", "r") as f:
+            g = f["workspace"]
+            counts.append(int(g["count"][()]))
+            ranges.append((int(g.attrs["shard_start"]), int(g.attrs["shard_stop"])))
+            assert g["reachable"].shape[0] == ranges[-1][1] - ranges[-1][0]
+    assert ranges == [(0, ranges[0][1]), (ranges[0][1], 9)] and 0 < ranges[0][1] < 9
+    merged = sweep / "merged" / "workspace_grid" / "results.h5"  # written by the SweepSummary callback
+    _assert_identical(merged, sweeps["single"])
+    with h5py.File(merged, "r") as f:
+        assert int(f["workspace/count"][()]) == sum(counts)
+        assert f.attrs["merged_n_shards"] == 2
+    import xarray as xr
+
+    from deltajax.io import open_xarray
+
+    a, b = open_xarray(merged, "workspace"), open_xarray(sweeps["single"], "workspace")
+    xr.testing.assert_identical(a, b)
+    assert a["reachable"].dims == ("x", "y", "z") and a["volume"].attrs["units"] == "m^3"
+    rows = json.loads((sweep / "summary.json").read_text())["runs"]
+    assert [(r["kind"], r["status"]) for r in rows] == [("run", "ok"), ("run", "ok"), ("merged", "ok")]
+    assert rows[2]["metrics"]["workspace/count"] == sum(counts)
+
+
+@pytest.mark.slow
+def test_merge_refuses_incomplete_or_foreign_shards(sweeps, tmp_path):
+    sweep = sweeps["tmp"] / "submitit"
+    with pytest.raises(ShardError, match="missing \\[1\\]"):
+        merge_shards([sweep / "0" / "results.h5"], tmp_path / "m.h5")
+    with pytest.raises(ShardError, match="not a shard of the same job"):
+        merge_shards([sweep / "0" / "results.h5", sweeps["tmp"] / "joblib" / "0" / "results.h5"], tmp_path / "m.h5")
+    out = merge_shards([sweep / "1" / "results.h5", sweep / "0" / "results.h5"], tmp_path / "m.h5")  # any order
+    _assert_identical(out, sweeps["single"])
+
+
+@pytest.mark.slow
+def test_resume_from_checkpoint_matches_single_run(sweeps):
+    assert "resuming: 4 x-planes already done" in sweeps["logs"]["resume"]
+    with h5py.File(sweeps["resume"], "r") as f:
+        assert f.attrs["points_evaluated"] == 5 * 9 * 7  # only the 5 missing x-planes
+    _assert_identical(sweeps["resume"], sweeps["single"], same_config=False)  # config: checkpoint_s differs
+
+
+@pytest.mark.slow
+def test_analysis_script_on_sweep(sweeps, tmp_path):
+    spec = importlib.util.spec_from_file_location("analyze_sweep", REPO / "experiments" / "analyze_sweep.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    written = mod.analyze(sweeps["tmp"] / "joblib", out=tmp_path)
+    for k in ("table_md", "table_csv", "metrics_png", "area_png"):
+        assert written[k].stat().st_size > 0, k
+    lines = written["table_csv"].read_text().splitlines()
+    assert lines[0].startswith("run,robot.forearm,workspace/volume [m^3]")
+    vols = [float(line.split(",")[2]) for line in lines[1:]]
+    with h5py.File(sweeps["single"], "r") as f:
+        ref = float(f["workspace/volume"][()])
+    assert len(vols) == 2 and vols[1] == ref and vols[0] < vols[1]
+    written = mod.analyze(sweeps["tmp"] / "submitit", out=tmp_path / "sub")  # sharded: merged row only
+    rows = written["table_csv"].read_text().splitlines()[1:]
+    assert len(rows) == 1 and rows[0].startswith("merged/workspace_grid,")
+
+
+# -- pure bookkeeping --------------------------------------------------------------------------------------
+@given(avail=st.integers(1, 256), n_jobs=st.integers(-4, 64).filter(lambda n: n != 0))
+def test_joblib_cpus_never_oversubscribe(avail, n_jobs):
+    cpus, _ = resolve_worker_cpus({"_target_": "hydra_plugins.hydra_joblib_launcher.JoblibLauncher",
+                                   "n_jobs": n_jobs}, environ={}, available=avail)
+    workers = n_jobs if n_jobs > 0 else max(1, avail + 1 + n_jobs)
+    assert cpus >= 1
+    assert cpus * workers <= avail or cpus == 1
+
+
+def test_worker_cpus_sources():
+    slurm = {"_target_": "hydra_plugins.hydra_submitit_launcher.submitit_launcher.SlurmLauncher", "cpus_per_task": 8}
+    assert resolve_worker_cpus(slurm, environ={"SLURM_CPUS_PER_TASK": "12"}, available=64)[0] == 12
+    assert resolve_worker_cpus(slurm, environ={}, available=64)[0] == 8
+    assert resolve_worker_cpus(slurm, environ={}, available=4)[0] == 4  # never more than the process may use
+    assert resolve_worker_cpus(None, environ={}, available=6) == (6, "all CPUs of the process")
+
+
+@given(nx=st.integers(1, 60), ny=st.integers(1, 9), nz=st.integers(1, 9), chunk=st.integers(1, 400),
+       n_dev=st.integers(1, 4), data=st.data())
+def test_shards_partition_the_grid_on_chunk_boundaries(nx, ny, nz, chunk, n_dev, data):
+    n_chunks = GridPlan((nx, ny, nz), chunk, n_dev, 0, 1).n_chunks
+    n_shards = data.draw(st.integers(1, n_chunks))
+    plans = [GridPlan((nx, ny, nz), chunk, n_dev, s, n_shards) for s in range(n_shards)]
+    assert plans[0].x_start == 0 and plans[-1].x_stop == nx
+    for p, q in zip(plans, plans[1:]):
+        assert p.x_stop == q.x_start and p.x_start < p.x_stop
+    for p in plans:
+        assert p.x_start % p.planes_per_chunk == 0  # same chunk positions as a single run
+        assert p.chunk_len % n_dev == 0 and p.chunk_len >= p.planes_per_chunk * ny * nz
+
+
+def test_bad_shard_settings_name_the_field():
+    with pytest.raises(ConfigError, match="^shard must be in 0..1"):
+        GridPlan((9, 9, 7), 100, 1, 2, 2)
+    with pytest.raises(ConfigError, match="^n_shards must be in 1..9"):
+        GridPlan((9, 9, 7), 100, 1, 0, 10)
