@@ -17,6 +17,8 @@ Host drivers (NumPy in/out, chunked, progress, checkpoint/resume)::
 
 from .grid import (FIELD_NAMES, Grid, franco2026_grid, index_fields, make_grid, point_indices, reachable_fraction,
                    reachable_mask)
-from .redundancy import (Redundancy, feasible_window, reach_interval, reconfigurable_reachable, resolve_redundancy,
-                         resolve_redundancy_host, sample_value)
+from .redundancy import (Redundancy, feasible_window, indices_at_host, reach_interval, reach_k_range_host,
+                         reconfigurable_reachable, resolve_redundancy, resolve_redundancy_host, sample_value)
+from .driver import CheckpointMismatch, GridJob, fixed_workspace, reconfigurable_workspace, redundancy_grid, run_chunks
+from .stats import PAPER_TABLES, TABLE_INDICES, index_stats
 from . import boundary

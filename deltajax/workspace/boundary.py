@@ -250,43 +250,45 @@ def _step_search(test_at, rho0, eps, rho_max, max_steps):
 
     Returns (radius_in, radius_out, calls, ok). Radii are ``rho0 + k eps`` (no accumulated sums); stepping
     down stops at the centre (rho = 0, reachable by assumption), stepping up at rho_max (ok = False).
+    The first loop iteration (k = 0) is the test at rho0 itself, so Test-Pose has a single call site
+    (one copy of the IK in the compiled loop: compiles faster).
     """
     rho0 = jnp.clip(rho0, 0.0, rho_max)
-    t0 = test_at(rho0)
-    direction = jnp.where(t0, 1.0, -1.0).astype(rho0.dtype)
 
-    def radius(k):
-        return jnp.clip(rho0 + direction * k * eps, 0.0, rho_max)
+    def radius(k, t0):
+        return jnp.clip(rho0 + jnp.where(t0, 1.0, -1.0) * k * eps, 0.0, rho_max)
 
     def cond(state):
-        k, flipped, calls = state
-        r = radius(k)
+        k, t0, flipped = state
+        r = radius(k, t0)
         at_end = jnp.where(t0, r >= rho_max, r <= 0.0)
-        return ~flipped & ~at_end & (k < max_steps)
+        return (k < 0) | (~flipped & ~at_end & (k < max_steps))
 
     def body(state):
-        k, _, calls = state
+        k, t0, _ = state
         k = k + 1
-        return k, test_at(radius(k)) != t0, calls + 1
+        t = test_at(radius(k, t0))
+        first = k == 0
+        return k, jnp.where(first, t, t0), ~first & (t != t0)
 
-    k, flipped, calls = jax.lax.while_loop(cond, body, (jnp.zeros((), jnp.int32), jnp.asarray(False),
-                                                        jnp.ones((), jnp.int32)))
-    r_k, r_prev = radius(k), radius(k - 1)
+    k, t0, flipped = jax.lax.while_loop(cond, body, (jnp.full((), -1, jnp.int32), jnp.asarray(True),
+                                                     jnp.asarray(False)))
+    r_k, r_prev = radius(k, t0), radius(k - 1, t0)
     # Up (t0 true): r_prev reachable, r_k not. Down (t0 false): r_k reachable, r_prev not.
     # Ran into rho = 0 without a flip: the centre itself (reachable) is the inner end.
     r_in = jnp.where(t0, r_prev, jnp.where(flipped, r_k, 0.0))
     r_out = jnp.where(t0, r_k, r_prev)
     ok = flipped | ~t0
-    return r_in, r_out, calls, ok
+    return r_in, r_out, k + 1, ok
 
 
-@partial(jax.jit, static_argnames=("n_bisect", "max_steps", "predictor", "half_space"))
-def _continuation_jit(robot, centre, polar, azimuth, eps, rho_max, n_bisect, max_steps, predictor, half_space):
+@partial(jax.jit, static_argnames=("max_steps", "predictor", "half_space"))
+def _continuation_jit(robot, centre, polar, azimuth, first, eps, rho_max, max_steps, predictor, half_space):
     dirs = ray_directions(polar, azimuth)  # (na, np, 3)
-    # First ray of every azimuth: bisection, as in the paper's first stage.
-    lo, hi = _bisect(robot, centre, dirs[:, 0, :], rho_max, n_bisect, half_space)
-    calls0 = jnp.full(lo.shape, n_bisect, jnp.int32)
-    ok0 = hi < rho_max
+    # First ray of every azimuth: the bisection result ``first`` (computed by its own jitted function).
+    lo, hi, calls0 = first.radius_in[:, 0], first.radius_out[:, 0], first.calls[:, 0]
+    ok0 = first.ok[:, 0]
+    lo = jnp.where(ok0, lo, 0.0)
 
     def one_ray(d, rho0):
         return _step_search(lambda rho: test_pose(robot, centre + rho * d, half_space), rho0, eps, rho_max,
@@ -312,7 +314,7 @@ def _continuation_jit(robot, centre, polar, azimuth, eps, rho_max, n_bisect, max
     r_in = jnp.concatenate([lo[:, None], r_in.T], axis=1)
     r_out = jnp.concatenate([hi[:, None], r_out.T], axis=1)
     calls = jnp.concatenate([calls0[:, None], calls.T], axis=1)
-    ok = jnp.concatenate([ok0[:, None], ok.T], axis=1) & test_pose(robot, centre, half_space)
+    ok = jnp.concatenate([ok0[:, None], ok.T], axis=1)
     nan = jnp.asarray(jnp.nan, r_in.dtype)
     return BoundaryResult(centre, polar, azimuth, jnp.where(ok, r_in, nan), jnp.where(ok, r_out, nan), calls, ok)
 
@@ -337,8 +339,10 @@ def continuation_rays(robot: Delta, centre: Sequence[float], polar, azimuth, *, 
     if ph.shape[0] < 2:
         raise ValueError("continuation needs at least two polar angles")
     max_steps = int(math.ceil(rho_max / eps)) + 2
-    return _continuation_jit(robot, c, ph, az, jnp.asarray(eps, c.dtype), jnp.asarray(rho_max, c.dtype),
-                             bisection_calls(rho_max, eps), max_steps, predictor, bool(half_space))
+    rmax = jnp.asarray(rho_max, c.dtype)
+    first = _bisect_jit(robot, c, ph[:1], az, rmax, bisection_calls(rho_max, eps), bool(half_space))
+    return _continuation_jit(robot, c, ph, az, first, jnp.asarray(eps, c.dtype), rmax, max_steps, predictor,
+                             bool(half_space))
 
 
 def boundary_search(robot: Delta, centre: Sequence[float], *, step_deg: float = 1.0, eps: float = 0.01,

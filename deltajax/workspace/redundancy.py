@@ -33,8 +33,7 @@ Exact-singular Jx is detected by det Jx == 0 exactly (rank tolerance zero), as S
 
 from __future__ import annotations
 
-from functools import partial
-from typing import Callable, NamedTuple, Optional
+from typing import NamedTuple
 
 import jax
 import jax.numpy as jnp
@@ -226,127 +225,53 @@ def feasible_window(recon: ReconfigurableDelta, p: Float[Array, "3"], *, width: 
     return first, last
 
 
-@jax.jit
-def _reach_batch(recon, pts):
-    return jax.vmap(lambda q: _reach_k_range(recon, q))(pts)
+def _nb_params(recon: ReconfigurableDelta):
+    from . import _nb
+
+    rb = recon.robot
+    f = lambda v: float(np.asarray(v))  # noqa: E731
+    return dict(R_min=f(recon.R_min), R_step=f(recon.R_step), r=f(rb.platform_radius), L1=f(rb.upper_arm),
+                L2=f(rb.forearm), lim=_nb.limits_tuple(f(rb.theta_min), f(rb.theta_max)))
 
 
-def _pair_points(seg_pts, seg, k, n_R):
-    return seg_pts[seg], k, (k >= 0) & (k < n_R)
+def reach_k_range_host(recon: ReconfigurableDelta, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Closed-form sample range [k_lo, k_stop) per point (host, NumPy); see :func:`reach_interval`."""
+    from . import _nb
 
-
-@jax.jit
-def _pairs_feasible(recon, seg_pts, seg, k):
-    """First/last IK-feasible sample per segment over flat (segment, sample) pairs."""
-    p, k, valid = _pair_points(seg_pts, seg, k, recon.n_R)
-    ok = jax.vmap(lambda q, kk: jnp.all(ik_cos_sin(recon.at(_sample_R(recon, kk)), _canonical(q)).ok))(p, k)
-    ok = ok & valid
-    n_seg = seg_pts.shape[0]
-    first = jax.ops.segment_min(jnp.where(ok, k, recon.n_R), seg, num_segments=n_seg, indices_are_sorted=True)
-    last = jax.ops.segment_max(jnp.where(ok, k, -1), seg, num_segments=n_seg, indices_are_sorted=True)
-    return first, last
-
-
-@partial(jax.jit, static_argnames=("criterion",))
-def _pairs_best(recon, seg_pts, seg, k, b_v, b_f, beta, criterion: str):
-    """Best sample per segment (max criterion, ties -> smallest k) over flat (segment, sample) pairs."""
-    p, k, valid = _pair_points(seg_pts, seg, k, recon.n_R)
-    feas, v = jax.vmap(lambda q, kk: sample_value(recon, q, kk, criterion=criterion, b_v=b_v, b_f=b_f,
-                                                   beta=beta))(p, jnp.where(valid, k, 0))
-    feas = feas & valid
-    v = jnp.where(feas, v, -jnp.inf)
-    n_seg = seg_pts.shape[0]
-    vmax = jax.ops.segment_max(v, seg, num_segments=n_seg, indices_are_sorted=True)
-    is_max = feas & (v == vmax[seg])
-    kbest = jax.ops.segment_min(jnp.where(is_max, k, recon.n_R), seg, num_segments=n_seg, indices_are_sorted=True)
-    found = kbest < recon.n_R
-    return jnp.where(found, kbest, -1), jnp.where(found, vmax, -jnp.inf)
-
-
-@jax.jit
-def _kernel_batch(recon, pts, k, b_v, b_f, beta):
-    return jax.vmap(lambda q, kk: _kernel(recon, _canonical(q), kk, b_v, b_f, beta))(pts, k)
-
-
-def _flat_chunks(starts: np.ndarray, widths: np.ndarray, chunk_pairs: int, max_segments: int):
-    """Split points (with sample windows start..start+width-1) into chunks of whole windows.
-
-    Yields (point indices, segment id per pair, sample k per pair), pairs padded to ``chunk_pairs`` with
-    k = -1 (invalid) in the last segment slot.
-    """
-    todo = np.nonzero(widths > 0)[0]
-    w = widths[todo]
-    csum = np.cumsum(w)
-    pos = 0
-    n = len(todo)
-    done = 0
-    while pos < n:
-        stop = int(np.searchsorted(csum, done + chunk_pairs, side="right"))
-        stop = min(max(stop, pos + 1), pos + max_segments, n)
-        idx = todo[pos:stop]
-        ww = widths[idx]
-        total = int(ww.sum())
-        seg = np.repeat(np.arange(len(idx), dtype=np.int32), ww)
-        offs = np.arange(total, dtype=np.int64) - np.repeat(np.cumsum(ww) - ww, ww)
-        k = (np.repeat(starts[idx], ww) + offs).astype(np.int32)
-        pad = chunk_pairs - total
-        if pad > 0:
-            seg = np.concatenate([seg, np.full(pad, max_segments - 1, np.int32)])
-            k = np.concatenate([k, np.full(pad, -1, np.int32)])
-        yield idx, seg, k
-        done = int(csum[stop - 1])
-        pos = stop
-
-
-def _run_pairs(fn, pts, starts, widths, chunk_pairs, max_segments, progress=None):
-    n = pts.shape[0]
-    out_a = np.empty(n, np.float64)
-    out_b = np.empty(n, np.float64)
-    seg_pts = np.zeros((max_segments, 3))
-    for idx, seg, k in _flat_chunks(starts, widths, chunk_pairs, max_segments):
-        seg_pts[:] = 0.0
-        seg_pts[:len(idx)] = pts[idx]
-        a, b = fn(jnp.asarray(seg_pts), jnp.asarray(seg), jnp.asarray(k))
-        out_a[idx] = np.asarray(a)[:len(idx)]
-        out_b[idx] = np.asarray(b)[:len(idx)]
-        if progress is not None:
-            progress(len(idx))
-    return out_a, out_b
+    q = _nb_params(recon)
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    k_lo = np.empty(pts.shape[0], np.int64)
+    k_stop = np.empty(pts.shape[0], np.int64)
+    _nb.reach_k_range(pts, q["R_min"], q["R_step"], recon.n_R, q["r"], q["L1"], q["L2"], k_lo, k_stop)
+    return k_lo, k_stop
 
 
 def resolve_redundancy_host(recon: ReconfigurableDelta, points: np.ndarray, criterion: str = "k_tilde", *,
                             mode: str = "fast", b_v: float = 2.0, b_f: float = 4.2, beta: float = 0.5,
-                            chunk_pairs: int = 1 << 20, mirror: bool = True, return_indices: bool = True,
-                            progress: Optional[Callable[[int], None]] = None) -> Redundancy:
-    """Redundancy resolution on the host, in memory-bounded chunks, as NumPy arrays.
-
-    Work is laid out as flat (point, R sample) pairs: each point contributes its window of samples, whole
-    windows are packed into chunks of ``chunk_pairs`` pairs and reduced per point (segment max, then the
-    smallest k attaining it). One compiled program serves every chunk and both modes, so the two modes
-    evaluate every (point, sample) pair they share with the same machine code.
+                            mirror: bool = True, return_indices: bool = True) -> tuple[Redundancy, dict]:
+    """Redundancy resolution on the host (Numba kernel, see :mod:`._nb`), NumPy in and out.
 
     Args:
-        recon: the reconfigurable robot.
+        recon: the reconfigurable robot (concrete values).
         points: (N, 3) positions (m).
         criterion, b_v, b_f, beta: as in :func:`resolve_redundancy`.
-        mode: ``"fast"`` (reach interval + feasibility window + mirror pairs) or ``"exact"`` (every sample of
-            every point, the paper's sweep). Both return the identical selection.
-        chunk_pairs: (point, sample) pairs per compiled call (bounds memory).
+        mode: ``"fast"`` (closed-form reach range, IK pre-test, mirror pairs solved once) or ``"exact"``
+            (every sample of every point, the paper's sweep; the IK pre-test still skips the Jacobian work
+            of unreachable samples). Both return the identical selection (same compiled kernel).
         mirror: solve each mirror pair (x, +-y, z) once (fast mode only).
-        return_indices: also evaluate every index at R* (one more kernel call per point).
-        progress: called with the number of points finished after each chunk.
+        return_indices: also return every index at R*.
 
     Returns:
-        :class:`Redundancy` of NumPy arrays.
+        (:class:`Redundancy` of NumPy arrays, work counters {"samples": IK tests, "full": full kernels}).
     """
+    from . import _nb
+
     _check_criterion(criterion)
     if mode not in ("fast", "exact"):
         raise ValueError(f"mode must be 'fast' or 'exact', got {mode!r}")
-    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     n_all = pts.shape[0]
-    n_R = recon.n_R
-    chunk_pairs = max(int(chunk_pairs), n_R)
-    max_segments = chunk_pairs // 4 if mode == "fast" else chunk_pairs // n_R + 1
+    q = _nb_params(recon)
     if mode == "fast" and mirror and n_all:
         keyed = np.stack([pts[:, 0], np.abs(pts[:, 1]), pts[:, 2]], axis=-1)
         uniq, inverse = np.unique(keyed, axis=0, return_inverse=True)
@@ -355,47 +280,37 @@ def resolve_redundancy_host(recon: ReconfigurableDelta, points: np.ndarray, crit
         uniq, inverse = pts, None
     n = uniq.shape[0]
     if mode == "exact":
-        starts = np.zeros(n, np.int64)
-        widths = np.full(n, n_R, np.int64)
+        k_lo = np.zeros(n, np.int64)
+        k_stop = np.full(n, recon.n_R, np.int64)
     else:
-        k_lo, k_hi = (np.asarray(a).astype(np.int64) for a in _reach_batch(recon, jnp.asarray(uniq)))
-        span = np.where(k_hi >= k_lo, k_hi - k_lo + 1, 0)
-        first, last = _run_pairs(lambda a, b, c: _pairs_feasible(recon, a, b, c), uniq, k_lo, span,
-                                 chunk_pairs * 2, max_segments)
-        first, last = first.astype(np.int64), last.astype(np.int64)
-        has = (span > 0) & (last >= first)
-        widths = np.where(has, last - first + 1, 0)
-        starts = np.where(has, first, 0)
-    best_k, best_v = _run_pairs(
-        lambda a, b, c: _pairs_best(recon, a, b, c, b_v, b_f, beta, criterion=criterion), uniq, starts, widths,
-        chunk_pairs, max_segments, progress)
-    best_k = np.where(widths > 0, best_k, -1).astype(np.int32)
-    best_v = np.where(widths > 0, best_v, -np.inf)
+        k_lo, k_stop = reach_k_range_host(recon, uniq)
+    best_k = np.empty(n, np.int64)
+    best_v = np.empty(n, np.float64)
+    n_full = np.empty(n, np.int64)
+    kt = _nb.kt_tuple(b_v, b_f, beta)
+    _nb.resolve(uniq, k_lo, k_stop, q["R_min"], q["R_step"], q["r"], q["L1"], q["L2"], q["lim"], kt,
+                INDEX_NAMES.index(criterion), best_k, best_v, n_full)
+    work = {"samples": int(np.sum(k_stop - k_lo)), "full": int(n_full.sum()), "points": int(n)}
     if inverse is not None:
         best_k, best_v = best_k[inverse], best_v[inverse]
     ok = best_k >= 0
+    R = np.where(ok, q["R_min"] + np.maximum(best_k, 0) * q["R_step"], np.nan)
     if return_indices:
-        ind = _indices_at(recon, pts, best_k, b_v=b_v, b_f=b_f, beta=beta)
+        ind = indices_at_host(recon, pts, best_k, b_v=b_v, b_f=b_f, beta=beta)
     else:
-        ind = Indices(*([np.full(n_all, np.nan)] * 8 + [np.full((n_all, 3), np.nan)]))
-    R = np.where(ok, np.asarray(_sample_R(recon, np.maximum(best_k, 0))), np.nan)
-    return Redundancy(k=best_k, R=R, value=np.where(ok, best_v, np.nan), ok=ok, indices=ind)
+        ind = None
+    return Redundancy(k=best_k.astype(np.int32), R=R, value=np.where(ok, best_v, np.nan), ok=ok,
+                      indices=ind), work
 
 
-def _indices_at(recon, pts, best_k, *, b_v, b_f, beta, size: int = 1 << 16) -> Indices:
-    n = pts.shape[0]
-    out = [np.full(n, np.nan) for _ in range(8)] + [np.full((n, 3), np.nan)]
-    for s in range(0, n, size):
-        sl = slice(s, min(n, s + size))
-        m_n = sl.stop - sl.start
-        kk = np.maximum(best_k[sl], 0)
-        m = best_k[sl] >= 0
-        q = pts[sl]
-        if m_n < size:  # one compiled size
-            q = np.concatenate([q, np.zeros((size - m_n, 3))])
-            kk = np.concatenate([kk, np.zeros(size - m_n, kk.dtype)])
-        _, ind = _kernel_batch(recon, jnp.asarray(q), jnp.asarray(kk, jnp.int32), b_v, b_f, beta)
-        for j, v in enumerate(ind):
-            v = np.asarray(v)[:m_n]
-            out[j][sl] = np.where(m if v.ndim == 1 else m[:, None], v, np.nan)
-    return Indices(*out)
+def indices_at_host(recon: ReconfigurableDelta, points: np.ndarray, k: np.ndarray, *, b_v: float = 2.0,
+                    b_f: float = 4.2, beta: float = 0.5) -> np.ndarray:
+    """Every index (columns in :data:`deltajax.INDEX_NAMES` order) at sample ``k`` per point, (N, 8); NaN where k < 0."""
+    from . import _nb
+
+    q = _nb_params(recon)
+    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
+    out = np.empty((pts.shape[0], _nb.N_IDX))
+    _nb.fields_at(pts, np.asarray(k, np.int64), q["R_min"], q["R_step"], q["r"], q["L1"], q["L2"], q["lim"],
+                  _nb.kt_tuple(b_v, b_f, beta), out)
+    return out
