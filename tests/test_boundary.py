@@ -195,8 +195,9 @@ def test_saturated_and_bad_inputs(robot):
     res = B.boundary_search(robot, CENTRE, step_deg=30.0, eps=EPS, rho_max=1.0, method="conti")
     assert not np.any(np.asarray(res.ok)) and np.all(np.isnan(np.asarray(res.radius_in)))
     # centre outside the workspace (z < 0 with half_space): nothing ok
-    res = B.boundary_search(robot, (0.0, 0.0, -1.0), step_deg=30.0, eps=EPS, rho_max=RHO_MAX, method="conti")
-    assert not np.any(np.asarray(res.ok))
+    for method in B.METHODS:
+        res = B.boundary_search(robot, (0.0, 0.0, -1.0), step_deg=30.0, eps=EPS, rho_max=RHO_MAX, method=method)
+        assert not np.any(np.asarray(res.ok)) and np.all(np.isnan(np.asarray(res.radius_out)))
     with pytest.raises(ValueError, match="eps"):
         B.boundary_search(robot, CENTRE, step_deg=30.0, eps=-1.0, rho_max=RHO_MAX)
     with pytest.raises(ValueError, match="method"):
@@ -250,3 +251,33 @@ def test_experiment_writes_results(tmp_path, searches):
     ds = xr.open_dataset(path, group="boundary/step_15deg/conti", engine="h5netcdf")
     assert ds["radius_in"].dims == ("azimuth", "polar")
     ds.close()
+
+
+def test_continuation_matches_sequential_reference(robot, searches):
+    """The vmapped scan/while_loop gives the brackets and call counts of a plain sequential loop (3 azimuths)."""
+    _, cont, _ = searches
+    test1 = jax.jit(lambda p: B.test_pose(robot, p))
+    polar, azimuth = np.asarray(cont.polar), np.asarray(cont.azimuth)
+    dirs = np.asarray(B.ray_directions(polar, azimuth))
+    c = np.asarray(CENTRE)
+    n_bis = B.bisection_calls(RHO_MAX, EPS)
+    for j in (0, 7, 19):
+        lo, hi = 0.0, RHO_MAX
+        for _ in range(n_bis):
+            mid = 0.5 * (lo + hi)
+            lo, hi = (mid, hi) if bool(test1(c + mid * dirs[j, 0])) else (lo, mid)
+        r_in, calls = [lo], [n_bis]
+        for i in range(1, polar.size):
+            rho0 = min(max(r_in[-1] / math.cos(polar[i] - polar[i - 1]), 0.0), RHO_MAX)
+            t0 = bool(test1(c + rho0 * dirs[j, i]))
+            sgn, k = (1.0 if t0 else -1.0), 0
+            while True:
+                k += 1
+                rk = min(max(rho0 + sgn * k * EPS, 0.0), RHO_MAX)
+                if bool(test1(c + rk * dirs[j, i])) != t0:
+                    break
+            prev = rho0 + sgn * (k - 1) * EPS
+            r_in.append(prev if t0 else rk)
+            calls.append(k + 1)
+        np.testing.assert_array_equal(np.asarray(cont.calls)[j], calls)
+        np.testing.assert_allclose(np.asarray(cont.radius_in)[j], r_in, rtol=0, atol=1e-13)

@@ -314,7 +314,8 @@ def _continuation_jit(robot, centre, polar, azimuth, first, eps, rho_max, max_st
     r_in = jnp.concatenate([lo[:, None], r_in.T], axis=1)
     r_out = jnp.concatenate([hi[:, None], r_out.T], axis=1)
     calls = jnp.concatenate([calls0[:, None], calls.T], axis=1)
-    ok = jnp.concatenate([ok0[:, None], ok.T], axis=1)
+    # Stepping down to rho = 0 takes the centre as the inner end: valid only if the centre is reachable.
+    ok = jnp.concatenate([ok0[:, None], ok.T], axis=1) & test_pose(robot, centre, half_space)
     nan = jnp.asarray(jnp.nan, r_in.dtype)
     return BoundaryResult(centre, polar, azimuth, jnp.where(ok, r_in, nan), jnp.where(ok, r_out, nan), calls, ok)
 
