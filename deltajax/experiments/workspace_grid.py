@@ -36,7 +36,8 @@ from ..config import ConfigError
 GROUP = "workspace"
 REDUCER = "deltajax.experiments.workspace_grid:reduce_shards"
 
-__all__ = ["run", "reduce_shards", "GridPlan", "plan_chunks", "make_evaluator", "plane_statistics"]
+__all__ = ["run", "reduce_shards", "GridPlan", "plan_chunks", "make_evaluator", "make_numba_evaluator",
+           "plane_statistics"]
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -135,6 +136,22 @@ def make_evaluator(n_devices: int, *, b_v: float, b_f: float, beta: float):
     def evaluate(robot, pts):
         robot = jax.device_put(robot, repl)
         return jf(robot, jax.device_put(pts, rows))
+
+    return evaluate
+
+
+def make_numba_evaluator(grid, *, b_v: float, b_f: float, beta: float):
+    """``f(robot, a, b) -> (ok[n], values[n, n_index])`` for the x-planes ``a:b`` of ``grid``, on the CPU
+    threads of :func:`deltajax.workspace.fixed_workspace` (Numba, ``NUMBA_NUM_THREADS``; float64)."""
+    from ..workspace import FIELD_NAMES, Grid, fixed_workspace
+
+    def evaluate(robot, a: int, b: int):
+        # the same coordinate values as the full grid (sliced, not rebuilt), so shards see identical points
+        sub = Grid(x=grid.x[a:b], y=grid.y, z=grid.z, h=grid.h, bounds=grid.bounds)
+        job = fixed_workspace(robot, sub, fields=True, b_v=b_v, b_f=b_f, beta=beta, chunk_size=sub.n_points,
+                              mirror=True)
+        vals = np.stack([job.fields[n] for n in FIELD_NAMES], axis=-1)
+        return job.ok.reshape(-1), vals.reshape(-1, len(FIELD_NAMES))
 
     return evaluate
 
@@ -273,25 +290,38 @@ def run(ctx) -> None:
                     chunk_planes=plan.planes_per_chunk,
                     description="fixed-R workspace grid: reachability, indices and their statistics")
 
-    evaluate = make_evaluator(n_dev, **params)
+    backend = ex.get("backend", "jax")
+    if backend not in ("jax", "numba"):
+        raise ConfigError(f"experiment.backend must be 'jax' or 'numba', got {backend!r}")
+    if backend == "jax":
+        evaluate = make_evaluator(n_dev, **params)
+    else:
+        evaluate = make_numba_evaluator(grid, **params)
     robot = ctx.robot
     first = plan.chunk0 + done // plan.planes_per_chunk
     ctx.log(f"workspace_grid: grid {nx}x{ny}x{nz} = {grid.n_points} points, shard {shard}/{n_shards} "
-            f"x[{plan.x_start}:{plan.x_stop}], {plan.chunk1 - first} chunks of {plan.planes_per_chunk} planes "
-            f"on {n_dev} device(s)")
+            f"x[{plan.x_start}:{plan.x_stop}], {plan.chunk1 - first} chunks of {plan.planes_per_chunk} planes, "
+            + (f"JAX on {n_dev} device(s)" if backend == "jax" else
+               f"Numba on {os.environ.get('NUMBA_NUM_THREADS', 'all')} thread(s)"))
     t_ckpt = time.monotonic()
     t0 = time.perf_counter()
     n_eval = 0
+    first_chunk_s, n_first = None, 0  # the first chunk includes compilation: timed apart
     every = float(ex.get("checkpoint_s", 60.0))
     for c in ctx.progress(range(first, plan.chunk1), total=plan.chunk1 - first, desc="workspace_grid"):
         a, b = plan.chunk_planes(c)
         idx = np.arange(a * plan.plane, b * plan.plane, dtype=np.int64)
-        pad = np.full(plan.chunk_len - idx.size, idx[0], np.int64)
-        pts = grid.points_at(np.concatenate([idx, pad])).astype(dtype)
-        ok, vals = evaluate(robot, pts)
+        if backend == "jax":
+            pad = np.full(plan.chunk_len - idx.size, idx[0], np.int64)
+            pts = grid.points_at(np.concatenate([idx, pad])).astype(dtype)
+            ok, vals = evaluate(robot, pts)
+        else:
+            ok, vals = evaluate(robot, a, b)
         ok = np.asarray(ok)[: idx.size].reshape(b - a, plan.plane)
-        vals = np.asarray(vals)[: idx.size].reshape(b - a, plan.plane, n_idx)
+        vals = np.asarray(vals)[: idx.size].reshape(b - a, plan.plane, n_idx).astype(dtype, copy=False)
         n_eval += idx.size
+        if first_chunk_s is None:
+            first_chunk_s, n_first = time.perf_counter() - t0, idx.size
         la, lb = a - plan.x_start, b - plan.x_start
         reach[la:lb] = ok.reshape(b - a, ny, nz)
         for name in store:
@@ -305,12 +335,16 @@ def run(ctx) -> None:
             t_ckpt = time.monotonic()
     elapsed = time.perf_counter() - t0
     stage(done)
-    ctx.results.set_attrs(points_evaluated=n_eval, points_per_s=n_eval / elapsed if elapsed > 0 else 0.0,
-                          devices_used=n_dev, worker_env=os.environ.get("DELTAJAX_WORKER_ENV", ""))
+    warm_s, warm_n = elapsed - (first_chunk_s or 0.0), n_eval - n_first
+    if warm_n == 0:  # a single chunk: its time includes compilation
+        warm_s, warm_n = elapsed, n_eval
+    rate = warm_n / warm_s if warm_s > 0 else 0.0
+    ctx.results.set_attrs(points_evaluated=n_eval, points_per_s=rate, first_chunk_s=first_chunk_s or 0.0,
+                          devices_used=n_dev if backend == "jax" else 0, backend=backend, worker_env=os.environ.get("DELTAJAX_WORKER_ENV", ""))
     s = _summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume)
     ctx.log(f"shard {shard}/{n_shards}: {int(s['count'])} reachable points, volume {float(s['volume']):.6g} m^3 "
             f"(count h^3), {float(s['volume_box']):.6g} m^3 (count/N V_box); "
-            f"{n_eval / max(elapsed, 1e-9) / 1e6:.2f} M points/s")
+            f"{rate / 1e6:.2f} M points/s after the first chunk ({first_chunk_s or 0.0:.1f} s with compilation)")
     if cfg.get("plots", True) and n_shards == 1:
         _plot(ctx, grid, reach)
 
