@@ -147,9 +147,11 @@ def main() -> None:
         print(f"{method:13s} {calls:8d} {warm * 1e3:8.1f}ms {comp:8.2f}s {t_np:19.2f} s {t_np / warm:7.0f}x "
               f"{paper:11.1f} s {paper / warm:9.0f}x   baseline agrees: {same}")
     print(f"continuation baseline max |radius_in diff| vs JAX: {diff_n:.3g} m")
-    print(f"continuation / conti: calls {int(np.asarray(results['continuation'][0].calls).sum()) / int(np.asarray(results['conti'][0].calls).sum()):.3f}, "
+    n_calls = {m: int(np.asarray(results[m][0].calls).sum()) for m in B.METHODS}
+    print(f"continuation / conti: calls {n_calls['continuation'] / n_calls['conti']:.3f}, "
           f"JAX time {results['continuation'][1] / results['conti'][1]:.2f}, NumPy time {t_cont_np / t_conti_np:.2f} "
-          f"(paper: time {PAPER_S['continuation'] / PAPER_S['conti']:.3f} at 1 deg, calls 79500/148239 = 0.536 at 2 deg)")
+          f"(paper: time {PAPER_S['continuation'] / PAPER_S['conti']:.3f} at 1 deg, "
+          f"calls 79500/148239 = 0.536 at 2 deg)")
 
 
 if __name__ == "__main__":

@@ -512,7 +512,8 @@ def ray_profiles(robot: Delta, result: BoundaryResult, *, rho_max: float, n_samp
     """
     if not (isinstance(n_samples, int) and n_samples >= 2):
         raise ValueError(f"n_samples must be an integer >= 2, got {n_samples!r}")
-    _check_search_args(float(rho_max) / n_samples, float(rho_max))
+    if not (isinstance(rho_max, (int, float)) and math.isfinite(rho_max) and rho_max > 0):
+        raise ValueError(f"rho_max must be a positive number (m), got {rho_max!r}")
     dirs = ray_directions(result.polar, result.azimuth)
     shape = dirs.shape[:-1]
     big = jnp.asarray(rho_max, dirs.dtype) * 2
