@@ -196,7 +196,7 @@ def test_saturated_and_bad_inputs(robot):
     assert not np.any(np.asarray(res.ok)) and np.all(np.isnan(np.asarray(res.radius_in)))
     # centre outside the workspace (z < 0 with half_space): nothing ok
     for method in B.METHODS:
-        res = B.boundary_search(robot, (0.0, 0.0, -1.0), step_deg=30.0, eps=EPS, rho_max=RHO_MAX, method=method)
+        res = B.boundary_search(robot, (0.0, 0.0, -1.0), step_deg=STEP, eps=EPS, rho_max=RHO_MAX, method=method)
         assert not np.any(np.asarray(res.ok)) and np.all(np.isnan(np.asarray(res.radius_out)))
     with pytest.raises(ValueError, match="eps"):
         B.boundary_search(robot, CENTRE, step_deg=30.0, eps=-1.0, rho_max=RHO_MAX)
