@@ -128,6 +128,12 @@ def apply_worker_env(cpus: int, host_devices: Optional[int] = None, gpu_prealloc
         env.setdefault(var, str(cpus))
     if not gpu_preallocate:
         env.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
+    import sys
+
+    if "numba" in sys.modules:  # already loaded (a reused worker): NUMBA_NUM_THREADS was read at its import
+        import numba
+
+        numba.set_num_threads(min(cpus, numba.config.NUMBA_NUM_THREADS))
     applied: dict[str, Any] = {"cpus": cpus, "PJRT_NPROC": env["PJRT_NPROC"],
                                "XLA_PYTHON_CLIENT_PREALLOCATE": env.get("XLA_PYTHON_CLIENT_PREALLOCATE", "")}
     import jax

@@ -23,6 +23,8 @@ finite value, and the scalars ``count``, ``volume`` (count h^3), ``volume_box`` 
 
 from __future__ import annotations
 
+import functools
+import importlib.util
 import json
 import math
 import os
@@ -109,6 +111,7 @@ def plan_chunks(shape, chunk_points, n_devices=1, shard=0, n_shards=1) -> GridPl
 # ---------------------------------------------------------------------------------------------------------
 # device kernel
 # ---------------------------------------------------------------------------------------------------------
+@functools.lru_cache(maxsize=8)  # one jitted function per setting: repeated runs in a process compile once
 def make_evaluator(n_devices: int, *, b_v: float, b_f: float, beta: float):
     """A jitted ``f(robot, points[n, 3]) -> (ok[n], values[n, n_index])`` sharded over ``n_devices`` devices.
 
@@ -253,11 +256,19 @@ def run(ctx) -> None:
     n_idx = len(FIELD_NAMES)
     dtype = np.dtype(ctx.dtype)
 
+    backend = ex.get("backend", "auto")
+    if backend not in ("auto", "jax", "numba"):
+        raise ConfigError(f"experiment.backend must be 'auto', 'jax' or 'numba', got {backend!r}")
+    if backend == "auto":  # what measures faster (experiments/bench_multidevice.py): Numba on CPU in float64
+        backend = "numba" if (jax.default_backend() == "cpu" and dtype == np.float64
+                              and importlib.util.find_spec("numba") is not None) else "jax"
+    elif backend == "numba" and dtype != np.float64:
+        raise ConfigError("experiment.backend=numba computes in float64: use precision=float64 or backend=jax")
     # a key for resuming: everything that determines the numbers (the shard is checked separately)
     key = json.dumps({"grid": [grid.x[0], grid.x[-1], grid.y[0], grid.y[-1], grid.z[0], grid.z[-1], grid.h],
                       "robot": {k: str(v) for k, v in ctx.cfg.robot.items()}, "params": params,
                       "chunk": plan.planes_per_chunk, "store": store,
-                      "precision": str(cfg.precision)}, sort_keys=True)
+                      "precision": str(cfg.precision), "backend": backend}, sort_keys=True)
     reach = np.zeros((n_local, ny, nz), np.uint8)
     fields = {name: np.full((n_local, ny, nz), np.nan, dtype) for name in store}
     planes = {"plane_count": np.zeros(n_local, np.int64), "plane_n": np.zeros((n_local, n_idx), np.int64),
@@ -290,9 +301,6 @@ def run(ctx) -> None:
                     chunk_planes=plan.planes_per_chunk,
                     description="fixed-R workspace grid: reachability, indices and their statistics")
 
-    backend = ex.get("backend", "jax")
-    if backend not in ("jax", "numba"):
-        raise ConfigError(f"experiment.backend must be 'jax' or 'numba', got {backend!r}")
     if backend == "jax":
         evaluate = make_evaluator(n_dev, **params)
     else:
