@@ -25,7 +25,8 @@ _CA = np.array([math.cos(a) for a in CHAIN_ANGLES])
 _SA = np.array([math.sin(a) for a in CHAIN_ANGLES])
 N_IDX = 8
 
-_opts = dict(cache=True, fastmath=False, nogil=True)
+# error_model="numpy": x / 0 gives inf/nan like NumPy and JAX instead of raising (Python semantics)
+_opts = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
 
 
 @nb.njit(**_opts)
@@ -205,13 +206,14 @@ def _st(sig, a, b):
     return 0.0
 
 
-@nb.njit(parallel=True, **_opts)
+@nb.njit(**_opts)
 def fixed_fields(pts, R, r, L1, L2, lim, kt, out, ok):
     """Indices (n, 8) and ok (n,) of a fixed robot at canonical points (n, 3)."""
     n = pts.shape[0]
-    for j in nb.prange(n):
+    scratch = np.empty((1, 6, 3, 3))
+    for j in range(n):
         row = out[j]
-        S = np.empty((6, 3, 3))
+        S = scratch[0]
         st = _point(pts[j, 0], abs(pts[j, 1]), pts[j, 2], R, r, L1, L2, lim, kt, row, S)
         ok[j] = st == 1
         if st != 1:
@@ -219,29 +221,30 @@ def fixed_fields(pts, R, r, L1, L2, lim, kt, out, ok):
                 row[q] = math.nan
 
 
-@nb.njit(parallel=True, **_opts)
+@nb.njit(**_opts)
 def fields_at(pts, ks, R_min, R_step, r, L1, L2, lim, kt, out):
     """Indices (n, 8) at sample ks[j] per point (NaN where ks < 0 or not feasible)."""
     n = pts.shape[0]
-    for j in nb.prange(n):
+    scratch = np.empty((1, 6, 3, 3))
+    for j in range(n):
         row = out[j]
         st = 0
         if ks[j] >= 0:
-            S = np.empty((6, 3, 3))
+            S = scratch[0]
             st = _point(pts[j, 0], abs(pts[j, 1]), pts[j, 2], R_min + ks[j] * R_step, r, L1, L2, lim, kt, row, S)
         if st != 1:
             for q in range(N_IDX):
                 row[q] = math.nan
 
 
-@nb.njit(parallel=True, **_opts)
+@nb.njit(**_opts)
 def fixed_mask(pts, R, r, L1, L2, lim, ok):
     n = pts.shape[0]
-    for j in nb.prange(n):
+    for j in range(n):
         ok[j] = _ik_ok(pts[j, 0], abs(pts[j, 1]), pts[j, 2], R, r, L1, L2, lim)
 
 
-@nb.njit(parallel=True, **_opts)
+@nb.njit(**_opts)
 def resolve(pts, k_start, k_stop, R_min, R_step, r, L1, L2, lim, kt, crit, best_k, best_v, n_full):
     """Per point: the sample k in [k_start, k_stop) maximising index ``crit`` (ties -> smallest k).
 
@@ -249,12 +252,15 @@ def resolve(pts, k_start, k_stop, R_min, R_step, r, L1, L2, lim, kt, crit, best_
     counts full-kernel evaluations per point.
     """
     n = pts.shape[0]
-    for j in nb.prange(n):
+    scratch = np.empty((1, 6, 3, 3))
+    rows = np.empty((1, N_IDX))
+    for j in range(n):
         x = pts[j, 0]
         y = abs(pts[j, 1])
         z = pts[j, 2]
-        row = np.empty(N_IDX)
-        S = np.empty((6, 3, 3))
+        tid = 0
+        row = rows[tid]
+        S = scratch[tid]
         bk = -1
         bv = -math.inf
         cnt = 0
@@ -274,10 +280,10 @@ def resolve(pts, k_start, k_stop, R_min, R_step, r, L1, L2, lim, kt, crit, best_
         n_full[j] = cnt
 
 
-@nb.njit(parallel=True, **_opts)
+@nb.njit(**_opts)
 def any_reach(pts, k_start, k_stop, R_min, R_step, r, L1, L2, lim, ok):
     n = pts.shape[0]
-    for j in nb.prange(n):
+    for j in range(n):
         x = pts[j, 0]
         y = abs(pts[j, 1])
         z = pts[j, 2]
@@ -289,11 +295,11 @@ def any_reach(pts, k_start, k_stop, R_min, R_step, r, L1, L2, lim, ok):
         ok[j] = hit
 
 
-@nb.njit(parallel=True, **_opts)
+@nb.njit(**_opts)
 def reach_k_range(pts, R_min, R_step, n_R, r, L1, L2, k_lo, k_hi):
     """Closed-form sample range (see redundancy.reach_interval), widened by one sample each side."""
     n = pts.shape[0]
-    for j in nb.prange(n):
+    for j in range(n):
         x = pts[j, 0]
         y = abs(pts[j, 1])
         z = pts[j, 2]
@@ -323,6 +329,28 @@ def reach_k_range(pts, R_min, R_step, n_R, r, L1, L2, k_lo, k_hi):
         b = min(max(b, -1.0), float(n_R - 1))
         k_lo[j] = int(a)
         k_hi[j] = int(b) + 1 if b >= a else int(a)  # exclusive stop
+
+
+def parallel(block_fn, n: int, n_threads: int | None = None) -> None:
+    """Call ``block_fn(lo, hi)`` over contiguous blocks of ``range(n)`` in threads.
+
+    The kernels release the GIL (``nogil``); each block works on disjoint slices of the per-point arrays,
+    so there is no shared mutable state (numba's ``prange`` dropped iterations of these loops in our tests,
+    so we parallelise by hand). Results do not depend on the number of threads.
+    """
+    import os
+    from concurrent.futures import ThreadPoolExecutor
+
+    if n_threads is None:
+        n_threads = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    blocks = max(1, min(n_threads * 8, n // 64))
+    edges = np.linspace(0, n, blocks + 1).astype(np.int64)
+    if blocks == 1 or n_threads == 1:
+        block_fn(0, n)
+        return
+    with ThreadPoolExecutor(n_threads) as ex:
+        for f in [ex.submit(block_fn, int(edges[i]), int(edges[i + 1])) for i in range(blocks)]:
+            f.result()
 
 
 def limits_tuple(theta_min: float, theta_max: float) -> np.ndarray:

@@ -217,10 +217,12 @@ def fixed_workspace(robot: Delta, grid: Grid, *, fields: bool = True, b_v: float
         pts = lay.points(start, stop)
         ok = np.empty(len(pts), np.bool_)
         if not fields:
-            _nb.fixed_mask(pts, q["base_radius"], q["platform_radius"], q["upper_arm"], q["forearm"], lim, ok)
+            _nb.parallel(lambda a, b: _nb.fixed_mask(pts[a:b], q["base_radius"], q["platform_radius"], q["upper_arm"],
+                                                     q["forearm"], lim, ok[a:b]), len(pts))
             return {"ok": ok}
         out = np.empty((len(pts), _nb.N_IDX))
-        _nb.fixed_fields(pts, q["base_radius"], q["platform_radius"], q["upper_arm"], q["forearm"], lim, kt, out, ok)
+        _nb.parallel(lambda a, b: _nb.fixed_fields(pts[a:b], q["base_radius"], q["platform_radius"], q["upper_arm"],
+                                                   q["forearm"], lim, kt, out[a:b], ok[a:b]), len(pts))
         res = {"ok": ok}
         res.update({n: out[:, i] for i, n in enumerate(INDEX_NAMES)})
         return res
@@ -258,7 +260,8 @@ def reconfigurable_workspace(recon: ReconfigurableDelta, grid: Grid, *, chunk_si
         pts = lay.points(start, stop)
         k_lo, k_stop = reach_k_range_host(recon, pts)
         ok = np.empty(len(pts), np.bool_)
-        _nb.any_reach(pts, k_lo, k_stop, q["R_min"], q["R_step"], q["r"], q["L1"], q["L2"], q["lim"], ok)
+        _nb.parallel(lambda a, b: _nb.any_reach(pts[a:b], k_lo[a:b], k_stop[a:b], q["R_min"], q["R_step"], q["r"],
+                                                q["L1"], q["L2"], q["lim"], ok[a:b]), len(pts))
         return {"ok": ok}
 
     _progress_total(progress, lay.n)

@@ -242,7 +242,8 @@ def reach_k_range_host(recon: ReconfigurableDelta, points: np.ndarray) -> tuple[
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     k_lo = np.empty(pts.shape[0], np.int64)
     k_stop = np.empty(pts.shape[0], np.int64)
-    _nb.reach_k_range(pts, q["R_min"], q["R_step"], recon.n_R, q["r"], q["L1"], q["L2"], k_lo, k_stop)
+    _nb.parallel(lambda a, b: _nb.reach_k_range(pts[a:b], q["R_min"], q["R_step"], recon.n_R, q["r"], q["L1"], q["L2"],
+                                                k_lo[a:b], k_stop[a:b]), pts.shape[0])
     return k_lo, k_stop
 
 
@@ -288,8 +289,9 @@ def resolve_redundancy_host(recon: ReconfigurableDelta, points: np.ndarray, crit
     best_v = np.empty(n, np.float64)
     n_full = np.empty(n, np.int64)
     kt = _nb.kt_tuple(b_v, b_f, beta)
-    _nb.resolve(uniq, k_lo, k_stop, q["R_min"], q["R_step"], q["r"], q["L1"], q["L2"], q["lim"], kt,
-                INDEX_NAMES.index(criterion), best_k, best_v, n_full)
+    crit = INDEX_NAMES.index(criterion)
+    _nb.parallel(lambda a, b: _nb.resolve(uniq[a:b], k_lo[a:b], k_stop[a:b], q["R_min"], q["R_step"], q["r"], q["L1"],
+                                          q["L2"], q["lim"], kt, crit, best_k[a:b], best_v[a:b], n_full[a:b]), n)
     work = {"samples": int(np.sum(k_stop - k_lo)), "full": int(n_full.sum()), "points": int(n)}
     if inverse is not None:
         best_k, best_v = best_k[inverse], best_v[inverse]
@@ -311,6 +313,8 @@ def indices_at_host(recon: ReconfigurableDelta, points: np.ndarray, k: np.ndarra
     q = _nb_params(recon)
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     out = np.empty((pts.shape[0], _nb.N_IDX))
-    _nb.fields_at(pts, np.asarray(k, np.int64), q["R_min"], q["R_step"], q["r"], q["L1"], q["L2"], q["lim"],
-                  _nb.kt_tuple(b_v, b_f, beta), out)
+    k = np.ascontiguousarray(k, np.int64)
+    kt = _nb.kt_tuple(b_v, b_f, beta)
+    _nb.parallel(lambda a, b: _nb.fields_at(pts[a:b], k[a:b], q["R_min"], q["R_step"], q["r"], q["L1"], q["L2"], q["lim"],
+                                            kt, out[a:b]), pts.shape[0])
     return out
