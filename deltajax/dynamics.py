@@ -534,6 +534,7 @@ def _min_duration_torque(a, g, limit):
 
     With x = 1 / T^2 >= 0 the feasible set of each constraint is [0, (limit - sign(a) g) / |a|].
     """
+    limit = jnp.broadcast_to(limit, jnp.shape(a))
     feasible = jnp.all(jnp.abs(g) <= limit)
     denom = limit - jnp.sign(a) * g
     ratio = jnp.where(jnp.abs(a) > 0, jnp.abs(a) / jnp.where(denom > 0, denom, 1.0), 0.0)
@@ -595,8 +596,8 @@ def cycle_metrics(robot: Delta, cycle, limits: Limits, *, method: str = "virtual
 
 def within_limits(profile: CycleProfile, limits: Limits, rtol: float = 0.0) -> jax.Array:
     """Do all efforts and speeds of a profile respect ``limits`` (with relative slack ``rtol``)?"""
-    tq = jnp.broadcast_to(limits.torque, (3,)) * (1 + rtol)
-    sp = jnp.broadcast_to(limits.speed, (3,)) * (1 + rtol)
+    tq = jnp.broadcast_to(limits.torque, profile.tau.shape) * (1 + rtol)
+    sp = jnp.broadcast_to(limits.speed, profile.theta_dot.shape) * (1 + rtol)
     return (jnp.all(jnp.abs(profile.tau) <= tq) & jnp.all(jnp.abs(profile.theta_dot) <= sp)
             & jnp.all(jnp.abs(profile.force_R) <= limits.force_R * (1 + rtol))
             & jnp.all(jnp.abs(profile.R_dot) <= limits.speed_R * (1 + rtol)))

@@ -247,6 +247,7 @@ def adept_cycle(centre: Any = (0.0, 0.0, 0.4), *, heading: float = 0.0, duration
     along = width * (sx - 0.5)
     e = jnp.asarray([math.cos(heading), math.sin(heading), 0.0], dtype)
     ez = jnp.asarray([0.0, 0.0, 1.0], dtype)
+    e, ez, centre = e[None, :], ez[None, :], centre[None, :]
     x = centre + along[:, None] * e + z[:, None] * ez
     dx = (dtau * width * dsx)[:, None] * e + (dtau * dz)[:, None] * ez
     ddx = (4.0 * width * ddsx)[:, None] * e + (4.0 * ddz)[:, None] * ez
@@ -262,8 +263,8 @@ def point_to_point(start: Any, end: Any, *, duration: float = 0.5, law: str = "p
     a, b = jnp.asarray(start, dtype), jnp.asarray(end, dtype)
     u = _uniform(n_samples, dtype)
     s, ds, dds = fn(u)
-    d = b - a
-    return Cycle(u=u, x=a + s[:, None] * d, dx=ds[:, None] * d, ddx=dds[:, None] * d, duration=duration,
+    d = (b - a)[None, :]
+    return Cycle(u=u, x=a[None, :] + s[:, None] * d, dx=ds[:, None] * d, ddx=dds[:, None] * d, duration=duration,
                  space="cartesian")
 
 

@@ -1,0 +1,244 @@
+"""Dynamics along the standard pick-and-place cycle and the GA paper's test motion (issue 4).
+
+For the config robot and the presets listed in ``experiment.robots``: joint positions, speeds, accelerations
+and actuator torques along the standard 25/305/25 mm cycle (at its nominal duration and at the minimum cycle
+time under the actuator limits) and along the GA paper's motion; peak/RMS torque, peak speed, minimum cycle
+time and cycles per minute; a Lagrange-vs-virtual-work cross-check on every profile. For a reconfigurable
+config robot, the GA motion again with R moving, with the R actuator's force.
+
+Writes group ``dynamics/<robot>/<case>`` (time axis ``t``; datasets p, p_dot, p_ddot, theta, theta_dot,
+theta_ddot, tau, force_R, R) plus ``dynamics/<robot>/adept_metrics`` and ``dynamics/summary``; plots
+``<robot>_ga_motion_platform.png`` (like the paper's Fig. 5), ``<robot>_ga_motion_torques.png`` (Fig. 6),
+``<robot>_adept_profiles.png``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import presets
+from .. import trajectory as tr
+from ..config import ConfigError
+from ..dynamics import Limits, cycle_metrics, cycle_profile
+
+CASE_FIELDS = (("p", "m"), ("p_dot", "m/s"), ("p_ddot", "m/s^2"), ("theta", "rad"), ("theta_dot", "rad/s"),
+               ("theta_ddot", "rad/s^2"), ("tau", "N m"), ("force_R", "N"), ("R", "m"), ("R_dot", "m/s"))
+
+
+def _setup(e, name):
+    s = e.setups.get(name) if name in e.setups else e.setups.default
+    out = {}
+    for key in ("centre", "heading_deg", "duration", "torque_limit", "speed_limit"):
+        if key not in s:
+            raise ConfigError(f"experiment.setups.{name}.{key} is required")
+    c = list(s.centre)
+    if len(c) != 3:
+        raise ConfigError(f"experiment.setups.{name}.centre must have 3 coordinates (m), got {c!r}")
+    out["centre"] = [float(v) for v in c]
+    for key in ("heading_deg", "duration", "torque_limit", "speed_limit"):
+        out[key] = float(s[key])
+    for key in ("duration", "torque_limit", "speed_limit"):
+        if not out[key] > 0:
+            raise ConfigError(f"experiment.setups.{name}.{key} must be > 0, got {out[key]!r}")
+    return out
+
+
+def _check(e):
+    if e.method not in ("virtual_work", "lagrange"):
+        raise ConfigError(f"experiment.method must be 'virtual_work' or 'lagrange', got {e.method!r}")
+    if e.law not in tr.MOTION_LAWS:
+        raise ConfigError(f"experiment.law must be one of {sorted(tr.MOTION_LAWS)}, got {e.law!r}")
+    if not (isinstance(e.n_samples, int) and e.n_samples >= 11):
+        raise ConfigError(f"experiment.n_samples must be an integer >= 11, got {e.n_samples!r}")
+    if not 0.0 <= float(e.blend) < 1.0:
+        raise ConfigError(f"experiment.blend must be in [0, 1), got {e.blend!r}")
+    for name in e.robots:
+        if name not in presets.PRESETS:
+            raise ConfigError(f"experiment.robots: unknown preset {name!r}; known: {sorted(presets.PRESETS)}")
+    if not float(e.ga_motion.duration) > 0:
+        raise ConfigError(f"experiment.ga_motion.duration must be > 0 s, got {e.ga_motion.duration!r}")
+
+
+def _preset_robot(name):
+    if name == "franco2026":
+        return presets.franco2026(fixed_R=0.200, with_mass=True)
+    rob = presets.get(name)
+    return rob if getattr(rob, "mass", None) is not None else None
+
+
+def _save_case(res, group, prof, attrs):
+    t = np.asarray(prof.t)
+    res.put_axis(group, "t", t, units="s")
+    for name, unit in CASE_FIELDS:
+        arr = np.asarray(getattr(prof, name))
+        dims = ("t",) if arr.ndim == 1 else ("t", "xyz" if name.startswith("p") else "chain")
+        res.put(group, name, arr, units=unit, dims=dims)
+    res.put(group, "ok", np.asarray(prof.ok), units="1", dims=("t",))
+    res.set_attrs(group, **attrs)
+
+
+def _plot_platform(ctx, name, prof, title):
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
+    t = np.asarray(prof.t)
+    for ax, key, unit in zip(axes, ("p", "p_dot", "p_ddot"), ("m", "m/s", "m/s$^2$")):
+        arr = np.asarray(getattr(prof, key))
+        for j, lab in enumerate("xyz"):
+            ax.plot(t, arr[:, j], label=lab)
+        ax.set_ylabel(f"{key} ({unit})")
+        ax.grid(alpha=0.3)
+    axes[0].legend(ncol=3)
+    axes[0].set_title(title)
+    axes[-1].set_xlabel("t (s)")
+    ctx.savefig(fig, f"{name}_ga_motion_platform")
+
+
+def _plot_torques(ctx, name, prof, title, fname):
+    import matplotlib.pyplot as plt
+
+    has_R = np.any(np.abs(np.asarray(prof.R_dot)) > 0)
+    fig, axes = plt.subplots(2 if has_R else 1, 1, figsize=(7, 6 if has_R else 3.6), sharex=True, squeeze=False)
+    t = np.asarray(prof.t)
+    tau = np.asarray(prof.tau)
+    for j in range(3):
+        axes[0, 0].plot(t, tau[:, j], label=f"actuator {j + 1}")
+    axes[0, 0].set_ylabel("torque (N m)")
+    axes[0, 0].legend()
+    axes[0, 0].grid(alpha=0.3)
+    axes[0, 0].set_title(title)
+    if has_R:
+        axes[1, 0].plot(t, np.asarray(prof.force_R), color="k")
+        axes[1, 0].set_ylabel("R actuator force (N)")
+        axes[1, 0].grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("t (s)")
+    ctx.savefig(fig, fname)
+
+
+def _plot_adept(ctx, name, prof_nom, prof_min, T_min):
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(3, 2, figsize=(11, 8), sharex="col")
+    for col, (prof, label) in enumerate(((prof_nom, "nominal duration"), (prof_min, f"minimum cycle time {T_min:.3f} s"))):
+        t = np.asarray(prof.t)
+        for row, (key, unit) in enumerate((("tau", "N m"), ("theta_dot", "rad/s"), ("theta_ddot", "rad/s$^2$"))):
+            arr = np.asarray(getattr(prof, key))
+            for j in range(3):
+                axes[row, col].plot(t, arr[:, j], label=f"{j + 1}")
+            axes[row, col].set_ylabel(f"{key} ({unit})")
+            axes[row, col].grid(alpha=0.3)
+        axes[0, col].set_title(f"{name}, standard cycle, {label}")
+        axes[-1, col].set_xlabel("t (s)")
+    axes[0, 0].legend(title="actuator", ncol=3)
+    ctx.savefig(fig, f"{name}_adept_profiles")
+
+
+def run(ctx) -> None:
+    e = ctx.cfg.experiment
+    _check(e)
+    dtype = ctx.dtype
+    if ctx.robot.mass is None:
+        raise ConfigError("experiment=dynamics_cycle needs a mass model: add a `mass:` block to the robot config "
+                          f"(robot.mass), robot {ctx.cfg.robot.get('name')!r} has none")
+    cfg_name = str(ctx.cfg.robot.get("name", "robot"))
+    robots = {cfg_name: ctx.robot}
+    for name in e.robots:
+        if name not in robots:
+            rob = _preset_robot(name)
+            if rob is None:
+                raise ConfigError(f"experiment.robots: preset {name!r} has no mass model")
+            robots[name] = rob
+    method = str(e.method)
+    other = "lagrange" if method == "virtual_work" else "virtual_work"
+    K = int(e.n_samples)
+    res = ctx.results
+    profile_jit = jax.jit(cycle_profile, static_argnames=("method",))
+    metrics_jit = jax.jit(cycle_metrics, static_argnames=("method",))
+    ga = tr.ga_paper_motion(amplitude=float(e.ga_motion.amplitude), duration=float(e.ga_motion.duration),
+                            n_samples=K, dtype=dtype)
+    summary = []
+    max_formulation_gap = 0.0
+    for name, robot in ctx.progress(robots.items(), total=len(robots), desc="robots"):
+        robot = jax.tree.map(lambda x: jnp.asarray(x, dtype) if eqx.is_inexact_array(x) else x, robot)
+        s = _setup(e, name)
+        limits = Limits(torque=s["torque_limit"], speed=s["speed_limit"])
+        cycle = tr.adept_cycle(s["centre"], heading=math.radians(s["heading_deg"]), duration=s["duration"],
+                               law=str(e.law), blend=float(e.blend), n_samples=K, dtype=dtype)
+        cases = {"adept": cycle, "ga_motion": ga}
+        for case, cyc in cases.items():
+            m = metrics_jit(robot, cyc, limits, method=method)
+            prof = profile_jit(robot, cyc, method=method)
+            check = profile_jit(robot, cyc, method=other)
+            gap = float(np.nanmax(np.abs(np.asarray(prof.tau) - np.asarray(check.tau)))) if bool(m.reachable) else 0.0
+            max_formulation_gap = max(max_formulation_gap, gap)
+            g = f"dynamics/{name}/{case}"
+            _save_case(res, g, prof, dict(duration=float(cyc.duration), method=method, limits_torque=s["torque_limit"],
+                                          limits_speed=s["speed_limit"], formulation_gap_Nm=gap))
+            mg = f"dynamics/{name}/{case}_metrics"
+            for key, unit in (("peak_torque", "N m"), ("rms_torque", "N m"), ("peak_speed", "rad/s"),
+                              ("peak_acceleration", "rad/s^2")):
+                res.put(mg, key, np.asarray(getattr(m, key)), units=unit, dims=("chain",))
+            for key, unit in (("cycle_time", "s"), ("cycles_per_minute", "1/min"), ("peak_force_R", "N"),
+                              ("ok", "1"), ("reachable", "1"), ("n_bad", "1")):
+                res.put(mg, key, np.asarray(getattr(m, key)), units=unit)
+            summary.append((name, case, m, gap))
+            ctx.log(f"{name:12s} {case:10s} reachable={bool(m.reachable)} "
+                    f"peak torque {np.array2string(np.asarray(m.peak_torque), precision=3)} N m, "
+                    f"RMS {np.array2string(np.asarray(m.rms_torque), precision=3)} N m, "
+                    f"peak speed {np.array2string(np.asarray(m.peak_speed), precision=3)} rad/s at T = "
+                    f"{float(cyc.duration):.3f} s; min cycle time {float(m.cycle_time):.4f} s "
+                    f"({float(m.cycles_per_minute):.1f} cycles/min) under {s['torque_limit']} N m, "
+                    f"{s['speed_limit']} rad/s; |tau_{method} - tau_{other}| <= {gap:.2e} N m")
+            if case == "adept" and bool(m.ok):
+                prof_min = profile_jit(robot, cyc, m.cycle_time, method=method)
+                _save_case(res, f"dynamics/{name}/adept_at_min_cycle_time", prof_min,
+                           dict(duration=float(m.cycle_time), method=method))
+                _plot_adept(ctx, name, prof, prof_min, float(m.cycle_time))
+            if case == "ga_motion" and bool(m.reachable):
+                _plot_platform(ctx, name, prof, f"{name}: GA paper motion, platform (cf. its Fig. 5)")
+                _plot_torques(ctx, name, prof, f"{name}: GA paper motion, actuator torques (cf. its Fig. 6)",
+                              f"{name}_ga_motion_torques")
+        res.flush()
+    if ctx.recon is not None and float(e.recon_R_amplitude) != 0.0:
+        recon = ctx.recon
+        robot = jax.tree.map(lambda x: jnp.asarray(x, dtype) if eqx.is_inexact_array(x) else x, recon.robot)
+        R0 = float(recon.robot.base_radius)
+        A = float(e.recon_R_amplitude)
+        if not (float(recon.R_min) <= R0 - abs(A) and R0 + abs(A) <= float(recon.R_max) + 1e-12):
+            raise ConfigError(f"experiment.recon_R_amplitude={A!r} m takes R = {R0} +- {abs(A)} m outside "
+                              f"[{float(recon.R_min)}, {float(recon.R_max)}] m")
+        cyc = tr.with_R_profile(ga, R0, amplitude=A)
+        s = _setup(e, cfg_name)
+        limits = Limits(torque=s["torque_limit"], speed=s["speed_limit"])
+        m = metrics_jit(robot, cyc, limits, method=method)
+        prof = profile_jit(robot, cyc, method=method)
+        check = profile_jit(robot, cyc, method=other)
+        gap_R = float(np.nanmax(np.abs(np.asarray(prof.force_R) - np.asarray(check.force_R))))
+        g = f"dynamics/{cfg_name}/ga_motion_moving_R"
+        _save_case(res, g, prof, dict(duration=float(cyc.duration), method=method, R0=R0, R_amplitude=A,
+                                      formulation_gap_N=gap_R))
+        res.put(g, "peak_force_R", float(m.peak_force_R), units="N")
+        summary.append((cfg_name, "ga_motion_moving_R", m, gap_R))
+        ctx.log(f"{cfg_name} GA motion with R = {R0} + {A} sin(2 pi t/T): peak R force {float(m.peak_force_R):.3f} N, "
+                f"peak torque {np.array2string(np.asarray(m.peak_torque), precision=3)} N m")
+        if bool(m.reachable):
+            _plot_torques(ctx, cfg_name, prof, f"{cfg_name}: GA motion with moving R", f"{cfg_name}_ga_motion_moving_R")
+    names = [f"{n}/{c}" for n, c, _, _ in summary]
+    res.put("dynamics/summary", "case", np.asarray(names, dtype="S"), units="1", dims=("case",))
+    for key, unit in (("cycle_time", "s"), ("cycles_per_minute", "1/min")):
+        res.put("dynamics/summary", key, np.asarray([float(getattr(m, key)) for _, _, m, _ in summary]), units=unit,
+                dims=("case",))
+    res.put("dynamics/summary", "peak_torque", np.asarray([np.asarray(m.peak_torque) for _, _, m, _ in summary]),
+            units="N m", dims=("case", "chain"))
+    res.put("dynamics/summary", "rms_torque", np.asarray([np.asarray(m.rms_torque) for _, _, m, _ in summary]),
+            units="N m", dims=("case", "chain"))
+    res.put("dynamics/summary", "peak_speed", np.asarray([np.asarray(m.peak_speed) for _, _, m, _ in summary]),
+            units="rad/s", dims=("case", "chain"))
+    res.set_attrs("dynamics", method=method, law=str(e.law), blend=float(e.blend), n_samples=K,
+                  max_formulation_gap=max_formulation_gap)
+    ctx.log(f"largest |virtual work - Lagrange| over all profiles: {max_formulation_gap:.2e}")
