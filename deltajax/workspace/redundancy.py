@@ -8,9 +8,9 @@ get ``ok=False``, ``k=-1`` and NaN values.
 
 Two implementations return the identical selection (tested):
 
-* **exact** -- every sample is evaluated, like the paper. :func:`resolve_redundancy` (pure, jit/vmap-able:
-  a ``lax.scan`` over the samples keeps memory O(N)) and the host driver ``resolve_redundancy_host(...,
-  mode="exact")``.
+* **exact** -- every sample is evaluated, like the paper. :func:`resolve_redundancy` (pure JAX, jit/vmap-able:
+  a ``lax.scan`` over the samples keeps memory O(N); what a GA calls) and the host driver
+  ``resolve_redundancy_host(..., mode="exact")`` (Numba).
 * **fast** -- ``resolve_redundancy_host(..., mode="fast")``. The savings, none of which changes the answer:
 
   1. *Closed-form reach interval.* For chain i with P in its local frame, d_x = p_x,i + r - R and
@@ -19,10 +19,8 @@ Two implementations return the identical selection (tested):
      a quadratic in d_x^2 whose roots are exactly these). Hence R must lie in
      [p_x,i + r - sqrt((L2'+L1)^2 - p_z^2), p_x,i + r + sqrt((L2'+L1)^2 - p_z^2)] for every chain; the
      intersection (widened by one sample for rounding) bounds the sample range of each point.
-  2. *Feasibility pass.* A cheap IK-only sweep over that range gives the first and last feasible sample
-     k_first..k_last (joint limits included); the full kernel (Jacobians + singular values) runs only on
-     that window. Windows are sorted by length and evaluated in buckets of equal width, so almost no
-     padded work is done.
+  2. *IK pre-test.* Inside that range each sample first runs the cheap IK test (joint limits included);
+     the Jacobian and singular-value work runs only where it passes (the Numba kernel in :mod:`._nb`).
   3. *Mirror symmetry.* The kernel evaluates every point at (x, |y|, z) (see :mod:`.grid`), so a point and
      its mirror image have bit-identical answers; the host driver solves each mirror pair once.
      The three-fold rotation maps the Cartesian grid onto itself only for a few points (120 deg rotations
