@@ -55,6 +55,8 @@ log = logging.getLogger(__name__)
 
 #: group attributes that describe a shard (rewritten to the single-run values by :func:`merge_shards`)
 SHARD_ATTRS = ("shard", "n_shards", "shard_start", "shard_stop")
+#: 1-D datasets up to this length (per-chain figures) enter sweep summaries as ``group/name[max]``
+SMALL_VECTOR = 8
 _SCALE_ATTRS = ("CLASS", "NAME", "REFERENCE_LIST", "DIMENSION_LIST", "DIMENSION_LABELS", "_Netcdf4Dimid",
                 "_Netcdf4Coordinates", "units")
 
@@ -558,9 +560,16 @@ def _scalars(path: Path) -> tuple[dict[str, float], dict[str, str], dict[str, An
         root = {k: _py(v) for k, v in f.attrs.items() if k != "config"}
 
         def visit(name, obj):
-            if isinstance(obj, h5py.Dataset) and obj.shape == () and obj.dtype.kind in "biuf":
+            if not isinstance(obj, h5py.Dataset) or obj.dtype.kind not in "biuf":
+                return
+            if obj.shape == ():
                 vals[name] = _py(obj[()])
                 units[name] = str(_py(obj.attrs.get("units", "")))
+            elif len(obj.shape) == 1 and 1 <= obj.shape[0] <= SMALL_VECTOR and not obj.attrs.get("CLASS"):
+                # a per-chain figure (peak torque of each actuator ...): its largest entry
+                v = np.asarray(obj[()], dtype=float)
+                vals[f"{name}[max]"] = float(np.nanmax(v)) if np.isfinite(v).any() else float("nan")
+                units[f"{name}[max]"] = str(_py(obj.attrs.get("units", "")))
 
         f.visititems(visit)
     return vals, units, root
@@ -572,7 +581,9 @@ def summarize_sweep(sweep_dir: os.PathLike) -> dict[str, Path]:
     One row per run directory (job order) and per merged sharded job (``kind = merged``): the run's overrides
     (one column per swept key), its status (``ok``: results.h5 complete; ``incomplete``: checkpoint only;
     ``missing``), experiment, wall time, and every scalar dataset of its results.h5 as ``group/name``
-    (units in ``summary.json`` and in the CSV header as ``group/name [units]``).
+    (units in ``summary.json`` and in the CSV header as ``group/name [units]``); numeric 1-D datasets of at
+    most :data:`SMALL_VECTOR` entries that are not axes (per-chain figures such as peak torques) enter as
+    ``group/name[max]``, their largest entry.
 
     Returns:
         ``{"json": path, "csv": path}``.

@@ -12,8 +12,8 @@ that takes several numeric values), then write into ``--out`` (default the sweep
 * ``sweep_area_vs_z.png``: for runs with a gridded ``workspace/reachable`` field, the reachable area per z
   level, read through xarray (:func:`deltajax.io.open_xarray`).
 
-Metrics default to those present among :data:`DEFAULT_METRICS` plus every scalar whose name mentions
-``torque`` or ``tau`` (the dynamics experiments' peak torques).
+Metrics default to those present among :data:`DEFAULT_METRICS` plus the largest per-chain peak torque of
+every case of ``experiment=dynamics_cycle`` (``.../peak_torque[max]``).
 """
 
 from __future__ import annotations
@@ -75,7 +75,7 @@ def pick_metrics(rows: Sequence[dict], metrics: Optional[str]) -> list[str]:
             raise SystemExit(f"--metrics: {unknown} not found; available: {present}")
         return chosen
     chosen = [m for m in DEFAULT_METRICS if m in present]
-    chosen += [m for m in present if m not in chosen and ("torque" in m.lower() or "/tau" in m.lower())]
+    chosen += [m for m in present if m not in chosen and m.endswith("peak_torque[max]")]
     return chosen or present[:6]
 
 
@@ -152,6 +152,8 @@ def analyze(sweep_dir: Path, x: Optional[str] = None, metrics: Optional[str] = N
                       for r in members]
                 ys = [_num(r["metrics"].get(m)) for r in members]
                 ys = [np.nan if y is None else y for y in ys]
+                if all(np.isnan(y) for y in ys):  # e.g. a series of another experiment without this metric
+                    continue
                 label = ", ".join(f"{s}={v}" for s, v in zip(series, gkey)) or None
                 ax.plot(xs, ys, "o-", label=label)
             ax.set_xlabel(xkey)

@@ -242,3 +242,31 @@ def test_jax_backend_shards_merge_to_single_run(sweeps, tmp_path):
         assert int(f["workspace/count"][()]) == 79
         np.testing.assert_allclose(f["workspace/k_tilde"][()], g["workspace/k_tilde"][()], rtol=1e-9, atol=1e-12)
         np.testing.assert_allclose(f["workspace/inv_cond_mean"][()], g["workspace/inv_cond_mean"][()], rtol=1e-9)
+
+
+def test_summary_indexes_runs_scalars_and_per_chain_maxima(tmp_path):
+    """summarize_sweep on a hand-made sweep: overrides as columns, 0-d scalars, [max] of per-chain vectors,
+    missing runs marked, axes not summarised."""
+    from deltajax.io import ResultsFile, summarize_sweep
+
+    for i, forearm in enumerate(("0.3", "0.5")):
+        run = tmp_path / str(i)
+        (run / ".hydra").mkdir(parents=True)
+        (run / ".hydra" / "overrides.yaml").write_text(f"- experiment=demo\n- robot.forearm={forearm}\n")
+        if i == 1:
+            continue  # a job that never wrote results
+        res = ResultsFile(run / "results.h5", attrs={"experiment": "demo"})
+        res.put("dynamics/case", "peak_torque", np.array([1.5, 7.25, np.nan]), units="N m", dims=("chain",))
+        res.put("workspace", "volume", 0.125, units="m^3")
+        res.put_axis("workspace", "z", np.linspace(0, 1, 3), units="m")
+        res.flush(final=True)
+    paths = summarize_sweep(tmp_path)
+    rows = json.loads(paths["json"].read_text())["runs"]
+    assert [(r["run"], r["status"], r["overrides"]["robot.forearm"]) for r in rows] == [("0", "ok", "0.3"),
+                                                                                        ("1", "missing", "0.5")]
+    assert rows[0]["metrics"] == {"workspace/volume": 0.125, "dynamics/case/peak_torque[max]": 7.25}
+    lines = paths["csv"].read_text().splitlines()
+    assert lines[0].split(",") == ["run", "kind", "status", "experiment_name", "wall_time_s", "experiment",
+                                   "robot.forearm", "dynamics/case/peak_torque[max] [N m]", "workspace/volume [m^3]"]
+    assert lines[1].split(",") == ["0", "run", "ok", "demo", "", "demo", "0.3", "7.25", "0.125"]
+    assert lines[2].split(",")[:3] == ["1", "run", "missing"]
