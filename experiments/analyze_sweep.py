@@ -66,6 +66,21 @@ def pick_x(rows: Sequence[dict], x: Optional[str]) -> tuple[Optional[str], list[
     return (varying[0] if varying else None), varying[1:]
 
 
+def join_experiments(rows: Sequence[dict], keys: Sequence[str]) -> list[dict]:
+    """Combine the runs of different experiments with the same values of ``keys`` into one row each."""
+    joined: dict[tuple, dict] = {}
+    for r in rows:
+        k = tuple(str(r["overrides"].get(p)) for p in keys)
+        if k not in joined:
+            joined[k] = {"run": r["run"], "kind": r["kind"], "overrides": {p: r["overrides"].get(p) for p in keys},
+                         "metrics": {}, "runs": []}
+        j = joined[k]
+        j["runs"].append(r["run"])
+        j["run"] = "+".join(j["runs"])
+        j["metrics"].update(r["metrics"])
+    return list(joined.values())
+
+
 def pick_metrics(rows: Sequence[dict], metrics: Optional[str]) -> list[str]:
     present = sorted({m for r in rows for m in r["metrics"]})
     if metrics:
@@ -112,6 +127,9 @@ def analyze(sweep_dir: Path, x: Optional[str] = None, metrics: Optional[str] = N
     if not rows:
         raise SystemExit(f"no completed runs in {sweep_dir} (see {paths['csv']})")
     xkey, series = pick_x(rows, x)
+    if "experiment" in series:  # several experiments per design: one row per design, metrics side by side
+        series = [k for k in series if k != "experiment"]
+        rows = join_experiments(rows, [k for k in [xkey, *series] if k])
     mets = pick_metrics(rows, metrics)
     units = summary.get("units", {})
     if xkey is not None:
@@ -157,7 +175,8 @@ def analyze(sweep_dir: Path, x: Optional[str] = None, metrics: Optional[str] = N
                 label = ", ".join(f"{s}={v}" for s, v in zip(series, gkey)) or None
                 ax.plot(xs, ys, "o-", label=label)
             ax.set_xlabel(xkey)
-            ax.set_ylabel(f"{m} [{units.get(m, '')}]")
+            ax.set_title(m if len(m) <= 48 else "..." + m[-45:], fontsize=8)
+            ax.set_ylabel(units.get(m, "") or "1")
             if series:
                 ax.legend(fontsize=7)
         for ax in list(axes.flat)[n:]:
@@ -171,10 +190,13 @@ def analyze(sweep_dir: Path, x: Optional[str] = None, metrics: Optional[str] = N
     fig, ax = plt.subplots(figsize=(5.5, 3.6))
     any_grid = False
     for r in rows:
-        f = sweep_dir / r["run"] / "results.h5"
-        try:
-            ws = open_xarray(f, "workspace")
-        except (OSError, ValueError, KeyError):
+        for run in r.get("runs", [r["run"]]):
+            try:
+                ws = open_xarray(sweep_dir / run / "results.h5", "workspace")
+            except (OSError, ValueError, KeyError):
+                continue
+            break
+        else:
             continue
         if "reachable" not in ws or set(ws["reachable"].dims) != {"x", "y", "z"}:
             continue
