@@ -38,7 +38,7 @@ from jaxtyping import Array, Bool, Float
 
 from .geometry import Delta
 from .jacobian import jacobians
-from .kinematics import _from_chain_frames, fk, ik, to_chain_frames
+from .kinematics import _from_chain_frames, fk, ik_cos_sin, to_chain_frames
 
 __all__ = [
     "Motion",
@@ -106,27 +106,47 @@ def _require_mass(robot: Delta):
     return robot.mass
 
 
-def _chain_terms(robot: Delta, p, theta):
-    """Loop vectors w_i = C_i - B_i (chain frames), unit u (local, base) and Jq diagonal d_i = L1 sin th2 sin th3."""
+def _chain_terms(robot: Delta, p, theta, c=None, s=None):
+    """Loop vectors w_i = C_i - B_i (chain frames), unit u (local) and Jq diagonal d_i = L1 sin th2 sin th3."""
     L1 = robot.upper_arm
+    c = jnp.cos(theta) if c is None else c
+    s = jnp.sin(theta) if s is None else s
     loc = to_chain_frames(p)
-    w = jnp.stack([loc[:, 0] + robot.platform_radius - robot.base_radius - L1 * jnp.cos(theta), loc[:, 1],
-                   loc[:, 2] - L1 * jnp.sin(theta)], axis=-1)
+    w = jnp.stack([loc[:, 0] + robot.platform_radius - robot.base_radius - L1 * c, loc[:, 1],
+                   loc[:, 2] - L1 * s], axis=-1)
     u = w / robot.forearm
-    d = L1 * (u[:, 2] * jnp.cos(theta) - u[:, 0] * jnp.sin(theta))
+    d = L1 * (u[:, 2] * c - u[:, 0] * s)
     return w, u, d
+
+
+def _adjugate_rows(A):
+    """(det A, C) with C[i] = A[j] x A[k] ((i, j, k) cyclic), so that A^-1 = C^T / det and A^-T = C / det.
+
+    Closed form for 3x3 systems: XLA:CPU's batched LU for tiny matrices costs more than the rest of the
+    inverse dynamics together.
+    """
+    C = jnp.stack([jnp.cross(A[1], A[2]), jnp.cross(A[2], A[0]), jnp.cross(A[0], A[1])])
+    return jnp.dot(A[0], C[0]), C
+
+
+def _solve3(A, b, *, transpose: bool = False):
+    """Solve A x = b (or A^T x = b) for a 3x3 A by the adjugate (caller masks singular A)."""
+    det, C = _adjugate_rows(A)
+    det = jnp.where(det != 0, det, 1.0)
+    return (C @ b if transpose else C.T @ b) / det
 
 
 def _validity(robot: Delta, u_local, d, tol):
     """Away from type-1 (Jq) and type-2 (Jx) singularities, relative tolerance ``tol``."""
-    det_jx = jnp.linalg.det(_from_chain_frames(u_local))
+    det_jx, _ = _adjugate_rows(_from_chain_frames(u_local))
     return (jnp.abs(det_jx) > tol) & jnp.all(jnp.abs(d) > tol * robot.upper_arm)
 
 
-def _elbow_rates(robot: Delta, theta, theta_dot, theta_ddot, R_dot, R_ddot):
+def _elbow_rates(robot: Delta, theta, theta_dot, theta_ddot, R_dot, R_ddot, c=None, s=None):
     """Elbow velocity and acceleration in the chain frames (rows = chains)."""
     L1 = robot.upper_arm
-    c, s = jnp.cos(theta), jnp.sin(theta)
+    c = jnp.cos(theta) if c is None else c
+    s = jnp.sin(theta) if s is None else s
     zero = jnp.zeros_like(theta)
     b_dot = jnp.stack([R_dot - L1 * s * theta_dot, zero, L1 * c * theta_dot], axis=-1)
     b_ddot = jnp.stack([R_ddot - L1 * c * theta_dot ** 2 - L1 * s * theta_ddot, zero,
@@ -157,18 +177,20 @@ def joint_motion(robot: Delta, p: Float[Array, "3"], p_dot: Float[Array, "3"], p
     dtype = jnp.result_type(p.dtype, robot.upper_arm.dtype)
     R_dot = jnp.asarray(R_dot, dtype)
     R_ddot = jnp.asarray(R_ddot, dtype)
-    sol = ik(robot, p, branch=branch)
-    theta = jnp.where(sol.ok, sol.theta, 0.0)
-    w, u, d = _chain_terms(robot, p, theta)
-    ok = sol.ok & _validity(robot, u, d, singular_tol)
+    cs = ik_cos_sin(robot, p, branch=branch)
+    ik_ok = jnp.all(cs.ok)
+    c = jnp.where(ik_ok, cs.cos, 1.0)
+    s = jnp.where(ik_ok, cs.sin, 0.0)
+    theta = jnp.arctan2(s, c)   # only reported; the dynamics use (c, s)
+    w, u, d = _chain_terms(robot, p, theta, c, s)
+    ok = ik_ok & _validity(robot, u, d, singular_tol)
     d_safe = jnp.where(jnp.abs(d) > 0, d, 1.0)
     pd_loc = to_chain_frames(p_dot)
     pdd_loc = to_chain_frames(p_ddot)
     theta_dot = (jnp.sum(u * pd_loc, axis=-1) - u[:, 0] * R_dot) / d_safe
-    b_dot, _ = _elbow_rates(robot, theta, theta_dot, jnp.zeros_like(theta), R_dot, R_ddot)
+    b_dot, _ = _elbow_rates(robot, theta, theta_dot, jnp.zeros_like(theta), R_dot, R_ddot, c, s)
     w_dot = pd_loc - b_dot
     L1 = robot.upper_arm
-    c, s = jnp.cos(theta), jnp.sin(theta)
     theta_ddot = (jnp.sum(u * pdd_loc, axis=-1) + jnp.sum(w_dot * w_dot, axis=-1) / robot.forearm
                   - u[:, 0] * R_ddot + L1 * theta_dot ** 2 * (u[:, 0] * c + u[:, 2] * s)) / d_safe
     nan = jnp.asarray(jnp.nan, dtype)
@@ -196,10 +218,10 @@ def platform_motion(robot: Delta, theta: Float[Array, "3"], theta_dot: Float[Arr
     Jx = _from_chain_frames(u)
     Jx_safe = jnp.where(ok, Jx, jnp.eye(3, dtype=dtype))
     b_dot, b_ddot = _elbow_rates(robot, theta, theta_dot, theta_ddot, R_dot, R_ddot)
-    p_dot = jnp.linalg.solve(Jx_safe, jnp.sum(u * b_dot, axis=-1))
+    p_dot = _solve3(Jx_safe, jnp.sum(u * b_dot, axis=-1))
     w_dot = to_chain_frames(p_dot) - b_dot
     rhs2 = jnp.sum(u * b_ddot, axis=-1) - jnp.sum(w_dot * w_dot, axis=-1) / robot.forearm
-    p_ddot = jnp.linalg.solve(Jx_safe, rhs2)
+    p_ddot = _solve3(Jx_safe, rhs2)
     nan = jnp.asarray(jnp.nan, dtype)
     return Motion(p=jnp.where(ok, p, nan), p_dot=jnp.where(ok, p_dot, nan), p_ddot=jnp.where(ok, p_ddot, nan),
                   theta=theta, theta_dot=theta_dot, theta_ddot=theta_ddot, R_dot=R_dot, R_ddot=R_ddot, ok=ok)
@@ -227,7 +249,7 @@ def _lagrange(robot: Delta, m: Motion):
     dG_dp = 2.0 * _from_chain_frames(w)                       # (3 constraints, 3 coords), base frame
     dG_dR = -2.0 * w[:, 0]                                    # (3,)
     dG_dth = 2.0 * L1 * (w[:, 0] * s - w[:, 2] * c)           # (3,) diagonal
-    lam = jnp.linalg.solve(dG_dp.T, lhs_p)
+    lam = _solve3(dG_dp, lhs_p, transpose=True)
     tau = lhs_theta - lam * dG_dth
     force_R = lhs_R - jnp.sum(lam * dG_dR)
     return tau, force_R
@@ -236,28 +258,41 @@ def _lagrange(robot: Delta, m: Motion):
 # ---------------------------------------------------------------------------------------------------------
 # Formulation 2: virtual work (d'Alembert) with the Jacobian transpose
 # ---------------------------------------------------------------------------------------------------------
-def _virtual_work(robot: Delta, m: Motion):
+def _virtual_work_split(robot: Delta, m: Motion):
+    """Virtual-work efforts split into (tau_inertial, tau_gravity, force_R_inertial, force_R_gravity).
+
+    The inertial part holds every acceleration and velocity-product term, the gravity part the static
+    efforts at the same configuration; one pass shares the Jacobians between them (used for time scaling).
+    """
     mm = _require_mass(robot)
     L1, g = robot.upper_arm, mm.gravity
     th, thd, thdd = m.theta, m.theta_dot, m.theta_ddot
     c, s = jnp.cos(th), jnp.sin(th)
-    zero = jnp.zeros_like(th)
-    g_loc = jnp.stack([zero, zero, g + zero], axis=-1)
-    tau = (mm.upper_arm_inertia_factor * mm.upper_arm_mass * L1 * L1
-           + mm.gear_ratio ** 2 * mm.rotor_inertia) * thdd   # rotation of the arm and the rotor
-    force_R = 3.0 * mm.carriage_mass * m.R_ddot
+    tau_in = (mm.upper_arm_inertia_factor * mm.upper_arm_mass * L1 * L1
+              + mm.gear_ratio ** 2 * mm.rotor_inertia) * thdd   # rotation of the arm and the rotor
+    tau_g = jnp.zeros_like(th)
+    fR_in = 3.0 * mm.carriage_mass * m.R_ddot
     for mass, arm in ((mm.upper_arm_mass, mm.upper_arm_com_fraction * L1), (mm.elbow_point_mass(), L1)):
-        acc = jnp.stack([m.R_ddot - arm * (c * thd ** 2 + s * thdd), zero,
-                         arm * (-s * thd ** 2 + c * thdd)], axis=-1)
-        force = mass * (acc - g_loc)                                 # what the arm must supply to the point
-        partial_theta = jnp.stack([-arm * s, zero, arm * c], axis=-1)  # d(point)/d(theta_i), chain frame
-        tau = tau + jnp.sum(force * partial_theta, axis=-1)
-        force_R = force_R + jnp.sum(force[:, 0])                     # d(point)/dR = e_x (chain frame)
-    ez = jnp.asarray([0.0, 0.0, 1.0], th.dtype)
-    F = _require_mass(robot).moving_mass() * (m.p_ddot - g * ez)
+        # point acceleration in the chain frame: (Rdd - arm (c thd^2 + s thdd), 0, arm (-s thd^2 + c thdd));
+        # the arm supplies mass * (acc - g e_z); partial velocities d/dtheta = arm (-s, 0, c), d/dR = e_x.
+        ax = m.R_ddot - arm * (c * thd ** 2 + s * thdd)
+        az = arm * (-s * thd ** 2 + c * thdd)
+        tau_in = tau_in + mass * (-arm * s * ax + arm * c * az)
+        tau_g = tau_g - mass * g * arm * c
+        fR_in = fR_in + mass * jnp.sum(ax)
     jac = jacobians(robot, m.p, th)
-    Q = jac.Jq.T @ jnp.linalg.solve(jac.Jx.T, F)                     # J^T F with J = Jx^-1 Jq
-    return tau + Q[1:], force_R + Q[0]
+    det, C = _adjugate_rows(jac.Jx)
+    det = jnp.where(det != 0, det, 1.0)
+    M = mm.moving_mass()
+    # J^T F with J = Jx^-1 Jq: Jq^T Jx^-T F, Jx^-T = C / det
+    Q_in = jac.Jq.T @ (C @ (M * m.p_ddot)) / det
+    Q_g = jac.Jq.T @ (-M * g * C[:, 2]) / det
+    return tau_in + Q_in[1:], tau_g + Q_g[1:], fR_in + Q_in[0], Q_g[0]
+
+
+def _virtual_work(robot: Delta, m: Motion):
+    tau_in, tau_g, fR_in, fR_g = _virtual_work_split(robot, m)
+    return tau_in + tau_g, fR_in + fR_g
 
 
 def inverse_dynamics_motion(robot: Delta, motion: Motion, *, method: str = "virtual_work") -> Torques:
@@ -482,7 +517,7 @@ class CycleMetrics(NamedTuple):
 
 
 def _sample(robot: Delta, cycle, k_x, k_dx, k_ddx, k_R, k_dR, k_ddR, method):
-    """One sample of a cycle at T = 1: motion, full efforts and static efforts."""
+    """One sample of a cycle at T = 1: motion, (inertial, gravity) efforts, R and Rdot."""
     rob = robot if k_R is None else robot.with_base_radius(k_R)
     dR = jnp.zeros((), k_x.dtype) if k_dR is None else k_dR
     ddR = jnp.zeros((), k_x.dtype) if k_ddR is None else k_ddR
@@ -490,13 +525,21 @@ def _sample(robot: Delta, cycle, k_x, k_dx, k_ddx, k_R, k_dR, k_ddR, method):
         motion = joint_motion(rob, k_x, k_dx, k_ddx, dR, ddR)
     else:
         motion = platform_motion(rob, k_x, k_dx, k_ddx, dR, ddR)
-    full = inverse_dynamics_motion(rob, motion, method=method)
-    zero3 = jnp.zeros_like(motion.theta)
-    static = Motion(p=motion.p, p_dot=zero3, p_ddot=zero3, theta=motion.theta, theta_dot=zero3,
-                    theta_ddot=zero3, R_dot=jnp.zeros_like(dR), R_ddot=jnp.zeros_like(dR), ok=motion.ok)
-    grav = inverse_dynamics_motion(rob, static, method=method)
+    nan = jnp.asarray(jnp.nan, k_x.dtype)
+    if method == "virtual_work":
+        tau_in, tau_g, fR_in, fR_g = _virtual_work_split(rob, motion)
+    else:
+        full = inverse_dynamics_motion(rob, motion, method=method)
+        zero3 = jnp.zeros_like(motion.theta)
+        static = Motion(p=motion.p, p_dot=zero3, p_ddot=zero3, theta=motion.theta, theta_dot=zero3,
+                        theta_ddot=zero3, R_dot=jnp.zeros_like(dR), R_ddot=jnp.zeros_like(dR), ok=motion.ok)
+        grav = inverse_dynamics_motion(rob, static, method=method)
+        tau_in, tau_g = full.tau - grav.tau, grav.tau
+        fR_in, fR_g = full.force_R - grav.force_R, grav.force_R
+    ok = motion.ok
+    efforts = tuple(jnp.where(ok, e, nan) for e in (tau_in, tau_g, fR_in, fR_g))
     R = rob.base_radius * jnp.ones((), k_x.dtype)
-    return motion, full, grav, R, dR
+    return motion, efforts, R, dR
 
 
 def cycle_profile(robot: Delta, cycle, duration: Any = None, *, method: str = "virtual_work") -> CycleProfile:
@@ -518,15 +561,15 @@ def cycle_profile(robot: Delta, cycle, duration: Any = None, *, method: str = "v
         R, dR, ddR = a[3:] if has_R else (None, None, None)
         return _sample(robot, cycle, x, dx, ddx, R, dR, ddR, method)
 
-    motion, full, grav, R, dR = jax.vmap(one)(*args)
-    a_tau = full.tau - grav.tau
-    a_fR = full.force_R - grav.force_R
+    if method not in ("virtual_work", "lagrange"):
+        raise ValueError(f"method must be 'virtual_work' or 'lagrange', got {method!r}")
+    motion, (a_tau, g_tau, a_fR, g_fR), R, dR = jax.vmap(one)(*args)
     inv_T2 = 1.0 / (T * T)
     return CycleProfile(
         t=cycle.u * T, p=motion.p, p_dot=motion.p_dot / T, p_ddot=motion.p_ddot * inv_T2, theta=motion.theta,
         theta_dot=motion.theta_dot / T, theta_ddot=motion.theta_ddot * inv_T2, R=R, R_dot=dR / T,
-        tau=a_tau * inv_T2 + grav.tau, force_R=a_fR * inv_T2 + grav.force_R, tau_gravity=grav.tau,
-        force_R_gravity=grav.force_R, tau_inertial_unit=a_tau, force_R_inertial_unit=a_fR, ok=motion.ok)
+        tau=a_tau * inv_T2 + g_tau, force_R=a_fR * inv_T2 + g_fR, tau_gravity=g_tau,
+        force_R_gravity=g_fR, tau_inertial_unit=a_tau, force_R_inertial_unit=a_fR, ok=motion.ok)
 
 
 def _min_duration_torque(a, g, limit):

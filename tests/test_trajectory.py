@@ -13,6 +13,7 @@ import deltajax as dj
 from deltajax import dynamics as dyn
 from deltajax import trajectory as tr
 
+_profile = jax.jit(dyn.cycle_profile)  # one compilation per cycle structure for this file
 PEAK_ACC = {"poly5": 10.0 / math.sqrt(3.0), "cycloidal": 2.0 * math.pi, "modified_trapezoid": 4.888}
 
 
@@ -85,7 +86,7 @@ def test_ga_paper_motion_is_the_papers():
     np.testing.assert_allclose(xd[:, 1], -0.25 * np.sin(t), atol=1e-13)
     np.testing.assert_allclose(xdd[:, 0], -0.25 * np.sin(t), atol=1e-13)
     robot = dj.presets.franco2026(fixed_R=0.2, with_mass=True)
-    prof = jax.jit(dyn.cycle_profile)(robot, cyc)
+    prof = _profile(robot, cyc)
     assert bool(jnp.all(prof.ok))
     # FK of the joint path reproduces the platform path, and IK of it returns the joint path
     p = jax.vmap(lambda th: dj.fk(robot, th).p)(jnp.asarray(x))
@@ -134,7 +135,7 @@ def test_reachability_checked_along_the_whole_path():
     """A move that leaves the workspace part-way is flagged at exactly the unreachable samples."""
     robot = dj.presets.franco2026(fixed_R=0.2, with_mass=True)
     cyc = tr.point_to_point((0.0, 0.0, 0.3), (0.0, 0.0, 0.7), n_samples=61)
-    prof = jax.jit(dyn.cycle_profile)(robot, cyc)
+    prof = _profile(robot, cyc)
     ik_ok = np.asarray(jax.vmap(lambda q: dj.ik(robot, q).ok)(cyc.x))
     assert ik_ok.any() and not ik_ok.all()
     np.testing.assert_array_equal(np.asarray(prof.ok), ik_ok)
