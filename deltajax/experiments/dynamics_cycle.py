@@ -124,7 +124,8 @@ def _plot_adept(ctx, name, prof_nom, prof_min, T_min):
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(3, 2, figsize=(11, 8), sharex="col")
-    for col, (prof, label) in enumerate(((prof_nom, "nominal duration"), (prof_min, f"minimum cycle time {T_min:.3f} s"))):
+    cases = ((prof_nom, "nominal duration"), (prof_min, f"minimum cycle time {T_min:.3f} s"))
+    for col, (prof, label) in enumerate(cases):
         t = np.asarray(prof.t)
         for row, (key, unit) in enumerate((("tau", "N m"), ("theta_dot", "rad/s"), ("theta_ddot", "rad/s$^2$"))):
             arr = np.asarray(getattr(prof, key))
