@@ -277,7 +277,8 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
                     criterion: str = "k_tilde", mode: str = "fast", b_v: float = 2.0, b_f: float = 4.2,
                     beta: float = 0.5, field_dtype=np.float64, chunk_size: int = 1 << 18,
                     checkpoint_dir: Optional[os.PathLike] = None, progress=None,
-                    max_chunks: Optional[int] = None, work: Optional[dict] = None) -> GridJob:
+                    max_chunks: Optional[int] = None, work: Optional[dict] = None, screen: bool = True,
+                    screen_margin: Optional[float] = None) -> GridJob:
     """Redundancy resolution at every grid point (or those in ``mask``), with every index at R*.
 
     Args:
@@ -290,18 +291,23 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
         mode: ``"fast"`` (mirror half + closed-form reach ranges) or ``"exact"`` (all points, all samples).
         field_dtype: dtype of the stored index fields.
         chunk_size, checkpoint_dir, progress, max_chunks: see :func:`run_chunks`.
-        work: if a dict, receives the work counters (IK tests, full kernel evaluations) of this call.
+        work: if a dict, receives the work counters (window samples, exact kernel evaluations, screened
+            samples, fallbacks; see :func:`deltajax.workspace.resolve_redundancy_host`) of this call.
+        screen, screen_margin: fast mode's screen-and-verify (see ``resolve_redundancy_host``); the selection
+            does not depend on them, so they are not part of the checkpoint fingerprint.
 
     Returns:
         :class:`GridJob`: ``ok`` (a feasible sample exists), fields: every index at R*, ``"R_star"`` (m),
         ``"k_star"`` (int32, -1 where none).
     """
-    from .redundancy import resolve_redundancy_host
+    from .redundancy import SCREEN_MARGIN, resolve_redundancy_host
 
+    if screen_margin is None:
+        screen_margin = SCREEN_MARGIN
     lay = _Layout(grid, mirror=(mode == "fast"))
     outputs = {"ok": (np.bool_, False), "k_star": (np.int32, -1), "R_star": (np.float64, np.nan)}
     outputs.update({n: (field_dtype, np.nan) for n in INDEX_NAMES})
-    counters = {"samples": 0, "full": 0, "points": 0}
+    counters = {"samples": 0, "full": 0, "points": 0, "screened": 0, "fallback": 0}
 
     def compute(start, stop):
         pts = lay.points(start, stop)
@@ -309,7 +315,7 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
         res = {n: np.full(len(pts), fill, dtype=dt) for n, (dt, fill) in outputs.items()}
         if sel.any():
             red, w = resolve_redundancy_host(recon, pts[sel], criterion, mode=mode, b_v=b_v, b_f=b_f, beta=beta,
-                                             mirror=False)
+                                             mirror=False, screen=screen, screen_margin=screen_margin)
             for k in counters:
                 counters[k] += w[k]
             res["ok"][sel] = red.ok
