@@ -35,8 +35,9 @@ grid covers every design in the bounds (radius and depth from the largest possib
 
 Constraints (designer's): the task cylinder must have ``task_coverage >= task.coverage_min`` (default: all of
 it reachable with index >= k_min: "task in the good workspace, minimum k~ there"), and the pick-and-place
-cycle must be reachable (joint limits included) at the operating R. Violation
-v = max(0, coverage_min - coverage) + [cycle not reachable]. Handling (``constraints.handling``):
+cycle must be reachable (joint limits included) at the operating R; optionally a size budget
+L1 + L2 <= ``constraints.max_arm_sum`` (without it a bigger robot always has a bigger workspace). Violation
+v = max(0, coverage_min - coverage) + [cycle not reachable] + max(0, L1 + L2 - max_arm_sum) / max_arm_sum. Handling (``constraints.handling``):
 
 * ``feasibility_first`` (default, Deb's rules as one scalar): feasible designs get their objective value,
   infeasible ones ``INFEASIBLE_OFFSET + v``. Feasible values are bounded far below the offset, so every
@@ -140,6 +141,7 @@ class Problem:
     handling: str
     penalty: float
     n_R_operating: int = 4
+    max_arm_sum: Optional[float] = None
     beta: float = 0.5
     b_v: float = 2.0
     b_f: float = 4.2
@@ -230,6 +232,8 @@ class Problem:
                                                                                        "constraints", 0.0),
             coverage_min=cov, weights=weights, handling=handling,
             penalty=num(con, "penalty", 10.0, "constraints", 0.0),
+            max_arm_sum=(None if con.get("max_arm_sum", None) is None
+                         else num(con, "max_arm_sum", None, "constraints", 1e-9)),
             n_R_operating=num(cyc, "n_R_operating", 4, "cycle", 1, True), beta=num(task, "beta", 0.5, "task", 0.0),
             settings={"r_max": r_max, "z_max": z_max, "task_diameter": diameter, "task_height": height,
                       "task_z_top": z_top, "cycle_centre": centre})
@@ -365,10 +369,13 @@ def evaluate_design(pb: Problem, design, needed: Optional[Sequence[str]] = None,
     if "good_volume" in need:
         ok, v = _index_at_points(pb, design, pts, smooth is not None)
         out["good_volume"] = jnp.sum(w * jnp.where(ok, step(v - pb.good_threshold), 0.0))
-    ok_t, v_t = _index_at_points(pb, design, tpts, smooth is not None)
-    out["task_index_mean"] = jnp.mean(v_t)
-    out["task_index_min"] = jnp.min(v_t) if smooth is None else _smin(v_t, smooth)
-    out["task_coverage"] = jnp.mean(jnp.where(ok_t, step(v_t - pb.k_min), 0.0))
+    if pb.coverage_min > 0 or need & {"task_index_mean", "task_index_min"} or smooth is None:
+        ok_t, v_t = _index_at_points(pb, design, tpts, smooth is not None)
+        out["task_index_mean"] = jnp.mean(v_t)
+        out["task_index_min"] = jnp.min(v_t) if smooth is None else _smin(v_t, smooth)
+        out["task_coverage"] = jnp.mean(jnp.where(ok_t, step(v_t - pb.k_min), 0.0))
+    else:  # relaxation without any task term: skip the redundancy sweep (and its gradient)
+        out["task_coverage"] = jnp.ones((), dt)
     # The cycle is always evaluated: its reachability is a constraint.
     if recon:
         j = jnp.arange(pb.n_R_operating, dtype=dt) / max(pb.n_R_operating - 1, 1)
@@ -384,7 +391,11 @@ def evaluate_design(pb: Problem, design, needed: Optional[Sequence[str]] = None,
             # Gradients through the selected candidate only (an argmin is piecewise differentiable like a
             # max); re-evaluating it keeps NaN partials of unreachable candidates out of the gradient.
             R_op = Rs[jax.lax.stop_gradient(k)]
-            cm1 = cycle_metrics(design.at(R_op), pb.cycle, pb.limits)
+            # Unreachable samples have NaN partials inside cycle_metrics; selecting on the *input* blocks them
+            # from the gradient when the cycle is not reachable (the where's cotangent is 0 there).
+            d_in = jax.tree_util.tree_map(lambda a: jnp.where(cycle_ok, a, jax.lax.stop_gradient(a)),
+                                          design.at(R_op))
+            cm1 = cycle_metrics(d_in, pb.cycle, pb.limits)
             pk, ct = jnp.max(cm1.peak_torque), cm1.cycle_time
         op = design.at(jnp.where(cycle_ok, R_op, Rs[0]))
         out["peak_torque"] = jnp.where(cycle_ok, pk, jnp.nan)
@@ -401,6 +412,8 @@ def evaluate_design(pb: Problem, design, needed: Optional[Sequence[str]] = None,
         out["peak_speed"] = _ee_speed(op, tpts, pb.motor_speed)
     # 1e-9: the coverage is a mean of 0/1 flags, exact only up to rounding
     violation = jnp.maximum(pb.coverage_min - out["task_coverage"] - 1e-9, 0.0) + jnp.where(cycle_ok, 0.0, 1.0)
+    if pb.max_arm_sum is not None:  # size budget: L1 + L2 <= max_arm_sum (relative excess)
+        violation = violation + jnp.maximum((robot0.upper_arm + robot0.forearm) / pb.max_arm_sum - 1.0 - 1e-9, 0.0)
     out["violation"] = violation
     out["feasible"] = violation <= 0.0
     return out

@@ -16,13 +16,13 @@ those replace their starting design.
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, Mapping, Optional
+from typing import Callable, Mapping, Optional, Sequence
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .objectives import SENSE, Problem, evaluate_design, fitness_from_metrics
+from .objectives import METRICS, SENSE, Problem, evaluate_design
 
 __all__ = ["RefineResult", "refine", "surrogate_loss"]
 
@@ -52,32 +52,35 @@ class RefineResult:
     loss_history: np.ndarray
 
 
-def _objective(pb: Problem, m, direction: Optional[Mapping[str, float]]):
-    """Weighted fitness (``direction=None``) or a direction sum of normalised, minimised objectives."""
-    if direction is None:
-        return fitness_from_metrics(pb, m)
-    f = 0.0
-    for name, wgt in direction.items():
-        f = f + wgt * SENSE[name] * m[name] / abs(pb.baseline[name])
-    return f
+def _direction_vector(pb: Problem, direction: Optional[Mapping[str, float]]) -> np.ndarray:
+    """Weights over :data:`METRICS` (sense and baseline normalisation folded in)."""
+    d = dict(pb.weights) if direction is None else dict(direction)
+    for k in d:
+        if k not in METRICS:
+            raise ValueError(f"refine direction: unknown metric {k!r}; known: {list(METRICS)}")
+    return np.asarray([d.get(k, 0.0) * SENSE[k] / abs(pb.baseline[k]) if d.get(k, 0.0) else 0.0
+                       for k in METRICS])
 
 
-def surrogate_loss(pb: Problem, space, genes, *, tau: float, direction=None, penalty: float = 10.0):
-    """Relaxed objective of one gene vector: the relaxed weighted objective plus ``penalty`` x the relaxed
-    constraint violation (a smooth exterior penalty; feasibility-first needs a step function)."""
-    m = evaluate_design(pb, space.decode(genes), smooth=tau)
-    if direction is None:
-        f = 0.0
-        for name, wgt in pb.weights.items():
-            f = f + wgt * SENSE[name] * m[name] / abs(pb.baseline[name])
-    else:
-        f = _objective(pb, m, direction)
-    return f + penalty * m["violation"]
+def _weighted(m, wvec):
+    # only the metrics that were computed (a NaN metric with weight 0 must not reach the gradient)
+    return sum(wvec[i] * m[k] for i, k in enumerate(METRICS) if k in m)
+
+
+def surrogate_loss(pb: Problem, space, genes, wvec, *, tau: float, penalty: float = 10.0,
+                   needed: Optional[Sequence[str]] = None):
+    """Relaxed objective of one gene vector: the relaxed weighted objective (``wvec`` over
+    :data:`METRICS`, see :func:`_direction_vector`) plus ``penalty`` x the relaxed constraint violation (a smooth
+    exterior penalty: feasibility-first needs a step function)."""
+    m = evaluate_design(pb, space.decode(genes), needed, smooth=tau)
+    if needed is not None:
+        m = {k: v for k, v in m.items() if k in needed or k == "violation"}
+    return _weighted(m, wvec) + penalty * m["violation"]
 
 
 def refine(pb: Problem, space, genes: np.ndarray, *, steps: int = 30, learning_rate: float = 0.01,
-           tau: float = 0.05, direction: Optional[Mapping[str, float]] = None, penalty: float = 10.0,
-           true_fn: Optional[Callable] = None) -> RefineResult:
+           tau: float = 0.05, directions: Optional[Sequence[Optional[Mapping[str, float]]]] = None,
+           penalty: float = 10.0, true_fn: Optional[Callable] = None) -> RefineResult:
     """Refine designs by projected Adam on the relaxed objective; verify on the true one.
 
     Args:
@@ -87,46 +90,57 @@ def refine(pb: Problem, space, genes: np.ndarray, *, steps: int = 30, learning_r
         steps: Adam steps.
         learning_rate: Adam step size in gene units.
         tau: relaxation temperature (see :func:`deltajax.optimize.evaluate_design`).
-        direction: ``None`` refines the GA's weighted fitness; a mapping ``{metric: weight}`` refines the
-            weighted sum of those normalised objectives instead (used for Pareto points).
+        directions: per design, ``None`` (refine the GA's weighted objective, ``pb.weights``) or a mapping
+            ``{metric: weight}`` (refine that weighted sum of baseline-normalised objectives, e.g. for Pareto
+            points). Default: ``None`` for every design. One compilation serves all of them.
         penalty: weight of the relaxed constraint violation.
-        true_fn: optional jitted ``genes (n, d) -> metrics`` (reuses a compiled evaluator).
+        true_fn: optional ``genes (n, d) -> metrics`` (reuses a compiled evaluator).
 
     Returns:
-        :class:`RefineResult`.
+        :class:`RefineResult`; ``true_*`` are the chosen objective (without constraints) on the true metrics.
     """
     import optax
     from optax import projections
 
     genes = jnp.asarray(np.clip(np.asarray(genes, float), 0.0, 1.0))
+    n = genes.shape[0]
+    directions = [None] * n if directions is None else list(directions)
+    if len(directions) != n:
+        raise ValueError(f"refine: {len(directions)} directions for {n} designs")
+    W = jnp.asarray(np.stack([_direction_vector(pb, d) for d in directions]))
     opt = optax.adam(learning_rate)
-    loss = lambda g: surrogate_loss(pb, space, g, tau=tau, direction=direction, penalty=penalty)  # noqa: E731
+
+    needed = tuple(sorted({k for j, k in enumerate(METRICS) if np.any(np.asarray(W)[:, j] != 0)}))
+
+    def loss(g, w):
+        return surrogate_loss(pb, space, g, w, tau=tau, penalty=penalty, needed=needed)
+
     vg = jax.value_and_grad(loss)
 
     @jax.jit
-    def descend(g0):
-        def one(g0):
+    def descend(G0, W):
+        def one(g0, w):
             def body(carry, _):
                 g, st = carry
-                val, grad = vg(g)
+                val, grad = vg(g, w)
                 grad = jnp.where(jnp.isfinite(grad), grad, 0.0)
                 upd, st = opt.update(grad, st, g)
                 g = projections.projection_box(optax.apply_updates(g, upd), 0.0, 1.0)
                 return (g, st), val
             (g, _), hist = jax.lax.scan(body, (g0, opt.init(g0)), None, length=steps)
-            return g, hist, loss(g0), loss(g)
-        return jax.vmap(one)(g0)
+            return g, hist, hist[0], loss(g, w)
+        return jax.vmap(one)(G0, W)
 
-    after, hist, s_before, s_after = descend(genes)
+    after, hist, s_before, s_after = descend(genes, W)
     if true_fn is None:
         true_fn = jax.jit(lambda G: jax.vmap(lambda g: evaluate_design(pb, space.decode(g)))(G))
-    mb = {k: np.asarray(v) for k, v in true_fn(genes).items()}
-    ma = {k: np.asarray(v) for k, v in true_fn(after).items()}
-    tb = np.asarray(jax.vmap(lambda i: _objective(pb, {k: jnp.asarray(v)[i] for k, v in mb.items()}, direction))(
-        jnp.arange(len(genes))))
-    ta = np.asarray(jax.vmap(lambda i: _objective(pb, {k: jnp.asarray(v)[i] for k, v in ma.items()}, direction))(
-        jnp.arange(len(genes))))
+    mb = {k: np.array(v) for k, v in true_fn(np.asarray(genes)).items()}
+    ma = {k: np.array(v) for k, v in true_fn(np.asarray(after)).items()}
+    Wn = np.asarray(W)
+    tb = np.asarray([sum(Wn[i, j] * mb[k][i] for j, k in enumerate(METRICS) if Wn[i, j]) for i in range(n)])
+    ta = np.asarray([sum(Wn[i, j] * ma[k][i] for j, k in enumerate(METRICS) if Wn[i, j]) for i in range(n)])
     accepted = (ta < tb) & ma["feasible"].astype(bool)
-    return RefineResult(genes_before=np.asarray(genes), genes_after=np.asarray(after), true_before=tb,
-                        true_after=ta, surrogate_before=np.asarray(s_before), surrogate_after=np.asarray(s_after),
-                        metrics_before=mb, metrics_after=ma, accepted=accepted, loss_history=np.asarray(hist).T)
+    return RefineResult(genes_before=np.array(genes), genes_after=np.array(after), true_before=tb, true_after=ta,
+                        surrogate_before=np.array(s_before), surrogate_after=np.array(s_after),
+                        metrics_before=mb, metrics_after=ma, accepted=np.array(accepted),
+                        loss_history=np.array(hist))

@@ -1,0 +1,186 @@
+"""Design space, evosax GA loop (bounds, reproducibility, bit-identical kill-and-resume), objectives and the
+optax refinement. Tiny sizes: population 8, 16 generations, coarse samples."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given
+from hypothesis import strategies as st
+
+import deltajax as dj
+from deltajax.optimize import (DesignSpace, DesignSpaceError, GAConfig, GAError, Problem, evaluate_design,
+                               reflect_unit, refine, run_ga, soft_margin)
+
+BOUNDS = {"R_min": [0.10, 0.20], "R_max": [0.30, 0.55], "platform_radius": [0.04, 0.09],
+          "upper_arm": [0.14, 0.30], "forearm": [0.30, 0.55]}
+
+
+def _space(n_R=4):
+    return DesignSpace.from_bounds(dj.presets.franco2026(with_mass=True), BOUNDS, n_R=n_R)
+
+
+SPACE = _space()
+
+
+# -- design space ----------------------------------------------------------------------------------------------
+
+@given(st.lists(st.one_of(st.floats(allow_nan=True, allow_infinity=True, width=64)), min_size=5, max_size=5))
+def test_every_gene_vector_decodes_inside_the_bounds(genes):
+    g = jnp.asarray(genes, dtype=jnp.float64)
+    u = reflect_unit(g)
+    assert bool(jnp.all((u >= 0) & (u <= 1)))
+    p = np.asarray(SPACE.to_params(g))
+    assert np.all(p >= np.asarray(SPACE.lower)) and np.all(p <= np.asarray(SPACE.upper))
+    d = SPACE.decode(g)  # traced-free decode validates the robot (GeometryError would fail the test)
+    assert float(d.R_min) < float(d.R_max)
+    assert 0.14 <= float(d.robot.upper_arm) <= 0.30
+
+
+def test_reflection_is_identity_inside_and_mirror_outside():
+    g = jnp.asarray([0.0, 0.25, 1.0, 1.25, -0.25, 2.5, -3.75])
+    np.testing.assert_allclose(reflect_unit(g), [0.0, 0.25, 1.0, 0.75, 0.25, 0.5, 0.25], atol=1e-15)
+
+
+def test_baseline_round_trip_and_mass_scaling():
+    g = SPACE.baseline_genes()
+    assert SPACE.baseline_inside()
+    d = SPACE.decode(jnp.asarray(g))
+    np.testing.assert_allclose([float(d.R_min), float(d.R_max), float(d.robot.upper_arm)], [0.138, 0.495, 0.2],
+                               rtol=1e-12)
+    g2 = np.array(g)
+    g2[3] = 1.0  # L1 = 0.30 = 1.5 x baseline
+    d2 = SPACE.decode(jnp.asarray(g2))
+    np.testing.assert_allclose(float(d2.robot.mass.upper_arm_mass), 1.5895 * 1.5, rtol=1e-12)
+    np.testing.assert_allclose(float(d2.robot.mass.forearm_mass), 0.0408, rtol=1e-12)
+
+
+@pytest.mark.parametrize("bounds, match", [
+    ({"upper_arm": [0.3, 0.2]}, "experiment.design.bounds.upper_arm"),
+    ({"wheel": [0, 1]}, "unknown design parameter"),
+    ({"R_min": [0.1, 0.4], "R_max": [0.3, 0.5]}, "disjoint"),
+    ({"base_radius": [0.1, 0.3]}, "R_min/R_max"),
+    ({"forearm": [-0.1, 0.3]}, "lengths must be > 0"),
+])
+def test_bad_bounds_name_the_field(bounds, match):
+    with pytest.raises(DesignSpaceError, match=match):
+        DesignSpace.from_bounds(dj.presets.franco2026(), bounds, prefix="experiment.design.bounds")
+
+
+# -- GA loop ---------------------------------------------------------------------------------------------------
+
+def sphere(genes):
+    f = jnp.sum((genes - 0.3) ** 2, axis=1)
+    inside = jnp.all((genes >= 0) & (genes <= 1), axis=1)
+    return f, {"feasible": inside, "f": f}
+
+
+CFG = GAConfig(algorithm="simple_ga", population_size=8, generations=16, checkpoint_every=8, sigma=0.2, seed=3)
+
+
+def test_ga_converges_stays_in_bounds_and_is_reproducible():
+    a = run_ga(sphere, 4, CFG)
+    b = run_ga(sphere, 4, CFG)
+    assert a.generations_done == 16
+    # every evaluated design of every generation was inside [0,1]^d
+    np.testing.assert_array_equal(a.history["gen_feasible_fraction"], np.ones(16))
+    assert np.all((a.final_population >= 0) & (a.final_population <= 1))
+    assert a.history["best_fitness"][-1] < a.history["gen_mean_fitness"][0]
+    assert np.all(np.diff(a.history["best_fitness"]) <= 0)  # best-so-far is monotone
+    np.testing.assert_array_equal(a.best_genes, b.best_genes)  # same seed, same result
+    np.testing.assert_array_equal(a.history["gen_best_genes"], b.history["gen_best_genes"])
+    c = run_ga(sphere, 4, GAConfig(**{**CFG.__dict__, "seed": 4}))
+    assert not np.array_equal(a.history["gen_best_genes"], c.history["gen_best_genes"])
+
+
+def test_kill_and_resume_is_bit_identical(tmp_path):
+    from deltajax.experiments.ga_reconfig import _load_checkpoint, _put_checkpoint
+    from deltajax.io import ResultsFile
+
+    full = run_ga(sphere, 4, CFG)
+    path = tmp_path / "results.h5"
+    res = ResultsFile(path)
+
+    def save(ck):
+        _put_checkpoint(res, ck)
+        res.flush()
+
+    killed = run_ga(sphere, 4, CFG, save_checkpoint=save, stop_after=8)  # "killed" after the first checkpoint
+    assert killed.generations_done == 8
+    ck = _load_checkpoint(path)  # what a new process finds on disk
+    assert ck["generations_done"] == 8
+    resumed = run_ga(sphere, 4, CFG, checkpoint=ck)
+    assert resumed.resumed_from == 8
+    np.testing.assert_array_equal(resumed.best_genes, full.best_genes)
+    assert resumed.best_fitness == full.best_fitness
+    np.testing.assert_array_equal(resumed.final_population, full.final_population)
+    for k, v in full.history.items():
+        np.testing.assert_array_equal(resumed.history[k], v, err_msg=k)
+    with pytest.raises(GAError, match="fingerprint"):  # changed settings never restart silently
+        run_ga(sphere, 4, GAConfig(**{**CFG.__dict__, "sigma": 0.1}), checkpoint=ck)
+
+
+def test_second_ga_selectable():
+    cfg = GAConfig(algorithm="mr15_ga", population_size=8, generations=8, checkpoint_every=8, sigma=0.2)
+    r = run_ga(sphere, 4, cfg)
+    assert r.best_fitness < 0.2
+    np.testing.assert_array_equal(r.history["gen_feasible_fraction"], np.ones(8))
+    with pytest.raises(GAError, match="experiment.ga.algorithm"):
+        GAConfig(algorithm="cmaes").validate()
+
+
+# -- objectives and refinement ---------------------------------------------------------------------------------
+
+def _problem(weights, **con):
+    cfg = {"workspace": {"n_r": 6, "n_phi": 2, "n_z": 6}, "task": {"n_r": 1, "n_phi": 3, "n_z": 2},
+           "cycle": {"n_samples": 12, "n_R_operating": 2}, "objectives": {"weights": weights},
+           "constraints": con}
+    return Problem.from_config(cfg, r_max=1.1, z_max=0.85)
+
+
+def test_wedge_quadrature_weights_and_volumes():
+    pb = _problem({"volume": 1.0})
+    np.testing.assert_allclose(pb.ws_weights.sum(), math.pi * 1.1 ** 2 * 0.85, rtol=1e-12)
+    f = jax.jit(lambda d: evaluate_design(pb, d, ("volume", "volume_fixed")))
+    m = f(SPACE.decode(jnp.asarray(SPACE.baseline_genes())))
+    # R chosen per point can only add volume; the fixed-R franco2026 workspace is 0.075 m^3 (paper), which
+    # this 18 cm quadrature (6 x 2 x 6 cells in the wedge) only brackets
+    assert float(m["volume"]) > float(m["volume_fixed"]) > 0.0
+    assert 0.05 < float(m["volume_fixed"]) < 0.13
+    assert bool(m["feasible"])
+
+
+def test_soft_margin_sign_matches_reachability_and_has_gradients():
+    robot = dj.presets.franco2026(fixed_R=0.2)
+    pts = np.array([[0.0, 0.1, 0.4], [0.2, -0.1, 0.35], [0.9, 0.0, 0.3], [0.0, 0.0, 0.05], [0.1, 0.3, 0.55]])
+    from deltajax.workspace import reachable_mask
+
+    marg = jax.vmap(lambda p: soft_margin(robot, p))(jnp.asarray(pts))
+    reach = np.asarray(reachable_mask(robot, jnp.asarray(pts)))
+    np.testing.assert_array_equal(np.asarray(marg) > 0, reach)
+    from jax.test_util import check_grads
+
+    check_grads(lambda L1: soft_margin(robot.__class__(base_radius=0.2, platform_radius=0.065, upper_arm=L1,
+                                                       forearm=0.4, theta_min=robot.theta_min,
+                                                       theta_max=robot.theta_max), jnp.asarray(pts[1])),
+                (jnp.asarray(0.2),), order=1, modes=("rev",))
+
+
+def test_refinement_improves_the_true_objective():
+    pb = _problem({"volume": 1.0}, coverage_min=0.0)
+    g0 = np.array([[0.3, 0.3, 0.5, 0.2, 0.2]])
+    base = jax.jit(lambda g: evaluate_design(pb, SPACE.decode(g)))(jnp.asarray(SPACE.baseline_genes()))
+    pb = pb.with_baseline({k: float(v) for k, v in base.items()})
+    # the relaxation converges to the truth as tau -> 0
+    d0 = SPACE.decode(jnp.asarray(g0[0]))
+    v_true = float(evaluate_design(pb, d0, ("volume",))["volume"])
+    v_soft = float(evaluate_design(pb, d0, ("volume",), smooth=1e-4)["volume"])
+    np.testing.assert_allclose(v_soft, v_true, rtol=2e-2)
+    r = refine(pb, SPACE, g0, steps=6, learning_rate=0.05, tau=0.05)
+    assert r.surrogate_after[0] < r.surrogate_before[0]
+    assert r.true_after[0] < r.true_before[0]  # verified on the true volume, not only the surrogate
+    assert r.metrics_after["volume"][0] > r.metrics_before["volume"][0]
+    assert bool(r.accepted[0])
+    assert np.all((r.genes_after >= 0) & (r.genes_after <= 1))
