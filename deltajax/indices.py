@@ -256,17 +256,22 @@ def point_indices(robot: Delta, p: Float[Array, "3"], *, branch: str = "outer", 
     from .kinematics import ik_cos_sin, to_chain_frames
 
     cs = ik_cos_sin(robot, p, branch=branch)
+    ok = jnp.all(cs.ok)
+    # double-where guard: failed points run the kernel on a harmless angle, so gradients stay finite
+    c = jnp.where(ok, cs.cos, 1.0)
+    s = jnp.where(ok, cs.sin, 0.0)
     L = _resolve_length(robot, length)
     loc = to_chain_frames(jnp.asarray(p, cs.cos.dtype))
     L1 = robot.upper_arm
-    ux = (loc[:, 0] + robot.platform_radius - robot.base_radius - L1 * cs.cos) / robot.forearm
-    uz = (loc[:, 2] - L1 * cs.sin) / robot.forearm
+    ux = (loc[:, 0] + robot.platform_radius - robot.base_radius - L1 * c) / robot.forearm
+    uz = (loc[:, 2] - L1 * s) / robot.forearm
     u_local = jnp.stack([ux, loc[:, 1] / robot.forearm, uz], axis=-1)
     Jx = _from_chain_frames(u_local)
-    dhat = (L1 / L) * (uz * cs.cos - ux * cs.sin)
-    s = singular_values_closed_form(Jx, dhat)
-    s = jnp.where(jnp.all(cs.ok), s, jnp.nan)
-    return cs, indices_from_singular_values(s, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L ** 3)
+    dhat = (L1 / L) * (uz * c - ux * s)
+    sv = singular_values_closed_form(Jx, dhat)
+    ind = indices_from_singular_values(sv, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L ** 3)
+    nan = jnp.asarray(jnp.nan, sv.dtype)
+    return cs, Indices(*(jnp.where(ok, v, nan) for v in ind))
 
 
 class Singularity(NamedTuple):

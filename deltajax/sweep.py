@@ -33,6 +33,8 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
+from .io import _py
+
 try:  # Hydra is a hard dependency of the CLI; keep this module importable without it for analysis
     from hydra.experimental.callback import Callback
 except ImportError:  # pragma: no cover
@@ -215,12 +217,6 @@ class _Dataset:
         self.data, self.units, self.dims, self.attrs, self.is_axis = data, units, dims, attrs, is_axis
 
 
-def _py(v: Any) -> Any:
-    if isinstance(v, bytes):
-        return v.decode()
-    if isinstance(v, np.generic):
-        return v.item()
-    return v
 
 
 def _read_tree(path: os.PathLike) -> tuple[dict, dict[str, dict], dict[str, dict[str, _Dataset]]]:

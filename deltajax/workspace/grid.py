@@ -35,8 +35,9 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from ..geometry import Delta
-from ..indices import INDEX_NAMES, Indices, indices_from_singular_values, singular_values_closed_form
-from ..kinematics import _from_chain_frames, ik_cos_sin, to_chain_frames
+from ..indices import INDEX_NAMES, Indices
+from ..indices import point_indices as core_point_indices
+from ..kinematics import ik_cos_sin
 
 __all__ = [
     "Grid",
@@ -211,22 +212,8 @@ def point_indices(robot: Delta, p: Float[Array, "3"], *, b_v: float = 2.0, b_f: 
     Returns:
         (ok, indices): ``ok`` is reachability within joint limits; the indices are NaN where not ok.
     """
-    p = _canonical(jnp.asarray(p))
-    cs = ik_cos_sin(robot, p)
-    ok = jnp.all(cs.ok)
-    c = jnp.where(ok, cs.cos, 1.0)
-    s = jnp.where(ok, cs.sin, 0.0)
-    loc = to_chain_frames(p)
-    L1, L2 = robot.upper_arm, robot.forearm
-    u = jnp.stack([loc[:, 0] + robot.platform_radius - robot.base_radius - L1 * c, loc[:, 1],
-                   loc[:, 2] - L1 * s], axis=-1) / L2  # unit forearm vectors, chain-local frames
-    Jx = _from_chain_frames(u)
-    dhat = u[:, 2] * c - u[:, 0] * s  # sin th2 sin th3 (homogenised: L1 sin th2 sin th3 / L1)
-    sv = singular_values_closed_form(Jx, dhat)
-    ind = indices_from_singular_values(sv, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L1 ** 3)
-    nan = jnp.asarray(jnp.nan, sv.dtype)
-    ind = Indices(*(jnp.where(ok, v, nan) for v in ind))
-    return ok, ind
+    cs, ind = core_point_indices(robot, _canonical(jnp.asarray(p)), b_v=b_v, b_f=b_f, beta=beta)
+    return jnp.all(cs.ok), ind
 
 
 def index_fields(robot: Delta, points: Float[Array, "n 3"], *, b_v: float = 2.0, b_f: float = 4.2,
