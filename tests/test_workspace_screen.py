@@ -100,6 +100,13 @@ def test_tcubic_solves_the_cardano_cubic():
     for _ in range(60):  # extended-precision Newton reference
         tl = tl - (tl * tl * (tl + 3) - w) / np.maximum(3 * tl * (tl + 2), 1e-300)
     assert float(np.max(np.abs(t - tl))) < 2e-15  # _T_NEWTON = 1e-14 is the bound used
+    # the paired solver of the screen (one shared division), both roots t(w) and t(4 - w)
+    t2 = np.array([_nb._tcubic2(v, 4.0 - v) for v in w])
+    assert float(np.max(np.abs(t2[:, 0] - tl))) < 2e-15
+    tl4 = np.sqrt((4.0 - w).astype(np.longdouble) / 3)
+    for _ in range(60):
+        tl4 = tl4 - (tl4 * tl4 * (tl4 + 3) - (4.0 - w)) / np.maximum(3 * tl4 * (tl4 + 2), 1e-300)
+    assert float(np.max(np.abs(t2[:, 1] - tl4))) < 2e-15
     # c = (1 + t) / 2 is cos(acos(r) / 3), r = w / 2 - 1: the trigonometric Cardano formula
     mid = (w > 1e-6) & (w < 4 - 1e-6)
     np.testing.assert_allclose((1 + t[mid]) / 2, np.cos(np.arccos(w[mid] / 2 - 1) / 3), rtol=0, atol=1e-9)

@@ -407,13 +407,39 @@ def _tcubic(w):
 
 
 @nb.njit(inline="always", **_opts)
-def _dt_bound(t, a, dw):
-    """Bound on |t(w + e) - t(w)| for |e| <= dw (a = sqrt(dw / 3)): a always (t^2 (t + 3) >= 3 t^2 and t
-    increasing), dw / f'(t - a) where the root is away from 0 (t is concave in w), 1 (t in [0, 1]); plus the
-    solver residual."""
-    t_lo = t - a
-    lin = dw / (3.0 * t_lo * (t_lo + 2.0)) if t_lo > 0.0 else math.inf
-    return min(min(a, lin), 1.0) + _T_NEWTON
+def _guess(w):
+    s = math.sqrt(w * (1.0 / 3.0))
+    return s * ((((_TC4 * s + _TC3) * s + _TC2) * s + _TC1) * s + _TC0)
+
+
+@nb.njit(inline="always", **_opts)
+def _tcubic2(wp, wm):
+    """:func:`_tcubic` of two arguments with one shared division (x / a, y / b = x b / (a b), y a / (a b))."""
+    tp = _guess(wp)
+    tm = _guess(wm)
+    fp_ = tp * tp * (tp + 3.0) - wp
+    dp_ = 3.0 * tp * (tp + 2.0)
+    np_ = 2.0 * fp_ * dp_
+    ep_ = max(2.0 * dp_ * dp_ - fp_ * (6.0 * tp + 6.0), 1e-150)
+    fm_ = tm * tm * (tm + 3.0) - wm
+    dm_ = 3.0 * tm * (tm + 2.0)
+    nm_ = 2.0 * fm_ * dm_
+    em_ = max(2.0 * dm_ * dm_ - fm_ * (6.0 * tm + 6.0), 1e-150)
+    inv = 1.0 / (ep_ * em_)
+    return tp - np_ * em_ * inv, tm - nm_ * ep_ * inv
+
+
+@nb.njit(inline="always", **_opts)
+def _dt_bound2(tp, tm, a, dw):
+    """Bound on |t(w + e) - t(w)| for |e| <= dw (a = sqrt(dw / 3)), for the roots tp and tm (summed): a always
+    (t^2 (t + 3) >= 3 t^2 and t increasing), dw / f'(t - a) where the root is away from 0 (t is concave in
+    w), 1 (t in [0, 1]); plus the solver residual. One shared division."""
+    lp = tp - a
+    lm = tm - a
+    fp_ = 3.0 * lp * (lp + 2.0) if lp > 0.0 else 1e-150
+    fm_ = 3.0 * lm * (lm + 2.0) if lm > 0.0 else 1e-150
+    inv = dw / (fp_ * fm_)
+    return min(min(a, fm_ * inv), 1.0) + min(min(a, fp_ * inv), 1.0) + 2.0 * _T_NEWTON
 
 
 @nb.njit(**_opts)
@@ -559,11 +585,11 @@ def screen_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, kt, crit, tol,
         a02 = t02 if jx_side else s02
         a12 = t12 if jx_side else s12
         # eigenvalues (trigonometric form, no inverse trig)
-        q = (a00 + a11 + a22) / 3.0
+        q = (a00 + a11 + a22) * (1.0 / 3.0)
         b00 = a00 - q
         b11 = a11 - q
         b22 = a22 - q
-        p2 = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) / 6.0
+        p2 = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) * (1.0 / 6.0)
         p = math.sqrt(p2)
         ip = 1.0 / p if p > 0.0 else 0.0
         n00 = b00 * ip
@@ -576,18 +602,17 @@ def screen_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, kt, crit, tol,
         rr = min(max(rr, -1.0), 1.0)
         wp = 2.0 * (1.0 + rr)
         wm = 2.0 * (1.0 - rr)
-        tp = _tcubic(wp)
-        tm = _tcubic(wm)
+        tp, tm = _tcubic2(wp, wm)
         dw = 2.0 * _C_R * _EPS * (1.0 + abs(q) * ip) if p > 0.0 else 0.0  # error of wp, wm
         dt_a = math.sqrt(dw * (1.0 / 3.0))
         lam_hi = q + p * (1.0 + tp)
         lam_mid = q + p * (tm - tp)
-        e_lam = _C_LAMBDA * _EPS * (abs(q) + 2.0 * p) + p * (_dt_bound(tp, dt_a, dw) + _dt_bound(tm, dt_a, dw))
+        e_lam = _C_LAMBDA * _EPS * (abs(q) + 2.0 * p) + p * _dt_bound2(tp, tm, dt_a, dw)
         # singular values (the formulas of _point, rearranged: two divisions)
         r1 = math.sqrt(max(lam_hi, 0.0))
         r2 = math.sqrt(max(lam_mid, 0.0))
-        ir1 = 1.0 / r1
-        ir12 = ir1 / r2
+        ir12 = 1.0 / (r1 * r2)
+        ir1 = r2 * ir12
         # Jx side: s3 = |prod d| / r1, s2 = |prod d| / r2, 1/s1 = |det Jx| |prod d| / (r1 r2)
         # Jq side: s1 = r1 / |det Jx|, s2 = r2 / |det Jx|, s3 = |prod d| |det Jx| / (r1 r2)
         pdj = prod_d * det_jx * ir12

@@ -42,8 +42,8 @@ Two implementations return the identical selection (tested):
        the eigenvalues at all: s1 s2 s3 = |prod d| / |det Jx|, 64 eps);
      * plus ``screen_margin`` (default :data:`SCREEN_MARGIN` = 1e-6 absolute), NaN or unbounded -> (-inf, inf).
 
-     Measured on every sample of the 10 mm job: max |k~_screen - k~_exact| <= 2.6e-8 for beta 0.25-0.75 (1.1e-7 on the axis), at
-     most 0.4 % of the bound (``tests/test_workspace_screen.py``, ``_nb.screen_audit``). With T the largest
+     Measured on every sample of the 10 mm job: max |k~_screen - k~_exact| <= 2.6e-8 for beta 0.25-0.75
+     (1.1e-7 on the axis), at most 0.4 % of the bound (``tests/test_workspace_screen.py``, ``_nb.screen_audit``). With T the largest
      lower end over the feasible samples, a sample with hi < T has a value below T <= the value of the
      sample that defines T, so it can be neither the maximum nor a tie: only the candidates (hi >= T, ~1.1
      per point) run the exact kernel, in increasing k with the exact mode's strict comparison. The result is
