@@ -43,13 +43,14 @@ Two implementations return the identical selection (tested):
      * plus ``screen_margin`` (default :data:`SCREEN_MARGIN` = 1e-6 absolute), NaN or unbounded -> (-inf, inf).
 
      Measured on every sample of the 10 mm job: max |k~_screen - k~_exact| <= 2.6e-8 for beta 0.25-0.75
-     (1.1e-7 on the axis), at most 0.4 % of the bound (``tests/test_workspace_screen.py``, ``_nb.screen_audit``). With T the largest
-     lower end over the feasible samples, a sample with hi < T has a value below T <= the value of the
-     sample that defines T, so it can be neither the maximum nor a tie: only the candidates (hi >= T, ~1.1
-     per point) run the exact kernel, in increasing k with the exact mode's strict comparison. The result is
-     then certified: if the best exact candidate value is >= T every other sample is strictly smaller;
-     otherwise (a bound failed, e.g. a NaN exact value) the point is swept exactly (``work["fallback"]``,
-     0 in all our runs). Before screening, the window is trimmed to its first and last IK-feasible samples.
+     (1.1e-7 on the axis), at most 0.4 % of the bound (``tests/test_workspace_screen.py``,
+     ``_nb.screen_audit``). With T the largest lower end over the feasible samples, a sample with hi < T
+     has a value below T <= the value of the sample that defines T, so it can be neither the maximum nor a
+     tie: only the candidates (hi >= T, ~1.15 per point) run the exact kernel, in increasing k with the
+     exact mode's strict comparison. The result is then certified: if the best exact candidate value is
+     >= T every other sample is strictly smaller; otherwise (a bound failed, e.g. a NaN exact value) the
+     point is swept exactly (``work["fallback"]``, 0 in all our runs). Before screening, the window is
+     trimmed to its first and last IK-feasible samples.
   4. *Mirror symmetry.* The kernel evaluates every point at (x, |y|, z) (see :mod:`.grid`), so a point and
      its mirror image have bit-identical answers; the host driver solves each mirror pair once.
      The three-fold rotation maps the Cartesian grid onto itself only for a few points (120 deg rotations
