@@ -112,8 +112,8 @@ def main(argv=None):
         assert np.array_equal(r1.best_genes, r2.best_genes)
         n_designs = P * (a.generations + 1)
         print(f"GA run {P} x {a.generations}: {cold:.1f} s including compilation, {warm:.1f} s warm "
-              f"({n_designs / warm:.0f} designs/s); best fitness {r1.best_fitness:.4f} (baseline "
-              f"{-1.0 - 1.0 + 1.0:.0f} by construction: -V/V0 + T/T0 - s/s0 = -1)")
+              f"({n_designs / warm:.0f} designs/s); best fitness {r1.best_fitness:.4f} (the baseline's is "
+              f"-V/V0 + T/T0 - s/s0 = -1 by construction)")
         out.update(ga_run_cold_s=cold, ga_run_warm_s=warm, ga_best_fitness=r1.best_fitness,
                    ga_population=P, ga_generations=a.generations)
     if a.out:
