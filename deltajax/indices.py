@@ -113,7 +113,11 @@ def _sym_eig_desc(S: Float[Array, "3 3"], sweeps: int = 4) -> tuple[Float[Array,
     axis two singular values coincide; the trigonometric Cardano formula loses sqrt(eps) there).
     Convergence is quadratic; 4 sweeps reach machine precision for 3x3.
     """
-    A = {(i, j): S[i, j] for i in range(3) for j in range(3)}
+    return _sym_eig_desc_entries({(i, j): S[i, j] for i in range(3) for j in range(3)}, sweeps)
+
+
+def _sym_eig_desc_entries(A: dict, sweeps: int = 4) -> tuple[Float[Array, ""], Float[Array, ""]]:
+    """:func:`_sym_eig_desc` on a dict of scalar entries (structure of arrays under vmap)."""
     for _ in range(sweeps):
         for p, q in ((0, 1), (0, 2), (1, 2)):
             A = _jacobi_rotate(A, p, q)
@@ -123,16 +127,17 @@ def _sym_eig_desc(S: Float[Array, "3 3"], sweeps: int = 4) -> tuple[Float[Array,
     return hi, e0 + e1 + e2 - hi - lo
 
 
-def _adj_sym(G: Float[Array, "3 3"]) -> Float[Array, "3 3"]:
-    """Adjugate of a symmetric 3x3 matrix."""
-    g00, g11, g22, g01, g02, g12 = G[0, 0], G[1, 1], G[2, 2], G[0, 1], G[0, 2], G[1, 2]
+def _adj_sym_entries(G: dict) -> dict:
+    """Adjugate of a symmetric 3x3 matrix given as a dict of scalar entries."""
+    g00, g11, g22, g01, g02, g12 = G[(0, 0)], G[(1, 1)], G[(2, 2)], G[(0, 1)], G[(0, 2)], G[(1, 2)]
     c00 = g11 * g22 - g12 * g12
     c11 = g00 * g22 - g02 * g02
     c22 = g00 * g11 - g01 * g01
     c01 = g02 * g12 - g01 * g22
     c02 = g01 * g12 - g02 * g11
     c12 = g01 * g02 - g00 * g12
-    return jnp.stack([jnp.stack([c00, c01, c02]), jnp.stack([c01, c11, c12]), jnp.stack([c02, c12, c22])])
+    return {(0, 0): c00, (1, 1): c11, (2, 2): c22, (0, 1): c01, (1, 0): c01, (0, 2): c02, (2, 0): c02,
+            (1, 2): c12, (2, 1): c12}
 
 
 def singular_values_closed_form(Jx: Float[Array, "3 3"], dhat: Float[Array, "3"]) -> Float[Array, "3"]:
@@ -147,17 +152,22 @@ def singular_values_closed_form(Jx: Float[Array, "3 3"], dhat: Float[Array, "3"]
     The remaining (smallest-eigenvalue) singular value comes from the exact determinant
     s1 s2 s3 = |prod dhat| / |det Jx|, so it keeps full relative accuracy near either kind of singularity.
     """
-    G = Jx @ Jx.T
-    det_jx = jnp.abs(  # explicit cofactor expansion: one fusion, no LU
-        Jx[0, 0] * (Jx[1, 1] * Jx[2, 2] - Jx[1, 2] * Jx[2, 1])
-        - Jx[0, 1] * (Jx[1, 0] * Jx[2, 2] - Jx[1, 2] * Jx[2, 0])
-        + Jx[0, 2] * (Jx[1, 0] * Jx[2, 1] - Jx[1, 1] * Jx[2, 0]))
-    prod_d = jnp.abs(dhat[0] * dhat[1] * dhat[2])
+    # Scalars only (structure of arrays): under vmap, stacking into small matrices gives (N, 3, 3) arrays whose
+    # entries are strided and do not vectorise on XLA:CPU.
+    J = [[Jx[i, k] for k in range(3)] for i in range(3)]
+    d = [dhat[0], dhat[1], dhat[2]]
+    G = {(i, j): J[i][0] * J[j][0] + J[i][1] * J[j][1] + J[i][2] * J[j][2] for i in range(3) for j in range(3)}
+    det_jx = jnp.abs(  # explicit cofactor expansion, no LU
+        J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1])
+        - J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0])
+        + J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]))
+    prod_d = jnp.abs(d[0] * d[1] * d[2])
     jx_side = det_jx < prod_d
-    adj_d = jnp.stack([dhat[1] * dhat[2], dhat[0] * dhat[2], dhat[0] * dhat[1]])
-    S = dhat[:, None] * _adj_sym(G) * dhat[None, :]
-    T = adj_d[:, None] * G * adj_d[None, :]
-    e1, e2 = _sym_eig_desc(jnp.where(jx_side, T, S))
+    adj_d = [d[1] * d[2], d[0] * d[2], d[0] * d[1]]
+    adj_g = _adj_sym_entries(G)
+    X = {(i, j): jnp.where(jx_side, adj_d[i] * G[(i, j)] * adj_d[j], d[i] * adj_g[(i, j)] * d[j])
+         for i in range(3) for j in range(3)}
+    e1, e2 = _sym_eig_desc_entries(X)
     r1 = jnp.sqrt(jnp.maximum(e1, 0.0))
     r2 = jnp.sqrt(jnp.maximum(e2, 0.0))
     # Jq side

@@ -98,9 +98,17 @@ def run(ctx) -> None:
     res = ctx.results
     lines = []
 
+    block = int(e.get("block", 1000))
+    if n % block:
+        raise ConfigError(f"experiment.n_points={n} must be a multiple of experiment.block={block}")
+
     def fast(robot, p):
-        cs, ind = jax.vmap(lambda q: point_indices(robot, q))(p)
-        return ind
+        # cache blocking: XLA:CPU splits the kernel into ~85 fusions with intermediates in memory between them;
+        # lax.map over blocks of ~1000 points keeps those intermediates in L1/L2 (measured ~1.5-2x)
+        def blk(c):
+            return jax.vmap(lambda q: point_indices(robot, q)[1])(c)
+        out = jax.lax.map(blk, p.reshape(-1, block, 3))
+        return jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:]), out)
 
     def naive(robot, p):
         def one(q):
