@@ -17,5 +17,7 @@ from . import dynamics, trajectory
 from .dynamics import CycleMetrics, Limits, Torques, cycle_metrics, cycle_profile, inverse_dynamics
 from .mass import MassModel
 from .trajectory import Cycle, adept_cycle, ga_paper_motion
+from . import optimize
+from .optimize import DesignSpace, GAConfig, Problem, nsga2, refine, run_ga
 
 __version__ = "0.1.0"
