@@ -19,13 +19,14 @@ import numpy as np
 
 from ..config import ConfigError
 from ..indices import INDEX_NAMES
+from .reconfig_workspace import grid_from_config
 
 STATS = ("min", "max", "mean")
 
 
 def run(ctx) -> None:
     from .. import plots
-    from ..workspace import PAPER_TABLES, fixed_workspace, franco2026_grid, index_stats, redundancy_grid
+    from ..workspace import PAPER_TABLES, fixed_workspace, index_stats, redundancy_grid
     from ..workspace.redundancy import resolve_redundancy_host
 
     cfg = ctx.cfg.experiment
@@ -51,11 +52,8 @@ def run(ctx) -> None:
     for n in store:
         if n not in INDEX_NAMES:
             raise ConfigError(f"experiment.store_fields: {n!r} is not one of {INDEX_NAMES}")
-    h = float(cfg.get("h", 0.002))
-    try:
-        grid = franco2026_grid(h)
-    except ValueError as e:
-        raise ConfigError(f"experiment.h={h!r}: {e}") from None
+    grid = grid_from_config(cfg)
+    h = grid.h
     chunk = int(cfg.get("chunk_points", 1 << 18))
     ck = ctx.run_dir / "checkpoint" if cfg.get("checkpoint", True) else None
     kw = dict(b_v=b_v, b_f=b_f, beta=beta)

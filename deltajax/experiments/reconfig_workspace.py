@@ -15,20 +15,28 @@ from ..config import ConfigError
 PAPER = {"volume_fixed": 0.075, "volume_reconfigurable": 0.137, "increase_percent": 82.0}
 
 
-def run(ctx) -> None:
-    from .. import plots
-    from ..workspace import fixed_workspace, franco2026_grid, reconfigurable_workspace
+def grid_from_config(cfg):
+    """The paper's grid at spacing ``experiment.h`` (m), validated (errors name the field)."""
+    from ..workspace import franco2026_grid
 
-    cfg = ctx.cfg.experiment
-    if ctx.recon is None:
-        raise ConfigError("reconfig_workspace needs a reconfigurable robot: robot.R_range is null")
     h = float(cfg.get("h", 0.002))
     if not h > 0:
         raise ConfigError(f"experiment.h must be > 0 m, got {h!r}")
     try:
-        grid = franco2026_grid(h)
+        return franco2026_grid(h)
     except ValueError as e:
         raise ConfigError(f"experiment.h={h!r}: {e}") from None
+
+
+def run(ctx) -> None:
+    from .. import plots
+    from ..workspace import fixed_workspace, reconfigurable_workspace
+
+    cfg = ctx.cfg.experiment
+    if ctx.recon is None:
+        raise ConfigError("reconfig_workspace needs a reconfigurable robot: robot.R_range is null")
+    grid = grid_from_config(cfg)
+    h = grid.h
     chunk = int(cfg.get("chunk_points", 1 << 20))
     ck = ctx.run_dir / "checkpoint" if cfg.get("checkpoint", True) else None
     ctx.log(f"grid {grid.shape} = {grid.n_points} points, h = {h} m")
