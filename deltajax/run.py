@@ -97,6 +97,10 @@ def execute(cfg: DictConfig, run_dir: Path) -> Path:
 
     # Precision first: the robot's array leaves take the default float dtype when they are built.
     jax.config.update("jax_enable_x64", cfg.precision == "float64")
+    cache = cfg.get("compilation_cache")
+    if cache:  # persistent XLA cache: reruns, resumes and sweep jobs skip most compilation
+        jax.config.update("jax_compilation_cache_dir", os.path.expanduser(str(cache)))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     robot, recon = robot_from_config(cfg.robot)  # validated before anything compiles
     from . import __version__
     from .io import ResultsFile, git_commit

@@ -127,12 +127,6 @@ def run(ctx) -> None:
     import time
 
     e = ctx.cfg.experiment
-    cache = e.get("compilation_cache", None)
-    if cache:  # persistent XLA cache: reruns and resumes skip most compilation
-        import os
-
-        jax.config.update("jax_compilation_cache_dir", os.path.expanduser(str(cache)))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     t_start = time.perf_counter()
     timings = {}
 
