@@ -106,18 +106,14 @@ def _jacobi_rotate(A, p: int, q: int):
     return out
 
 
-def _sym_eig_desc(S: Float[Array, "3 3"], sweeps: int = 4) -> tuple[Float[Array, ""], Float[Array, ""]]:
-    """Two largest eigenvalues of a symmetric 3x3 matrix by cyclic Jacobi (sqrt only, no inverse trig).
-
-    Jacobi keeps the eigenvalues accurate to ~eps ||S|| even for repeated eigenvalues (on the robot's
-    axis two singular values coincide; the trigonometric Cardano formula loses sqrt(eps) there).
-    Convergence is quadratic; 4 sweeps reach machine precision for 3x3.
-    """
-    return _sym_eig_desc_entries({(i, j): S[i, j] for i in range(3) for j in range(3)}, sweeps)
-
-
 def _sym_eig_desc_entries(A: dict, sweeps: int = 4) -> tuple[Float[Array, ""], Float[Array, ""]]:
-    """:func:`_sym_eig_desc` on a dict of scalar entries (structure of arrays under vmap)."""
+    """Two largest eigenvalues of a symmetric 3x3 matrix, given as a dict of scalar entries, by cyclic Jacobi.
+
+    Scalar entries keep the batched code structure-of-arrays under vmap. Jacobi (sqrt only, no inverse trig)
+    keeps the eigenvalues accurate to ~eps ||S|| even for repeated eigenvalues (on the robot's axis two
+    singular values coincide; the trigonometric Cardano formula loses sqrt(eps) there). Convergence is
+    quadratic; 4 sweeps reach machine precision for 3x3.
+    """
     for _ in range(sweeps):
         for p, q in ((0, 1), (0, 2), (1, 2)):
             A = _jacobi_rotate(A, p, q)
