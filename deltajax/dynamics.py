@@ -154,6 +154,12 @@ def _elbow_rates(robot: Delta, theta, theta_dot, theta_ddot, R_dot, R_ddot, c=No
     return b_dot, b_ddot
 
 
+def _loop_acceleration(robot: Delta, m: Motion, c, s):
+    """Loop-vector accelerations w_i'' = C_i'' - B_i'' in the chain frames (rows = chains), m/s^2."""
+    _, b_ddot = _elbow_rates(robot, m.theta, m.theta_dot, m.theta_ddot, m.R_dot, m.R_ddot, c, s)
+    return to_chain_frames(m.p_ddot) - b_ddot
+
+
 def joint_motion(robot: Delta, p: Float[Array, "3"], p_dot: Float[Array, "3"], p_ddot: Float[Array, "3"],
                  R_dot=0.0, R_ddot=0.0, *, branch: str = "outer", singular_tol: float = 1e-9) -> Motion:
     """Joint positions, rates and accelerations for a platform motion (IK + closed-form loop derivatives).
@@ -249,6 +255,13 @@ def _lagrange(robot: Delta, m: Motion):
     dG_dp = 2.0 * _from_chain_frames(w)                       # (3 constraints, 3 coords), base frame
     dG_dR = -2.0 * w[:, 0]                                    # (3,)
     dG_dth = 2.0 * L1 * (w[:, 0] * s - w[:, 2] * c)           # (3,) diagonal
+    if mm.forearm_model == "rigid_rod":
+        # T_rod = T_split - J/2 sum_i |w_i'|^2 (mass.py): d/dt dT/dqdot - dT/dq of it adds -J w_i'' . dw_i/dq.
+        J = mm.forearm_rotation_deficit()
+        w_dd = _loop_acceleration(robot, m, c, s)
+        lhs_p = lhs_p - J * jnp.sum(_from_chain_frames(w_dd), axis=0)
+        lhs_theta = lhs_theta + J * L1 * (c * w_dd[:, 2] - s * w_dd[:, 0])
+        lhs_R = lhs_R + J * jnp.sum(w_dd[:, 0])
     lam = _solve3(dG_dp, lhs_p, transpose=True)
     tau = lhs_theta - lam * dG_dth
     force_R = lhs_R - jnp.sum(lam * dG_dR)
@@ -284,8 +297,17 @@ def _virtual_work_split(robot: Delta, m: Motion):
     det, C = _adjugate_rows(jac.Jx)
     det = jnp.where(det != 0, det, 1.0)
     M = mm.moving_mass()
+    F_in = M * m.p_ddot
+    if mm.forearm_model == "rigid_rod":
+        # The rods' rotation: a pseudo-mass -J on the loop vector w_i = C_i - B_i (mass.py), i.e. the rod's
+        # d'Alembert moment I_c u x u'' taken with partial angular velocities u x du/dq, relative to the split.
+        J = mm.forearm_rotation_deficit()
+        w_dd = _loop_acceleration(robot, m, c, s)
+        tau_in = tau_in + J * L1 * (c * w_dd[:, 2] - s * w_dd[:, 0])   # -J w'' . dw/dtheta, dw/dtheta = -dB/dtheta
+        fR_in = fR_in + J * jnp.sum(w_dd[:, 0])                       # dw/dR = -e_x
+        F_in = F_in - J * jnp.sum(_from_chain_frames(w_dd), axis=0)   # dw/dp = identity (base frame)
     # J^T F with J = Jx^-1 Jq: Jq^T Jx^-T F, Jx^-T = C / det
-    Q_in = jac.Jq.T @ (C @ (M * m.p_ddot)) / det
+    Q_in = jac.Jq.T @ (C @ F_in) / det
     Q_g = jac.Jq.T @ (-M * g * C[:, 2]) / det
     return tau_in + Q_in[1:], tau_g + Q_g[1:], fR_in + Q_in[0], Q_g[0]
 
@@ -320,7 +342,7 @@ def inverse_dynamics_motion(robot: Delta, motion: Motion, *, method: str = "virt
 # Formulation 3: autodiff of the reduced Lagrangian (FK-based, no hand algebra)
 # ---------------------------------------------------------------------------------------------------------
 def _points(robot: Delta, q):
-    """Positions (base frame) of the lumped bodies as functions of q = (R, theta): com, elbow, carriage, P."""
+    """Positions (base frame) as functions of q = (R, theta): arm com, elbow B_i, carriage A_i, P, forearm end C_i."""
     R, theta = q[0], q[1:]
     mm = robot.mass
     L1 = robot.upper_arm
@@ -331,18 +353,39 @@ def _points(robot: Delta, q):
     elbow = _from_chain_frames(jnp.stack([R + L1 * jnp.cos(theta), zero, L1 * jnp.sin(theta)], axis=-1))
     carriage = _from_chain_frames(jnp.stack([R + zero, zero, zero], axis=-1))
     p = fk(rob, theta).p
-    return com, elbow, carriage, p
+    ends = p[None, :] + _from_chain_frames(jnp.stack([robot.platform_radius + zero, zero, zero], axis=-1))
+    return com, elbow, carriage, p, ends
 
 
 def _energies(robot: Delta, q, qd):
+    """(T, V) of the model from body positions (FK) and their velocities (forward-mode autodiff).
+
+    ``point_split``: point masses at the elbows and the platform. ``rigid_rod``: the elbow hardware at B_i,
+    each forearm's mass at its centre of mass x_c = s B_i + (1 - s) C_i, plus I_c/2 |u x u'|^2 with
+    u = (C_i - B_i) / L2 (the rods' rotation; the module docstring of :mod:`deltajax.mass`).
+    """
     mm = _require_mass(robot)
     L1 = robot.upper_arm
-    pos, vel = jax.jvp(lambda qq: _points(robot, qq), (q,), (qd,))
-    masses = (mm.upper_arm_mass, mm.elbow_point_mass(), mm.carriage_mass, mm.moving_mass())
+    (com, elbow, carriage, p, ends), (v_com, v_elbow, v_carr, v_p, v_ends) = jax.jvp(
+        lambda qq: _points(robot, qq), (q,), (qd,))
     T = 0.5 * (mm.upper_arm_inertia_factor * mm.upper_arm_mass * L1 * L1
                + mm.gear_ratio ** 2 * mm.rotor_inertia) * jnp.sum(qd[1:] ** 2)
+    if mm.forearm_model == "point_split":
+        bodies = ((mm.upper_arm_mass, com, v_com), (mm.elbow_point_mass(), elbow, v_elbow),
+                  (mm.carriage_mass, carriage, v_carr), (mm.moving_mass(), p, v_p))
+    else:
+        s = mm.forearm_elbow_fraction
+        rod = s * elbow + (1.0 - s) * ends
+        v_rod = s * v_elbow + (1.0 - s) * v_ends
+        bodies = ((mm.upper_arm_mass, com, v_com), (mm.elbow_mass, elbow, v_elbow),
+                  (mm.carriage_mass, carriage, v_carr), (mm.platform_mass + mm.payload_mass, p, v_p),
+                  (mm.forearm_mass, rod, v_rod))
+        u = (ends - elbow) / robot.forearm
+        u_dot = (v_ends - v_elbow) / robot.forearm
+        omega = jnp.cross(u, u_dot)
+        T = T + 0.5 * mm.forearm_inertia(robot.forearm) * jnp.sum(omega * omega)
     V = jnp.zeros((), q.dtype)
-    for mass, x, v in zip(masses, pos, vel):
+    for mass, x, v in bodies:
         T = T + 0.5 * mass * jnp.sum(v * v)
         V = V - mass * mm.gravity * jnp.sum(x[..., 2])
     return T, V
@@ -416,6 +459,10 @@ def energy(robot: Delta, motion: Motion) -> tuple[Float[Array, ""], Float[Array,
     M = mm.moving_mass()
     T = (jnp.sum(0.5 * mm.radial_mass() * motion.R_dot ** 2 - s_arm * s * motion.R_dot * thd
                  + 0.5 * mm.arm_inertia(L1) * thd ** 2) + 0.5 * M * jnp.sum(motion.p_dot ** 2))
+    if mm.forearm_model == "rigid_rod":
+        b_dot, _ = _elbow_rates(robot, motion.theta, thd, jnp.zeros_like(thd), motion.R_dot, jnp.zeros_like(motion.R_dot))
+        w_dot = to_chain_frames(motion.p_dot) - b_dot
+        T = T - 0.5 * mm.forearm_rotation_deficit() * jnp.sum(w_dot * w_dot)
     V = -mm.gravity * (s_arm * jnp.sum(s) + M * motion.p[2])
     return T, V
 
