@@ -1,6 +1,13 @@
 """Inverse dynamics of the (reconfigurable) Delta robot, single configuration (vmap for batches).
 
-Model: :mod:`deltajax.mass` (lumped masses; forearm split between elbow and platform; z down, gravity +z).
+Model: :mod:`deltajax.mass` (z down, gravity +z). Forearms: ``rigid_rod`` (default) or ``point_split``. The
+formulations below are written for the point split (masses s m_f at the elbows, (1 - s) m_f at the platform,
+inside the lumped I, s, M); the rigid rod has the same potential energy and the kinetic energy
+``T_split - J/2 sum_i |w_i'|^2`` (w_i = C_i - B_i, J = ``mass.forearm_rotation_deficit()``), which adds
+``-J w_i'' . dw_i/dq`` to every generalised force (platform rows -J sum_i w_i'', arm rows
+J L1 (cos th w_z'' - sin th w_x''), R row J sum_i w_x''). The autodiff formulation instead uses the rods'
+``m/2 |v_c|^2 + I_c/2 |u x u'|^2`` literally, and tests/test_dynamics.py checks all three against Newton-Euler
+on free-body diagrams.
 Generalised coordinates q = (R, theta_1, theta_2, theta_3): R is the reconfiguration joint that moves the
 three A_i radially together (the robot's ``base_radius`` is R at the current instant), theta the actuated
 arm angles. Generalised forces: ``tau`` (N m, about the motor axes, positive in the +theta = downward sense,

@@ -6,6 +6,11 @@ time under the actuator limits) and along the GA paper's motion; peak/RMS torque
 time and cycles per minute; a Lagrange-vs-virtual-work cross-check on every profile. For a reconfigurable
 config robot, the GA motion again with R moving, with the R actuator's force.
 
+Every robot and case is evaluated with both forearm models (:data:`deltajax.mass.FOREARM_MODELS`: the robot's
+own model drives the profiles, the other is the comparison), issue 16: peak and RMS torque and minimum cycle
+time of each, and the relative difference, in ``dynamics/<robot>/<case>_forearm_models`` and
+``dynamics/forearm_models`` (one row per robot/case).
+
 Writes group ``dynamics/<robot>/<case>`` (time axis ``t``; datasets p, p_dot, p_ddot, theta, theta_dot,
 theta_ddot, tau, force_R, R) plus ``dynamics/<robot>/adept_metrics`` and ``dynamics/summary``; plots
 ``<robot>_ga_motion_platform.png`` (like the paper's Fig. 5), ``<robot>_ga_motion_torques.png`` (Fig. 6),
@@ -25,6 +30,7 @@ from .. import presets
 from .. import trajectory as tr
 from ..config import ConfigError
 from ..dynamics import Limits, cycle_metrics, cycle_profile
+from ..mass import FOREARM_MODELS
 
 CASE_FIELDS = (("p", "m"), ("p_dot", "m/s"), ("p_ddot", "m/s^2"), ("theta", "rad"), ("theta_dot", "rad/s"),
                ("theta_ddot", "rad/s^2"), ("tau", "N m"), ("force_R", "N"), ("R", "m"), ("R_dot", "m/s"))
@@ -80,6 +86,53 @@ def _save_case(res, group, prof, attrs):
         res.put(group, name, arr, units=unit, dims=dims)
     res.put(group, "ok", np.asarray(prof.ok), units="1", dims=("t",))
     res.set_attrs(group, **attrs)
+
+
+def _rel(new, old):
+    """Relative change (new - old) / |old| (NaN where old is 0 or not finite)."""
+    new, old = np.asarray(new, float), np.asarray(old, float)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(np.isfinite(old) & (old != 0), (new - old) / np.abs(old), np.nan)
+
+
+def _save_forearm_models(res, group, by_model):
+    """Metrics of one robot/case under each forearm model, and rigid_rod relative to point_split."""
+    models = list(FOREARM_MODELS)
+    res.put(group, "forearm_model", np.asarray(models, dtype="S"), units="1", dims=("forearm_model",))
+    for key, unit in (("peak_torque", "N m"), ("rms_torque", "N m")):
+        res.put(group, key, np.stack([np.asarray(getattr(by_model[fm], key)) for fm in models]), units=unit,
+                dims=("forearm_model", "chain"))
+    for key, unit in (("cycle_time", "s"), ("cycles_per_minute", "1/min")):
+        res.put(group, key, np.asarray([float(getattr(by_model[fm], key)) for fm in models]), units=unit,
+                dims=("forearm_model",))
+    rod, split = by_model["rigid_rod"], by_model["point_split"]
+    res.put(group, "rel_change_peak_torque", _rel(np.max(rod.peak_torque), np.max(split.peak_torque)), units="1",
+            attrs={"long_name": "(rigid_rod - point_split) / point_split of the largest peak torque"})
+    res.put(group, "rel_change_rms_torque", _rel(np.max(rod.rms_torque), np.max(split.rms_torque)), units="1")
+    res.put(group, "rel_change_cycle_time", _rel(rod.cycle_time, split.cycle_time), units="1")
+
+
+def _save_forearm_summary(res, comparison):
+    g = "dynamics/forearm_models"
+    res.put(g, "case", np.asarray([c for c, _ in comparison], dtype="S"), units="1", dims=("case",))
+    res.put(g, "forearm_model", np.asarray(list(FOREARM_MODELS), dtype="S"), units="1", dims=("forearm_model",))
+    for key, unit, red in (("peak_torque", "N m", np.max), ("rms_torque", "N m", np.max),
+                           ("cycle_time", "s", float)):
+        arr = np.asarray([[red(np.asarray(getattr(bm[fm], key))) for fm in FOREARM_MODELS] for _, bm in comparison])
+        res.put(g, key, arr, units=unit, dims=("case", "forearm_model"),
+                attrs={"long_name": f"{key} (largest over the actuators) per forearm model"})
+    res.set_attrs(g, note="rigid_rod: rods with translation + rotation energy; point_split: end point masses "
+                          "(deltajax/mass.py); static torques identical")
+
+
+def _forearm_line(name, case, by_model):
+    rod, split = by_model["rigid_rod"], by_model["point_split"]
+    pk = (float(np.max(rod.peak_torque)), float(np.max(split.peak_torque)))
+    rms = (float(np.max(rod.rms_torque)), float(np.max(split.rms_torque)))
+    ct = (float(rod.cycle_time), float(split.cycle_time))
+    return (f"{name:12s} {case:10s} forearm rigid_rod vs point_split: peak torque {pk[0]:.4f} vs {pk[1]:.4f} N m "
+            f"({100 * float(_rel(*pk)):+.2f} %), RMS {rms[0]:.4f} vs {rms[1]:.4f} N m ({100 * float(_rel(*rms)):+.2f} %), "
+            f"min cycle time {ct[0]:.4f} vs {ct[1]:.4f} s ({100 * float(_rel(*ct)):+.2f} %)")
 
 
 def _plot_platform(ctx, name, prof, title):
@@ -163,6 +216,7 @@ def run(ctx) -> None:
     ga = tr.ga_paper_motion(amplitude=float(e.ga_motion.amplitude), duration=float(e.ga_motion.duration),
                             n_samples=K, dtype=dtype)
     summary = []
+    comparison = []   # (robot/case, {model: metrics})
     max_formulation_gap = 0.0
     for name, robot in ctx.progress(robots.items(), total=len(robots), desc="robots"):
         robot = jax.tree.map(lambda x: jnp.asarray(x, dtype) if eqx.is_inexact_array(x) else x, robot)
@@ -188,6 +242,14 @@ def run(ctx) -> None:
                               ("ok", "1"), ("reachable", "1"), ("n_bad", "1")):
                 res.put(mg, key, np.asarray(getattr(m, key)), units=unit)
             summary.append((name, case, m, gap))
+            by_model = {robot.mass.forearm_model: m}
+            for fm in FOREARM_MODELS:
+                if fm not in by_model:
+                    other_rob = eqx.tree_at(lambda d: d.mass, robot, robot.mass.with_forearm_model(fm))
+                    by_model[fm] = metrics_jit(other_rob, cyc, limits, method=method)
+            _save_forearm_models(res, f"dynamics/{name}/{case}_forearm_models", by_model)
+            comparison.append((f"{name}/{case}", by_model))
+            ctx.log(_forearm_line(name, case, by_model))
             ctx.log(f"{name:12s} {case:10s} reachable={bool(m.reachable)} "
                     f"peak torque {np.array2string(np.asarray(m.peak_torque), precision=3)} N m, "
                     f"RMS {np.array2string(np.asarray(m.rms_torque), precision=3)} N m, "
@@ -240,6 +302,7 @@ def run(ctx) -> None:
             units="N m", dims=("case", "chain"))
     res.put("dynamics/summary", "peak_speed", np.asarray([np.asarray(m.peak_speed) for _, _, m, _ in summary]),
             units="rad/s", dims=("case", "chain"))
+    _save_forearm_summary(res, comparison)
     res.set_attrs("dynamics", method=method, law=str(e.law), blend=float(e.blend), n_samples=K,
                   max_formulation_gap=max_formulation_gap)
     ctx.log(f"largest |virtual work - Lagrange| over all profiles: {max_formulation_gap:.2e}")
