@@ -516,3 +516,30 @@ def test_forearm_model_validation():
     # a batch of designs keeps one model (static field): vmapped construction works and does not retrace
     pop = jax.vmap(lambda m: MassModel(upper_arm_mass=m, forearm_model="point_split"))(jnp.asarray([1.0, 2.0]))
     assert pop.forearm_model == "point_split" and pop.upper_arm_mass.shape == (2,)
+
+
+@pytest.mark.slow
+def test_dynamics_cycle_experiment_reports_both_forearm_models(tmp_path):
+    """The CLI job evaluates both forearm models on every robot/case and writes the comparison to HDF5."""
+    import os
+    import subprocess
+    import sys
+
+    from deltajax.io import load
+
+    repo = CONFIGS.parent
+    out = subprocess.run([sys.executable, "-m", "deltajax.run", "experiment=dynamics_cycle", "experiment.n_samples=41",
+                          "experiment.robots=[industrial]", "plots=false", "progress=false",
+                          f"hydra.run.dir={tmp_path}"], cwd=repo, env={**os.environ, "PYTHONPATH": str(repo)},
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    d = load(tmp_path / "results.h5")["dynamics"]
+    cmp_ = d["forearm_models"]
+    assert list(cmp_["forearm_model"]) == ["rigid_rod", "point_split"]
+    cases = list(cmp_["case"])
+    assert "industrial/adept" in cases and "franco2026/adept" in cases
+    ind = d["industrial"]["adept_forearm_models"]
+    assert -0.09 < float(ind["rel_change_peak_torque"]) < -0.05      # ~ -7 % (issue 16)
+    assert float(ind["rel_change_cycle_time"]) < 0
+    # the robot's own model (rigid_rod, the preset default) is what the main metrics hold
+    np.testing.assert_array_equal(ind["peak_torque"][0], d["industrial"]["adept_metrics"]["peak_torque"])
