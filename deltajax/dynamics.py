@@ -44,8 +44,9 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from .geometry import Delta
-from .jacobian import jacobians
-from .kinematics import _from_chain_frames, fk, ik_cos_sin, to_chain_frames
+from .jacobian import jq_theta, jx_det, jx_row
+from .kinematics import (_COS_A, _SIN_A, _branch_sign, _from_chain_frames, chain_local, design_ok, fk, limit_terms,
+                         loop_closure, loop_vectors, to_chain_frames)
 
 __all__ = [
     "Motion",
@@ -114,26 +115,33 @@ def _require_mass(robot: Delta):
 
 
 def _chain_terms(robot: Delta, p, theta, c=None, s=None):
-    """Loop vectors w_i = C_i - B_i (chain frames), unit u (local) and Jq diagonal d_i = L1 sin th2 sin th3."""
-    L1 = robot.upper_arm
+    """Loop vectors w_i = C_i - B_i (chain frames), unit u (local) and Jq diagonal d_i = L1 sin th2 sin th3.
+
+    (3,)-array form for the per-point API; built from the core's :func:`~deltajax.kinematics.loop_vectors`
+    and :func:`~deltajax.jacobian.jq_theta`.
+    """
+    L1, L2 = robot.upper_arm, robot.forearm
     c = jnp.cos(theta) if c is None else c
     s = jnp.sin(theta) if s is None else s
-    loc = to_chain_frames(p)
-    w = jnp.stack([loc[:, 0] + robot.platform_radius - robot.base_radius - L1 * c, loc[:, 1],
-                   loc[:, 2] - L1 * s], axis=-1)
-    u = w / robot.forearm
-    d = L1 * (u[:, 2] * c - u[:, 0] * s)
-    return w, u, d
+    shift = robot.platform_radius - robot.base_radius
+    u, d = [], []
+    for i in range(3):
+        x, y, z = chain_local(p[0], p[1], p[2], i)
+        ui = loop_vectors(x + shift, y, z, c[i], s[i], L1, L2)
+        u.append(jnp.stack(ui))
+        d.append(L1 * jq_theta(ui[0], ui[2], c[i], s[i]))
+    u = jnp.stack(u)
+    return u * L2, u, jnp.stack(d)
 
 
 def _adjugate_rows(A):
     """(det A, C) with C[i] = A[j] x A[k] ((i, j, k) cyclic), so that A^-1 = C^T / det and A^-T = C / det.
 
     Closed form for 3x3 systems: XLA:CPU's batched LU for tiny matrices costs more than the rest of the
-    inverse dynamics together.
+    inverse dynamics together. The determinant is the core's :func:`~deltajax.jacobian.jx_det`.
     """
     C = jnp.stack([jnp.cross(A[1], A[2]), jnp.cross(A[2], A[0]), jnp.cross(A[0], A[1])])
-    return jnp.dot(A[0], C[0]), C
+    return jx_det(*(A[i, j] for i in range(3) for j in range(3))), C
 
 
 def _solve3(A, b, *, transpose: bool = False):
@@ -147,6 +155,110 @@ def _validity(robot: Delta, u_local, d, tol):
     """Away from type-1 (Jq) and type-2 (Jx) singularities, relative tolerance ``tol``."""
     det_jx, _ = _adjugate_rows(_from_chain_frames(u_local))
     return (jnp.abs(det_jx) > tol) & jnp.all(jnp.abs(d) > tol * robot.upper_arm)
+
+
+# ---------------------------------------------------------------------------------------------------------
+# Flat (scalar per chain) form: what cycle_profile / cycle_metrics run. Under vmap over samples and designs
+# every quantity here is one flat (P, K) array; nothing is a per-point (3,) vector or (3, 3) matrix
+# (XLA:CPU does not vectorise those; issue 9).
+# ---------------------------------------------------------------------------------------------------------
+class _Chain(NamedTuple):
+    """One chain at one instant (scalars): cos/sin theta, unit forearm u (chain frame), Jq entry d = L1 sin th2
+    sin th3, joint rate and acceleration, loop closed within limits."""
+
+    c: jax.Array
+    s: jax.Array
+    ux: jax.Array
+    uy: jax.Array
+    uz: jax.Array
+    d: jax.Array
+    thd: jax.Array
+    thdd: jax.Array
+    ok: jax.Array
+
+
+def _chain_motion(robot: Delta, i: int, p, v, a, R_dot, R_ddot, lim, sign) -> _Chain:
+    """Chain i's joint motion for a platform motion (p, v, a: base-frame 3-tuples of scalars); see joint_motion."""
+    L1, L2 = robot.upper_arm, robot.forearm
+    x, y, z = chain_local(*p, i)
+    vx, vy, vz = chain_local(*v, i)
+    ax, ay, az = chain_local(*a, i)
+    lc = loop_closure(x + (robot.platform_radius - robot.base_radius), y, z, L1, L2, lim, sign)
+    c, s = lc.cos, lc.sin
+    ux, uy, uz = loop_vectors(lc.dx, lc.py, lc.pz, c, s, L1, L2)
+    d = L1 * jq_theta(ux, uz, c, s)
+    d_safe = jnp.where(jnp.abs(d) > 0, d, 1.0)
+    thd = (ux * vx + uy * vy + uz * vz - ux * R_dot) / d_safe
+    wx, wz = vx - R_dot + L1 * s * thd, vz - L1 * c * thd          # w' = C' - B'
+    thdd = ((ux * ax + uy * ay + uz * az) + (wx * wx + vy * vy + wz * wz) / L2 - ux * R_ddot
+            + L1 * thd * thd * (ux * c + uz * s)) / d_safe
+    return _Chain(c=c, s=s, ux=ux, uy=uy, uz=uz, d=d, thd=thd, thdd=thdd, ok=lc.ok)
+
+
+def _chain_state(robot: Delta, i: int, p, theta, thd, thdd) -> _Chain:
+    """Chain i for a given joint state (theta known, e.g. from FK): cos/sin of theta, u and d from the core."""
+    L1 = robot.upper_arm
+    c, s = jnp.cos(theta), jnp.sin(theta)
+    x, y, z = chain_local(*p, i)
+    ux, uy, uz = loop_vectors(x + (robot.platform_radius - robot.base_radius), y, z, c, s, L1, robot.forearm)
+    return _Chain(c=c, s=s, ux=ux, uy=uy, uz=uz, d=L1 * jq_theta(ux, uz, c, s), thd=thd, thdd=thdd,
+                  ok=jnp.isfinite(theta))
+
+
+def _jx_rows(chains):
+    return tuple(jx_row(ch.ux, ch.uy, ch.uz, i) for i, ch in enumerate(chains))
+
+
+def _flat_validity(robot: Delta, chains, rows, tol):
+    det = jx_det(*rows[0], *rows[1], *rows[2])
+    ok = jnp.abs(det) > tol
+    for ch in chains:
+        ok = ok & ch.ok & (jnp.abs(ch.d) > tol * robot.upper_arm)
+    return ok, det
+
+
+def _cross(a, b):
+    return a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]
+
+
+def _flat_efforts(robot: Delta, chains, rows, det, p_ddot, R_ddot):
+    """Virtual-work efforts, split (tau_inertial, tau_gravity, force_R_inertial, force_R_gravity); scalars.
+
+    Arms: I thdd - S sin th Rdd (inertial) and -g S cos th (gravity), with I, S the lumped inertia and first
+    moment; R: m_R Rdd - S (cos th thd^2 + sin th thdd) per chain; platform: J^T F = Jq^T Jx^-T F,
+    Jx^-T F = C F / det (C[i] = row_j x row_k). Rigid-rod forearms add -J w_i'' . dw_i/dq (module docstring).
+    """
+    mm = _require_mass(robot)
+    L1, g = robot.upper_arm, mm.gravity
+    I_arm, S, M, m_R = mm.arm_inertia(L1), mm.arm_first_moment(L1), mm.moving_mass(), mm.radial_mass()
+    tau_in = [I_arm * ch.thdd - S * ch.s * R_ddot for ch in chains]
+    tau_g = [-g * S * ch.c for ch in chains]
+    fR_in = sum(m_R * R_ddot - S * (ch.c * ch.thd * ch.thd + ch.s * ch.thdd) for ch in chains)
+    F = [M * a for a in p_ddot]
+    if mm.forearm_model == "rigid_rod":
+        J = mm.forearm_rotation_deficit()
+        for i, ch in enumerate(chains):
+            bx = R_ddot - L1 * (ch.c * ch.thd * ch.thd + ch.s * ch.thdd)      # elbow acceleration B''
+            bz = L1 * (ch.c * ch.thdd - ch.s * ch.thd * ch.thd)
+            ax, _, az = chain_local(*p_ddot, i)
+            wx, wz = ax - bx, az - bz                                        # w'' = C'' - B'' (x, z)
+            tau_in[i] = tau_in[i] + J * L1 * (ch.c * wz - ch.s * wx)
+            fR_in = fR_in + J * wx
+            # -J sum_i w_i'' in the base frame = -3 J p'' + J sum_i B_i'' (B'' has no y component)
+            F[0] = F[0] - J * (p_ddot[0] - _COS_A[i] * bx)
+            F[1] = F[1] - J * (p_ddot[1] - _SIN_A[i] * bx)
+            F[2] = F[2] - J * (p_ddot[2] - bz)
+    C = (_cross(rows[1], rows[2]), _cross(rows[2], rows[0]), _cross(rows[0], rows[1]))
+    inv_det = 1.0 / jnp.where(det != 0, det, 1.0)
+    fR_g = jnp.zeros_like(fR_in)
+    for i, ch in enumerate(chains):
+        y = (C[i][0] * F[0] + C[i][1] * F[1] + C[i][2] * F[2]) * inv_det      # (Jx^-T F)_i
+        y_g = -M * g * C[i][2] * inv_det                                     # (Jx^-T (-M g e_z))_i
+        tau_in[i] = tau_in[i] + ch.d * y
+        tau_g[i] = tau_g[i] + ch.d * y_g
+        fR_in = fR_in + ch.ux * y
+        fR_g = fR_g + ch.ux * y_g
+    return tau_in, tau_g, fR_in, fR_g
 
 
 def _elbow_rates(robot: Delta, theta, theta_dot, theta_ddot, R_dot, R_ddot, c=None, s=None):
@@ -188,28 +300,27 @@ def joint_motion(robot: Delta, p: Float[Array, "3"], p_dot: Float[Array, "3"], p
     """
     p, p_dot, p_ddot = (jnp.asarray(a) for a in (p, p_dot, p_ddot))
     dtype = jnp.result_type(p.dtype, robot.upper_arm.dtype)
+    p, p_dot, p_ddot = (a.astype(dtype) for a in (p, p_dot, p_ddot))
     R_dot = jnp.asarray(R_dot, dtype)
     R_ddot = jnp.asarray(R_ddot, dtype)
-    cs = ik_cos_sin(robot, p, branch=branch)
-    ik_ok = jnp.all(cs.ok)
-    c = jnp.where(ik_ok, cs.cos, 1.0)
-    s = jnp.where(ik_ok, cs.sin, 0.0)
-    theta = jnp.arctan2(s, c)   # only reported; the dynamics use (c, s)
-    w, u, d = _chain_terms(robot, p, theta, c, s)
-    ok = ik_ok & _validity(robot, u, d, singular_tol)
-    d_safe = jnp.where(jnp.abs(d) > 0, d, 1.0)
-    pd_loc = to_chain_frames(p_dot)
-    pdd_loc = to_chain_frames(p_ddot)
-    theta_dot = (jnp.sum(u * pd_loc, axis=-1) - u[:, 0] * R_dot) / d_safe
-    b_dot, _ = _elbow_rates(robot, theta, theta_dot, jnp.zeros_like(theta), R_dot, R_ddot, c, s)
-    w_dot = pd_loc - b_dot
-    L1 = robot.upper_arm
-    theta_ddot = (jnp.sum(u * pdd_loc, axis=-1) + jnp.sum(w_dot * w_dot, axis=-1) / robot.forearm
-                  - u[:, 0] * R_ddot + L1 * theta_dot ** 2 * (u[:, 0] * c + u[:, 2] * s)) / d_safe
+    chains, ok, _, _ = _flat_motion(robot, tuple(p), tuple(p_dot), tuple(p_ddot), R_dot, R_ddot,
+                                    branch=branch, singular_tol=singular_tol)
+    theta = jnp.stack([jnp.arctan2(ch.s, ch.c) for ch in chains])   # only reported; the dynamics use (c, s)
     nan = jnp.asarray(jnp.nan, dtype)
     return Motion(p=p, p_dot=p_dot, p_ddot=p_ddot, theta=jnp.where(ok, theta, nan),
-                  theta_dot=jnp.where(ok, theta_dot, nan), theta_ddot=jnp.where(ok, theta_ddot, nan),
+                  theta_dot=jnp.where(ok, jnp.stack([ch.thd for ch in chains]), nan),
+                  theta_ddot=jnp.where(ok, jnp.stack([ch.thdd for ch in chains]), nan),
                   R_dot=R_dot, R_ddot=R_ddot, ok=ok)
+
+
+def _flat_motion(robot: Delta, p, v, a, R_dot, R_ddot, *, branch: str = "outer", singular_tol: float = 1e-9):
+    """The three chains' joint motion (scalars), validity, Jx rows and det Jx for one platform motion."""
+    lim = limit_terms(robot.theta_min, robot.theta_max)
+    sign = _branch_sign(branch)
+    chains = tuple(_chain_motion(robot, i, p, v, a, R_dot, R_ddot, lim, sign) for i in range(3))
+    rows = _jx_rows(chains)
+    ok, det = _flat_validity(robot, chains, rows, singular_tol)
+    return chains, ok & design_ok(robot), rows, det
 
 
 def platform_motion(robot: Delta, theta: Float[Array, "3"], theta_dot: Float[Array, "3"],
@@ -283,40 +394,15 @@ def _virtual_work_split(robot: Delta, m: Motion):
 
     The inertial part holds every acceleration and velocity-product term, the gravity part the static
     efforts at the same configuration; one pass shares the Jacobians between them (used for time scaling).
+    Per-point front end of the flat form (:func:`_flat_efforts`).
     """
-    mm = _require_mass(robot)
-    L1, g = robot.upper_arm, mm.gravity
-    th, thd, thdd = m.theta, m.theta_dot, m.theta_ddot
-    c, s = jnp.cos(th), jnp.sin(th)
-    tau_in = (mm.upper_arm_inertia_factor * mm.upper_arm_mass * L1 * L1
-              + mm.gear_ratio ** 2 * mm.rotor_inertia) * thdd   # rotation of the arm and the rotor
-    tau_g = jnp.zeros_like(th)
-    fR_in = 3.0 * mm.carriage_mass * m.R_ddot
-    for mass, arm in ((mm.upper_arm_mass, mm.upper_arm_com_fraction * L1), (mm.elbow_point_mass(), L1)):
-        # point acceleration in the chain frame: (Rdd - arm (c thd^2 + s thdd), 0, arm (-s thd^2 + c thdd));
-        # the arm supplies mass * (acc - g e_z); partial velocities d/dtheta = arm (-s, 0, c), d/dR = e_x.
-        ax = m.R_ddot - arm * (c * thd ** 2 + s * thdd)
-        az = arm * (-s * thd ** 2 + c * thdd)
-        tau_in = tau_in + mass * (-arm * s * ax + arm * c * az)
-        tau_g = tau_g - mass * g * arm * c
-        fR_in = fR_in + mass * jnp.sum(ax)
-    jac = jacobians(robot, m.p, th)
-    det, C = _adjugate_rows(jac.Jx)
-    det = jnp.where(det != 0, det, 1.0)
-    M = mm.moving_mass()
-    F_in = M * m.p_ddot
-    if mm.forearm_model == "rigid_rod":
-        # The rods' rotation: a pseudo-mass -J on the loop vector w_i = C_i - B_i (mass.py), i.e. the rod's
-        # d'Alembert moment I_c u x u'' taken with partial angular velocities u x du/dq, relative to the split.
-        J = mm.forearm_rotation_deficit()
-        w_dd = _loop_acceleration(robot, m, c, s)
-        tau_in = tau_in + J * L1 * (c * w_dd[:, 2] - s * w_dd[:, 0])   # -J w'' . dw/dtheta, dw/dtheta = -dB/dtheta
-        fR_in = fR_in + J * jnp.sum(w_dd[:, 0])                       # dw/dR = -e_x
-        F_in = F_in - J * jnp.sum(_from_chain_frames(w_dd), axis=0)   # dw/dp = identity (base frame)
-    # J^T F with J = Jx^-1 Jq: Jq^T Jx^-T F, Jx^-T = C / det
-    Q_in = jac.Jq.T @ (C @ F_in) / det
-    Q_g = jac.Jq.T @ (-M * g * C[:, 2]) / det
-    return tau_in + Q_in[1:], tau_g + Q_g[1:], fR_in + Q_in[0], Q_g[0]
+    p = tuple(m.p[k] for k in range(3))
+    chains = tuple(_chain_state(robot, i, p, m.theta[i], m.theta_dot[i], m.theta_ddot[i]) for i in range(3))
+    rows = _jx_rows(chains)
+    det = jx_det(*rows[0], *rows[1], *rows[2])
+    tau_in, tau_g, fR_in, fR_g = _flat_efforts(robot, chains, rows, det, tuple(m.p_ddot[k] for k in range(3)),
+                                               m.R_ddot)
+    return jnp.stack(tau_in), jnp.stack(tau_g), fR_in, fR_g
 
 
 def _virtual_work(robot: Delta, m: Motion):
@@ -575,11 +661,22 @@ def _sample(robot: Delta, cycle, k_x, k_dx, k_ddx, k_R, k_dR, k_ddR, method):
     rob = robot if k_R is None else robot.with_base_radius(k_R)
     dR = jnp.zeros((), k_x.dtype) if k_dR is None else k_dR
     ddR = jnp.zeros((), k_x.dtype) if k_ddR is None else k_ddR
+    nan = jnp.asarray(jnp.nan, k_x.dtype)
+    if cycle.space == "cartesian" and method == "virtual_work":
+        # the hot path (GA fitness, motor sizing): flat scalars from IK to efforts, stacked only at the end
+        cols = tuple(tuple(v[k] for k in range(3)) for v in (k_x, k_dx, k_ddx))
+        chains, ok, rows, det = _flat_motion(rob, *cols, dR, ddR)
+        tau_in, tau_g, fR_in, fR_g = _flat_efforts(rob, chains, rows, det, cols[2], ddR)
+        stack = lambda xs: jnp.where(ok, jnp.stack(xs), nan)  # noqa: E731
+        motion = Motion(p=k_x, p_dot=k_dx, p_ddot=k_ddx, theta=stack([jnp.arctan2(ch.s, ch.c) for ch in chains]),
+                        theta_dot=stack([ch.thd for ch in chains]), theta_ddot=stack([ch.thdd for ch in chains]),
+                        R_dot=dR, R_ddot=ddR, ok=ok)
+        efforts = (stack(tau_in), stack(tau_g), jnp.where(ok, fR_in, nan), jnp.where(ok, fR_g, nan))
+        return motion, efforts, rob.base_radius * jnp.ones((), k_x.dtype), dR
     if cycle.space == "cartesian":
         motion = joint_motion(rob, k_x, k_dx, k_ddx, dR, ddR)
     else:
         motion = platform_motion(rob, k_x, k_dx, k_ddx, dR, ddR)
-    nan = jnp.asarray(jnp.nan, k_x.dtype)
     if method == "virtual_work":
         tau_in, tau_g, fR_in, fR_g = _virtual_work_split(rob, motion)
     else:
