@@ -30,9 +30,6 @@ TINY = ["experiment=workspace_grid", "plots=false", "progress=false", "experimen
 SLURM = ["hydra/launcher=slurm", "hydra.launcher.timeout_min=15"]
 TIMEOUT = 600  # s per CLI call (jobs share the machine's 2 cores with the rest of CI)
 
-pytestmark = pytest.mark.slow
-
-
 def _cluster_problem(env) -> str:
     """'' if the cluster answers with an idle (or busy) node, else why not."""
     conf = env.get("SLURM_CONF")
@@ -124,6 +121,7 @@ def _assert_identical(a_path, b_path, skip_attrs=()):
 
 
 # -- (a) an array job -----------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_two_point_sweep_is_one_array_job(cluster):
     sweep = cluster["tmp"] / "array"
     t0 = time.perf_counter()
@@ -159,6 +157,7 @@ def test_two_point_sweep_is_one_array_job(cluster):
 
 
 # -- (b) shards merged exactly, and the CPUs of the job reach JAX, XLA and Numba ---------------------------
+@pytest.mark.slow
 def test_sharded_grid_merges_to_single_run_and_cpus_reach_the_worker(cluster):
     tmp = cluster["tmp"]
     single = tmp / "single"
@@ -188,6 +187,7 @@ def test_sharded_grid_merges_to_single_run_and_cpus_reach_the_worker(cluster):
 
 
 # -- (d) a failing sweep point --------------------------------------------------------------------------
+@pytest.mark.slow
 def test_failed_point_is_reported_others_merge_and_merge_cli_recovers(cluster):
     sweep = cluster["tmp"] / "failing"
     out = _finish(_cli(cluster, ["-m", *TINY, "robot.forearm=0.4,-1", "n_shards=2", "shard=0,1", *SLURM,
@@ -219,6 +219,7 @@ def test_failed_point_is_reported_others_merge_and_merge_cli_recovers(cluster):
 
 
 # -- mem_gb is enforced by SLURM ------------------------------------------------------------------------
+@pytest.mark.slow
 def test_mem_gb_is_enforced_and_reported(cluster):
     """A point that needs more than mem_gb (a 2.5 mm grid, 24.8e6 points, storing 5 index fields: ~1.0 GB of
     arrays allocated up front, ~1.4 GB with the interpreter) is killed by SLURM (OverMemoryKill: the step's RSS
@@ -270,6 +271,7 @@ def _generations_done(path):
         return 0
 
 
+@pytest.mark.slow
 def test_cancelled_ga_job_resubmitted_finishes_bit_identical(cluster):
     over = [*_ga_overrides(), *SLURM, "hydra.launcher.cpus_per_task=1", "hydra.launcher.mem_gb=2"]
     generations = int(next(o for o in over if o.startswith("experiment.ga.generations=")).split("=")[1])
@@ -302,3 +304,43 @@ def test_cancelled_ga_job_resubmitted_finishes_bit_identical(cluster):
     # every dataset bit-identical to the uninterrupted run; attributes too, but timings and the resume point
     _assert_identical(results, ref_sweep / "0" / "results.h5", skip_attrs=(r"time_.*", "resumed_from"))
     assert [r["status"] for r in _rows(sweep)] == ["ok"]
+
+
+# -- the summary's statuses from the jobs' own records (no cluster needed) ------------------------------------
+def test_summary_status_from_job_records(tmp_path):
+    """failed (the job raised), killed (SLURM's message in the job's stderr), running (no end and no trace),
+    ok; the job records go to summary.json."""
+    from deltajax.io import ResultsFile
+    from deltajax.sweep import summarize_sweep
+
+    records = {
+        "0": {"status": "ok"},
+        "1": {"status": "failed", "error": "ConfigError: robot: forearm must be > 0 m, got -1.0"},
+        "2": {"status": "running", "err": "submitit WARNING - Bypassing signal SIGTERM\n"
+                                          "slurmstepd-n1: error: *** STEP 7.0 ON n1 CANCELLED AT 2026-12-01T12:00:00 ***\n"},
+        "3": {"status": "running", "err": "still computing\n"},
+        "4": None,
+    }
+    for run, rec in records.items():
+        d = tmp_path / run
+        (d / ".hydra").mkdir(parents=True)
+        (d / ".hydra" / "overrides.yaml").write_text(f"- seed={run}\n")
+        if run == "0":
+            res = ResultsFile(d / "results.h5", attrs={"experiment": "demo"})
+            res.put("g", "x", 1.5, units="m")
+            res.flush(final=True)
+        if rec is None:
+            continue
+        rec = dict(rec)
+        if "err" in rec:
+            (d / "err.log").write_text(rec.pop("err"))
+            rec["stderr"] = str(d / "err.log")
+        (d / ".hydra" / "job_status.json").write_text(json.dumps(rec))
+    rows = _rows(Path(summarize_sweep(tmp_path)["json"]).parent)
+    status = {r["run"]: r["status"] for r in rows}
+    assert status == {"0": "ok", "1": "failed: ConfigError: robot: forearm must be > 0 m, got -1.0",
+                      "2": "killed: slurmstepd-n1: error: *** STEP 7.0 ON n1 CANCELLED AT 2026-12-01T12:00:00 ***",
+                      "3": "running", "4": "missing"}
+    assert rows[1]["job"]["status"] == "failed" and "job" not in rows[4]
+    csv = (tmp_path / "summary.csv").read_text().splitlines()
+    assert csv[2].startswith('1,run,"failed: ConfigError: robot: forearm must be > 0 m, got -1.0"')
