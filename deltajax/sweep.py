@@ -134,12 +134,16 @@ def apply_worker_env(cpus: int, host_devices: Optional[int] = None, gpu_prealloc
         env.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
     import sys
 
-    if "numba" in sys.modules:  # already loaded (a reused worker): NUMBA_NUM_THREADS was read at its import
+    if "numba" in sys.modules and environ is None:  # a reused worker: NUMBA_NUM_THREADS was read at its import
         import numba
 
         numba.set_num_threads(min(cpus, numba.config.NUMBA_NUM_THREADS))
     applied: dict[str, Any] = {"cpus": cpus, "PJRT_NPROC": env["PJRT_NPROC"],
                                "XLA_PYTHON_CLIENT_PREALLOCATE": env.get("XLA_PYTHON_CLIENT_PREALLOCATE", "")}
+    if environ is None:  # this process: the Numba thread pool size in effect (numba reads NUMBA_NUM_THREADS once)
+        import numba
+
+        applied["numba_threads"] = int(numba.get_num_threads())
     import jax
     from jax._src import xla_bridge
 
@@ -187,24 +191,114 @@ class WorkerEnv(Callback):
               f"host devices {applied['host_devices']}", flush=True)
 
 
+#: per-job status file (in the job's ``.hydra/`` folder) written by :class:`SweepSummary` in each sweep job
+JOB_STATUS = "job_status.json"
+
+
+def _job_status_path(config) -> Path:
+    sub = config.hydra.get("output_subdir", None)
+    return Path(str(config.hydra.runtime.output_dir)) / (str(sub) if sub else ".") / JOB_STATUS
+
+
+def _write_json(path: Path, data: Mapping[str, Any]) -> None:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_text(json.dumps(data, indent=1, default=str))
+    os.replace(tmp, path)
+
+
+def _scheduler_ids() -> dict[str, Any]:
+    """The scheduler's identity of this job (SLURM job/array ids, submitit's log files), if any."""
+    ids: dict[str, Any] = {k: os.environ[k] for k in ("SLURM_JOB_ID", "SLURM_ARRAY_JOB_ID", "SLURM_ARRAY_TASK_ID",
+                                                      "SLURM_CPUS_PER_TASK", "SLURM_RESTART_COUNT")
+                           if k in os.environ}
+    if os.environ.get("SUBMITIT_EXECUTOR"):
+        try:
+            import submitit
+
+            paths = submitit.JobEnvironment().paths
+            ids.update(stdout=str(paths.stdout), stderr=str(paths.stderr))
+        except Exception as e:  # not inside a submitit job after all: say so in the status file
+            ids["submitit_paths"] = f"unavailable: {e}"
+    return ids
+
+
 class SweepSummary(Callback):
     """Hydra callback: at the end of a multirun, merge sharded runs and write the sweep's summary files.
+
+    In every sweep job it also records the job's outcome in ``<run>/.hydra/job_status.json``
+    (``running`` with the scheduler's job id and log files when the job starts; ``ok`` or ``failed`` with the
+    error when it ends), which :func:`summarize_sweep` reports. The summary is written when the multirun ends,
+    and also when it ends with an error (a failed job makes Hydra raise before its end-of-sweep callbacks):
+    then from an ``atexit`` hook of the submitting process.
 
     Arguments (overrides under ``hydra.callbacks.sweep_summary``): ``merge`` (default true).
     """
 
     def __init__(self, merge: bool = True) -> None:
         self.merge = bool(merge)
+        self._pending: Optional[Path] = None
+
+    @staticmethod
+    def _in_multirun(config) -> bool:
+        return "MULTIRUN" in str(config.hydra.get("mode", ""))
+
+    def on_job_start(self, config, **kwargs: Any) -> None:
+        if self._in_multirun(config):
+            _write_json(_job_status_path(config), {"status": "running", "start_time": _now(), **_scheduler_ids()})
+
+    def on_job_end(self, config, job_return, **kwargs: Any) -> None:
+        if not self._in_multirun(config):
+            return
+        path = _job_status_path(config)
+        try:
+            data = json.loads(path.read_text())
+        except (OSError, ValueError):
+            data = _scheduler_ids()
+        data["end_time"] = _now()
+        status = getattr(getattr(job_return, "status", None), "name", "")
+        if status == "COMPLETED":
+            data["status"] = "ok"
+        else:
+            err = getattr(job_return, "_return_value", None)
+            first = str(err).strip().splitlines()[0] if str(err).strip() else ""
+            data["status"] = "failed"
+            data["error"] = f"{type(err).__name__}: {first}"[:500]
+        _write_json(path, data)
+
+    def on_multirun_start(self, config, **kwargs: Any) -> None:
+        import atexit
+
+        self._pending = Path(str(config.hydra.sweep.dir))
+        atexit.register(self._after_failed_sweep)
 
     def on_multirun_end(self, config, **kwargs: Any) -> None:
-        sweep_dir = Path(str(config.hydra.sweep.dir))
+        self._pending = None
+        self._finish(Path(str(config.hydra.sweep.dir)))
+
+    def _after_failed_sweep(self) -> None:
+        if self._pending is not None:  # the sweep raised (a job failed, or the submitter was interrupted)
+            sweep_dir, self._pending = self._pending, None
+            print("[deltajax] the sweep did not finish cleanly: summarising what is there", flush=True)
+            self._finish(sweep_dir)
+
+    def _finish(self, sweep_dir: Path) -> None:
         if not sweep_dir.is_dir():
             return
         if self.merge:
             for out in merge_sweep(sweep_dir):
                 print(f"[deltajax] merged shards -> {out}", flush=True)
         paths = summarize_sweep(sweep_dir)
-        print(f"[deltajax] sweep summary -> {paths['csv']}", flush=True)
+        rows = json.loads(paths["json"].read_text())["runs"]
+        bad = [f"{r['run']}: {r['status']}" for r in rows if r["status"] != "ok"]
+        print(f"[deltajax] sweep summary -> {paths['csv']}"
+              + (f" ({len(bad)} not ok: " + "; ".join(bad) + ")" if bad else ""), flush=True)
+
+
+def _now() -> str:
+    import datetime
+
+    return datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds")
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -571,12 +665,40 @@ def _scalars(path: Path) -> tuple[dict[str, float], dict[str, str], dict[str, An
     return vals, units, root
 
 
+def _job_status(run_dir: Path) -> dict[str, Any]:
+    for f in (run_dir / ".hydra" / JOB_STATUS, run_dir / JOB_STATUS):
+        try:
+            return dict(json.loads(f.read_text()))
+        except FileNotFoundError:
+            continue
+        except (OSError, ValueError) as e:
+            return {"status": "unknown", "error": f"unreadable {f}: {e}"}
+    return {}
+
+
+#: what SLURM writes into a job's error stream when it ends the job (cancel, time limit, memory limit)
+_KILL_LINE = re.compile(r"(slurmstepd\S*: error: .*)|(.*\bCANCELLED AT .*)|(.*DUE TO (TIME LIMIT|PREEMPTION).*)")
+
+
+def _killed_by_scheduler(job: Mapping[str, Any]) -> str:
+    """The scheduler's last word on a job that started and never ended (from its error log), or ``""``."""
+    try:
+        text = Path(str(job["stderr"])).read_text(errors="replace")
+    except (KeyError, OSError):
+        return ""
+    hits = [m.group(0).strip() for m in _KILL_LINE.finditer(text)]
+    return hits[-1][:300] if hits else ""
+
+
 def summarize_sweep(sweep_dir: os.PathLike) -> dict[str, Path]:
     """Write ``summary.json`` and ``summary.csv`` indexing a sweep's runs and their key figures.
 
     One row per run directory (job order) and per merged sharded job (``kind = merged``): the run's overrides
-    (one column per swept key), its status (``ok``: results.h5 complete; ``incomplete``: checkpoint only;
-    ``missing``), experiment, wall time, and every scalar dataset of its results.h5 as ``group/name``
+    (one column per swept key), its status (``ok``: results.h5 complete; ``failed: <error>``: the job raised;
+    ``killed: <the scheduler's message>``: SLURM ended it (cancel, time or memory limit); ``incomplete``:
+    checkpoint only; ``running``: started, no end recorded; ``missing``: never started; the job's own record,
+    ``.hydra/job_status.json``, is in summary.json as ``job``), experiment, wall time, and every scalar
+    dataset of its results.h5 as ``group/name``
     (units in ``summary.json`` and in the CSV header as ``group/name [units]``); numeric 1-D datasets of at
     most :data:`SMALL_VECTOR` entries that are not axes (per-chain figures such as peak torques) enter as
     ``group/name[max]``, their largest entry.
@@ -597,6 +719,9 @@ def summarize_sweep(sweep_dir: os.PathLike) -> dict[str, Path]:
         f = run / "results.h5"
         row: dict[str, Any] = {"run": str(run.relative_to(sweep_dir)), "kind": kind, "overrides": ov,
                                "status": "missing", "metrics": {}}
+        job = _job_status(run) if kind == "run" else {}
+        if job:
+            row["job"] = job
         if f.exists():
             try:
                 vals, units, root = _scalars(f)
@@ -613,6 +738,14 @@ def summarize_sweep(sweep_dir: os.PathLike) -> dict[str, Path]:
                     row["overrides"].pop("shard", None)
                 row["metrics"] = vals
                 all_units.update(units)
+        if job.get("status") == "failed":
+            row["status"] = f"failed: {job.get('error', '')}"
+        elif job.get("status") == "running" and row["status"] != "ok":
+            killed = _killed_by_scheduler(job)
+            if killed:
+                row["status"] = f"killed: {killed}"
+            elif row["status"] == "missing":
+                row["status"] = "running"  # started, no end recorded: still running, or killed without a trace
         rows.append(row)
     summary = {"sweep_dir": str(sweep_dir.resolve()), "n_runs": sum(r["kind"] == "run" for r in rows),
                "units": all_units, "runs": rows}

@@ -1,0 +1,346 @@
+"""Sweeps through a real SLURM scheduler (slurmctld + slurmd on this machine, `.ci/slurm-up`), with the real CLI
+(``python -m deltajax.run -m ... hydra/launcher=slurm``): array jobs, sharded grids merged exactly, a GA job
+cancelled and resubmitted into its run directory, failed and memory-killed jobs in the sweep summary, and the
+resources (CPUs, memory, log files) as SLURM itself records and enforces them.
+
+Needs a cluster: ``SLURM_CONF`` (or ``/tmp/deltajax-slurm/slurm.conf`` from ``.ci/slurm-up``) with its node
+idle. Without one these tests skip, saying so; with ``DELTAJAX_REQUIRE_SLURM=1`` (set by ``.ci/run``) they
+fail instead, so CI can never skip them silently.
+"""
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import h5py
+import numpy as np
+import pytest
+
+from deltajax.sweep import _read_tree
+
+REPO = Path(__file__).resolve().parent.parent
+DEFAULT_CONF = Path(os.environ.get("DELTAJAX_SLURM_DIR", "/tmp/deltajax-slurm")) / "slurm.conf"
+TINY = ["experiment=workspace_grid", "plots=false", "progress=false", "experiment.grid.h=0.1",
+        "experiment.grid.z=[0.0,0.6]", "experiment.chunk_points=100"]
+SLURM = ["hydra/launcher=slurm", "hydra.launcher.timeout_min=15"]
+TIMEOUT = 600  # s per CLI call (jobs share the machine's 2 cores with the rest of CI)
+
+def _cluster_problem(env) -> str:
+    """'' if the cluster answers with an idle (or busy) node, else why not."""
+    conf = env.get("SLURM_CONF")
+    if not conf:
+        return f"SLURM_CONF unset and {DEFAULT_CONF} absent: start a test cluster with .ci/slurm-up"
+    if not Path(conf).is_file():
+        return f"SLURM_CONF={conf} does not exist"
+    if shutil.which("sbatch", path=env["PATH"]) is None:
+        return "sbatch not found (slurm-client not installed): run .ci/slurm-up"
+    try:
+        out = subprocess.run(["sinfo", "-h", "-o", "%t"], env=env, capture_output=True, text=True, timeout=20)
+    except (OSError, subprocess.TimeoutExpired) as e:
+        return f"sinfo failed: {e}"
+    states = out.stdout.split()
+    if out.returncode != 0 or not any(s in ("idle", "mix", "alloc", "comp") for s in states):
+        return f"no usable node (sinfo rc {out.returncode}: {(out.stdout + out.stderr).strip()[:300]})"
+    return ""
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory):
+    """The environment for CLI calls that submit to the test cluster (skip or, in CI, fail without one)."""
+    env = dict(os.environ, HYDRA_FULL_ERROR="1",
+               PYTHONPATH=str(REPO) + os.pathsep + os.environ.get("PYTHONPATH", ""))
+    env.pop("XLA_FLAGS", None)
+    if "SLURM_CONF" not in env and DEFAULT_CONF.is_file():
+        env["SLURM_CONF"] = str(DEFAULT_CONF)
+    if env.get("SLURM_CONF"):  # .ci/slurm-up's sacct stand-in (see there) comes first on PATH
+        env["PATH"] = str(Path(env["SLURM_CONF"]).parent / "bin") + os.pathsep + env["PATH"]
+    problem = _cluster_problem(env)
+    if problem:
+        if os.environ.get("DELTAJAX_REQUIRE_SLURM") == "1":
+            pytest.fail(f"DELTAJAX_REQUIRE_SLURM=1 but no SLURM test cluster: {problem}")
+        pytest.skip(f"no SLURM test cluster: {problem}")
+    tmp = tmp_path_factory.mktemp("slurm")
+    return {"env": env, "tmp": tmp, "jobcomp": Path(env["SLURM_CONF"]).parent / "log" / "jobcomp.log"}
+
+
+def _cli(cluster, args, **kw):
+    return subprocess.Popen([sys.executable, "-m", "deltajax.run", *args], cwd=cluster["tmp"], env=cluster["env"],
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kw)
+
+
+def _finish(proc, what, ok=True):
+    try:
+        out, _ = proc.communicate(timeout=TIMEOUT)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        out, _ = proc.communicate()
+        pytest.fail(f"{what}: no answer in {TIMEOUT} s:\n{out[-4000:]}")
+    if ok:
+        assert proc.returncode == 0, f"{what} failed (rc {proc.returncode}):\n{out[-4000:]}"
+    return out
+
+
+def _job(run_dir):
+    return json.loads((Path(run_dir) / ".hydra" / "job_status.json").read_text())
+
+
+def _slurm_record(cluster, job_id):
+    """SLURM's completion record of a job (jobcomp/filetxt, written by slurmctld) as a dict."""
+    for line in reversed(cluster["jobcomp"].read_text().splitlines()):
+        rec = dict(re.findall(r"(\w+)=(\S*)", line))
+        if rec.get("JobId") == str(job_id):
+            return rec
+    raise AssertionError(f"SLURM has no completion record of job {job_id} in {cluster['jobcomp']}")
+
+
+def _rows(sweep):
+    return json.loads((Path(sweep) / "summary.json").read_text())["runs"]
+
+
+def _assert_identical(a_path, b_path, skip_attrs=()):
+    """Same groups and datasets (bit for bit, NaN = NaN), units, dimensions and group attributes."""
+    a, b = _read_tree(a_path), _read_tree(b_path)
+    assert a[2].keys() == b[2].keys()
+    for g in b[2]:
+        assert a[2][g].keys() == b[2][g].keys(), g
+        for n, d in b[2][g].items():
+            e = a[2][g][n]
+            assert e.data.dtype == d.data.dtype and e.data.shape == d.data.shape, (g, n)
+            assert np.array_equal(e.data, d.data, equal_nan=d.data.dtype.kind in "fc"), (g, n)
+            assert (e.units, e.dims, e.attrs) == (d.units, d.dims, d.attrs), (g, n)
+        ka = {k for k in a[1][g] if not any(re.fullmatch(p, k) for p in skip_attrs)}
+        kb = {k for k in b[1][g] if not any(re.fullmatch(p, k) for p in skip_attrs)}
+        assert ka == kb, g
+        for k in kb:
+            assert np.array_equal(np.asarray(a[1][g][k]), np.asarray(b[1][g][k])), (g, k)
+
+
+# -- (a) an array job -----------------------------------------------------------------------------------
+@pytest.mark.slow
+def test_two_point_sweep_is_one_array_job(cluster):
+    sweep = cluster["tmp"] / "array"
+    t0 = time.perf_counter()
+    out = _finish(_cli(cluster, ["-m", *TINY, "robot.forearm=0.35,0.4", *SLURM, "hydra.launcher.cpus_per_task=1",
+                                 "hydra.launcher.mem_gb=1", f"hydra.sweep.dir={sweep}"]), "array sweep")
+    wall = time.perf_counter() - t0
+    jobs = [_job(sweep / r) for r in ("0", "1")]
+    # one array job, one task per sweep point
+    assert jobs[0]["SLURM_ARRAY_JOB_ID"] == jobs[1]["SLURM_ARRAY_JOB_ID"]
+    assert [j["SLURM_ARRAY_TASK_ID"] for j in jobs] == ["0", "1"]
+    array = jobs[0]["SLURM_ARRAY_JOB_ID"]
+    script = (sweep / ".submitit" / array / f"{array}_submission.sh").read_text()
+    assert "#SBATCH --array=0-1%" in script
+    for j, task in zip(jobs, "01"):
+        rec = _slurm_record(cluster, j["SLURM_JOB_ID"])  # what SLURM itself recorded
+        assert (rec["ArrayJobId"], rec["ArrayTaskId"], rec["JobState"]) == (array, task, "COMPLETED")
+        assert "cpu=1," in rec["Tres"] and "mem=1G" in rec["Tres"]
+        # logs where docs/CLUSTER.md says: <sweep>/.submitit/<array id>_<task>/<array id>_<task>_0_log.{out,err}
+        log_dir = sweep / ".submitit" / f"{array}_{task}"
+        assert j["stdout"] == str(log_dir / f"{array}_{task}_0_log.out")
+        assert j["stderr"] == str(log_dir / f"{array}_{task}_0_log.err")
+        log = Path(j["stdout"]).read_text()
+        assert "[deltajax] worker: 1 CPUs (SLURM_CPUS_PER_TASK)" in log and "wrote " in log
+        assert j["status"] == "ok"
+    rows = _rows(sweep)
+    assert [(r["run"], r["status"], r["overrides"]["robot.forearm"]) for r in rows] == [("0", "ok", "0.35"),
+                                                                                        ("1", "ok", "0.4")]
+    csv = (sweep / "summary.csv").read_text().splitlines()
+    assert len(csv) == 3 and csv[1].startswith("0,run,ok,") and csv[2].startswith("1,run,ok,")
+    assert rows[0]["metrics"]["workspace/count"] < rows[1]["metrics"]["workspace/count"] == 79
+    print(f"array sweep of 2 points: submit to finish {wall:.1f} s wall", file=sys.stderr)
+    assert "sweep summary" in out
+
+
+# -- (b) shards merged exactly, and the CPUs of the job reach JAX, XLA and Numba ---------------------------
+@pytest.mark.slow
+def test_sharded_grid_merges_to_single_run_and_cpus_reach_the_worker(cluster):
+    tmp = cluster["tmp"]
+    single = tmp / "single"
+    ref = _cli(cluster, [*TINY, f"hydra.run.dir={single}"])  # one local process, all CPUs
+    sweep = tmp / "shards"
+    _finish(_cli(cluster, ["-m", *TINY, "n_shards=3", "shard=0,1,2", *SLURM, "hydra.launcher.cpus_per_task=2",
+                           "hydra.launcher.mem_gb=2", f"hydra.sweep.dir={sweep}"]), "sharded sweep")
+    _finish(ref, "single run")
+    merged = sweep / "merged" / "workspace_grid" / "results.h5"
+    _assert_identical(merged, single / "results.h5")
+    with h5py.File(merged, "r") as f:
+        assert f.attrs["merged_n_shards"] == 3
+    for s in ("0", "1", "2"):
+        job = _job(sweep / s)
+        assert job["SLURM_CPUS_PER_TASK"] == "2"
+        rec = _slurm_record(cluster, job["SLURM_JOB_ID"])
+        assert rec["JobState"] == "COMPLETED" and "cpu=2," in rec["Tres"] and "mem=2G" in rec["Tres"]
+        with h5py.File(sweep / s / "results.h5", "r") as f:
+            env = json.loads(f.attrs["worker_env"])
+            device = str(f.attrs["device"])
+        # SLURM_CPUS_PER_TASK=2 -> 2 XLA threads, 2 JAX host devices, 2 Numba threads in the job's process
+        assert env["cpus_from"] == "SLURM_CPUS_PER_TASK" and env["cpus"] == 2
+        assert env["PJRT_NPROC"] == "2" and env["host_devices"] == 2 and env["numba_threads"] == 2
+        assert device.endswith(" x2"), device
+    rows = _rows(sweep)
+    assert [(r["kind"], r["status"]) for r in rows] == [("run", "ok")] * 3 + [("merged", "ok")]
+
+
+# -- (d) a failing sweep point --------------------------------------------------------------------------
+@pytest.mark.slow
+def test_failed_point_is_reported_others_merge_and_merge_cli_recovers(cluster):
+    sweep = cluster["tmp"] / "failing"
+    out = _finish(_cli(cluster, ["-m", *TINY, "robot.forearm=0.4,-1", "n_shards=2", "shard=0,1", *SLURM,
+                                 "hydra.launcher.cpus_per_task=1", "hydra.launcher.mem_gb=1",
+                                 f"hydra.sweep.dir={sweep}"]), "failing sweep", ok=False)
+    assert "forearm must be > 0 m, got -1.0" in out
+    rows = _rows(sweep)  # written although Hydra raised (SweepSummary's exit hook)
+    status = {r["run"]: r["status"] for r in rows}
+    assert status["0"] == status["1"] == "ok"
+    for r in ("2", "3"):
+        assert status[r].startswith("failed: ConfigError: robot: forearm must be > 0 m, got -1.0"), status[r]
+    merged = sweep / "merged" / "robot.forearm=0.4" / "results.h5"
+    assert status["merged/robot.forearm=0.4"] == "ok" and len(rows) == 5
+    before = {k: v.data for k, v in _read_tree(merged)[2]["workspace"].items()}
+    csv_before = (sweep / "summary.csv").read_text()
+    assert "failed: ConfigError" in csv_before
+    # as if the submitting process had died before its summary: the merge command rebuilds both
+    shutil.rmtree(sweep / "merged")
+    for f in ("summary.csv", "summary.json"):
+        (sweep / f).unlink()
+    res = subprocess.run([sys.executable, "-m", "deltajax.merge", str(sweep)], cwd=cluster["tmp"], env=cluster["env"],
+                         capture_output=True, text=True, timeout=TIMEOUT)
+    assert res.returncode == 0, res.stderr
+    assert f"merged -> {merged}" in res.stdout
+    after = {k: v.data for k, v in _read_tree(merged)[2]["workspace"].items()}
+    assert before.keys() == after.keys()
+    assert all(np.array_equal(before[k], after[k], equal_nan=before[k].dtype.kind == "f") for k in before)
+    assert (sweep / "summary.csv").read_text() == csv_before
+
+
+# -- mem_gb is enforced by SLURM ------------------------------------------------------------------------
+@pytest.mark.slow
+def test_mem_gb_is_enforced_and_reported(cluster):
+    """A point that needs more than mem_gb (a 2.5 mm grid, 24.8e6 points, storing 5 index fields: ~1.0 GB of
+    arrays allocated up front, ~1.4 GB with the interpreter) is killed by SLURM (OverMemoryKill: the step's RSS
+    is polled every second); the other point completes."""
+    from deltajax.workspace import FIELD_NAMES
+
+    sweep = cluster["tmp"] / "memory"
+    store = "[" + ",".join(FIELD_NAMES[:5]) + "]"
+    out = _finish(_cli(cluster, ["-m", *TINY, "experiment.grid.h=0.1,0.0025", f"experiment.store={store}", *SLURM,
+                                 "hydra.launcher.cpus_per_task=1", "hydra.launcher.mem_gb=1",
+                                 f"hydra.sweep.dir={sweep}"]), "memory sweep", ok=False)
+    status = {r["run"]: r["status"] for r in _rows(sweep)}
+    assert status["0"] == "ok"
+    assert re.match(r"killed: slurmstepd\S*: error: .*(memory limit|Exceeded job memory)", status["1"]), status["1"]
+    job = _job(sweep / "1")
+    rec = _slurm_record(cluster, job["SLURM_JOB_ID"])
+    assert "mem=1G" in rec["Tres"] and rec["JobState"] in ("FAILED", "OUT_OF_MEMORY", "CANCELLED"), rec
+    assert "has not produced any output" in out  # submitit saw the job end without a result
+
+
+# -- (c) a GA job cancelled mid-way, resubmitted into its run directory -----------------------------------
+def _ga_overrides():
+    """A toy GA: population, generations, seed; a checkpoint every generation; later stages off or small,
+    for whichever of those keys the ga_reconfig config has."""
+    from hydra import compose, initialize_config_dir
+
+    from deltajax.run import CONFIG_DIR
+
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose(config_name="config", overrides=["experiment=ga_reconfig"])
+    over = ["experiment=ga_reconfig", "plots=false", "progress=false", "seed=0",
+            "experiment.ga.population_size=8", "experiment.ga.generations=400"]
+    optional = {"experiment.ga.checkpoint_every": 1, "experiment.pareto.enabled": "false",
+                "experiment.refine.enabled": "false", "experiment.verify.n_r": 8, "experiment.verify.n_phi": 4,
+                "experiment.verify.n_z": 8, "experiment.verify.cycle_samples": 48}
+    from omegaconf import OmegaConf
+
+    for key, value in optional.items():
+        if OmegaConf.select(cfg, key, default=None) is not None:
+            over.append(f"{key}={value}")
+    return over
+
+
+def _generations_done(path):
+    try:
+        with h5py.File(path, "r") as f:
+            return int(f["ga/checkpoint"].attrs["generations_done"])
+    except (OSError, KeyError):
+        return 0
+
+
+@pytest.mark.slow
+def test_cancelled_ga_job_resubmitted_finishes_bit_identical(cluster):
+    over = [*_ga_overrides(), *SLURM, "hydra.launcher.cpus_per_task=1", "hydra.launcher.mem_gb=2"]
+    generations = int(next(o for o in over if o.startswith("experiment.ga.generations=")).split("=")[1])
+    tmp = cluster["tmp"]
+    ref_sweep, sweep = tmp / "ga_ref", tmp / "ga_cut"
+    ref = _cli(cluster, ["-m", *over, f"hydra.sweep.dir={ref_sweep}"])
+    cut = _cli(cluster, ["-m", *over, f"hydra.sweep.dir={sweep}"])
+    results = sweep / "0" / "results.h5"
+    deadline = time.monotonic() + TIMEOUT
+    while _generations_done(results) < 1:  # the first checkpoint
+        assert cut.poll() is None, f"GA job ended before its first checkpoint:\n{cut.communicate()[0][-3000:]}"
+        assert time.monotonic() < deadline, "no GA checkpoint in time"
+        time.sleep(0.2)
+    job = _job(sweep / "0")
+    subprocess.run(["scancel", job["SLURM_JOB_ID"]], env=cluster["env"], check=True, timeout=30)
+    out = _finish(cut, "cancelled sweep", ok=False)
+    assert cut.returncode != 0 and "has not produced any output (state: CANCELLED" in out
+    done_at_cancel = _generations_done(results)
+    assert 1 <= done_at_cancel < generations, f"GA finished ({done_at_cancel} generations) before scancel landed"
+    status = {r["run"]: r["status"] for r in _rows(sweep)}
+    assert status["0"].startswith("killed: ") and "CANCELLED" in status["0"], status
+    assert _slurm_record(cluster, job["SLURM_JOB_ID"])["JobState"] == "CANCELLED"
+    # resubmit the same sweep into the same directory: the job resumes from its checkpoint
+    out = _finish(_cli(cluster, ["-m", *over, f"hydra.sweep.dir={sweep}"]), "resubmitted sweep")
+    log = Path(_job(sweep / "0")["stdout"]).read_text()
+    assert f"resuming the GA from generation {done_at_cancel}" in log
+    _finish(ref, "uninterrupted GA sweep")
+    with h5py.File(results, "r") as f:
+        assert int(f["ga"].attrs["resumed_from"]) == done_at_cancel
+    # every dataset bit-identical to the uninterrupted run; attributes too, but timings and the resume point
+    _assert_identical(results, ref_sweep / "0" / "results.h5", skip_attrs=(r"time_.*", "resumed_from"))
+    assert [r["status"] for r in _rows(sweep)] == ["ok"]
+
+
+# -- the summary's statuses from the jobs' own records (no cluster needed) ------------------------------------
+def test_summary_status_from_job_records(tmp_path):
+    """failed (the job raised), killed (SLURM's message in the job's stderr), running (no end and no trace),
+    ok; the job records go to summary.json."""
+    from deltajax.io import ResultsFile
+    from deltajax.sweep import summarize_sweep
+
+    records = {
+        "0": {"status": "ok"},
+        "1": {"status": "failed", "error": "ConfigError: robot: forearm must be > 0 m, got -1.0"},
+        "2": {"status": "running", "err": "submitit WARNING - Bypassing signal SIGTERM\n"
+                                          "slurmstepd-n1: error: *** STEP 7.0 ON n1 CANCELLED AT 2026-12-01T12:00:00 ***\n"},
+        "3": {"status": "running", "err": "still computing\n"},
+        "4": None,
+    }
+    for run, rec in records.items():
+        d = tmp_path / run
+        (d / ".hydra").mkdir(parents=True)
+        (d / ".hydra" / "overrides.yaml").write_text(f"- seed={run}\n")
+        if run == "0":
+            res = ResultsFile(d / "results.h5", attrs={"experiment": "demo"})
+            res.put("g", "x", 1.5, units="m")
+            res.flush(final=True)
+        if rec is None:
+            continue
+        rec = dict(rec)
+        if "err" in rec:
+            (d / "err.log").write_text(rec.pop("err"))
+            rec["stderr"] = str(d / "err.log")
+        (d / ".hydra" / "job_status.json").write_text(json.dumps(rec))
+    rows = _rows(Path(summarize_sweep(tmp_path)["json"]).parent)
+    status = {r["run"]: r["status"] for r in rows}
+    assert status == {"0": "ok", "1": "failed: ConfigError: robot: forearm must be > 0 m, got -1.0",
+                      "2": "killed: slurmstepd-n1: error: *** STEP 7.0 ON n1 CANCELLED AT 2026-12-01T12:00:00 ***",
+                      "3": "running", "4": "missing"}
+    assert rows[1]["job"]["status"] == "failed" and "job" not in rows[4]
+    csv = (tmp_path / "summary.csv").read_text().splitlines()
+    assert csv[2].startswith('1,run,"failed: ConfigError: robot: forearm must be > 0 m, got -1.0"')
