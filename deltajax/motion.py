@@ -74,6 +74,7 @@ __all__ = [
     "RefineResult",
     "path_tables",
     "resolve_path",
+    "resolve_tables",
     "pointwise_path",
     "fixed_path",
     "path_score",
@@ -477,15 +478,34 @@ def resolve_path(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_t
                                                                       beta=beta)
     w, a = _bands(recon, cycle, limits)
     dt = float(cycle.duration) / (cycle.n_samples - 1)
-    args = (tables.value, tables.feasible, tables.force_coef, tables.weights, float(recon.R_step), dt,
-            float(limits.force))
+    return resolve_tables(tables, dt, w, a, float(limits.force), aggregate=aggregate, boundary=boundary,
+                          start_batch=start_batch)
+
+
+def resolve_tables(tables: PathTables, dt: float, w: int, a: int, force_limit: float = math.inf, *,
+                   aggregate: str = "integral", boundary: str = "free", start_batch: int = 16) -> PathResult:
+    """The DP of :func:`resolve_path` on given tables and integer bands (w: speed, a: acceleration, in samples).
+
+    Args:
+        tables: :class:`PathTables` (any source; the DP only reads value, feasible, force_coef, weights, R_step).
+        dt: sample spacing (s).
+        w, a: |k_{j+1} - k_j| <= w, |k_{j+1} - 2 k_j + k_{j-1}| <= a (a is capped at 2 w, where it stops binding).
+        force_limit: |F_R| limit (N).
+    """
+    if aggregate not in AGGREGATES or boundary not in BOUNDARIES:
+        _check_names(INDEX_NAMES[0], aggregate, boundary)
+    n = tables.value.shape[1]
+    w = int(min(max(w, 0), n - 1))
+    a = int(min(max(a, 0), 2 * w))
+    args = (tables.value, tables.feasible, tables.force_coef, tables.weights, float(tables.R_step), float(dt),
+            float(force_limit))
     pm = aggregate == "min"
     k0 = 0
     if boundary == "closed":
         k0 = int(_closed_jit(*args, w=w, a=a, primary_min=pm, batch=int(start_batch)))
     P, S, path = _dp_jit(*args, k0, w=w, a=a, primary_min=pm, boundary=boundary, backtrack=True)
     ok = bool(np.isfinite(float(P)))
-    return _evaluate(tables, np.asarray(path), aggregate, dt, (w, a), ok)
+    return _evaluate(tables, np.asarray(path), aggregate, float(dt), (w, a), ok)
 
 
 def pointwise_path(tables: PathTables, aggregate: str = "integral", dt: float = 1.0) -> PathResult:
