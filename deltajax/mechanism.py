@@ -350,16 +350,18 @@ class ScrewLinkage(Mechanism):
         phi, ok = jax.vmap(self.inverse)(jnp.asarray(Rs))
         phi, ok = np.asarray(phi), np.asarray(ok)
         if not ok.all():
-            raise ValueError(f"ScrewLinkage cannot reach R = {Rs[~ok][0]!r} m on assembly {self.assembly}")
+            raise ValueError(f"ScrewLinkage cannot reach R = {float(Rs[~ok][0])!r} m on assembly {self.assembly} with "
+                             f"nut_side {self.nut_side} (out of the rocker's reach, or the working branch ends at a "
+                             "singular position before it)")
         st = jax.vmap(self.state)(jnp.asarray(phi))
         R_back = np.asarray(st.R)
         bad = ~np.isclose(R_back, Rs, rtol=0, atol=1e-9)
         if bad.any():
-            raise ValueError(f"ScrewLinkage: phi(R) at R = {Rs[bad][0]!r} m is not on assembly {self.assembly} "
+            raise ValueError(f"ScrewLinkage: phi(R) at R = {float(Rs[bad][0])!r} m is not on assembly {self.assembly} "
                              f"(forward position {R_back[bad][0]!r} m)")
         sing = np.asarray(st.singular)
         if sing.any():
-            raise ValueError(f"ScrewLinkage is singular at R = {Rs[sing][0]!r} m inside [{R_min}, {R_max}] m")
+            raise ValueError(f"ScrewLinkage is singular at R = {float(Rs[sing][0])!r} m inside [{R_min}, {R_max}] m")
         dphi = np.diff(phi)
         if not (np.all(dphi > 0) or np.all(dphi < 0)):
             raise ValueError(f"ScrewLinkage: phi(R) is not monotone over [{R_min}, {R_max}] m")

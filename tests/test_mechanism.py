@@ -104,11 +104,13 @@ def test_validation_names_field_and_value(field, value):
 
 
 def test_check_range_refuses_a_range_through_a_singularity():
-    top = float(MECH.R_f + MECH.R_r)          # the rocker lies radial there (sin alpha4 = 0)
-    with pytest.raises(ValueError, match="singular"):
-        MECH.check_range(0.138, top)
-    with pytest.raises(ValueError, match="cannot reach"):
-        MECH.check_range(0.138, top + 0.01)
+    # above R_max the working branch ends where the coupler turns perpendicular to the screw (Y = 0, R ~ 0.530 m)
+    with pytest.raises(ValueError, match="ScrewLinkage cannot reach R = 0.5"):
+        MECH.check_range(0.138, 0.54)
+    rows = MECH.singular_positions()["coupler_normal"]
+    R_end = [float(MECH.position(p)) for p, b in rows if b == MECH.assembly]
+    assert any(0.495 < r < 0.54 for r in R_end)
+    assert MECH.check_range(0.138, 0.525)["min_transmission"] > 0
 
 
 def test_effort_is_virtual_work_with_efficiency():
