@@ -373,12 +373,12 @@ def _dp(value, feasible, coef, weights, dR, dt, fmax, k0, *, w: int, a: int, pri
 _dp_jit = jax.jit(_dp, static_argnames=("w", "a", "primary_min", "boundary", "backtrack"))
 
 
-def _closed_starts(value, feasible, coef, weights, dR, dt, fmax, *, w, a, primary_min, batch):
+def _closed_starts(value, feasible, coef, weights, dR, dt, fmax, starts, *, w, a, primary_min, batch):
     one = lambda k0: _dp(value, feasible, coef, weights, dR, dt, fmax, k0, w=w, a=a,  # noqa: E731
                          primary_min=primary_min, boundary="closed", backtrack=False)[:2]
-    P, S = jax.lax.map(one, jnp.arange(value.shape[1]), batch_size=batch)
+    P, S = jax.lax.map(one, starts, batch_size=batch)
     flat = jnp.argmax(jnp.where(P == jnp.max(P), S, -jnp.inf))
-    return flat
+    return starts[flat]
 
 
 _closed_jit = jax.jit(_closed_starts, static_argnames=("w", "a", "primary_min", "batch"))
@@ -502,7 +502,14 @@ def resolve_tables(tables: PathTables, dt: float, w: int, a: int, force_limit: f
     pm = aggregate == "min"
     k0 = 0
     if boundary == "closed":
-        k0 = int(_closed_jit(*args, w=w, a=a, primary_min=pm, batch=int(start_batch)))
+        # only samples feasible at both ends can start a closed path (host filter; padded to limit retraces)
+        fe = np.asarray(tables.feasible)
+        starts = np.flatnonzero(fe[0] & fe[-1])
+        if starts.size == 0:
+            return _evaluate(tables, None, aggregate, float(dt), (w, a), False)
+        pad = -(-starts.size // start_batch) * start_batch
+        starts = np.concatenate([starts, np.full(pad - starts.size, starts[0])]).astype(np.int32)
+        k0 = int(_closed_jit(*args, jnp.asarray(starts), w=w, a=a, primary_min=pm, batch=int(start_batch)))
     P, S, path = _dp_jit(*args, k0, w=w, a=a, primary_min=pm, boundary=boundary, backtrack=True)
     ok = bool(np.isfinite(float(P)))
     return _evaluate(tables, np.asarray(path), aggregate, float(dt), (w, a), ok)
