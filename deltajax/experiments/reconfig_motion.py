@@ -1,0 +1,336 @@
+"""Experiment ``reconfig_motion``: the reconfigurable robot's R(t) along trajectories (issue 14).
+
+For each case (the standard pick-and-place cycle and a multi-point task, on the config robot, franco2026 by
+default) four ways to run the reconfiguration joint are compared:
+
+* ``fixed`` -- the best fixed R on the path (every sample feasible, static R force within the limit);
+* ``pointwise`` -- R*(t) = argmax of the criterion at every sample independently (what the workspace maps do);
+  its jumps are counted and its discrete rates reported as they are (the drive cannot follow them);
+* ``path_dp`` -- the exact path-optimal R(t) on the R samples (:func:`deltajax.resolve_path`) under the R drive's
+  speed, acceleration and force limits;
+* ``path_refined`` -- the smooth spline refinement (:func:`deltajax.refine_path`), kept only if it beats the DP
+  with every constraint met (else it repeats the DP and ``accepted = 0``).
+
+For each: the criterion along the path, R, Rdot, Rddot, the R actuator force F_R and arm torques (inverse
+dynamics with moving R, :func:`deltajax.cycle_profile`), the screw angle and motor-side torque of the
+reconfiguration drive (:mod:`deltajax.mechanism`), and the minimum cycle time when the arms *and* the R drive must
+keep up: the path is time-scaled (u fixed, T free) and T_min is the smallest T meeting the arm torque/speed
+limits, |F_R| and |Rdot| (:func:`deltajax.cycle_metrics`) and |Rddot| (R'' / T^2 <= limit, closed form).
+
+Writes group ``reconfig_motion/<case>``: axes ``t`` (s), ``R_grid`` (m), ``method``; ``p`` (t, xyz); the index
+landscape ``value_table`` (t, R_grid); per method ``<method>/R``, ``R_dot``, ``R_ddot``, ``value``, ``force_R``,
+``tau``, ``screw_angle``, ``screw_torque``; and ``summary`` datasets over ``method``. Plots
+``<case>_landscape.png`` (index over (t, R) with the four R(t)), ``<case>_profiles.png``, ``<case>_torques.png``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import motion as mo
+from .. import trajectory as tr
+from ..config import ConfigError
+from ..dynamics import Limits, cycle_metrics, cycle_profile
+from ..geometry import GeometryError, ReconfigurableDelta
+from ..indices import INDEX_NAMES
+from ..mechanism import MECHANISMS, DirectRadial, drive_profile, example_screw_linkage
+
+METHODS = ("fixed", "pointwise", "path_dp", "path_refined")
+SUMMARY = (("mean_value", "1"), ("min_value", "1"), ("max_abs_R_dot", "m/s"), ("max_abs_R_ddot", "m/s^2"),
+           ("max_abs_force_R", "N"), ("max_abs_screw_torque", "N m"), ("max_screw_speed", "rad/s"),
+           ("peak_arm_torque", "N m"), ("n_jumps", "1"), ("max_jump", "m"), ("cycle_time_arms", "s"),
+           ("cycle_time_with_drive", "s"), ("within_drive_limits", "1"))
+
+
+def _pos(e, key, unit, *, allow_inf=False):
+    try:
+        v = float(e[key])
+    except (KeyError, TypeError, ValueError):
+        raise ConfigError(f"experiment.{key} must be a number ({unit}), got {e.get(key)!r}") from None
+    if math.isnan(v) or not v > 0 or (not allow_inf and math.isinf(v)):
+        raise ConfigError(f"experiment.{key} must be > 0 {unit}{' (inf allowed)' if allow_inf else ''}, got {v!r}")
+    return v
+
+
+def _check(ctx):
+    e = ctx.cfg.experiment
+    if ctx.recon is None:
+        raise ConfigError("reconfig_motion needs a reconfigurable robot: robot.R_range is null")
+    if ctx.recon.robot.mass is None:
+        raise ConfigError("reconfig_motion needs a mass model: robot.mass is null")
+    out = {}
+    crit = str(e.get("criterion", "k_tilde"))
+    if crit not in INDEX_NAMES:
+        raise ConfigError(f"experiment.criterion must be one of {INDEX_NAMES}, got {crit!r}")
+    agg = str(e.get("aggregate", "integral"))
+    if agg not in mo.AGGREGATES:
+        raise ConfigError(f"experiment.aggregate must be one of {mo.AGGREGATES}, got {agg!r}")
+    out.update(criterion=crit, aggregate=agg)
+    for k in ("b_v", "b_f"):
+        out[k] = _pos(e, k, "")
+    out["beta"] = float(e.get("beta", 0.5))
+    if not 0.0 < out["beta"] < 1.0:
+        raise ConfigError(f"experiment.beta must be in (0, 1), got {out['beta']!r}")
+    out["R_step"] = _pos(e, "R_step", "m")
+    d = e.get("drive")
+    if d is None:
+        raise ConfigError("experiment.drive is required (speed m/s, acceleration m/s^2, force N)")
+    try:
+        out["drive"] = mo.RDriveLimits(speed=float(d.speed), acceleration=float(d.acceleration), force=float(d.force))
+    except (ValueError, AttributeError) as err:
+        raise ConfigError(f"experiment.drive: {err}") from None
+    out["torque_limit"] = _pos(e, "torque_limit", "N m")
+    out["speed_limit"] = _pos(e, "speed_limit", "rad/s")
+    mech = e.get("mechanism", {})
+    kind = str(mech.get("kind", "screw_linkage"))
+    if kind not in MECHANISMS:
+        raise ConfigError(f"experiment.mechanism.kind must be one of {sorted(MECHANISMS)}, got {kind!r}")
+    kw = {k: v for k, v in dict(mech).items() if k != "kind"}
+    try:
+        if kind == "direct":
+            out["mech"] = DirectRadial(**kw)
+        else:
+            R0, R1 = float(ctx.recon.R_min), float(ctx.recon.R_max)
+            out["mech"] = example_screw_linkage(R0, R1, **kw)
+            out["mech_info"] = out["mech"].check_range(R0, R1)
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"experiment.mechanism: {err}") from None
+    ref = e.get("refine", {})
+    out["refine"] = dict(enabled=bool(ref.get("enabled", True)), n_ctrl=int(ref.get("n_ctrl", 16)),
+                         steps=int(ref.get("steps", 150)), learning_rate=float(ref.get("learning_rate", 2e-4)))
+    if out["refine"]["n_ctrl"] < 6 or out["refine"]["steps"] < 1 or not out["refine"]["learning_rate"] > 0:
+        raise ConfigError(f"experiment.refine: n_ctrl >= 6, steps >= 1, learning_rate > 0 required, got {dict(ref)!r}")
+    cases = e.get("cases")
+    if not cases:
+        raise ConfigError("experiment.cases must list at least one case")
+    out["cases"] = {}
+    for name, c in cases.items():
+        kind = str(c.get("kind", ""))
+        boundary = str(c.get("boundary", "free"))
+        if boundary not in mo.BOUNDARIES:
+            raise ConfigError(f"experiment.cases.{name}.boundary must be one of {mo.BOUNDARIES}, got {boundary!r}")
+        law = str(c.get("law", "poly5"))
+        if law not in tr.MOTION_LAWS:
+            raise ConfigError(f"experiment.cases.{name}.law must be one of {sorted(tr.MOTION_LAWS)}, got {law!r}")
+        try:
+            if kind == "adept":
+                cyc = tr.adept_cycle([float(v) for v in c.centre], heading=math.radians(float(c.heading_deg)),
+                                     duration=float(c.duration), law=law, blend=float(c.get("blend", 0.5)),
+                                     n_samples=int(c.n_samples), dtype=ctx.dtype)
+            elif kind == "task":
+                cyc = mo.task_path([list(p) for p in c.points], segment_duration=float(c.segment_duration), law=law,
+                                   samples_per_segment=int(c.samples_per_segment), closed=bool(c.get("closed", False)),
+                                   dtype=ctx.dtype)
+            else:
+                raise ConfigError(f"experiment.cases.{name}.kind must be 'adept' or 'task', got {kind!r}")
+        except (ValueError, TypeError, AttributeError) as err:
+            if isinstance(err, ConfigError):
+                raise
+            raise ConfigError(f"experiment.cases.{name}: {err}") from None
+        out["cases"][name] = (cyc, boundary)
+    return out
+
+
+def _metrics_T(robot, cyc, R, Rd, Rdd, s):
+    """(cycle time for the arms only, cycle time with the R drive) of the time-scaled path."""
+    c = mo.with_R(cyc, R, Rd, Rdd)
+    arms = cycle_metrics(robot, c, Limits(torque=s["torque_limit"], speed=s["speed_limit"]))
+    lim = s["drive"]
+    full = cycle_metrics(robot, c, Limits(torque=s["torque_limit"], speed=s["speed_limit"], force_R=float(lim.force),
+                                          speed_R=float(lim.speed)))
+    T = float(cyc.duration)
+    Rdd_u = np.max(np.abs(np.asarray(Rdd))) * T * T        # R'' in normalised time
+    T_acc = math.sqrt(Rdd_u / float(lim.acceleration)) if math.isfinite(float(lim.acceleration)) else 0.0
+    return float(arms.cycle_time), max(float(full.cycle_time), T_acc)
+
+
+def _evaluate(robot, cyc, mech, R, Rd, Rdd, value, s, jump):
+    c = mo.with_R(cyc, R, Rd, Rdd)
+    prof = cycle_profile(robot, c)
+    drv = drive_profile(mech, prof.R, prof.R_dot, prof.force_R)
+    T_arms, T_drive = _metrics_T(robot, cyc, R, Rd, Rdd, s)
+    dR = np.abs(np.diff(np.asarray(R)))
+    lim = s["drive"]
+    within = (np.all(np.abs(Rd) <= float(lim.speed) * (1 + 1e-9)) and np.all(np.abs(Rdd) <= float(lim.acceleration)
+              * (1 + 1e-9) + 1e-9) and np.all(np.abs(np.asarray(prof.force_R)) <= float(lim.force)))
+    row = dict(mean_value=float(np.sum(np.asarray(mo._trapezoid_weights(len(value), 1.0, np.float64)) * value)
+                                / (len(value) - 1)),
+               min_value=float(np.min(value)), max_abs_R_dot=float(np.max(np.abs(Rd))),
+               max_abs_R_ddot=float(np.max(np.abs(Rdd))), max_abs_force_R=float(np.max(np.abs(prof.force_R))),
+               max_abs_screw_torque=float(np.max(np.abs(drv.effort))),
+               max_screw_speed=float(np.max(np.abs(drv.motor_speed))),
+               peak_arm_torque=float(np.max(np.abs(prof.tau))), n_jumps=int(np.sum(dR > jump)),
+               max_jump=float(dR.max()), cycle_time_arms=T_arms, cycle_time_with_drive=T_drive,
+               within_drive_limits=int(bool(within)))
+    return prof, drv, row
+
+
+def _plot_landscape(ctx, name, t, Rg, table, paths, crit):
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(9, 5))
+    im = ax.pcolormesh(t, Rg, table.T, shading="nearest", cmap="viridis")
+    fig.colorbar(im, ax=ax, label=f"{crit} (NaN: unreachable)")
+    styles = {"fixed": dict(color="w", ls="--", lw=1.5), "pointwise": dict(color="r", ls="none", marker=".", ms=4),
+              "path_dp": dict(color="orange", lw=2.0), "path_refined": dict(color="k", lw=1.2)}
+    for m, R in paths.items():
+        ax.plot(t, R, label=m, **styles[m])
+    ax.set_xlabel("t (s)")
+    ax.set_ylabel("R (m)")
+    ax.set_title(f"{name}: {crit} over (t, R) and the four R(t)")
+    ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
+    ctx.savefig(fig, f"{name}_landscape")
+
+
+def _plot_profiles(ctx, name, t, data, s):
+    import matplotlib.pyplot as plt
+
+    keys = (("value", s["criterion"], None), ("R", "R (m)", None), ("R_dot", "Rdot (m/s)", float(s["drive"].speed)),
+            ("force_R", "F_R (N)", float(s["drive"].force)), ("screw_torque", "screw motor torque (N m)", None))
+    fig, axes = plt.subplots(len(keys), 1, figsize=(9, 12), sharex=True)
+    colors = {"fixed": "C0", "pointwise": "C3", "path_dp": "C1", "path_refined": "k"}
+    for ax, (key, label, lim) in zip(axes, keys):
+        lo, hi = np.inf, -np.inf
+        for m, d in data.items():
+            y = np.asarray(d[key])
+            kw = dict(marker=".", ms=3, lw=0.6) if m == "pointwise" else dict(lw=1.4)
+            ax.plot(t, y, color=colors[m], label=m, **kw)
+            if m != "pointwise":
+                lo, hi = min(lo, np.nanmin(y)), max(hi, np.nanmax(y))
+        if lim is not None and math.isfinite(lim):
+            ax.axhline(lim, color="grey", ls=":", lw=1)
+            ax.axhline(-lim, color="grey", ls=":", lw=1)
+            lo, hi = min(lo, -lim), max(hi, lim)
+        if key in ("R_dot", "force_R", "screw_torque"):
+            pad = 0.15 * (hi - lo + 1e-12)
+            ax.set_ylim(lo - pad, hi + pad)   # pointwise jumps run off this scale; their peaks are in the summary
+        ax.set_ylabel(label)
+        ax.grid(alpha=0.3)
+    axes[0].legend(ncol=4, fontsize=8)
+    axes[0].set_title(f"{name}: index, R(t), Rdot, R force and screw torque (dotted: drive limits; pointwise "
+                      "off-scale where it jumps)", fontsize=9)
+    axes[-1].set_xlabel("t (s)")
+    ctx.savefig(fig, f"{name}_profiles")
+
+
+def _plot_torques(ctx, name, t, data):
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
+    colors = {"fixed": "C0", "pointwise": "C3", "path_dp": "C1", "path_refined": "k"}
+    for i, ax in enumerate(axes):
+        for m, d in data.items():
+            ax.plot(t, np.asarray(d["tau"])[:, i], color=colors[m], lw=0.8 if m == "pointwise" else 1.4, label=m)
+        ax.set_ylabel(f"tau_{i + 1} (N m)")
+        ax.grid(alpha=0.3)
+    axes[0].legend(ncol=4, fontsize=8)
+    axes[0].set_title(f"{name}: arm torques at the nominal duration")
+    axes[-1].set_xlabel("t (s)")
+    ctx.savefig(fig, f"{name}_torques")
+
+
+def run(ctx) -> None:
+    s = _check(ctx)
+    rec0 = ctx.recon
+    try:
+        recon = ReconfigurableDelta.from_range(rec0.robot, float(rec0.R_min), float(rec0.R_max), s["R_step"])
+    except GeometryError as err:
+        raise ConfigError(f"experiment.R_step: {err}") from None
+    robot = recon.robot
+    res = ctx.results
+    mech = s["mech"]
+    kw = dict(b_v=s["b_v"], b_f=s["b_f"], beta=s["beta"])
+    tables_jit = jax.jit(mo.path_tables, static_argnames=("criterion",))
+    lim = s["drive"]
+    table_rows = []
+    for name, (cyc, boundary) in s["cases"].items():
+        t0 = time.perf_counter()
+        c0 = time.process_time()
+        tab = jax.block_until_ready(tables_jit(recon, cyc, s["criterion"], **kw))
+        dt = float(cyc.duration) / (cyc.n_samples - 1)
+        fixed = mo.fixed_path(tab, lim, s["aggregate"], dt)
+        pw = mo.pointwise_path(tab, s["aggregate"], dt)
+        dp = mo.resolve_path(recon, cyc, s["criterion"], limits=lim, aggregate=s["aggregate"], boundary=boundary,
+                             tables=tab, **kw)
+        t_dp = time.perf_counter() - t0
+        if not dp.ok:
+            raise RuntimeError(f"case {name!r}: no R(t) meets the drive limits {lim} on this path (bands {dp.bands})")
+        if s["refine"]["enabled"]:
+            rf = mo.refine_path(recon, cyc, dp, s["criterion"], limits=lim, aggregate=s["aggregate"],
+                                boundary=boundary, n_ctrl=s["refine"]["n_ctrl"], steps=s["refine"]["steps"],
+                                learning_rate=s["refine"]["learning_rate"], **kw)
+        else:
+            rf = None
+        wall, cpu = time.perf_counter() - t0, time.process_time() - c0
+        jump = float(lim.speed) * dt if math.isfinite(float(lim.speed)) else float(recon.R_step)
+        profiles = {"fixed": fixed, "pointwise": pw, "path_dp": dp}
+        data, rows = {}, {}
+        for m in METHODS:
+            if m == "path_refined":
+                src = rf if rf is not None else dp
+                R, Rd, Rdd, val = src.R, src.R_dot, src.R_ddot, src.value
+            else:
+                r = profiles[m]
+                if not r.ok:
+                    ctx.log(f"{name}: {m} has no feasible R on this path; skipped")
+                    continue
+                R, Rd, Rdd, val = r.R, r.R_dot, r.R_ddot, r.value
+            prof, drv, row = _evaluate(robot, cyc, mech, R, Rd, Rdd, np.asarray(val), s, jump)
+            data[m] = dict(R=np.asarray(R), R_dot=np.asarray(Rd), R_ddot=np.asarray(Rdd), value=np.asarray(val),
+                           force_R=np.asarray(prof.force_R), tau=np.asarray(prof.tau), screw_angle=np.asarray(drv.q),
+                           screw_torque=np.asarray(drv.effort), drive_ok=np.asarray(drv.ok))
+            rows[m] = row
+        g = f"reconfig_motion/{name}"
+        t = np.asarray(cyc.time())
+        res.put_axis(g, "t", t, units="s")
+        res.put_axis(g, "R_grid", np.asarray(tab.R), units="m")
+        res.put(g, "p", np.asarray(cyc.x), units="m", dims=("t", "xyz"),
+                attrs={"long_name": "platform centre, base frame (z down)"})
+        res.put(g, "value_table", np.asarray(tab.value), units="1", dims=("t", "R_grid"),
+                attrs={"long_name": f"{s['criterion']} at (sample, R sample); NaN infeasible"})
+        units = dict(R="m", R_dot="m/s", R_ddot="m/s^2", value="1", force_R="N", tau="N m", screw_angle="rad",
+                     screw_torque=mech.effort_unit, drive_ok="1")
+        for m, d in data.items():
+            for key, arr in d.items():
+                res.put(f"{g}/{m}", key, arr, units=units[key], dims=("t", "chain") if arr.ndim == 2 else ("t",))
+        present = [m for m in METHODS if m in rows]
+        res.put_axis(f"{g}/summary", "method", np.asarray(present, dtype="S"), units="1")
+        for key, unit in SUMMARY:
+            res.put(f"{g}/summary", key, np.asarray([rows[m][key] for m in present], float), units=unit,
+                    dims=("method",))
+        attrs = dict(boundary=boundary, criterion=s["criterion"], aggregate=s["aggregate"], duration=float(cyc.duration),
+                     n_samples=int(cyc.n_samples), R_step=float(recon.R_step), band_speed=dp.bands[0],
+                     band_acceleration=dp.bands[1], dp_score=list(dp.score), wall_s=wall, cpu_s=cpu, dp_wall_s=t_dp,
+                     drive_speed=float(lim.speed), drive_acceleration=float(lim.acceleration),
+                     drive_force=float(lim.force), jump_threshold_m=jump)
+        if rf is not None:
+            attrs.update(refine_accepted=int(rf.accepted), refine_reason=rf.reason, refine_score=list(rf.spline_score))
+        res.set_attrs(g, **attrs)
+        res.flush()
+        for m in present:
+            r = rows[m]
+            table_rows.append((name, m, r))
+            ctx.log(f"{name:6s} {m:12s} mean {s['criterion']} {r['mean_value']:.4f} min {r['min_value']:.4f} | "
+                    f"max|Rdot| {r['max_abs_R_dot']:.3f} m/s max|Rddot| {r['max_abs_R_ddot']:.2f} m/s^2 "
+                    f"max|F_R| {r['max_abs_force_R']:.1f} N screw {r['max_abs_screw_torque']:.3f} N m | "
+                    f"jumps {r['n_jumps']} (max {1000 * r['max_jump']:.1f} mm) | arm torque {r['peak_arm_torque']:.2f} N m"
+                    f" | T_min arms {r['cycle_time_arms']:.3f} s, with R drive {r['cycle_time_with_drive']:.3f} s")
+        ctx.log(f"{name}: bands w={dp.bands[0]}, a={dp.bands[1]} samples; DP {t_dp:.1f} s wall; case {wall:.1f} s wall, "
+                f"{cpu:.1f} CPU-s" + (f"; refinement {'accepted' if rf.accepted else 'rejected'}: {rf.reason}"
+                                      if rf is not None else ""))
+        paths = {m: d["R"] for m, d in data.items()}
+        _plot_landscape(ctx, name, t, np.asarray(tab.R), np.asarray(tab.value), paths, s["criterion"])
+        _plot_profiles(ctx, name, t, data, s)
+        _plot_torques(ctx, name, t, data)
+    if "mech_info" in s:
+        res.set_attrs("reconfig_motion", mechanism="screw_linkage",
+                      **{f"mechanism_{k}": float(np.asarray(getattr(mech, k))) for k in
+                         ("R_f", "R_r", "d1", "d2", "d3", "pitch", "efficiency", "back_efficiency", "gear_ratio")},
+                      **{f"mechanism_{k}": v for k, v in s["mech_info"].items()})
+    else:
+        res.set_attrs("reconfig_motion", mechanism="direct")

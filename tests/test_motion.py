@@ -1,0 +1,162 @@
+"""Path-level redundancy resolution: DP exact vs brute force, limits respected, >= best fixed R, pointwise
+equals the workspace resolver, exact force polynomial, smooth refinement, task paths."""
+
+import itertools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+import deltajax as dj
+from deltajax import motion as mo
+from deltajax.geometry import ReconfigurableDelta
+
+
+def _brute(tab, dt, w, a, fmax, aggregate, boundary):
+    K, n = tab.value.shape
+    dR = float(tab.R_step)
+    best = (-math.inf, -math.inf)
+    coef_all = np.asarray(tab.force_coef)
+    for ks in itertools.product(range(n), repeat=K):
+        k = np.array(ks)
+        d1, d2 = np.diff(k), np.diff(k, 2)
+        if np.any(np.abs(d1) > w) or np.any(np.abs(d2) > a):
+            continue
+        if boundary in ("rest", "closed") and (d1[0] != 0 or d1[-1] != 0):
+            continue
+        if boundary == "closed" and k[0] != k[-1]:
+            continue
+        s = mo.path_score(tab, k, aggregate)
+        if not np.isfinite(s[0]):
+            continue
+        v, acc = mo._int_rates(k, dR, dt)
+        c = coef_all[np.arange(K), k]
+        F = c[:, 0] + v * (c[:, 1] + v * c[:, 2]) + acc * c[:, 3]
+        if np.any(~(np.abs(F) <= fmax)):
+            continue
+        best = max(best, s)
+    return best
+
+
+def _random_tables(seed, K=5, n=4):
+    rng = np.random.default_rng(seed)
+    value = rng.uniform(0.0, 1.0, (K, n)).round(2)   # rounded: ties happen and must be handled
+    feasible = rng.uniform(size=(K, n)) > 0.15
+    coef = rng.normal(0.0, 1.0, (K, n, 4)) * np.array([3.0, 1.0, 0.5, 0.3])
+    return mo.PathTables(t=jnp.linspace(0, 1, K), R=jnp.arange(n) * 0.01 + 0.1,
+                         value=jnp.asarray(np.where(feasible, value, np.nan)), feasible=jnp.asarray(feasible),
+                         force_coef=jnp.asarray(np.where(feasible[..., None], coef, np.nan)),
+                         weights=jnp.asarray(np.r_[0.5, np.ones(K - 2), 0.5] * 0.25), R_step=jnp.asarray(0.01))
+
+
+@pytest.mark.parametrize("seed", range(2))
+def test_dp_equals_brute_force_on_random_tables(seed):
+    tab = _random_tables(seed)
+    dt = 0.05
+    for (w, a, fmax) in [(1, 1, 4.0), (2, 1, 3.0), (3, 6, math.inf)]:
+        for aggregate in mo.AGGREGATES:
+            for boundary in mo.BOUNDARIES:
+                res = mo.resolve_tables(tab, dt, w, a, fmax, aggregate=aggregate, boundary=boundary)
+                bf = _brute(tab, dt, w, a, fmax, aggregate, boundary)
+                assert res.score == bf, (w, a, fmax, aggregate, boundary)
+                assert res.ok == np.isfinite(bf[0])
+                if res.ok:   # the returned path achieves the score and satisfies the bands
+                    assert mo.path_score(tab, res.k, aggregate) == bf
+                    assert np.all(np.abs(np.diff(res.k)) <= w) and np.all(np.abs(np.diff(res.k, 2)) <= a)
+                    assert np.all(np.abs(res.force_R) <= fmax)
+
+
+# -- on the robot -----------------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def tiny():
+    base = dj.presets.franco2026(fixed_R=0.2, with_mass=True)
+    recon = ReconfigurableDelta.from_range(base, 0.14, 0.22, 0.02)
+    cyc = dj.trajectory.point_to_point([-0.12, 0.06, 0.36], [0.12, -0.05, 0.42], duration=0.4, n_samples=5)
+    tab = jax.jit(mo.path_tables, static_argnames="criterion")(recon, cyc, "sigma_min_v")
+    return recon, cyc, tab
+
+
+def test_robot_instance_exact_limits_and_baselines(tiny):
+    recon, cyc, tab = tiny
+    dt = 0.1
+    F0 = np.abs(np.asarray(tab.force_coef)[..., 0])
+    for lim, aggregate, boundary in [
+            (dj.RDriveLimits(speed=0.25, acceleration=2.5, force=float(np.nanmedian(F0)) + 4.0), "integral", "free"),
+            (dj.RDriveLimits(speed=0.45, acceleration=4.5), "min", "rest"),
+            (dj.RDriveLimits(), "integral", "rest")]:
+        res = dj.resolve_path(recon, cyc, "sigma_min_v", limits=lim, aggregate=aggregate, boundary=boundary,
+                              tables=tab)
+        w, a = res.bands
+        assert res.score == _brute(tab, dt, w, a, float(lim.force), aggregate, boundary)
+        assert res.ok and mo.path_constraints_ok(res, lim, dt, 0.02)
+        fixed = dj.fixed_path(tab, lim, aggregate, dt)
+        assert fixed.ok and res.score >= fixed.score
+    assert res.bands == (recon.n_R - 1, 2 * (recon.n_R - 1))   # unlimited drive
+
+
+def test_pointwise_equals_workspace_resolver(tiny):
+    recon, cyc, tab = tiny
+    pw = dj.pointwise_path(tab, dt=0.1)
+    ref = dj.workspace.resolve_redundancy(recon, cyc.x, "sigma_min_v")
+    np.testing.assert_array_equal(np.asarray(ref.ok), True)
+    np.testing.assert_allclose(pw.value, np.asarray(ref.value), rtol=1e-12)
+    np.testing.assert_allclose(pw.R, np.asarray(ref.R), rtol=0, atol=1e-15)
+
+
+def test_force_is_exactly_quadratic_in_Rdot_and_affine_in_Rddot(tiny):
+    recon, cyc, tab = tiny
+    x, xd, xdd = cyc.rates()
+    rng = np.random.default_rng(0)
+    j = np.array([0, 2, 3, 4])
+    k = np.array([1, 3, 2, 4])
+    v = rng.uniform(-0.8, 0.8, 4)
+    acc = rng.uniform(-20, 20, 4)
+    F, _, ok = mo._forces(recon.robot, cyc, x[j], xd[j], xdd[j], tab.R[k], jnp.asarray(v), jnp.asarray(acc))
+    c = np.asarray(tab.force_coef)[j, k]
+    assert bool(jnp.all(ok))
+    np.testing.assert_allclose(np.asarray(F), c[:, 0] + v * c[:, 1] + v ** 2 * c[:, 2] + acc * c[:, 3],
+                               rtol=1e-10, atol=1e-10)
+
+
+def test_limits_validation_names_field():
+    with pytest.raises(ValueError, match="RDriveLimits.speed"):
+        dj.RDriveLimits(speed=-1.0)
+    with pytest.raises(ValueError, match="RDriveLimits.force"):
+        dj.RDriveLimits(force=float("nan"))
+    with pytest.raises(ValueError, match="aggregate"):
+        mo.resolve_tables(_random_tables(0), 0.1, 1, 1, aggregate="mean")
+
+
+def test_task_path_rates_are_derivatives():
+    pts = [[0.0, 0.0, 0.35], [0.1, 0.05, 0.40], [-0.08, 0.1, 0.38]]
+    cyc = dj.task_path(pts, segment_duration=0.4, samples_per_segment=41)
+    assert cyc.n_samples == 81 and float(cyc.duration) == pytest.approx(0.8)
+    x, xd, _ = cyc.rates()
+    t = np.asarray(cyc.time())
+    fd = np.gradient(np.asarray(x), t, axis=0)
+    np.testing.assert_allclose(np.asarray(xd)[1:-1], fd[1:-1], atol=4e-3)   # O(dt^2) central differences
+    np.testing.assert_allclose(np.asarray(x)[[0, 40, 80]], pts, atol=1e-15)
+    with pytest.raises(ValueError, match="task points"):
+        dj.task_path([[0, 0, 0.3]])
+
+
+@pytest.mark.slow
+def test_refinement_accepts_only_improvements_within_limits():
+    base = dj.presets.franco2026(fixed_R=0.2, with_mass=True)
+    recon = ReconfigurableDelta.from_range(base, 0.14, 0.30, 0.005)
+    cyc = dj.trajectory.point_to_point([-0.12, 0.06, 0.36], [0.12, -0.05, 0.42], duration=0.5, n_samples=11)
+    lim = dj.RDriveLimits(speed=0.3, acceleration=6.0, force=60.0)
+    dp = dj.resolve_path(recon, cyc, "k_tilde", limits=lim, boundary="rest")
+    ref = dj.refine_path(recon, cyc, dp, "k_tilde", limits=lim, boundary="rest", n_ctrl=6, steps=60,
+                         learning_rate=1e-3)
+    assert ref.dp_score == dp.score
+    if ref.accepted:
+        assert ref.score > dp.score
+        assert np.all(np.abs(ref.R_dot) <= 0.3 + 1e-12) and np.all(np.abs(ref.R_ddot) <= 6.0 + 1e-9)
+        assert np.all(np.abs(ref.force_R) <= 60.0) and abs(ref.R_dot[0]) < 1e-9 and abs(ref.R_dot[-1]) < 1e-9
+    else:
+        np.testing.assert_array_equal(ref.R, dp.R)
+        assert ref.reason
