@@ -5,6 +5,7 @@ choice: ``jax.config.update("jax_enable_x64", True)``; the CLI does it from ``pr
 """
 
 from . import presets
+from ._precision import Float32Warning
 from .geometry import CHAIN_ANGLES, Delta, GeometryError, ReconfigurableDelta, from_z_up, to_z_up
 from .indices import (INDEX_NAMES, Indices, Singularity, classify_singularity, indices,
                       indices_from_singular_values, k_tilde, point_indices, sigma_tilde,
