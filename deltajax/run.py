@@ -268,29 +268,33 @@ def main(cfg: DictConfig) -> None:
 
 @contextlib.contextmanager
 def _api_logging(run_dir: Path):
-    """Logging for :func:`run_experiment` when the caller has configured none: the run's lines on stdout and
-    in ``<run_dir>/run.log``, as under the CLI."""
+    """Logging for :func:`run_experiment`: the run's lines always go to ``<run_dir>/run.log`` (as under the
+    CLI) and, when the caller has configured no logging, to stdout (warnings and errors to stderr)."""
     root = logging.getLogger()
-    if root.handlers:
-        yield
-        return
     run_dir.mkdir(parents=True, exist_ok=True)
-    out = logging.StreamHandler(sys.stdout)
-    out.setFormatter(logging.Formatter("%(message)s"))
-    out.addFilter(BelowWarning())
-    err = logging.StreamHandler(sys.stderr)
-    err.setLevel(logging.WARNING)
-    err.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))
     file = logging.FileHandler(run_dir / "run.log")
     file.setFormatter(logging.Formatter("[%(asctime)s][%(name)s][%(levelname)s] - %(message)s"))
-    level = root.level
-    root.handlers = [out, err, file]
-    root.setLevel(logging.INFO)
+    file.setLevel(logging.INFO)
+    added = [file]
+    if not root.handlers:
+        out = logging.StreamHandler(sys.stdout)
+        out.setFormatter(logging.Formatter("%(message)s"))
+        out.addFilter(BelowWarning())
+        err = logging.StreamHandler(sys.stderr)
+        err.setLevel(logging.WARNING)
+        err.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))
+        added += [out, err]
+    level = log.level
+    if log.getEffectiveLevel() > logging.INFO:
+        log.setLevel(logging.INFO)  # the run's INFO lines reach run.log whatever the root level is
+    for h in added:
+        root.addHandler(h)
     try:
         yield
     finally:
-        root.handlers = []
-        root.setLevel(level)
+        for h in added:
+            root.removeHandler(h)
+        log.setLevel(level)
         file.close()
 
 
