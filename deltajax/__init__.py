@@ -19,6 +19,7 @@ from .dynamics import CycleMetrics, Limits, Torques, cycle_metrics, cycle_profil
 from .mass import MassModel
 from .trajectory import Cycle, adept_cycle, ga_paper_motion
 from . import optimize
+from . import workspace
 from .optimize import DesignSpace, GAConfig, Problem, nsga2, refine, run_ga
 
 __version__ = "0.1.0"

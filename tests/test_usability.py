@@ -96,3 +96,37 @@ def test_float32_warning_once_unless_requested():
     assert _count_float32_warnings("") == "1"  # forgot jax_enable_x64: warned once per process, not per robot
     assert _count_float32_warnings("import jax; jax.config.update('jax_enable_x64', True)\n") == "0"
     assert _count_float32_warnings("from deltajax._precision import float32_requested; float32_requested()\n") == "0"
+
+
+# -- API: one-call volume, result objects, progress totals -------------------------------------------------------
+def test_workspace_volume_one_call_matches_a_big_grid_and_flags_truncation(monkeypatch):
+    import io
+
+    import numpy as np
+    from tqdm import tqdm
+
+    from deltajax import workspace as ws
+    from deltajax.workspace import measure as vol_mod
+
+    robot = dj.presets.franco2026(fixed_R=0.2)
+    h = 0.02
+    res = dj.workspace.volume(robot, h=h)
+    assert not res.truncated and res.count > 0 and res.volume == pytest.approx(res.count * h ** 3)
+    # the same lattice in a generous box: the reach-sized box misses nothing
+    big = ws.make_grid((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0), h)
+    ref = ws.fixed_workspace(robot, big, fields=False)
+    assert ref.count == res.count and isinstance(ref.count, int)  # GridJob.count: points, not tuple.count
+    # a box that cuts the workspace off is flagged, never reported as complete
+    monkeypatch.setattr(vol_mod, "reach_box", lambda r: ((-0.2, 0.2), (-0.2, 0.2), (0.0, 0.3)))
+    cut = dj.workspace.volume(robot, h=h)
+    assert cut.truncated and cut.count < res.count
+    monkeypatch.undo()
+    rec = dj.workspace.volume(dj.presets.franco2026(), h=0.04)
+    assert rec.reconfigurable and not rec.truncated and rec.volume > dj.workspace.volume(robot, h=0.04).volume
+    with pytest.raises(ValueError, match=r"h must be a positive grid spacing in m, got -0.01"):
+        dj.workspace.volume(robot, h=-0.01)
+    # grid progress bars end at 100 % under mirror halving (bar.update passed, as the experiments do)
+    g = ws.make_grid((-0.4, 0.4), (-0.4, 0.4), (0.0, 0.6), 0.05)
+    with tqdm(total=g.n_points, file=io.StringIO()) as bar:
+        ws.fixed_workspace(robot, g, fields=False, chunk_size=500, progress=bar.update)
+        assert bar.n == bar.total and bar.total < g.n_points
