@@ -5,6 +5,7 @@ choice: ``jax.config.update("jax_enable_x64", True)``; the CLI does it from ``pr
 """
 
 from . import presets
+from ._precision import Float32Warning
 from .geometry import CHAIN_ANGLES, Delta, GeometryError, ReconfigurableDelta, from_z_up, to_z_up
 from .indices import (INDEX_NAMES, Indices, Singularity, classify_singularity, indices,
                       indices_from_singular_values, k_tilde, point_indices, sigma_tilde,
@@ -18,6 +19,7 @@ from .dynamics import CycleMetrics, Limits, Torques, cycle_metrics, cycle_profil
 from .mass import MassModel
 from .trajectory import Cycle, adept_cycle, ga_paper_motion
 from . import optimize
+from . import workspace
 from .optimize import DesignSpace, GAConfig, Problem, nsga2, refine, run_ga
 from . import mechanism, motion
 from .mechanism import DirectRadial, ScrewLinkage, drive_profile, example_screw_linkage, reconfiguration_drive

@@ -18,6 +18,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ._precision import warn_if_float32
+
 __all__ = [
     "Delta",
     "ReconfigurableDelta",
@@ -63,6 +65,10 @@ def _cos_range(lo: float, hi: float) -> tuple[float, float]:
     return (-1.0 if contains(math.pi) else min(ends)), (1.0 if contains(0.0) else max(ends))
 
 
+#: a full revolution (rad), with room for the rounding of [-pi, pi] and of radians(+-180)
+_FULL_TURN = 2 * math.pi * (1 + 1e-12)
+
+
 def _leaf(x: Any) -> jax.Array:
     return jnp.asarray(x, dtype=jnp.result_type(float))
 
@@ -89,6 +95,7 @@ class Delta(eqx.Module):
     mass: Any = None
 
     def __check_init__(self):
+        warn_if_float32(self.base_radius.dtype, "deltajax.Delta")
         R = _concrete_float("base_radius", self.base_radius)
         r = _concrete_float("platform_radius", self.platform_radius)
         L1 = _concrete_float("upper_arm", self.upper_arm)
@@ -108,10 +115,11 @@ class Delta(eqx.Module):
                 raise GeometryError(
                     f"joint limits inverted or empty: theta_min={lo_f!r} rad must be < theta_max={hi_f!r} rad"
                 )
-            if math.isfinite(lo_f) and math.isfinite(hi_f) and hi_f - lo_f >= 2 * math.pi:
+            # [-pi, pi] (a full revolution) is the common way to write "no limit"; more than one turn is an error
+            if math.isfinite(lo_f) and math.isfinite(hi_f) and hi_f - lo_f > _FULL_TURN:
                 raise GeometryError(
-                    f"joint range theta_max - theta_min = {hi_f - lo_f!r} rad must be < 2*pi "
-                    "(use theta_min=-inf, theta_max=inf for an unlimited joint)"
+                    f"joint range theta_max - theta_min = {hi_f - lo_f:.6g} rad must be <= 2*pi "
+                    "(a full revolution, e.g. [-pi, pi]; or theta_min=-inf, theta_max=inf)"
                 )
         if None not in (R, r, L1, L2) and _is_concrete(lo) and _is_concrete(hi) and np.ndim(lo) == 0:
             # With sphere centres c_i = rho_i e_i + z_i (rho_i = R - r + L1 cos theta_i) the three forearm
@@ -139,9 +147,21 @@ class Delta(eqx.Module):
     @staticmethod
     def from_degrees(*, base_radius, platform_radius, upper_arm, forearm, theta_min_deg=None,
                      theta_max_deg=None, mass=None) -> "Delta":
-        """Build a Delta with joint limits given in degrees (``None`` = unlimited)."""
-        lo = -math.inf if theta_min_deg is None else math.radians(float(theta_min_deg))
-        hi = math.inf if theta_max_deg is None else math.radians(float(theta_max_deg))
+        """Build a Delta with joint limits given in degrees (``None`` = unlimited; [-180, 180] = a full turn).
+
+        Limit errors are reported in degrees, the units they were given in.
+        """
+        lo_d = None if theta_min_deg is None else float(theta_min_deg)
+        hi_d = None if theta_max_deg is None else float(theta_max_deg)
+        if lo_d is not None and hi_d is not None and not (math.isnan(lo_d) or math.isnan(hi_d)):
+            if not lo_d < hi_d:
+                raise GeometryError(f"joint limits inverted or empty: theta_min_deg={lo_d:g} deg must be < "
+                                    f"theta_max_deg={hi_d:g} deg")
+            if hi_d - lo_d > 360.0 * (1 + 1e-12):
+                raise GeometryError(f"joint range theta_max_deg - theta_min_deg = {hi_d - lo_d:g} deg must be <= "
+                                    "360 deg (a full revolution, e.g. [-180, 180]; or null for no limit)")
+        lo = -math.inf if lo_d is None else math.radians(lo_d)
+        hi = math.inf if hi_d is None else math.radians(hi_d)
         return Delta(base_radius=base_radius, platform_radius=platform_radius, upper_arm=upper_arm,
                      forearm=forearm, theta_min=lo, theta_max=hi, mass=mass)
 

@@ -3,8 +3,12 @@
 Layout: root attributes (version, git commit, resolved config as YAML, experiment, seed, precision,
 backend/device, start/end time); one group per kind of result (``robot``, ``workspace``, ``boundary``,
 ``dynamics``, ``ga``, ``pareto``, ``refine``, ``bench``, nested groups allowed with "a/b" names). Every dataset
-has a ``units`` attribute and every dimension is an HDF5 dimension scale, so that
-``xarray.open_dataset(path, group=..., engine="h5netcdf")`` opens each group.
+has CF-style ``units`` and ``long_name`` attributes (a ``z`` axis in m also ``positive: "down"``, the base
+frame's convention) and every dimension is an HDF5 dimension scale, so that :func:`open_xarray` (or
+``xarray.open_dataset(path, group=..., engine="h5netcdf")``) opens each group with its coordinates. Datasets of
+:data:`COMPRESS_MIN_ELEMENTS` or more elements are chunked (about :data:`CHUNK_BYTES` per chunk, whole trailing
+axes first) and gzip-compressed with the shuffle filter: reachability masks shrink ~100x, index fields
+several-fold, and any HDF5/netCDF reader decodes them.
 
 Writes are atomic: the whole file is written to ``<name>.tmp`` and renamed over the old one, so a reader
 (or a killed run) never sees a half-written file. Host-side only; never call inside jit.
@@ -13,6 +17,7 @@ Writes are atomic: the whole file is written to ``<name>.tmp`` and renamed over 
 from __future__ import annotations
 
 import datetime as _dt
+import math
 import os
 import subprocess
 from pathlib import Path
@@ -21,9 +26,56 @@ from typing import Any, Mapping, Optional, Sequence
 import h5py
 import numpy as np
 
-__all__ = ["ResultsFile", "load", "git_commit", "RESERVED_NAMES"]
+__all__ = ["ResultsFile", "load", "groups", "git_commit", "RESERVED_NAMES", "ResultsGroupError"]
 
 RESERVED_NAMES = ("attrs", "units")
+
+#: datasets with at least this many elements are chunked and compressed (smaller ones are stored contiguous)
+COMPRESS_MIN_ELEMENTS = 4096
+#: target bytes per chunk (uncompressed)
+CHUNK_BYTES = 1 << 20
+#: gzip level (4: most of the ratio of level 9 at a fraction of its time)
+GZIP_LEVEL = 4
+
+#: ``long_name`` of datasets whose name is shared across experiments (others: given by the writer, or the
+#: name with spaces).
+LONG_NAMES = {
+    "x": "x coordinate of the platform centre (base frame)",
+    "y": "y coordinate of the platform centre (base frame)",
+    "z": "z coordinate of the platform centre (base frame, positive down)",
+    "t": "time",
+    "R": "base radius R",
+    "R_star": "base radius R* selected by the redundancy resolution",
+    "k_star": "index of the selected R sample (-1: none feasible)",
+    "inv_cond": "inverse condition number 1/k of the homogenised theta-block",
+    "sigma_min_v": "smallest singular value (velocity), sigma_min,v",
+    "sigma_min_f": "force transmission sigma_min,f = 1/s1",
+    "omega_v": "velocity volume index omega_v = s1 s2 s3",
+    "omega_f": "force volume index omega_f = 1/omega_v",
+    "k_tilde": "combined index k~ (Franco-Lopez 2026)",
+    "manipulability": "Yoshikawa manipulability",
+    "imi": "inverse manipulability index 1/sqrt(det(J J^T))",
+    "reachable": "reachable (IK solvable for all chains, theta within limits)",
+    "reachable_fixed": "reachable by the fixed robot",
+    "reachable_reconfigurable": "reachable by the reconfigurable robot at some R sample",
+    "theta": "actuated joint angle theta (positive down)",
+    "theta_dot": "actuated joint speed",
+    "theta_ddot": "actuated joint acceleration",
+    "tau": "actuator torque",
+    "force_R": "force of the R actuator",
+    "p": "platform centre position (base frame)",
+    "p_dot": "platform centre velocity (base frame)",
+    "p_ddot": "platform centre acceleration (base frame)",
+    "volume": "workspace volume",
+    "count": "number of reachable grid points",
+}
+
+
+class ResultsGroupError(KeyError):
+    """A group that the results file does not have; the message lists the groups it has."""
+
+    def __str__(self) -> str:  # KeyError would quote the message
+        return str(self.args[0]) if self.args else ""
 
 
 def git_commit(cwd: Optional[os.PathLike] = None) -> str:
@@ -68,7 +120,7 @@ class ResultsFile:
 
     # -- staging ---------------------------------------------------------------------------------------------
     def put(self, group: str, name: str, data: Any, *, units: str, dims: Optional[Sequence[str]] = None,
-            attrs: Optional[Mapping[str, Any]] = None) -> None:
+            attrs: Optional[Mapping[str, Any]] = None, long_name: Optional[str] = None) -> None:
         """Stage dataset ``group/name``.
 
         Args:
@@ -79,6 +131,7 @@ class ResultsFile:
             dims: names of the dimensions; each must be an axis staged with :meth:`put_axis` in the same group,
                 or is created as an index axis of the right length. ``None``: ``<name>_dim<i>`` index axes.
             attrs: extra attributes.
+            long_name: CF ``long_name`` (default: :data:`LONG_NAMES`, else the name with spaces).
         """
         if name in RESERVED_NAMES or "/" in name:
             raise ValueError(f"dataset name {name!r} is reserved or contains '/'")
@@ -96,16 +149,20 @@ class ResultsFile:
                 if g[d].data.shape != (n,):
                     raise ValueError(f"{group}/{name}: axis {d!r} has length {g[d].data.shape}, data has {n}")
             elif d != name:
-                g[d] = _Var(np.arange(n), "1", (d,), {"index_axis": 1})
-        g[name] = _Var(arr, units, dims, dict(attrs or {}))
+                g[d] = _Var(np.arange(n), "1", (d,), {"index_axis": 1, "long_name": f"index along {d}"})
+        a = dict(attrs or {})
+        a.setdefault("long_name", long_name or LONG_NAMES.get(name) or name.replace("_", " "))
+        if name == "z" and dims == ("z",) and units == "m":
+            a.setdefault("positive", "down")  # the base frame's z points down (docs/CONVENTIONS.md)
+        g[name] = _Var(arr, units, dims, a)
 
     def put_axis(self, group: str, name: str, values: Any, *, units: str,
-                 attrs: Optional[Mapping[str, Any]] = None) -> None:
+                 attrs: Optional[Mapping[str, Any]] = None, long_name: Optional[str] = None) -> None:
         """Stage a 1-D coordinate axis (an HDF5 dimension scale) named ``name`` in ``group``."""
         arr = np.asarray(values)
         if arr.ndim != 1:
             raise ValueError(f"axis {group}/{name} must be 1-D, got shape {arr.shape}")
-        self.put(group, name, arr, units=units, dims=(name,), attrs=attrs)
+        self.put(group, name, arr, units=units, dims=(name,), attrs=attrs, long_name=long_name)
 
     def set_attrs(self, group: Optional[str] = None, **attrs: Any) -> None:
         """Set root attributes (``group=None``) or attributes of a group."""
@@ -149,6 +206,9 @@ class ResultsFile:
             data = v.data
             if data.dtype == object:
                 dset = g.create_dataset(n, data=data.astype(h5py.string_dtype()))
+            elif data.size >= COMPRESS_MIN_ELEMENTS and data.ndim >= 1:
+                dset = g.create_dataset(n, data=data, chunks=_chunk_shape(data.shape, data.dtype.itemsize),
+                                        compression="gzip", compression_opts=GZIP_LEVEL, shuffle=True)
             else:
                 dset = g.create_dataset(n, data=data)
             dset.attrs["units"] = v.units
@@ -164,6 +224,17 @@ class ResultsFile:
                 continue
             for i, d in enumerate(v.dims):
                 dsets[n].dims[i].attach_scale(dsets[d])
+
+
+def _chunk_shape(shape: Sequence[int], itemsize: int, target: int = CHUNK_BYTES) -> tuple:
+    """Chunk of about ``target`` bytes: whole trailing axes, the leading axes cut first (x-slabs of a grid)."""
+    chunk = [max(1, int(n)) for n in shape]
+    for i in range(len(chunk)):
+        total = int(np.prod(chunk)) * itemsize
+        if total <= target:
+            break
+        chunk[i] = max(1, math.ceil(chunk[i] / math.ceil(total / target)))
+    return tuple(chunk)
 
 
 def _attr_value(v: Any) -> Any:
@@ -202,16 +273,56 @@ def _py(v: Any) -> Any:
     return v
 
 
-def load(path: os.PathLike) -> dict[str, Any]:
-    """Load a results file as plain Python/NumPy.
+def groups(path: os.PathLike) -> list[str]:
+    """Names ("a/b") of the groups of a results file that hold datasets, in file order."""
+    out: list[str] = []
+
+    def visit(name, item):
+        if isinstance(item, h5py.Group) and any(isinstance(v, h5py.Dataset) for v in item.values()):
+            out.append(name)
+
+    with _open(path) as f:
+        if any(isinstance(v, h5py.Dataset) for v in f.values()):
+            out.append("/")
+        f.visititems(visit)
+    return out
+
+
+def _open(path: os.PathLike) -> h5py.File:
+    p = Path(path)
+    if not p.is_file():
+        raise FileNotFoundError(f"no results file at {p} (a run writes <run dir>/results.h5)")
+    return h5py.File(p, "r")
+
+
+def _no_group(path: os.PathLike, group: str) -> ResultsGroupError:
+    have = groups(path)
+    return ResultsGroupError(f"{path} has no group {group!r}; its groups with data: {', '.join(have) or 'none'}")
+
+
+def load(path: os.PathLike, group: Optional[str] = None) -> dict[str, Any]:
+    """Load a results file (or one group of it) as plain Python/NumPy.
+
+    Args:
+        path: the results file.
+        group: a group name ("a/b"); ``None`` loads the whole file.
 
     Returns:
         A dict with ``"attrs"`` (root attributes; ``attrs["config"]`` is the resolved YAML), ``"units"`` and
         one dict per group, each holding its datasets as NumPy arrays, its own ``"attrs"`` and ``"units"``
-        (dataset name -> units string), and nested groups as dicts.
+        (dataset name -> units string), and nested groups as dicts. With ``group``: that group's dict.
+
+    Raises:
+        FileNotFoundError: no file at ``path``.
+        ResultsGroupError: ``group`` is not in the file; the message lists the groups it has.
     """
-    with h5py.File(path, "r") as f:
-        return _read_group(f)
+    with _open(path) as f:
+        if group is None:
+            return _read_group(f)
+        g = f.get(group.strip("/") or "/")
+        if not isinstance(g, h5py.Group):
+            raise _no_group(path, group)
+        return _read_group(g)
 
 
 # -- sweeps and analysis (additive; the merge and summary logic lives in deltajax.sweep) ----------------------
@@ -219,16 +330,24 @@ def open_xarray(path: os.PathLike, group: str):
     """Open one group of a results file as an in-memory :class:`xarray.Dataset` (SPEC §5).
 
     Gridded datasets come with their named dimensions and coordinate axes (the HDF5 dimension scales), each
-    variable with its ``units`` attribute; scalars are 0-d variables. The file is closed on return.
+    variable with its ``units`` and ``long_name`` attributes; scalars are 0-d variables. The file is closed on
+    return.
 
     Example::
 
         ws = open_xarray(run_dir / "results.h5", "workspace")
         area_vs_z = ws.reachable.sum(("x", "y")) * float(ws.attrs["h"]) ** 2      # m^2 per z level
+
+    Raises:
+        FileNotFoundError: no file at ``path``.
+        ResultsGroupError: ``group`` is not in the file; the message lists the groups it has.
     """
     import xarray as xr
 
-    with xr.open_dataset(path, group=group, engine="h5netcdf") as ds:
+    with _open(path) as f:
+        if not isinstance(f.get(group.strip("/") or "/"), h5py.Group):
+            raise _no_group(path, group)
+    with xr.open_dataset(path, group=group, engine="h5netcdf", phony_dims="sort") as ds:
         return ds.load()
 
 

@@ -7,9 +7,13 @@ settings live in ``configs/experiment/<name>.yaml`` (``# @package _global_``, wi
 
 from __future__ import annotations
 
+import ast
+import contextlib
 import dataclasses
 import importlib
+import logging
 import os
+import shutil
 import sys
 import time
 from pathlib import Path
@@ -18,9 +22,30 @@ from typing import Any, Iterable, Optional
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
-CONFIG_DIR = os.environ.get("DELTAJAX_CONFIG_DIR", str(Path(__file__).resolve().parent.parent / "configs"))
+log = logging.getLogger("deltajax")
 
-__all__ = ["RunContext", "main", "run_experiment", "CONFIG_DIR"]
+#: Exit status of a run stopped by a user error (bad config value, unknown experiment): one line on stderr.
+EXIT_USER_ERROR = 2
+
+
+def _config_dir() -> str:
+    """Where the Hydra configs are: ``DELTAJAX_CONFIG_DIR``, else the repository's top-level ``configs/`` (a
+    source checkout or an editable install), else the copy shipped inside the package (``deltajax/configs``,
+    a wheel or a non-editable ``pip install .``)."""
+    env = os.environ.get("DELTAJAX_CONFIG_DIR")
+    if env:
+        return env
+    here = Path(__file__).resolve().parent
+    repo = here.parent
+    if (repo / "configs" / "config.yaml").is_file() and (repo / "pyproject.toml").is_file():
+        return str(repo / "configs")
+    return str(here / "configs")
+
+
+CONFIG_DIR = _config_dir()
+
+__all__ = ["RunContext", "main", "cli", "run_experiment", "execute", "list_experiments", "CONFIG_DIR",
+           "EXIT_USER_ERROR"]
 
 
 @dataclasses.dataclass
@@ -66,7 +91,8 @@ class RunContext:
         return path
 
     def log(self, msg: str) -> None:
-        print(f"[deltajax] {msg}", flush=True)
+        """Log a line of the run (console and ``<run_dir>/run.log``; through the progress bars, not across)."""
+        log.info(msg)
 
 
 def _validate_top(cfg: DictConfig) -> None:
@@ -81,9 +107,35 @@ def _validate_top(cfg: DictConfig) -> None:
         raise ConfigError("experiment.name is missing: pick one with experiment=NAME")
 
 
+def list_experiments(config_dir: Optional[str] = None) -> dict[str, str]:
+    """Experiments selectable with ``experiment=NAME`` (their configs) -> one-line description."""
+    from .experiments import SUMMARIES
+
+    exp_dir = Path(config_dir or CONFIG_DIR) / "experiment"
+    names = sorted(p.stem for p in exp_dir.glob("*.yaml"))
+    names.sort(key=lambda n: (n not in SUMMARIES, list(SUMMARIES).index(n) if n in SUMMARIES else 0, n))
+    return {n: SUMMARIES.get(n) or _docstring_line(n) for n in names}
+
+
+def _docstring_line(name: str) -> str:
+    """First sentence of ``deltajax/experiments/<name>.py``'s docstring, read without importing it."""
+    path = Path(__file__).resolve().parent / "experiments" / f"{name}.py"
+    try:
+        doc = ast.get_docstring(ast.parse(path.read_text())) or ""
+    except (OSError, SyntaxError):
+        return "(no description)"
+    first = " ".join(doc.split("\n\n")[0].split())
+    return first.split(". ")[0].rstrip(".") or "(no description)"
+
+
 def execute(cfg: DictConfig, run_dir: Path) -> Path:
-    """Run the experiment described by ``cfg`` into ``run_dir``; returns the results path."""
-    from .config import robot_from_config
+    """Run the experiment described by ``cfg`` into ``run_dir``; returns the results path.
+
+    Raises:
+        ConfigError: a user error (bad value, unknown experiment), raised before anything compiles where the
+            value is known up front; the CLI prints it as one line and exits with status 2.
+    """
+    from .config import ConfigError, robot_from_config
 
     _validate_top(cfg)
     name = cfg.experiment.name
@@ -91,12 +143,16 @@ def execute(cfg: DictConfig, run_dir: Path) -> Path:
         module = importlib.import_module(f"deltajax.experiments.{name}")
     except ModuleNotFoundError as e:
         if e.name == f"deltajax.experiments.{name}":
-            raise SystemExit(f"unknown experiment {name!r} (no deltajax/experiments/{name}.py)") from None
+            raise ConfigError(f"experiment.name={name!r} has no module deltajax/experiments/{name}.py; "
+                              f"choose one of {', '.join(list_experiments())}") from None
         raise
     import jax
 
     # Precision first: the robot's array leaves take the default float dtype when they are built.
     jax.config.update("jax_enable_x64", cfg.precision == "float64")
+    from ._precision import float32_requested
+
+    float32_requested(cfg.precision == "float32")  # asked for: no float32 warning
     cache = cfg.get("compilation_cache")
     if cache:  # persistent XLA cache: reruns, resumes and sweep jobs skip most compilation
         jax.config.update("jax_compilation_cache_dir", os.path.expanduser(str(cache)))
@@ -121,19 +177,125 @@ def execute(cfg: DictConfig, run_dir: Path) -> Path:
     results = ResultsFile(run_dir / "results.h5", attrs=attrs)
     ctx = RunContext(cfg=cfg, run_dir=run_dir, results=results, robot=robot, recon=recon)
     t0 = time.perf_counter()
-    module.run(ctx)
-    results.set_attrs(wall_time_s=time.perf_counter() - t0)
-    path = results.flush(final=True)
-    ctx.log(f"wrote {path}")
+    with _console_through_tqdm():
+        module.run(ctx)
+        results.set_attrs(wall_time_s=time.perf_counter() - t0)
+        path = results.flush(final=True)
+        _drop_checkpoints(ctx)
+        ctx.log(f"wrote {path} ({path.stat().st_size / 1e6:.3g} MB)")
     return path
+
+
+def _drop_checkpoints(ctx: RunContext) -> None:
+    """Remove ``<run_dir>/checkpoint`` once the complete results are safely in results.h5 (after the final
+    flush): a finished run keeps its results, not gigabytes of resume state. Partial runs keep it."""
+    ck = ctx.run_dir / "checkpoint"
+    if not ck.is_dir():
+        return
+    size = sum(p.stat().st_size for p in ck.rglob("*") if p.is_file())
+    shutil.rmtree(ck)
+    ctx.log(f"run complete: removed its checkpoint directory ({size / 1e6:.3g} MB)")
+
+
+class _TqdmHandler(logging.StreamHandler):
+    """A console handler that writes through ``tqdm.write`` so a log line never breaks a progress bar."""
+
+    def emit(self, record):
+        from tqdm import tqdm
+
+        try:
+            tqdm.write(self.format(record), file=self.stream)
+            self.flush()
+        except Exception:  # noqa: BLE001 - logging must not raise
+            self.handleError(record)
+
+
+@contextlib.contextmanager
+def _console_through_tqdm():
+    """Route every console logging handler of the root logger through ``tqdm.write`` (keeping its stream,
+    level, formatter and filters; ``tqdm.contrib.logging.logging_redirect_tqdm`` keeps only the first one)."""
+    root = logging.getLogger()
+    saved = list(root.handlers)
+    new = []
+    for h in saved:
+        if type(h) is logging.StreamHandler and h.stream in (sys.stdout, sys.stderr):
+            t = _TqdmHandler(h.stream)
+            t.setLevel(h.level)
+            t.setFormatter(h.formatter)
+            for f in h.filters:
+                t.addFilter(f)
+            new.append(t)
+        else:
+            new.append(h)
+    root.handlers = new
+    try:
+        yield
+    finally:
+        root.handlers = saved
+
+
+class BelowWarning(logging.Filter):
+    """Logging filter (used by ``configs/hydra/job_logging/deltajax.yaml``): records below WARNING only, so
+    the run's lines go to stdout and warnings/errors to stderr."""
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        return record.levelno < logging.WARNING
+
+
+def _user_errors() -> tuple:
+    from .config import ConfigError
+    from .geometry import GeometryError
+
+    return (ConfigError, GeometryError)
 
 
 @hydra.main(config_path=CONFIG_DIR, config_name="config", version_base="1.3")
 def main(cfg: DictConfig) -> None:
-    """Hydra entry point."""
+    """Hydra entry point. A user error is one line on stderr (and in run.log) and exit status 2; set
+    ``HYDRA_FULL_ERROR=1`` for the traceback."""
     from hydra.core.hydra_config import HydraConfig
+    from hydra.types import RunMode
 
-    execute(cfg, Path(HydraConfig.get().runtime.output_dir))
+    hc = HydraConfig.get()
+    try:
+        execute(cfg, Path(hc.runtime.output_dir))
+    except _user_errors() as e:
+        if os.environ.get("HYDRA_FULL_ERROR") == "1" or hc.mode == RunMode.MULTIRUN:
+            raise  # a sweep records the failed job; the launcher reports it
+        log.error("%s", e)
+        sys.exit(EXIT_USER_ERROR)
+
+
+@contextlib.contextmanager
+def _api_logging(run_dir: Path):
+    """Logging for :func:`run_experiment`: the run's lines always go to ``<run_dir>/run.log`` (as under the
+    CLI) and, when the caller has configured no logging, to stdout (warnings and errors to stderr)."""
+    root = logging.getLogger()
+    run_dir.mkdir(parents=True, exist_ok=True)
+    file = logging.FileHandler(run_dir / "run.log")
+    file.setFormatter(logging.Formatter("[%(asctime)s][%(name)s][%(levelname)s] - %(message)s"))
+    file.setLevel(logging.INFO)
+    added = [file]
+    if not root.handlers:
+        out = logging.StreamHandler(sys.stdout)
+        out.setFormatter(logging.Formatter("%(message)s"))
+        out.addFilter(BelowWarning())
+        err = logging.StreamHandler(sys.stderr)
+        err.setLevel(logging.WARNING)
+        err.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))
+        added += [out, err]
+    level = log.level
+    if log.getEffectiveLevel() > logging.INFO:
+        log.setLevel(logging.INFO)  # the run's INFO lines reach run.log whatever the root level is
+    for h in added:
+        root.addHandler(h)
+    try:
+        yield
+    finally:
+        for h in added:
+            root.removeHandler(h)
+        log.setLevel(level)
+        file.close()
 
 
 def run_experiment(name: str, overrides: Iterable[str] = (), run_dir: Optional[os.PathLike] = None) -> Path:
@@ -153,8 +315,63 @@ def run_experiment(name: str, overrides: Iterable[str] = (), run_dir: Optional[o
         cfg = compose(config_name="config", overrides=[f"experiment={name}", *overrides])
     if run_dir is None:
         run_dir = Path("outputs") / name / time.strftime("%Y-%m-%d_%H-%M-%S")
-    return execute(cfg, Path(run_dir))
+    with _api_logging(Path(run_dir)):
+        return execute(cfg, Path(run_dir))
+
+
+def help_text() -> str:
+    """What ``python -m deltajax.run --help`` prints: usage, the experiments (one line each), common keys."""
+    exps = list_experiments()
+    w = max(map(len, exps)) + 2
+    robots = sorted(p.stem for p in (Path(CONFIG_DIR) / "robot").glob("*.yaml"))
+    lines = [
+        "usage: python -m deltajax.run [experiment=NAME] [KEY=VALUE ...]     (one run)",
+        "       python -m deltajax.run -m experiment=NAME KEY=A,B ...         (a sweep: Hydra multirun)",
+        "",
+        "Runs one experiment (default: ga_reconfig, the main job) and writes results.h5 (HDF5, SI units),",
+        "PNG plots and run.log into outputs/<experiment>/<date>_<time>/ (set it with hydra.run.dir=DIR;",
+        "rerun into a killed run's directory to resume).",
+        "",
+        "experiments (experiment=NAME; settings in configs/experiment/NAME.yaml):",
+        *[f"  {n:<{w}}{d}" for n, d in exps.items()],
+        "",
+        "common keys:",
+        f"  robot=NAME           robot preset: {', '.join(robots)}; then e.g. robot.forearm=0.45 (m),",
+        "                       robot.theta_min_deg=-40 (deg)",
+        "  experiment.KEY=V     an experiment setting (see its yaml), e.g. experiment.h=0.004",
+        "  precision=float64    float64 (analysis default) | float32 (throughput)",
+        "  seed=0  plots=true  progress=true  compilation_cache=null",
+        "  hydra/launcher=joblib | slurm | slurm_local   (with -m; see docs/CLUSTER.md)",
+        "",
+        "other flags: --cfg job (print the composed config and exit), --hydra-help (Hydra's own options).",
+        "A bad value stops the run with one line naming the field (exit status 2); HYDRA_FULL_ERROR=1 shows",
+        "the traceback.",
+        f"configs: {CONFIG_DIR}",
+    ]
+    return "\n".join(lines)
+
+
+def cli(argv: Optional[list] = None) -> int:
+    """Console entry point (``python -m deltajax.run`` / ``deltajax``): our ``--help``, an early check of
+    ``experiment=NAME``, then Hydra."""
+    args = sys.argv[1:] if argv is None else list(argv)
+    if "--help" in args or "-h" in args:
+        print(help_text())
+        return 0
+    known = None
+    for a in args:
+        if a.startswith("experiment="):
+            known = known or list_experiments()
+            bad = [n for n in a.split("=", 1)[1].split(",") if n not in known]
+            if bad:
+                print(f"ERROR: experiment={bad[0]} is not an experiment; choose one of: {', '.join(known)} "
+                      "(python -m deltajax.run --help describes them)", file=sys.stderr)
+                return EXIT_USER_ERROR
+    if argv is not None:
+        sys.argv = [sys.argv[0], *args]
+    main()
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(cli())

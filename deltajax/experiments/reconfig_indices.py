@@ -113,7 +113,7 @@ def run(ctx) -> None:
     X, Y = np.meshgrid(grid.x, grid.y, indexing="ij")
     sl_rdr, sl_odr, sl_R = [], [], []
     col = INDEX_NAMES.index(slice_index)
-    for k in kz:
+    for k in ctx.progress(kz, total=len(kz), desc="Fig 8 planes (RDR R*)"):
         pts = np.stack([X.ravel(), Y.ravel(), np.full(X.size, grid.z[k])], axis=-1)
         red, _ = resolve_redundancy_host(ctx.recon, pts, criterion, mode="fast", **kw)
         sl_rdr.append(red.indices[:, col].reshape(nx, ny))

@@ -79,9 +79,14 @@ def surrogate_loss(pb: Problem, space, genes, wvec, *, tau: float, penalty: floa
     return _weighted(m, wvec) + penalty * m["violation"]
 
 
+#: progress phases of :func:`refine`: the Adam descent, the true metrics of every iterate, the final loss
+REFINE_PHASES = ("descent", "verification", "surrogate")
+
+
 def refine(pb: Problem, space, genes: np.ndarray, *, steps: int = 30, learning_rate: float = 0.01,
            tau: float = 0.05, directions: Optional[Sequence[Optional[Mapping[str, float]]]] = None,
-           penalty: float = 10.0, true_fn: Optional[Callable] = None) -> RefineResult:
+           penalty: float = 10.0, true_fn: Optional[Callable] = None,
+           progress: Optional[Callable[[int], None]] = None) -> RefineResult:
     """Refine designs by projected Adam on the relaxed objective; verify on the true one.
 
     Args:
@@ -96,6 +101,8 @@ def refine(pb: Problem, space, genes: np.ndarray, *, steps: int = 30, learning_r
             points). Default: ``None`` for every design. One compilation serves all of them.
         penalty: weight of the relaxed constraint violation.
         true_fn: optional ``genes (n, d) -> metrics`` (reuses a compiled evaluator).
+        progress: called with 1 after each of the :data:`REFINE_PHASES` phases (e.g. ``tqdm.update``; the
+            descent is one compiled scan, so its phases are what can be reported).
 
     Returns:
         :class:`RefineResult`; ``true_*`` are the chosen objective (without constraints) on the true metrics.
@@ -132,7 +139,10 @@ def refine(pb: Problem, space, genes: np.ndarray, *, steps: int = 30, learning_r
             return path, hist, hist[0], loss(g, w)
         return jax.vmap(one)(G0, W)
 
+    tick = progress or (lambda n: None)
     path, hist, s_before, s_after = descend(genes, W)  # path: (n, steps, d) iterates after each step
+    jax.block_until_ready(path)
+    tick(1)
     if true_fn is None:
         true_fn = jax.jit(lambda G: jax.vmap(lambda g: evaluate_design(pb, space.decode(g)))(G))
     Wn = np.asarray(W)
@@ -142,6 +152,7 @@ def refine(pb: Problem, space, genes: np.ndarray, *, steps: int = 30, learning_r
     # strict improvement of the true objective.
     cand = np.concatenate([np.asarray(genes)[:, None, :], np.asarray(path)], axis=1)  # (n, steps + 1, d)
     mc = {k: np.array(v).reshape(n, steps + 1) for k, v in true_fn(cand.reshape(-1, d)).items()}
+    tick(1)
     tc = sum(Wn[:, j, None] * mc[k] for j, k in enumerate(METRICS) if np.any(Wn[:, j]))
     feas = mc["feasible"].astype(bool)
     score = np.where(feas | (np.arange(steps + 1)[None, :] == 0), tc, np.inf)
@@ -154,6 +165,7 @@ def refine(pb: Problem, space, genes: np.ndarray, *, steps: int = 30, learning_r
     tb, ta = tc[:, 0], tc[rows, pick]
     accepted = (pick > 0) & (ta < tb) & ma["feasible"].astype(bool)
     s_after = np.asarray(jax.jit(jax.vmap(loss))(jnp.asarray(after), W))
+    tick(1)
     return RefineResult(genes_before=np.array(genes), genes_after=np.array(after), true_before=tb, true_after=ta,
                         surrogate_before=np.array(s_before), surrogate_after=np.array(s_after),
                         metrics_before=mb, metrics_after=ma, accepted=np.array(accepted),

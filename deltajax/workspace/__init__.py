@@ -9,6 +9,10 @@ Pure, jit/vmap-able functions (one robot; vmap over designs with ``in_axes=(0, N
     index_fields(robot, points, b_v=, b_f=, beta=) -> (ok[N], {index name: float[N]})   NaN outside
     resolve_redundancy(recon, points, criterion="k_tilde", b_v=, b_f=, beta=) -> Redundancy(k, R, value, ok, indices)
 
+One call for any robot (box sized from its reach bound, truncation flagged)::
+
+    volume(robot, h=0.005, stats=False) -> WorkspaceVolume(volume, count, h, box, truncated, grid, mask, stats)
+
 Host drivers (NumPy in/out, chunked, progress, checkpoint/resume)::
 
     resolve_redundancy_host(recon, points, criterion, mode="fast" | "exact", ...)
@@ -21,4 +25,5 @@ from .redundancy import (Redundancy, feasible_window, indices_at_host, reach_int
                          reconfigurable_reachable, resolve_redundancy, resolve_redundancy_host, sample_value)
 from .driver import CheckpointMismatch, GridJob, fixed_workspace, reconfigurable_workspace, redundancy_grid, run_chunks
 from .stats import PAPER_TABLES, TABLE_INDICES, index_stats
+from .measure import WorkspaceVolume, reach_box, volume
 from . import boundary

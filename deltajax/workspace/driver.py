@@ -21,12 +21,13 @@ Jobs::
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
 import os
 from pathlib import Path
-from typing import Any, Callable, NamedTuple, Optional
+from typing import Any, Callable, Optional
 
 import numpy as np
 
@@ -42,8 +43,11 @@ class CheckpointMismatch(RuntimeError):
     """The checkpoint directory holds a run with different parameters."""
 
 
-class GridJob(NamedTuple):
+@dataclasses.dataclass(frozen=True, eq=False)
+class GridJob:
     """Result of a grid job; arrays have the grid's shape (nx, ny, nz).
+
+    A dataclass, not a NamedTuple: ``job.count`` is the number of reachable points, not ``tuple.count``.
 
     Attributes:
         ok: reachable / feasible mask.
@@ -54,6 +58,11 @@ class GridJob(NamedTuple):
     ok: np.ndarray
     fields: dict
     complete: bool
+
+    @property
+    def count(self) -> int:
+        """Number of reachable / feasible grid points."""
+        return int(np.count_nonzero(self.ok))
 
 
 def _fingerprint(obj: Any) -> str:
@@ -182,8 +191,11 @@ def _grid_desc(grid: Grid) -> dict:
 
 
 def _progress_total(progress, total):
-    if progress is not None and hasattr(progress, "reset"):
-        progress.reset(total=total)
+    """Set the bar's total to the points actually computed (half the grid under mirror halving), whether the
+    caller passed the bar or its ``update`` method (``progress=bar.update``: the bar is ``__self__``)."""
+    bar = getattr(progress, "__self__", progress)
+    if progress is not None and hasattr(bar, "reset"):
+        bar.reset(total=total)
 
 
 def fixed_workspace(robot: Delta, grid: Grid, *, fields: bool = True, b_v: float = 2.0, b_f: float = 4.2,
