@@ -40,6 +40,7 @@ class RunContext:
     results: Any
     robot: Any
     recon: Any
+    complete: bool = True  # a job that stops early (resumable) sets False: the run dir then stays resumable
 
     @property
     def dtype(self):
@@ -81,8 +82,12 @@ def _validate_top(cfg: DictConfig) -> None:
         raise ConfigError("experiment.name is missing: pick one with experiment=NAME")
 
 
-def execute(cfg: DictConfig, run_dir: Path) -> Path:
-    """Run the experiment described by ``cfg`` into ``run_dir``; returns the results path."""
+def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
+    """Run the experiment described by ``cfg`` into ``run_dir``; returns the results path.
+
+    The run directory is claimed first (:mod:`deltajax.rundir`: lock, manifest, refusal of another job or
+    config); ``on_claimed()`` runs right after the claim (the CLI writes ``.hydra/`` there).
+    """
     from .config import robot_from_config
 
     _validate_top(cfg)
@@ -104,26 +109,35 @@ def execute(cfg: DictConfig, run_dir: Path) -> Path:
     robot, recon = robot_from_config(cfg.robot)  # validated before anything compiles
     from . import __version__
     from .io import ResultsFile, git_commit
+    from .rundir import claim
 
-    run_dir.mkdir(parents=True, exist_ok=True)
-    dev = jax.devices()[0]
-    attrs = {
-        "deltajax_version": __version__,
-        "git_commit": git_commit(),
-        "config": OmegaConf.to_yaml(cfg, resolve=True),
-        "experiment": name,
-        "seed": int(cfg.seed),
-        "precision": str(cfg.precision),
-        "backend": jax.default_backend(),
-        "device": f"{dev.platform}:{getattr(dev, 'device_kind', '')} x{jax.device_count()}",
-        "jax_version": jax.__version__,
-    }
-    results = ResultsFile(run_dir / "results.h5", attrs=attrs)
-    ctx = RunContext(cfg=cfg, run_dir=run_dir, results=results, robot=robot, recon=recon)
-    t0 = time.perf_counter()
-    module.run(ctx)
-    results.set_attrs(wall_time_s=time.perf_counter() - t0)
-    path = results.flush(final=True)
+    with claim(run_dir, name, OmegaConf.to_container(cfg, resolve=True), fresh=bool(cfg.get("fresh", False))) as owner:
+        if on_claimed is not None:
+            on_claimed()
+        if owner.state == "complete":
+            print(f"[deltajax] {run_dir} already holds the complete results of this {name} run; nothing to do "
+                  f"(fresh=true recomputes them)", flush=True)
+            return run_dir / "results.h5"
+        dev = jax.devices()[0]
+        attrs = {
+            "deltajax_version": __version__,
+            "git_commit": git_commit(),
+            "config": OmegaConf.to_yaml(cfg, resolve=True),
+            "experiment": name,
+            "seed": int(cfg.seed),
+            "precision": str(cfg.precision),
+            "backend": jax.default_backend(),
+            "device": f"{dev.platform}:{getattr(dev, 'device_kind', '')} x{jax.device_count()}",
+            "jax_version": jax.__version__,
+        }
+        results = ResultsFile(run_dir / "results.h5", attrs=attrs)
+        ctx = RunContext(cfg=cfg, run_dir=run_dir, results=results, robot=robot, recon=recon)
+        t0 = time.perf_counter()
+        module.run(ctx)
+        results.set_attrs(wall_time_s=time.perf_counter() - t0)
+        path = results.flush(final=True)
+        if ctx.complete and cfg.experiment.get("stop_after") is None:
+            owner.mark_complete()
     ctx.log(f"wrote {path}")
     return path
 
@@ -133,7 +147,17 @@ def main(cfg: DictConfig) -> None:
     """Hydra entry point."""
     from hydra.core.hydra_config import HydraConfig
 
-    execute(cfg, Path(HydraConfig.get().runtime.output_dir))
+    hc = HydraConfig.get()
+    run_dir = Path(hc.runtime.output_dir)
+
+    def write_hydra_files() -> None:  # what Hydra's output_subdir would have written, once the dir is ours
+        out = run_dir / ".hydra"
+        out.mkdir(parents=True, exist_ok=True)
+        OmegaConf.save(cfg, out / "config.yaml")
+        OmegaConf.save(OmegaConf.create({"hydra": OmegaConf.to_container(hc, resolve=False)}), out / "hydra.yaml")
+        OmegaConf.save(OmegaConf.create(list(hc.overrides.task)), out / "overrides.yaml")
+
+    execute(cfg, run_dir, on_claimed=write_hydra_files)
 
 
 def run_experiment(name: str, overrides: Iterable[str] = (), run_dir: Optional[os.PathLike] = None) -> Path:

@@ -35,7 +35,7 @@ from ..indices import INDEX_NAMES
 from .grid import Grid
 
 __all__ = ["GridJob", "run_chunks", "fixed_workspace", "reconfigurable_workspace", "redundancy_grid",
-           "CheckpointMismatch"]
+           "CheckpointMismatch", "reach_box", "face_count"]
 
 
 class CheckpointMismatch(RuntimeError):
@@ -335,3 +335,62 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
         work.update(counters)
     out = {n: lay.expand(arrays[n]) for n in outputs if n != "ok"}
     return GridJob(ok=lay.expand(arrays["ok"]), fields=out, complete=complete)
+
+
+# -- box from the reach bound, truncation -----------------------------------------------------------------
+
+def _sin_range(lo: float, hi: float) -> tuple[float, float]:
+    """(min, max) of sin over the angle interval [lo, hi] (rad)."""
+    if hi - lo >= 2 * math.pi:
+        return -1.0, 1.0
+    ends = [math.sin(lo), math.sin(hi)]
+    k_hi = math.floor((hi - math.pi / 2) / (2 * math.pi))  # largest pi/2 + 2 pi k <= hi
+    k_lo = math.floor((hi + math.pi / 2) / (2 * math.pi))  # largest -pi/2 + 2 pi k <= hi
+    top = 1.0 if math.pi / 2 + 2 * math.pi * k_hi >= lo else max(ends)
+    bottom = -1.0 if -math.pi / 2 + 2 * math.pi * k_lo >= lo else min(ends)
+    return bottom, top
+
+
+def reach_box(robot: Delta, R_max: Optional[float] = None) -> tuple[tuple[float, float], ...]:
+    """A box (m, z down) holding every point the platform centre can reach: ((x0, x1), (y0, y1), (z0, z1)).
+
+    Closed form: chain i's platform joint is within L2 of its elbow, which lies at (R - r + L1 cos theta) u_i +
+    L1 sin theta e_z from the base centre shifted by the platform offset, so the centre p satisfies, for every
+    chain, |p_h - (R - r) u_i| <= L1 max|cos theta| + L2 horizontally and L1 min sin theta - L2 <= p_z <=
+    L1 max sin theta + L2 over the joint range. The box is the intersection of the three chains' boxes.
+
+    Args:
+        robot: the robot (concrete values).
+        R_max: for a reconfigurable robot, the largest base radius (the box then holds every R up to it;
+            R - r enters only through the horizontal centres, and the union over R is taken end to end).
+    """
+    q = _robot_desc(robot)
+    L1, L2 = q["upper_arm"], q["forearm"]
+    lo, hi = q["theta_min"], q["theta_max"]
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        lo, hi = -math.pi, math.pi
+    s_lo, s_hi = _sin_range(lo, hi)
+    c_lo, c_hi = _sin_range(lo + math.pi / 2, hi + math.pi / 2)  # cos theta = sin(theta + pi/2)
+    rho = L1 * max(abs(c_lo), abs(c_hi)) + L2
+    ds = [q["base_radius"] - q["platform_radius"]]
+    if R_max is not None:
+        ds.append(float(R_max) - q["platform_radius"])
+    boxes = []
+    for d in ds:
+        cx = [d * math.cos(2 * math.pi * i / 3) for i in range(3)]
+        cy = [d * math.sin(2 * math.pi * i / 3) for i in range(3)]
+        boxes.append(((max(cx) - rho, min(cx) + rho), (max(cy) - rho, min(cy) + rho)))
+    x = (min(b[0][0] for b in boxes), max(b[0][1] for b in boxes))
+    y = (min(b[1][0] for b in boxes), max(b[1][1] for b in boxes))
+    return x, y, (L1 * s_lo - L2, L1 * s_hi + L2)
+
+
+def face_count(mask: np.ndarray) -> int:
+    """Number of True points of a 3-D mask on the faces of its box (each counted once).
+
+    A reachable point on a face means the reachable set may continue outside the grid: a volume computed from
+    the mask is then a lower bound, not the workspace volume.
+    """
+    m = np.asarray(mask, dtype=bool)
+    inner = m[1:-1, 1:-1, 1:-1].sum() if min(m.shape) > 2 else 0
+    return int(m.sum() - inner)
