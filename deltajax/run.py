@@ -20,6 +20,15 @@ from omegaconf import DictConfig, OmegaConf
 
 CONFIG_DIR = os.environ.get("DELTAJAX_CONFIG_DIR", str(Path(__file__).resolve().parent.parent / "configs"))
 
+
+def _register_schemas() -> None:
+    from .config import register_schemas
+
+    register_schemas()
+
+
+_register_schemas()  # before Hydra composes (configs/config.yaml names schema/robot and schema/experiment)
+
 __all__ = ["RunContext", "main", "run_experiment", "CONFIG_DIR"]
 
 
@@ -88,7 +97,7 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
     The run directory is claimed first (:mod:`deltajax.rundir`: lock, manifest, refusal of another job or
     config); ``on_claimed()`` runs right after the claim (the CLI writes ``.hydra/`` there).
     """
-    from .config import robot_from_config
+    from .config import check_keys, robot_from_config, validate_config
 
     _validate_top(cfg)
     name = cfg.experiment.name
@@ -106,7 +115,9 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
     if cache:  # persistent XLA cache: reruns, resumes and sweep jobs skip most compilation
         jax.config.update("jax_compilation_cache_dir", os.path.expanduser(str(cache)))
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+    check_keys(cfg)  # unknown keys (also +key=value ones), before anything else reads the config
     robot, recon = robot_from_config(cfg.robot)  # validated before anything compiles
+    validate_config(cfg, robot, recon)  # every experiment field, before the run directory is touched
     from . import __version__
     from .io import ResultsFile, git_commit
     from .rundir import claim

@@ -244,7 +244,9 @@ def reduce_shards(data: Mapping[str, np.ndarray], shard_attrs: Sequence[Mapping[
     names = [str(s) for s in data["index"]]
     scalars = _summary(data, names, float(a0["h"]), int(a0["n_points"]), float(a0["box_volume"]))
     planes_done = sum(int(a["planes_done"]) for a in shard_attrs)
-    return scalars, {"planes_done": planes_done, "complete": int(planes_done == int(a0["shard_axis_size"]))}
+    size = int(a0["shard_axis_size"])
+    return scalars, {"planes_done": planes_done, "complete": int(planes_done == size),
+                     "resume_seal": _seal(str(a0["resume_key"]), planes_done, 0, size)}
 
 
 # ---------------------------------------------------------------------------------------------------------

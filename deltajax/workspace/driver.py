@@ -8,9 +8,11 @@ computing it.
 
 Checkpoint/resume: with ``checkpoint_dir`` the outputs live in ``<dir>/<name>.npy`` memory maps and
 ``<dir>/state.json`` records the number of finished chunks, rewritten atomically (temporary file + rename)
-after the chunk's data is flushed. A killed run restarts at the first unfinished chunk; chunks are
-deterministic, so the result is bit-for-bit that of an uninterrupted run. A checkpoint written with other
-parameters (its fingerprint differs) is refused with an error rather than silently mixed.
+after the chunk's data is flushed, with a sha256 of every finished chunk's outputs. A killed run restarts at the
+first unfinished chunk; chunks are deterministic, so the result is bit-for-bit that of an uninterrupted run. A
+checkpoint written with other parameters (its fingerprint differs), or one whose state or data is damaged (an
+unreadable state.json, a chunk count out of range, a missing or resized array, a finished chunk whose data no
+longer matches its checksum) is refused with an error naming the directory rather than silently used.
 
 Jobs::
 
@@ -39,7 +41,7 @@ __all__ = ["GridJob", "run_chunks", "fixed_workspace", "reconfigurable_workspace
 
 
 class CheckpointMismatch(RuntimeError):
-    """The checkpoint directory holds a run with different parameters."""
+    """The checkpoint directory holds a run with different parameters, or a damaged checkpoint."""
 
 
 class GridJob(NamedTuple):
@@ -92,19 +94,39 @@ def run_chunks(n_items: int, chunk_size: int, compute: Callable[[int, int], dict
         ck.mkdir(parents=True, exist_ok=True)
         state_path = ck / "state.json"
         if state_path.exists():
-            state = json.loads(state_path.read_text())
+            def damaged(what):
+                return CheckpointMismatch(f"checkpoint {ck} is damaged ({what}); delete that directory to recompute it")
+
+            try:
+                state = json.loads(state_path.read_text())
+                done = int(state["done_chunks"])
+                sums = [str(h) for h in state["chunk_sha256"]]
+            except (OSError, ValueError, KeyError, TypeError) as e:
+                raise damaged(f"state.json unreadable: {type(e).__name__}") from None
             if state.get("fingerprint") != fp:
                 raise CheckpointMismatch(f"checkpoint {ck} was written by a different job "
                                          f"(fingerprint {state.get('fingerprint')} != {fp}); use another directory")
-            done = int(state["done_chunks"])
-            for name in outputs:
-                arrays[name] = np.load(ck / f"{name}.npy", mmap_mode="r+")
+            if not 0 <= done <= n_chunks or len(sums) != done:
+                raise damaged(f"done_chunks={done} with {len(sums)} checksums, {n_chunks} chunks in the job")
+            for name, (dtype, _) in outputs.items():
+                try:
+                    arrays[name] = np.load(ck / f"{name}.npy", mmap_mode="r+")
+                except (OSError, ValueError) as e:
+                    raise damaged(f"{name}.npy unreadable: {type(e).__name__}") from None
+                if arrays[name].shape != (n_items,) or arrays[name].dtype != np.dtype(dtype):
+                    raise damaged(f"{name}.npy holds {arrays[name].dtype}{arrays[name].shape}, expected "
+                                  f"{np.dtype(dtype)}({n_items},)")
+            for c in range(done):
+                a, b = c * chunk_size, min(n_items, (c + 1) * chunk_size)
+                if _chunk_sha256({k: v[a:b] for k, v in arrays.items()}) != sums[c]:
+                    raise damaged(f"chunk {c} (items {a}:{b}) does not match its checksum")
         else:
             for name, (dtype, fill) in outputs.items():
                 arr = np.lib.format.open_memmap(ck / f"{name}.npy", mode="w+", dtype=dtype, shape=(n_items,))
                 arr[:] = fill
                 arrays[name] = arr
-            _write_state(state_path, fp, 0, n_chunks)
+            sums = []
+            _write_state(state_path, fp, 0, n_chunks, sums)
     else:
         arrays = {name: np.full(n_items, fill, dtype=dtype) for name, (dtype, fill) in outputs.items()}
     if progress is not None and done:
@@ -123,16 +145,26 @@ def run_chunks(n_items: int, chunk_size: int, compute: Callable[[int, int], dict
         if state_path is not None:
             for a in arrays.values():
                 a.flush()
-            _write_state(state_path, fp, done, n_chunks)
+            sums.append(_chunk_sha256({k: arrays[k][start:stop] for k in outputs}))
+            _write_state(state_path, fp, done, n_chunks, sums)
         if progress is not None:
             progress(stop - start)
     return arrays, done >= n_chunks
 
 
-def _write_state(path: Path, fp: str, done: int, n_chunks: int) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps({"fingerprint": fp, "done_chunks": done, "n_chunks": n_chunks}))
-    os.replace(tmp, path)
+def _chunk_sha256(arrays: dict) -> str:
+    h = hashlib.sha256()
+    for k in sorted(arrays):
+        h.update(k.encode())
+        h.update(memoryview(np.ascontiguousarray(arrays[k])).cast("B"))
+    return h.hexdigest()
+
+
+def _write_state(path: Path, fp: str, done: int, n_chunks: int, sums: list) -> None:
+    from ..io import write_atomic
+
+    write_atomic(path, json.dumps({"fingerprint": fp, "done_chunks": done, "n_chunks": n_chunks,
+                                   "chunk_sha256": sums}).encode())
 
 
 # -- grid layout (mirror halving) ------------------------------------------------------------------------
