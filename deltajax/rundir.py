@@ -13,6 +13,7 @@ its output directory before it writes anything there, ``.hydra/`` included:
   complete and does nothing (``complete``). Anything else is refused with one line naming the settings that
   differ, and nothing in the directory is touched. A directory holding deltajax results but no manifest is
   refused too (it cannot be matched to a config).
+* **Killed writers**: their unique temporaries (``.<name>.<pid>.<random>.tmp``) are removed by the next claim.
 * **Starting over is explicit**: ``fresh=true`` deletes what earlier runs wrote there (results, checkpoints,
   manifest, ``.hydra``, figures) before the new run starts.
 
@@ -168,7 +169,7 @@ def _remove_artefacts(path: Path) -> None:
             shutil.rmtree(p)
         elif p.exists():
             p.unlink()
-    for p in list(path.glob("*.png")) + list(path.glob(".results.h5.*.tmp")):
+    for p in path.glob("*.png"):
         p.unlink()
 
 
@@ -209,6 +210,10 @@ def claim(path: os.PathLike, experiment: str, config: Mapping[str, Any], *, fres
     fd = _lock(path)
     try:
         state = "new"
+        # temporaries of writers killed mid-write (SIGKILL cannot clean up): with the lock held no writer is
+        # alive here, and a temporary is never data (the rename that would have made it so did not happen)
+        for tmp in list(path.glob(".*.tmp")) + list(path.glob("checkpoint/*/.*.tmp")):
+            tmp.unlink()
         if fresh:
             _remove_artefacts(path)
         mpath = path / MANIFEST

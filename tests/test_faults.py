@@ -128,13 +128,13 @@ def test_second_process_in_a_run_directory_is_refused(tmp_path):
 def test_refused_cli_rerun_keeps_hydra_files(tmp_path):
     """Through the CLI: a rerun with another config is refused before .hydra/ is written."""
     d = tmp_path / "run"
-    ok = _cli(*WG, f"hydra.run.dir={d}")
+    ok = _cli("experiment=workspace_grid", *WG, f"hydra.run.dir={d}")
     assert ok.returncode == 0, ok.stderr[-2000:]
     hydra_cfg = (d / ".hydra" / "config.yaml").read_bytes()
-    bad = _cli(*WG, "experiment.grid.h=0.05", f"hydra.run.dir={d}")
+    bad = _cli("experiment=workspace_grid", *WG, "experiment.grid.h=0.05", f"hydra.run.dir={d}")
     assert bad.returncode != 0 and "experiment.grid.h=0.1 there, 0.05 now" in bad.stderr
     assert (d / ".hydra" / "config.yaml").read_bytes() == hydra_cfg
-    again = _cli(*WG, f"hydra.run.dir={d}")
+    again = _cli("experiment=workspace_grid", *WG, f"hydra.run.dir={d}")
     assert again.returncode == 0 and "nothing to do" in again.stdout
 
 
@@ -278,24 +278,48 @@ def _cli(*args, timeout=300):
                           text=True, timeout=timeout)
 
 
-def _kill_then_finish(args, run_dir, seed, kills=2, window=(2.0, 7.0)):
-    """Start the CLI, SIGKILL it after a seeded random delay (``kills`` times), then run it to completion."""
+def _progress(run_dir):
+    """What a killed run had finished: x-planes of workspace_grid, or chunks of reconfig_indices' checkpoints."""
+    run_dir = Path(run_dir)
+    states = sorted(run_dir.glob("checkpoint/*/state.json"))
+    if states:
+        return tuple(json.loads(p.read_text())["done_chunks"] for p in states)
+    if (run_dir / "results.h5").exists():
+        with h5py.File(run_dir / "results.h5", "r") as f:
+            return (int(f["workspace"].attrs["planes_done"]),)
+    return ()
+
+
+def _kill_then_finish(args, run_dir, seed, targets):
+    """Start the CLI and SIGKILL it at a seeded random moment once its checkpoint has reached each of
+    ``targets`` (finished x-planes or chunks; plus a random 0-0.2 s so the kill lands anywhere inside the next
+    chunk or flush), then run it to completion. Returns the progress seen after each kill."""
     rng = random.Random(seed)
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    killed = 0
-    for _ in range(kills):
+    seen = []
+    for target in targets:
         p = subprocess.Popen([sys.executable, "-m", "deltajax.run", *args, f"hydra.run.dir={run_dir}"], cwd=REPO,
                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        time.sleep(rng.uniform(*window))
+        t_end = time.monotonic() + 240
+        while p.poll() is None and time.monotonic() < t_end:
+            try:
+                if sum(_progress(run_dir)) >= target:
+                    break
+            except (OSError, KeyError, ValueError):  # a file being replaced right now: look again
+                pass
+            time.sleep(0.01)
+        time.sleep(rng.uniform(0.0, 0.2))
         if p.poll() is None:
             p.send_signal(signal.SIGKILL)
-            killed += 1
         p.wait()
         assert p.returncode in (0, -signal.SIGKILL), p.returncode
+        seen.append(_progress(run_dir))
+        if p.returncode == 0:
+            break
     out = _cli(*args, f"hydra.run.dir={run_dir}")
     assert out.returncode == 0, out.stderr[-3000:]
     assert not list(Path(run_dir).glob("*.tmp")) and not list(Path(run_dir).glob(".*.tmp"))
-    return killed
+    return seen
 
 
 WG_KILL = ["experiment=workspace_grid", "plots=false", "progress=false", "experiment.grid.h=0.02",
@@ -306,21 +330,23 @@ WG_KILL = ["experiment=workspace_grid", "plots=false", "progress=false", "experi
 def test_workspace_grid_killed_at_random_moments_resumes_bit_identically(tmp_path):
     ref = _cli(*WG_KILL, f"hydra.run.dir={tmp_path / 'ref'}")
     assert ref.returncode == 0, ref.stderr[-3000:]
-    killed = _kill_then_finish(WG_KILL, tmp_path / "killed", seed=11)
-    assert killed >= 1
+    rng = random.Random(11)
+    seen = _kill_then_finish(WG_KILL, tmp_path / "killed", seed=11, targets=sorted(rng.sample(range(1, 30), 3)))
+    assert sum(0 < s[0] < 41 for s in seen if s) >= 2, seen  # kills inside the grid (41 x-planes)
     _assert_same_results(tmp_path / "killed" / "results.h5", tmp_path / "ref" / "results.h5")
 
 
 RI_KILL = ["experiment=reconfig_indices", "plots=false", "progress=false", "experiment.h=0.04",
-           "experiment.chunk_points=256", "experiment.slices_z=[0.4]"]
+           "experiment.chunk_points=128", "experiment.slices_z=[0.4]"]
 
 
 @pytest.mark.slow
 def test_reconfig_indices_killed_at_random_moments_resumes_bit_identically(tmp_path):
     ref = _cli(*RI_KILL, f"hydra.run.dir={tmp_path / 'ref'}")
     assert ref.returncode == 0, ref.stderr[-3000:]
-    killed = _kill_then_finish(RI_KILL, tmp_path / "killed", seed=5)
-    assert killed >= 1
+    rng = random.Random(5)  # progress = ODR chunks (1) + RDR chunks (28 of 128 points)
+    seen = _kill_then_finish(RI_KILL, tmp_path / "killed", seed=5, targets=sorted(rng.sample(range(2, 26), 3)))
+    assert sum(len(s) == 2 and 0 < s[1] < 28 for s in seen) >= 2, seen  # kills inside the RDR stage (28 chunks)
     _assert_same_results(tmp_path / "killed" / "results.h5", tmp_path / "ref" / "results.h5")
 
 
