@@ -5,12 +5,14 @@ Every error raised here names the config field and the value, before anything is
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from typing import Any, Mapping, Optional, Tuple
+from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 from .geometry import Delta, GeometryError, ReconfigurableDelta
 
-__all__ = ["ConfigError", "robot_from_config"]
+__all__ = ["ConfigError", "robot_from_config", "validate_config", "check_keys", "register_schemas", "TOP_LEVEL_KEYS",
+           "EXPERIMENT_VALIDATORS", "EXPERIMENT_SCHEMAS"]
 
 
 class ConfigError(ValueError):
@@ -78,4 +80,664 @@ def robot_from_config(cfg: Mapping[str, Any], prefix: str = "robot") -> Tuple[De
         recon = ReconfigurableDelta.from_range(robot, r_min, r_max, r_step)
     except GeometryError as e:
         raise ConfigError(f"{p}: {e}") from None
+    # something must be reachable over the whole range: the reach test is monotone in R, so both ends suffice
+    for end, R in (("min", r_min), ("max", float(recon.R_max))):
+        try:
+            Delta.from_degrees(theta_min_deg=lo, theta_max_deg=hi, mass=mass, **{**kw, "base_radius": R})
+        except GeometryError as e:
+            raise ConfigError(f"{p}.{end}={_cfg_value(rng, end)!r} m: at R = {R:g} m the {e}") from None
     return robot, recon
+
+
+def _cfg_value(cfg: Mapping[str, Any], key: str) -> Any:
+    return cfg.get(key) if hasattr(cfg, "get") else None
+
+
+# =============================================================================================================
+# Validation of every experiment field, before anything is computed (called by run.execute after the robot)
+# =============================================================================================================
+#: Top-level keys of the composed config (configs/config.yaml and the `# @package _global_` experiment files).
+TOP_LEVEL_KEYS = ("robot", "experiment", "seed", "precision", "plots", "progress", "compilation_cache", "fresh",
+                  "shard", "n_shards", "beta")
+
+def _field(path: str, v: Any, *, kind: str = "float", lo: Optional[float] = None, hi: Optional[float] = None,
+           lo_open: bool = False, hi_open: bool = False, none: bool = False) -> Any:
+    """Check one value; ``kind`` is "float" (finite number), "int" or "bool". Returns it as a Python value."""
+    if v is None:
+        if none:
+            return None
+        raise ConfigError(f"{path} is required, got null")
+    if kind == "bool":
+        if not isinstance(v, bool):
+            raise ConfigError(f"{path} must be true or false, got {v!r}")
+        return v
+    if isinstance(v, bool):
+        raise ConfigError(f"{path} must be {'an integer' if kind == 'int' else 'a number'}, got {v!r}")
+    if kind == "int":
+        if isinstance(v, float) and v.is_integer():
+            v = int(v)
+        if not isinstance(v, int):
+            raise ConfigError(f"{path} must be an integer, got {v!r}")
+    else:
+        try:
+            v = float(v)
+        except (TypeError, ValueError):
+            raise ConfigError(f"{path} must be a number, got {v!r}") from None
+        if not math.isfinite(v):
+            raise ConfigError(f"{path} must be a finite number, got {v!r}")
+    bad_lo = lo is not None and (v <= lo if lo_open else v < lo)
+    bad_hi = hi is not None and (v >= hi if hi_open else v > hi)
+    if bad_lo or bad_hi:
+        left = "" if lo is None else ("(" if lo_open else "[") + f"{lo:g}"
+        right = "" if hi is None else f"{hi:g}" + (")" if hi_open else "]")
+        if lo is not None and hi is None:
+            rng = f"{'>' if lo_open else '>='} {lo:g}"
+        elif hi is not None and lo is None:
+            rng = f"{'<' if hi_open else '<='} {hi:g}"
+        else:
+            rng = f"in {left}, {right}"
+        raise ConfigError(f"{path} must be {rng}, got {v!r}")
+    return v
+
+
+def _choice(path: str, v: Any, options) -> str:
+    if v not in tuple(options):
+        raise ConfigError(f"{path} must be one of {sorted(options)}, got {v!r}")
+    return v
+
+
+def _names(path: str, v: Any, options, *, min_len: int = 0) -> list:
+    items = list(v or [])
+    for x in items:
+        _choice(f"{path} entry", x, options)
+    if len(items) < min_len:
+        raise ConfigError(f"{path} must list at least {min_len} of {sorted(options)}, got {items!r}")
+    return items
+
+
+def _vector(path: str, v: Any, n: int) -> list:
+    try:
+        items = [float(t) for t in v]
+    except (TypeError, ValueError):
+        raise ConfigError(f"{path} must be a list of {n} numbers, got {v!r}") from None
+    if len(items) != n or not all(math.isfinite(t) for t in items):
+        raise ConfigError(f"{path} must be a list of {n} finite numbers, got {v!r}")
+    return items
+
+
+def _validate_top(cfg: Mapping[str, Any]) -> None:
+    _field("seed", cfg.get("seed"), kind="int")
+    _choice("precision", cfg.get("precision"), ("float64", "float32"))
+    for k in ("plots", "progress", "fresh"):
+        if k in cfg:
+            _field(k, cfg.get(k), kind="bool")
+    n_shards = _field("n_shards", cfg.get("n_shards", 1), kind="int", lo=1)
+    _field("shard", cfg.get("shard", 0), kind="int", lo=0, hi=n_shards - 1)
+
+
+def _v_workspace_grid(e, cfg, robot, recon) -> None:
+    from .indices import INDEX_NAMES
+
+    g = e.get("grid") or {}
+    _field("experiment.grid.h", g.get("h"), lo=0, lo_open=True)
+    for k in ("x", "y", "z"):
+        if g.get(k) is not None:
+            lo, hi = _vector(f"experiment.grid.{k}", g.get(k), 2)
+            if not hi >= lo:
+                raise ConfigError(f"experiment.grid.{k} must be [lo, hi] with lo <= hi (m), got {[lo, hi]!r}")
+    if g.get("bounds") is not None:
+        b = g.get("bounds")
+        if not hasattr(b, "__len__") or len(b) != 3:
+            raise ConfigError(f"experiment.grid.bounds must be null or [[x0,x1],[y0,y1],[z0,z1]] (m), got {b!r}")
+        for i, k in enumerate("xyz"):
+            lo, hi = _vector(f"experiment.grid.bounds[{i}]", b[i], 2)
+            if not hi > lo:
+                raise ConfigError(f"experiment.grid.bounds[{i}] ({k}) must have lo < hi (m), got {[lo, hi]!r}")
+    _field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
+    _field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True)
+    _field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
+    _names("experiment.store", e.get("store"), INDEX_NAMES)
+    _field("experiment.chunk_points", e.get("chunk_points"), kind="int", lo=1)
+    _choice("experiment.backend", e.get("backend", "auto"), ("auto", "jax", "numba"))
+    dev = e.get("devices", "all")
+    if dev not in ("all", None):
+        _field("experiment.devices", dev, kind="int", lo=1)
+    _field("experiment.checkpoint_s", e.get("checkpoint_s"), lo=0)
+    _field("experiment.resume", e.get("resume", True), kind="bool")
+    _field("experiment.stop_after", e.get("stop_after"), kind="int", lo=1, none=True)
+
+
+def _v_paper_grid(e, cfg, robot, recon) -> None:
+    _field("experiment.h", e.get("h"), lo=0, lo_open=True)
+    _field("experiment.chunk_points", e.get("chunk_points"), kind="int", lo=1)
+    _field("experiment.checkpoint", e.get("checkpoint", True), kind="bool")
+    if recon is None:
+        raise ConfigError(f"experiment={e.get('name')} needs a reconfigurable robot: robot.R_range is null")
+
+
+def _v_reconfig_indices(e, cfg, robot, recon) -> None:
+    from .indices import INDEX_NAMES
+
+    _v_paper_grid(e, cfg, robot, recon)
+    _field("beta", cfg.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
+    _field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
+    _field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True)
+    _choice("experiment.criterion", e.get("criterion"), INDEX_NAMES)
+    _choice("experiment.mode", e.get("mode"), ("fast", "exact"))
+    _choice("experiment.slice_index", e.get("slice_index"), INDEX_NAMES)
+    _names("experiment.store_fields", e.get("store_fields"), INDEX_NAMES)
+    for i, z in enumerate(e.get("slices_z") or []):
+        _field(f"experiment.slices_z[{i}]", z)
+
+
+def _v_indices_examples(e, cfg, robot, recon) -> None:
+    _field("experiment.R_step", e.get("R_step"), lo=0, lo_open=True)
+    for i, p in enumerate(e.get("points") or []):
+        _vector(f"experiment.points[{i}]", p, 3)
+    _field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
+    _field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True)
+    _field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
+    _choice("experiment.matrix", e.get("matrix"), ("theta3x3", "full3x4"))
+
+
+def _v_bench_kernel(e, cfg, robot, recon) -> None:
+    for k in ("n_points", "n_baseline", "block", "repeats"):
+        _field(f"experiment.{k}", e.get(k), kind="int", lo=1)
+    _field("experiment.R", e.get("R"), lo=0, lo_open=True)
+    _names("experiment.dtypes", e.get("dtypes"), ("float32", "float64"), min_len=1)
+
+
+def _v_dynamics_cycle(e, cfg, robot, recon) -> None:
+    from .trajectory import MOTION_LAWS
+
+    _choice("experiment.method", e.get("method"), ("virtual_work", "lagrange"))
+    _field("experiment.n_samples", e.get("n_samples"), kind="int", lo=2)
+    _choice("experiment.law", e.get("law"), MOTION_LAWS)
+    _field("experiment.blend", e.get("blend"), lo=0, hi=1, hi_open=True)
+    for name, s in (e.get("setups") or {}).items():
+        p = f"experiment.setups.{name}"
+        _vector(f"{p}.centre", s.get("centre"), 3)
+        _field(f"{p}.heading_deg", s.get("heading_deg"))
+        for k in ("duration", "torque_limit", "speed_limit"):
+            _field(f"{p}.{k}", s.get(k), lo=0, lo_open=True)
+    gm = e.get("ga_motion") or {}
+    _field("experiment.ga_motion.amplitude", gm.get("amplitude"), lo=0, lo_open=True)
+    _field("experiment.ga_motion.duration", gm.get("duration"), lo=0, lo_open=True)
+    _field("experiment.recon_R_amplitude", e.get("recon_R_amplitude"), lo=0)
+
+
+def _v_boundary_search(e, cfg, robot, recon) -> None:
+    _vector("experiment.centre", e.get("centre"), 3)
+    for k in ("eps", "rho_max", "grid_h", "sweep_step_deg"):
+        _field(f"experiment.{k}", e.get(k), lo=0, lo_open=True)
+    for i, s in enumerate(e.get("steps_deg") or []):
+        _field(f"experiment.steps_deg[{i}]", s, lo=0, lo_open=True)
+    for i, z in enumerate(e.get("centre_sweep_z") or []):
+        _field(f"experiment.centre_sweep_z[{i}]", z)
+    _field("experiment.profile_samples", e.get("profile_samples"), kind="int", lo=2)
+    _field("experiment.timing_repeats", e.get("timing_repeats"), kind="int", lo=1)
+    _field("experiment.half_space", e.get("half_space", True), kind="bool")
+
+
+# ---- ga_reconfig: today's keys (designer is rewriting them; update this block and GAReconfigSchema together) ----
+def _v_ga_reconfig(e, cfg, robot, recon) -> None:
+    from .indices import INDEX_NAMES
+    from .optimize.ga import ALGORITHMS
+    from .optimize.objectives import METRIC_UNITS
+    from .trajectory import MOTION_LAWS
+
+    p = "experiment"
+    _choice(f"{p}.resume", e.get("resume", "auto"), ("auto", "never", "must"))
+    _field(f"{p}.stop_after", e.get("stop_after"), kind="int", lo=1, none=True)
+    d = e.get("design") or {}
+    _field(f"{p}.design.n_R", d.get("n_R"), kind="int", lo=2)
+    for name, b in (d.get("bounds") or {}).items():
+        lo, hi = _vector(f"{p}.design.bounds.{name}", b, 2)
+        if not hi > lo:
+            raise ConfigError(f"{p}.design.bounds.{name} must be [lo, hi] with lo < hi, got {[lo, hi]!r}")
+    ga = e.get("ga") or {}
+    _choice(f"{p}.ga.algorithm", ga.get("algorithm"), ALGORITHMS)
+    _field(f"{p}.ga.population_size", ga.get("population_size"), kind="int", lo=2)
+    _field(f"{p}.ga.generations", ga.get("generations"), kind="int", lo=1)
+    _field(f"{p}.ga.sigma", ga.get("sigma"), lo=0, lo_open=True)
+    _field(f"{p}.ga.crossover_rate", ga.get("crossover_rate"), lo=0, hi=1)
+    _field(f"{p}.ga.elite_ratio", ga.get("elite_ratio"), lo=0, hi=1, lo_open=True)
+    _field(f"{p}.ga.checkpoint_every", ga.get("checkpoint_every"), kind="int", lo=1)
+    _choice(f"{p}.ga.init", ga.get("init"), ("uniform", "around"))
+    ws = e.get("workspace") or {}
+    for k in ("n_r", "n_phi", "n_z"):
+        _field(f"{p}.workspace.{k}", ws.get(k), kind="int", lo=1)
+    for k in ("r_max", "z_max"):
+        _field(f"{p}.workspace.{k}", ws.get(k), lo=0, lo_open=True, none=True)
+    _field(f"{p}.workspace.good_threshold", ws.get("good_threshold"), lo=0)
+    t = e.get("task") or {}
+    for k in ("diameter", "height"):
+        _field(f"{p}.task.{k}", t.get(k), lo=0, lo_open=True)
+    _field(f"{p}.task.z_top", t.get("z_top"))
+    for k in ("n_r", "n_phi", "n_z"):
+        _field(f"{p}.task.{k}", t.get(k), kind="int", lo=1)
+    _choice(f"{p}.task.index", t.get("index"), INDEX_NAMES)
+    _field(f"{p}.task.beta", t.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
+    c = e.get("cycle") or {}
+    for k in ("duration", "torque_limit", "speed_limit", "motor_speed"):
+        _field(f"{p}.cycle.{k}", c.get(k), lo=0, lo_open=True)
+    _field(f"{p}.cycle.n_samples", c.get("n_samples"), kind="int", lo=2)
+    _choice(f"{p}.cycle.law", c.get("law"), MOTION_LAWS)
+    _field(f"{p}.cycle.n_R_operating", c.get("n_R_operating"), kind="int", lo=1)
+    for k, w in ((e.get("objectives") or {}).get("weights") or {}).items():
+        _choice(f"{p}.objectives.weights key", k, METRIC_UNITS)
+        _field(f"{p}.objectives.weights.{k}", w)
+    k = e.get("constraints") or {}
+    _choice(f"{p}.constraints.handling", k.get("handling"), ("feasibility_first", "penalty"))
+    _field(f"{p}.constraints.coverage_min", k.get("coverage_min"), lo=0, hi=1)
+    _field(f"{p}.constraints.k_min", k.get("k_min"), lo=0)
+    _field(f"{p}.constraints.max_arm_sum", k.get("max_arm_sum"), lo=0, lo_open=True, none=True)
+    _field(f"{p}.constraints.penalty", k.get("penalty"), lo=0)
+    pa = e.get("pareto") or {}
+    if _field(f"{p}.pareto.enabled", pa.get("enabled"), kind="bool"):
+        _names(f"{p}.pareto.objectives", pa.get("objectives"), METRIC_UNITS, min_len=2)
+    _field(f"{p}.pareto.population_size", pa.get("population_size"), kind="int", lo=2)
+    _field(f"{p}.pareto.generations", pa.get("generations"), kind="int", lo=1)
+    _field(f"{p}.pareto.ref_max_factor", pa.get("ref_max_factor"), lo=0, hi=1, lo_open=True, hi_open=True)
+    _field(f"{p}.pareto.ref_min_factor", pa.get("ref_min_factor"), lo=1, lo_open=True)
+    r = e.get("refine") or {}
+    _field(f"{p}.refine.enabled", r.get("enabled"), kind="bool")
+    _field(f"{p}.refine.steps", r.get("steps"), kind="int", lo=0)
+    _field(f"{p}.refine.learning_rate", r.get("learning_rate"), lo=0, lo_open=True)
+    _field(f"{p}.refine.tau", r.get("tau"), lo=0, lo_open=True)
+    _field(f"{p}.refine.pareto_points", r.get("pareto_points"), kind="int", lo=0)
+    v = e.get("verify") or {}
+    for k in ("n_r", "n_phi", "n_z"):
+        _field(f"{p}.verify.{k}", v.get(k), kind="int", lo=1)
+    _field(f"{p}.verify.cycle_samples", v.get("cycle_samples"), kind="int", lo=2)
+# ---- end of ga_reconfig block ----
+
+
+#: experiment name -> validator(experiment cfg, whole cfg, robot, recon); experiments not listed get the
+#: top-level checks only (their job validates its own fields).
+EXPERIMENT_VALIDATORS = {
+    "workspace_grid": _v_workspace_grid,
+    "reconfig_workspace": _v_paper_grid,
+    "reconfig_indices": _v_reconfig_indices,
+    "indices_examples": _v_indices_examples,
+    "bench_kernel": _v_bench_kernel,
+    "dynamics_cycle": _v_dynamics_cycle,
+    "boundary_search": _v_boundary_search,
+    "ga_reconfig": _v_ga_reconfig,
+}
+
+
+def validate_config(cfg: Mapping[str, Any], robot=None, recon=None) -> None:
+    """Check every field of the composed config before anything is computed.
+
+    Top-level keys (unknown ones rejected, types and ranges), then the experiment block with its validator
+    (types, ranges, NaN, cross-field rules). The robot block is checked by :func:`robot_from_config`.
+
+    Raises:
+        ConfigError: one line naming the field (dotted path) and the value.
+    """
+    check_keys(cfg)
+    _validate_top(cfg)
+    e = cfg.get("experiment") or {}
+    check = EXPERIMENT_VALIDATORS.get(e.get("name"))
+    if check is not None:
+        check(e, cfg, robot, recon)
+
+
+# =============================================================================================================
+# Hydra structured-config schemas (ConfigStore): a mistyped key, a wrong type or an unknown +key is rejected at
+# composition, with the valid keys listed. configs/config.yaml puts schema/robot before the robot group and
+# schema/experiment/<name> (optional: experiments without a schema are validated by their job only) before
+# the experiment group. Values live in the YAML files; fields without a YAML value default to null here.
+# =============================================================================================================
+_REQ = "???"  # omegaconf.MISSING: the YAML must give a value
+
+
+def _list(*items):
+    return dataclasses.field(default_factory=lambda: list(items))
+
+
+@dataclasses.dataclass
+class RRangeSchema:
+    min: Optional[float] = None
+    max: Optional[float] = None
+    step: Optional[float] = None
+
+
+@dataclasses.dataclass
+class MassSchema:
+    upper_arm_mass: Optional[float] = None
+    upper_arm_com_fraction: Optional[float] = None
+    upper_arm_inertia_factor: Optional[float] = None
+    upper_arm_inertia: Optional[float] = None
+    rotor_inertia: Optional[float] = None
+    gear_ratio: Optional[float] = None
+    elbow_mass: Optional[float] = None
+    forearm_mass: Optional[float] = None
+    forearm_elbow_fraction: Optional[float] = None
+    platform_mass: Optional[float] = None
+    payload_mass: Optional[float] = None
+    carriage_mass: Optional[float] = None
+    gravity: Optional[float] = None
+
+
+@dataclasses.dataclass
+class RobotSchema:
+    name: str = "custom"
+    base_radius: Optional[float] = None
+    platform_radius: Optional[float] = None
+    upper_arm: Optional[float] = None
+    forearm: Optional[float] = None
+    theta_min_deg: Optional[float] = None
+    theta_max_deg: Optional[float] = None
+    R_range: Optional[RRangeSchema] = None
+    mass: Optional[MassSchema] = None
+
+
+@dataclasses.dataclass
+class GridSchema:
+    x: Optional[List[float]] = None
+    y: Optional[List[float]] = None
+    z: Optional[List[float]] = None
+    h: float = _REQ
+    bounds: Optional[List[List[float]]] = None
+
+
+@dataclasses.dataclass
+class WorkspaceGridSchema:
+    name: str = "workspace_grid"
+    grid: GridSchema = dataclasses.field(default_factory=GridSchema)
+    b_v: float = _REQ
+    b_f: float = _REQ
+    beta: float = _REQ
+    store: List[str] = _list()
+    chunk_points: int = _REQ
+    backend: str = "auto"
+    devices: Any = "all"  # 'all' or a count
+    checkpoint_s: float = 60.0
+    resume: bool = True
+    stop_after: Optional[int] = None
+
+
+@dataclasses.dataclass
+class ReconfigWorkspaceSchema:
+    name: str = "reconfig_workspace"
+    h: float = _REQ
+    chunk_points: int = _REQ
+    checkpoint: bool = True
+
+
+@dataclasses.dataclass
+class ReconfigIndicesSchema:
+    name: str = "reconfig_indices"
+    h: float = _REQ
+    criterion: str = "k_tilde"
+    mode: str = "fast"
+    b_v: float = _REQ
+    b_f: float = _REQ
+    slices_z: List[float] = _list()
+    slice_index: str = "omega_v"
+    chunk_points: int = _REQ
+    checkpoint: bool = True
+    store_fields: List[str] = _list()
+
+
+@dataclasses.dataclass
+class IndicesExamplesSchema:
+    name: str = "indices_examples"
+    R_step: float = _REQ
+    points: List[List[float]] = _list()
+    b_v: float = _REQ
+    b_f: float = _REQ
+    beta: float = _REQ
+    matrix: str = "theta3x3"
+
+
+@dataclasses.dataclass
+class BenchKernelSchema:
+    name: str = "bench_kernel"
+    n_points: int = _REQ
+    n_baseline: int = _REQ
+    block: int = 1000
+    repeats: int = _REQ
+    R: float = _REQ
+    dtypes: List[str] = _list()
+
+
+@dataclasses.dataclass
+class CycleSetupSchema:
+    centre: List[float] = _list()
+    heading_deg: float = 0.0
+    duration: float = _REQ
+    torque_limit: float = _REQ
+    speed_limit: float = _REQ
+
+
+@dataclasses.dataclass
+class GAMotionSchema:
+    amplitude: float = _REQ
+    duration: float = _REQ
+
+
+@dataclasses.dataclass
+class DynamicsCycleSchema:
+    name: str = "dynamics_cycle"
+    robots: List[str] = _list()
+    method: str = "virtual_work"
+    n_samples: int = _REQ
+    law: str = "poly5"
+    blend: float = _REQ
+    setups: Dict[str, CycleSetupSchema] = dataclasses.field(default_factory=dict)
+    ga_motion: GAMotionSchema = dataclasses.field(default_factory=GAMotionSchema)
+    recon_R_amplitude: float = _REQ
+
+
+@dataclasses.dataclass
+class BoundarySearchSchema:
+    name: str = "boundary_search"
+    centre: List[float] = _list()
+    eps: float = _REQ
+    steps_deg: List[float] = _list()
+    rho_max: float = _REQ
+    predictor: str = "tangent"
+    half_space: bool = True
+    volume_rule: str = "pyramid"
+    profile_samples: int = _REQ
+    grid_h: float = _REQ
+    grid_box: List[List[float]] = _list()
+    centre_sweep_z: List[float] = _list()
+    sweep_step_deg: float = _REQ
+    timing_repeats: int = _REQ
+
+
+# ---- ga_reconfig schema: today's keys (designer is rewriting them; update with _v_ga_reconfig above) ----------
+@dataclasses.dataclass
+class GADesignSchema:
+    n_R: int = _REQ
+    bounds: Dict[str, List[float]] = dataclasses.field(default_factory=dict)
+
+
+@dataclasses.dataclass
+class GASchema:
+    algorithm: str = "simple_ga"
+    population_size: int = _REQ
+    generations: int = _REQ
+    sigma: float = _REQ
+    crossover_rate: float = _REQ
+    elite_ratio: float = _REQ
+    checkpoint_every: int = _REQ
+    init: str = "uniform"
+
+
+@dataclasses.dataclass
+class GAWorkspaceSchema:
+    n_r: int = _REQ
+    n_phi: int = _REQ
+    n_z: int = _REQ
+    r_max: Optional[float] = None
+    z_max: Optional[float] = None
+    good_threshold: float = _REQ
+
+
+@dataclasses.dataclass
+class GATaskSchema:
+    diameter: float = _REQ
+    height: float = _REQ
+    z_top: float = _REQ
+    n_r: int = _REQ
+    n_phi: int = _REQ
+    n_z: int = _REQ
+    index: str = "k_tilde"
+    beta: float = _REQ
+
+
+@dataclasses.dataclass
+class GACycleSchema:
+    duration: float = _REQ
+    n_samples: int = _REQ
+    law: str = "poly5"
+    torque_limit: float = _REQ
+    speed_limit: float = _REQ
+    motor_speed: float = _REQ
+    n_R_operating: int = _REQ
+
+
+@dataclasses.dataclass
+class GAObjectivesSchema:
+    weights: Dict[str, float] = dataclasses.field(default_factory=dict)
+
+
+@dataclasses.dataclass
+class GAConstraintsSchema:
+    handling: str = "feasibility_first"
+    coverage_min: float = _REQ
+    k_min: float = _REQ
+    max_arm_sum: Optional[float] = None
+    penalty: float = _REQ
+
+
+@dataclasses.dataclass
+class GAParetoSchema:
+    enabled: bool = True
+    objectives: List[str] = _list()
+    population_size: int = _REQ
+    generations: int = _REQ
+    ref_max_factor: float = _REQ
+    ref_min_factor: float = _REQ
+
+
+@dataclasses.dataclass
+class GARefineSchema:
+    enabled: bool = True
+    steps: int = _REQ
+    learning_rate: float = _REQ
+    tau: float = _REQ
+    pareto_points: int = _REQ
+
+
+@dataclasses.dataclass
+class GAVerifySchema:
+    n_r: int = _REQ
+    n_phi: int = _REQ
+    n_z: int = _REQ
+    cycle_samples: int = _REQ
+
+
+@dataclasses.dataclass
+class GAReconfigSchema:
+    name: str = "ga_reconfig"
+    resume: str = "auto"
+    stop_after: Optional[int] = None
+    design: GADesignSchema = dataclasses.field(default_factory=GADesignSchema)
+    ga: GASchema = dataclasses.field(default_factory=GASchema)
+    workspace: GAWorkspaceSchema = dataclasses.field(default_factory=GAWorkspaceSchema)
+    task: GATaskSchema = dataclasses.field(default_factory=GATaskSchema)
+    cycle: GACycleSchema = dataclasses.field(default_factory=GACycleSchema)
+    objectives: GAObjectivesSchema = dataclasses.field(default_factory=GAObjectivesSchema)
+    constraints: GAConstraintsSchema = dataclasses.field(default_factory=GAConstraintsSchema)
+    pareto: GAParetoSchema = dataclasses.field(default_factory=GAParetoSchema)
+    refine: GARefineSchema = dataclasses.field(default_factory=GARefineSchema)
+    verify: GAVerifySchema = dataclasses.field(default_factory=GAVerifySchema)
+# ---- end of ga_reconfig schema ----
+
+
+#: experiment name -> schema, registered as ``schema/experiment/<name>``.
+EXPERIMENT_SCHEMAS = {
+    "workspace_grid": WorkspaceGridSchema,
+    "reconfig_workspace": ReconfigWorkspaceSchema,
+    "reconfig_indices": ReconfigIndicesSchema,
+    "indices_examples": IndicesExamplesSchema,
+    "bench_kernel": BenchKernelSchema,
+    "dynamics_cycle": DynamicsCycleSchema,
+    "boundary_search": BoundarySearchSchema,
+    "ga_reconfig": GAReconfigSchema,
+}
+
+
+def register_schemas() -> None:
+    """Register the schemas in Hydra's ConfigStore (idempotent; run.py calls it at import)."""
+    from hydra.core.config_store import ConfigStore
+
+    cs = ConfigStore.instance()
+    cs.store(group="schema/robot", name="delta", node=RobotSchema)
+    for name, node in EXPERIMENT_SCHEMAS.items():
+        cs.store(group="schema/experiment", name=name, node=node)
+
+
+def _schema_fields(schema) -> dict:
+    import typing
+
+    hints = typing.get_type_hints(schema)
+    return {f.name: hints[f.name] for f in dataclasses.fields(schema)}
+
+
+def _unwrap(tp):
+    """The dataclass inside Optional[...] / Dict[str, ...] annotations: (dataclass or None, is_dict)."""
+    import typing
+
+    args = typing.get_args(tp)
+    origin = typing.get_origin(tp)
+    if origin is typing.Union:
+        inner = [a for a in args if a is not type(None)]
+        return _unwrap(inner[0]) if len(inner) == 1 else (None, False)
+    if origin in (dict, Dict) and len(args) == 2 and dataclasses.is_dataclass(args[1]):
+        return args[1], True
+    if dataclasses.is_dataclass(tp):
+        return tp, False
+    return None, False
+
+
+def _check_keys(node: Any, schema, path: str) -> None:
+    if not hasattr(node, "keys"):
+        return
+    fields = _schema_fields(schema)
+    for k in node.keys():
+        if k not in fields:
+            raise ConfigError(f"{path}.{k} is not a setting of {path}; valid keys: {sorted(fields)}")
+        sub, is_dict = _unwrap(fields[k])
+        v = node.get(k)
+        if sub is None or v is None:
+            continue
+        if is_dict:
+            for name in v.keys():
+                _check_keys(v.get(name), sub, f"{path}.{k}.{name}")
+        else:
+            _check_keys(v, sub, f"{path}.{k}")
+
+
+def check_keys(cfg: Mapping[str, Any]) -> None:
+    """Reject keys that no schema knows, including those added with ``+key=value`` (Hydra adds them even to a
+    structured config), listing the valid keys of that block.
+
+    Raises:
+        ConfigError: one line naming the unknown key and the valid ones.
+    """
+    extra = [k for k in cfg.keys() if k not in TOP_LEVEL_KEYS]
+    if extra:
+        raise ConfigError(f"unknown top-level key(s) {extra}; valid keys: {list(TOP_LEVEL_KEYS)}")
+    if cfg.get("robot") is not None:
+        _check_keys(cfg.get("robot"), RobotSchema, "robot")
+    e = cfg.get("experiment")
+    schema = EXPERIMENT_SCHEMAS.get(e.get("name")) if e is not None else None
+    if schema is not None:
+        _check_keys(e, schema, "experiment")

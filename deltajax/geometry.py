@@ -237,7 +237,15 @@ class ReconfigurableDelta(eqx.Module):
         return self.R_min + k * self.R_step
 
     def at(self, R: Any) -> Delta:
-        """The robot frozen at base radius ``R`` (m); works with traced R inside jit/vmap."""
+        """The robot frozen at base radius ``R`` (m); works with traced R inside jit/vmap.
+
+        Raises:
+            GeometryError: a concrete scalar ``R`` that is not a finite number > 0 (traced or batched values are
+                not checked here: failure is data inside batches).
+        """
+        v = _concrete_float("R", R)
+        if v is not None and not v > 0:
+            raise GeometryError(f"R must be > 0 m, got {v!r}")
         return self.robot.with_base_radius(R)
 
 

@@ -10,23 +10,33 @@ frame's convention) and every dimension is an HDF5 dimension scale, so that :fun
 axes first) and gzip-compressed with the shuffle filter: reachability masks shrink ~100x, index fields
 several-fold, and any HDF5/netCDF reader decodes them.
 
-Writes are atomic: the whole file is written to ``<name>.tmp`` and renamed over the old one, so a reader
-(or a killed run) never sees a half-written file. Host-side only; never call inside jit.
+Writes are atomic: the whole file is built in memory, written to a temporary name unique to the writer
+(``.<name>.<pid>.<random>.tmp`` in the same directory) and renamed over the old one, so a reader (or a killed
+run) never sees a half-written file and two writers never share a temporary. A full disk or another I/O error
+raises :class:`ResultsWriteError` (one line: the path, the cause, that the previous file is intact, what to
+do) and leaves no temporary behind. Every dataset carries a ``checksum`` attribute (``sha256:<hex>`` of its
+data) that :func:`read_checked` verifies, so a resume refuses a damaged or edited checkpoint. Host-side only;
+never call inside jit.
 """
 
 from __future__ import annotations
 
 import datetime as _dt
 import math
+import errno as _errno
+import hashlib
+import itertools
 import os
 import subprocess
+import uuid
 from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence
 
 import h5py
 import numpy as np
 
-__all__ = ["ResultsFile", "load", "groups", "git_commit", "RESERVED_NAMES", "ResultsGroupError"]
+__all__ = ["ResultsFile", "ResultsWriteError", "ChecksumError", "ResultsGroupError", "load", "groups",
+           "read_checked", "checksum", "write_atomic", "git_commit", "RESERVED_NAMES"]
 
 RESERVED_NAMES = ("attrs", "units")
 
@@ -177,12 +187,25 @@ class ResultsFile:
 
     # -- writing ---------------------------------------------------------------------------------------------
     def flush(self, *, final: bool = False) -> Path:
-        """Write everything staged so far atomically; ``final=True`` also records the end time."""
+        """Write everything staged so far atomically; ``final=True`` also records the end time.
+
+        Raises:
+            ResultsWriteError: the file could not be written (disk full, I/O error); the previous file at
+                ``path`` is untouched and no temporary file is left.
+        """
         if final:
             self.attrs["end_time"] = _now()
         self.path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = self.path.with_name(self.path.name + ".tmp")
-        with h5py.File(tmp, "w") as f:
+        write_atomic(self.path, self._image())
+        return self.path
+
+    def _image(self) -> bytes:
+        # The file is built in memory (HDF5 core driver) and written to disk with plain OS calls. Writing through
+        # HDF5's own file driver, a full disk made File.close() fail half-way and the surviving dataset ids
+        # segfaulted at garbage collection (exit 139); now HDF5 never sees an I/O error.
+        f = h5py.File(f"deltajax-image-{os.getpid()}-{next(_IMAGE_IDS)}", "w", driver="core",
+                      backing_store=False, block_size=1 << 22)
+        try:
             for k, v in self.attrs.items():
                 f.attrs[k] = _attr_value(v)
             for gname, variables in self._groups.items():
@@ -190,13 +213,17 @@ class ResultsFile:
                 for k, v in self._group_attrs.get(gname, {}).items():
                     g.attrs[k] = _attr_value(v)
                 self._write_group(g, variables)
+                for n, v in variables.items():
+                    g[n].attrs["checksum"] = checksum(v.data)
             for gname, gattrs in self._group_attrs.items():
                 if gname not in self._groups:
                     g = f.require_group(gname)
                     for k, v in gattrs.items():
                         g.attrs[k] = _attr_value(v)
-        os.replace(tmp, self.path)
-        return self.path
+            f.flush()
+            return f.id.get_file_image()
+        finally:
+            f.close()
 
     @staticmethod
     def _write_group(g: h5py.Group, variables: dict[str, _Var]) -> None:
@@ -235,6 +262,84 @@ def _chunk_shape(shape: Sequence[int], itemsize: int, target: int = CHUNK_BYTES)
             break
         chunk[i] = max(1, math.ceil(chunk[i] / math.ceil(total / target)))
     return tuple(chunk)
+_IMAGE_IDS = itertools.count()
+
+
+class ResultsWriteError(OSError):
+    """A results file could not be written (disk full, I/O error); the previous file at the path is intact."""
+
+    def __str__(self) -> str:  # one line, without OSError's "[Errno N]" prefix
+        return str(self.strerror)
+
+
+class ChecksumError(ValueError):
+    """A stored dataset does not match its checksum (damaged or edited file)."""
+
+
+def checksum(data: Any) -> str:
+    """``"sha256:<hex>"`` of an array's dtype, shape and bytes (strings: their UTF-8 text)."""
+    arr = np.asarray(data)
+    h = hashlib.sha256()
+    if arr.dtype.kind in "OUS":
+        h.update(f"str{arr.shape}".encode())
+        for item in arr.reshape(-1):
+            h.update((item.decode() if isinstance(item, bytes) else str(item)).encode() + b"\0")
+    else:
+        arr = np.ascontiguousarray(arr)
+        h.update(f"{arr.dtype.str}{arr.shape}".encode())
+        h.update(memoryview(arr.reshape(-1)).cast("B"))
+    return "sha256:" + h.hexdigest()
+
+
+def read_checked(dset: "h5py.Dataset") -> np.ndarray:
+    """Read a whole dataset and verify it against its ``checksum`` attribute.
+
+    Raises:
+        ChecksumError: the attribute is missing or does not match (the message names file and dataset).
+    """
+    data = dset[()]
+    want = dset.attrs.get("checksum")
+    want = want.decode() if isinstance(want, bytes) else want
+    where = f"{dset.file.filename}:{dset.name}"
+    if not want:
+        raise ChecksumError(f"{where} has no checksum (not written by this deltajax version, or edited)")
+    if checksum(data) != want:
+        raise ChecksumError(f"{where} does not match its checksum (the file is damaged or was edited)")
+    return data
+
+
+def _write_all(fd: int, data: bytes) -> None:
+    view, n = memoryview(data), 0
+    while n < len(view):
+        n += os.write(fd, view[n:])
+
+
+def write_atomic(path: os.PathLike, data: bytes) -> None:
+    """Write ``data`` to ``path`` through a temporary name unique to this writer, fsync, then rename.
+
+    Raises:
+        ResultsWriteError: one line naming the path, the cause and what to do; no temporary is left.
+    """
+    path = Path(path)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp")
+    try:
+        fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
+        try:
+            _write_all(fd, data)
+            os.fsync(fd)
+        finally:
+            os.close(fd)
+        os.replace(tmp, path)
+    except OSError as e:
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        cause = "no space left on device" if e.errno == _errno.ENOSPC else (e.strerror or str(e))
+        kept = f"the previous {path.name} there is intact" if path.exists() else "nothing was written"
+        raise ResultsWriteError(e.errno, f"cannot write {path} ({len(data) / 1e6:.1f} MB): {cause}; {kept}. "
+                                         f"Free space (or fix the cause) and rerun the same command to resume"
+                                ) from None
 
 
 def _attr_value(v: Any) -> Any:

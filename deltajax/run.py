@@ -44,6 +44,15 @@ def _config_dir() -> str:
 
 CONFIG_DIR = _config_dir()
 
+
+def _register_schemas() -> None:
+    from .config import register_schemas
+
+    register_schemas()
+
+
+_register_schemas()  # before Hydra composes (configs/config.yaml names schema/robot and schema/experiment)
+
 __all__ = ["RunContext", "main", "cli", "run_experiment", "execute", "list_experiments", "CONFIG_DIR",
            "EXIT_USER_ERROR"]
 
@@ -65,6 +74,7 @@ class RunContext:
     results: Any
     robot: Any
     recon: Any
+    complete: bool = True  # a job that stops early (resumable) sets False: the run dir then stays resumable
 
     @property
     def dtype(self):
@@ -128,14 +138,17 @@ def _docstring_line(name: str) -> str:
     return first.split(". ")[0].rstrip(".") or "(no description)"
 
 
-def execute(cfg: DictConfig, run_dir: Path) -> Path:
+def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
     """Run the experiment described by ``cfg`` into ``run_dir``; returns the results path.
+
+    The run directory is claimed first (:mod:`deltajax.rundir`: lock, manifest, refusal of another job or
+    config); ``on_claimed()`` runs right after the claim (the CLI writes ``.hydra/`` there).
 
     Raises:
         ConfigError: a user error (bad value, unknown experiment), raised before anything compiles where the
             value is known up front; the CLI prints it as one line and exits with status 2.
     """
-    from .config import ConfigError, robot_from_config
+    from .config import ConfigError, check_keys, robot_from_config, validate_config
 
     _validate_top(cfg)
     name = cfg.experiment.name
@@ -157,32 +170,43 @@ def execute(cfg: DictConfig, run_dir: Path) -> Path:
     if cache:  # persistent XLA cache: reruns, resumes and sweep jobs skip most compilation
         jax.config.update("jax_compilation_cache_dir", os.path.expanduser(str(cache)))
         jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+    check_keys(cfg)  # unknown keys (also +key=value ones), before anything else reads the config
     robot, recon = robot_from_config(cfg.robot)  # validated before anything compiles
+    validate_config(cfg, robot, recon)  # every experiment field, before the run directory is touched
     from . import __version__
     from .io import ResultsFile, git_commit
+    from .rundir import claim
 
-    run_dir.mkdir(parents=True, exist_ok=True)
-    dev = jax.devices()[0]
-    attrs = {
-        "deltajax_version": __version__,
-        "git_commit": git_commit(),
-        "config": OmegaConf.to_yaml(cfg, resolve=True),
-        "experiment": name,
-        "seed": int(cfg.seed),
-        "precision": str(cfg.precision),
-        "backend": jax.default_backend(),
-        "device": f"{dev.platform}:{getattr(dev, 'device_kind', '')} x{jax.device_count()}",
-        "jax_version": jax.__version__,
-    }
-    results = ResultsFile(run_dir / "results.h5", attrs=attrs)
-    ctx = RunContext(cfg=cfg, run_dir=run_dir, results=results, robot=robot, recon=recon)
-    t0 = time.perf_counter()
-    with _console_through_tqdm():
-        module.run(ctx)
-        results.set_attrs(wall_time_s=time.perf_counter() - t0)
-        path = results.flush(final=True)
-        _drop_checkpoints(ctx)
-        ctx.log(f"wrote {path} ({path.stat().st_size / 1e6:.3g} MB)")
+    with claim(run_dir, name, OmegaConf.to_container(cfg, resolve=True), fresh=bool(cfg.get("fresh", False))) as owner:
+        if on_claimed is not None:
+            on_claimed()
+        if owner.state == "complete":
+            log.info(f"{run_dir} already holds the complete results of this {name} run; nothing to do "
+                     f"(fresh=true recomputes them)")
+            return run_dir / "results.h5"
+        dev = jax.devices()[0]
+        attrs = {
+            "deltajax_version": __version__,
+            "git_commit": git_commit(),
+            "config": OmegaConf.to_yaml(cfg, resolve=True),
+            "experiment": name,
+            "seed": int(cfg.seed),
+            "precision": str(cfg.precision),
+            "backend": jax.default_backend(),
+            "device": f"{dev.platform}:{getattr(dev, 'device_kind', '')} x{jax.device_count()}",
+            "jax_version": jax.__version__,
+        }
+        results = ResultsFile(run_dir / "results.h5", attrs=attrs)
+        ctx = RunContext(cfg=cfg, run_dir=run_dir, results=results, robot=robot, recon=recon)
+        t0 = time.perf_counter()
+        with _console_through_tqdm():
+            module.run(ctx)
+            results.set_attrs(wall_time_s=time.perf_counter() - t0)
+            path = results.flush(final=True)
+            if ctx.complete and cfg.experiment.get("stop_after") is None:
+                owner.mark_complete()
+                _drop_checkpoints(ctx)
+            ctx.log(f"wrote {path} ({path.stat().st_size / 1e6:.3g} MB)")
     return path
 
 
@@ -245,8 +269,12 @@ class BelowWarning(logging.Filter):
 def _user_errors() -> tuple:
     from .config import ConfigError
     from .geometry import GeometryError
+    from .io import ResultsWriteError
+    from .rundir import RunDirError
 
-    return (ConfigError, GeometryError)
+    # RunDirError: busy/foreign/damaged run directory; ResultsWriteError: disk full or I/O error (the previous
+    # results are intact). Each message already says what to do.
+    return (ConfigError, GeometryError, RunDirError, ResultsWriteError)
 
 
 @hydra.main(config_path=CONFIG_DIR, config_name="config", version_base="1.3")
@@ -257,8 +285,17 @@ def main(cfg: DictConfig) -> None:
     from hydra.types import RunMode
 
     hc = HydraConfig.get()
+    run_dir = Path(hc.runtime.output_dir)
+
+    def write_hydra_files() -> None:  # what Hydra's output_subdir would have written, once the dir is ours
+        out = run_dir / ".hydra"
+        out.mkdir(parents=True, exist_ok=True)
+        OmegaConf.save(cfg, out / "config.yaml")
+        OmegaConf.save(OmegaConf.create({"hydra": OmegaConf.to_container(hc, resolve=False)}), out / "hydra.yaml")
+        OmegaConf.save(OmegaConf.create(list(hc.overrides.task)), out / "overrides.yaml")
+
     try:
-        execute(cfg, Path(hc.runtime.output_dir))
+        execute(cfg, run_dir, on_claimed=write_hydra_files)
     except _user_errors() as e:
         if os.environ.get("HYDRA_FULL_ERROR") == "1" or hc.mode == RunMode.MULTIRUN:
             raise  # a sweep records the failed job; the launcher reports it

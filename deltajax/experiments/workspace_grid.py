@@ -34,6 +34,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ..config import ConfigError
+from ..rundir import CheckpointError, RunDirError
 
 GROUP = "workspace"
 REDUCER = "deltajax.experiments.workspace_grid:reduce_shards"
@@ -45,21 +46,37 @@ __all__ = ["run", "reduce_shards", "GridPlan", "plan_chunks", "make_evaluator", 
 # ---------------------------------------------------------------------------------------------------------
 # configuration
 # ---------------------------------------------------------------------------------------------------------
-def _grid_from_config(g: Mapping[str, Any]):
+def _grid_from_config(g: Mapping[str, Any], robot=None):
+    """The grid of ``experiment.grid``; an axis given as null is sized from the robot's reach bound
+    (:func:`deltajax.workspace.driver.reach_box`, widened outwards to whole steps of h, y symmetric)."""
     from ..workspace import make_grid
+    from ..workspace.driver import reach_box
 
-    def pair(key):
+    h = g.get("h")
+    if not isinstance(h, (int, float)) or isinstance(h, bool) or not h > 0 or not math.isfinite(h):
+        raise ConfigError(f"experiment.grid.h must be a positive number (m), got {h!r}")
+    box = reach_box(robot) if robot is not None else None
+
+    def pair(i, key):
         v = g.get(key)
+        if v is None and box is not None:  # from the reach bound, on whole steps of h (y symmetric: mirror halving)
+            lo, hi = box[i]
+            if key == "y":
+                n = math.ceil(max(-lo, hi) / h - 1e-9)
+                return -n * h, n * h
+            return math.floor(lo / h + 1e-9) * h, math.ceil(hi / h - 1e-9) * h
         try:
             lo, hi = (float(t) for t in v)
         except (TypeError, ValueError):
-            raise ConfigError(f"experiment.grid.{key} must be [lo, hi] in m, got {v!r}") from None
+            raise ConfigError(f"experiment.grid.{key} must be [lo, hi] in m (or null: from the reach bound), "
+                              f"got {v!r}") from None
         return lo, hi
 
-    h = g.get("h")
-    if not isinstance(h, (int, float)) or isinstance(h, bool) or not h > 0:
-        raise ConfigError(f"experiment.grid.h must be a positive number (m), got {h!r}")
     bounds = g.get("bounds")
+    auto = [k for k in ("x", "y", "z") if g.get(k) is None]
+    if auto and bounds is not None:
+        raise ConfigError(f"experiment.grid.bounds must be null when the grid is sized from the reach bound "
+                          f"(experiment.grid.{'/'.join(auto)}=null), got {bounds!r}")
     if bounds is not None:
         try:
             bounds = [[float(a), float(b)] for a, b in bounds]
@@ -68,7 +85,7 @@ def _grid_from_config(g: Mapping[str, Any]):
             raise ConfigError(f"experiment.grid.bounds must be null or [[x0,x1],[y0,y1],[z0,z1]] (m), "
                               f"got {g.get('bounds')!r}") from None
     try:
-        return make_grid(pair("x"), pair("y"), pair("z"), float(h), bounds=bounds)
+        return make_grid(pair(0, "x"), pair(1, "y"), pair(2, "z"), float(h), bounds=bounds)
     except ValueError as e:
         raise ConfigError(f"experiment.grid: {e}") from None
 
@@ -183,9 +200,21 @@ def plane_statistics(ok: np.ndarray, values: np.ndarray) -> dict[str, np.ndarray
     }
 
 
+def _face_count(planes: Mapping[str, np.ndarray], x_faces: tuple[bool, bool]) -> np.int64:
+    """Reachable points on the grid's faces: the y/z faces of every plane, plus whole first/last x-planes."""
+    pc, pf = planes["plane_count"], planes["plane_face_count"]
+    n = int(pf.sum())
+    if len(pc) and x_faces[0]:
+        n += int(pc[0] - pf[0])
+    if len(pc) > 1 and x_faces[1]:
+        n += int(pc[-1] - pf[-1])
+    return np.int64(n)
+
+
 def _summary(planes: Mapping[str, np.ndarray], names: Sequence[str], h: float, n_points: int,
-             box_volume: float) -> dict[str, np.ndarray]:
+             box_volume: float, x_faces: tuple[bool, bool] = (True, True)) -> dict[str, np.ndarray]:
     count = np.int64(planes["plane_count"].sum())
+    faces = _face_count(planes, x_faces)
     n = planes["plane_n"].sum(axis=0)
     total = planes["plane_sum"].sum(axis=0)
     vmin = planes["plane_min"].min(axis=0)
@@ -195,6 +224,9 @@ def _summary(planes: Mapping[str, np.ndarray], names: Sequence[str], h: float, n
         "volume": np.float64(count * h ** 3),
         "volume_box": np.float64(count / n_points * box_volume),
         "fraction": np.float64(count / n_points),
+        # reachable points on the box faces: the workspace continues outside the grid, volume is a lower bound
+        "face_count": faces,
+        "truncated": np.uint8(faces > 0),
     }
     with np.errstate(invalid="ignore", divide="ignore"):
         mean = np.where(n > 0, total / np.maximum(n, 1), np.nan)
@@ -212,7 +244,9 @@ def reduce_shards(data: Mapping[str, np.ndarray], shard_attrs: Sequence[Mapping[
     names = [str(s) for s in data["index"]]
     scalars = _summary(data, names, float(a0["h"]), int(a0["n_points"]), float(a0["box_volume"]))
     planes_done = sum(int(a["planes_done"]) for a in shard_attrs)
-    return scalars, {"planes_done": planes_done, "complete": int(planes_done == int(a0["shard_axis_size"]))}
+    size = int(a0["shard_axis_size"])
+    return scalars, {"planes_done": planes_done, "complete": int(planes_done == size),
+                     "resume_seal": _seal(str(a0["resume_key"]), planes_done, 0, size)}
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -232,7 +266,7 @@ def run(ctx) -> None:
 
     cfg = ctx.cfg
     ex = cfg.experiment
-    grid = _grid_from_config(ex.grid)
+    grid = _grid_from_config(ex.grid, ctx.robot)
     shard = _int(cfg, "shard", "shard", 0)
     n_shards = _int(cfg, "n_shards", "n_shards", 1)
     chunk_points = _int(ex, "chunk_points", "experiment.chunk_points", 1)
@@ -271,12 +305,17 @@ def run(ctx) -> None:
                       "precision": str(cfg.precision), "backend": backend}, sort_keys=True)
     reach = np.zeros((n_local, ny, nz), np.uint8)
     fields = {name: np.full((n_local, ny, nz), np.nan, dtype) for name in store}
-    planes = {"plane_count": np.zeros(n_local, np.int64), "plane_n": np.zeros((n_local, n_idx), np.int64),
+    planes = {"plane_count": np.zeros(n_local, np.int64), "plane_face_count": np.zeros(n_local, np.int64),
+              "plane_n": np.zeros((n_local, n_idx), np.int64),
               "plane_sum": np.zeros((n_local, n_idx), dtype), "plane_min": np.full((n_local, n_idx), np.inf, dtype),
               "plane_max": np.full((n_local, n_idx), -np.inf, dtype)}
     done = 0  # planes of this shard finished
-    if ex.get("resume", True) and ctx.results.path.exists():
-        done = _resume(ctx, key, plan.x_start, plan.x_stop, reach, fields, planes)
+    if ctx.results.path.exists():
+        if not ex.get("resume", True):
+            raise RunDirError(f"{ctx.results.path} exists and experiment.resume=false: add fresh=true to start over, "
+                              f"or choose another hydra.run.dir")
+        done = _resume(ctx, key, plan, reach, fields, planes)
+    x_faces = (plan.x_start == 0, plan.x_stop == nx)
 
     def stage(planes_done: int) -> None:
         r = ctx.results
@@ -290,15 +329,18 @@ def run(ctx) -> None:
             r.put(GROUP, name, fields[name], units="1", dims=("x", "y", "z"),
                   attrs={"description": f"{name} (theta3x3, homogenised by L1); NaN outside the workspace"})
         r.put(GROUP, "plane_count", planes["plane_count"], units="1", dims=("x",))
+        r.put(GROUP, "plane_face_count", planes["plane_face_count"], units="1", dims=("x",),
+              attrs={"description": "reachable points of the x-plane on the y and z faces of the grid box"})
         for k in ("plane_n", "plane_sum", "plane_min", "plane_max"):
             r.put(GROUP, k, planes[k], units="1", dims=("x", "index"))
-        for k, v in _summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume).items():
+        for k, v in _summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume, x_faces).items():
             r.put(GROUP, k, v, units={"count": "1", "volume": "m^3", "volume_box": "m^3"}.get(k, "1"), dims=())
         r.set_attrs(GROUP, shard_axis="x", shard=shard, n_shards=n_shards, shard_start=plan.x_start,
                     shard_stop=plan.x_stop, shard_axis_size=nx, shard_reduce=REDUCER, planes_done=planes_done,
                     complete=int(planes_done == n_local), resume_key=key, h=grid.h, n_points=grid.n_points,
                     box_volume=grid.box_volume, b_v=params["b_v"], b_f=params["b_f"], beta=params["beta"],
                     chunk_planes=plan.planes_per_chunk,
+                    resume_seal=_seal(key, planes_done, plan.x_start, plan.x_stop),
                     description="fixed-R workspace grid: reachability, indices and their statistics")
 
     if backend == "jax":
@@ -316,7 +358,9 @@ def run(ctx) -> None:
     n_eval = 0
     first_chunk_s, n_first = None, 0  # the first chunk includes compilation: timed apart
     every = float(ex.get("checkpoint_s", 60.0))
-    for c in ctx.progress(range(first, plan.chunk1), total=plan.chunk1 - first, desc="workspace_grid"):
+    stop_after = ex.get("stop_after")  # stop as if killed after this many chunks (tests the resume path)
+    last = plan.chunk1 if stop_after is None else min(plan.chunk1, first + int(stop_after))
+    for c in ctx.progress(range(first, last), total=last - first, desc="workspace_grid"):
         a, b = plan.chunk_planes(c)
         idx = np.arange(a * plan.plane, b * plan.plane, dtype=np.int64)
         if backend == "jax":
@@ -336,8 +380,11 @@ def run(ctx) -> None:
             fields[name][la:lb] = vals[..., FIELD_NAMES.index(name)].reshape(b - a, ny, nz)
         for k, v in plane_statistics(ok, vals).items():
             planes[k][la:lb] = v
+        okp = ok.reshape(b - a, ny, nz)
+        planes["plane_face_count"][la:lb] = (okp.sum(axis=(1, 2)) - okp[:, 1:-1, 1:-1].sum(axis=(1, 2))
+                                             if min(ny, nz) > 2 else okp.sum(axis=(1, 2)))
         done = lb
-        if time.monotonic() - t_ckpt > every and c + 1 < plan.chunk1:
+        if time.monotonic() - t_ckpt > every and c + 1 < last:
             stage(done)
             ctx.results.flush()
             t_ckpt = time.monotonic()
@@ -349,7 +396,15 @@ def run(ctx) -> None:
     rate = warm_n / warm_s if warm_s > 0 else 0.0
     ctx.results.set_attrs(points_evaluated=n_eval, points_per_s=rate, first_chunk_s=first_chunk_s or 0.0,
                           devices_used=n_dev if backend == "jax" else 0, backend=backend, worker_env=os.environ.get("DELTAJAX_WORKER_ENV", ""))
-    s = _summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume)
+    s = _summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume, x_faces)
+    if int(s["face_count"]):
+        ctx.log(f"WARNING: {int(s['face_count'])} reachable points lie on the faces of the grid box: the workspace "
+                f"continues outside it, so the volume below is a lower bound (widen experiment.grid.x/y/z, or set "
+                f"them to null to size the box from the robot's reach bound)")
+    if done < n_local:
+        ctx.complete = False
+        ctx.log(f"stopped after {done} of {n_local} x-planes (experiment.stop_after): rerun into {ctx.run_dir} "
+                f"to resume")
     ctx.log(f"shard {shard}/{n_shards}: {int(s['count'])} reachable points, volume {float(s['volume']):.6g} m^3 "
             f"(count h^3), {float(s['volume_box']):.6g} m^3 (count/N V_box); "
             f"{rate / 1e6:.2f} M points/s after the first chunk ({first_chunk_s or 0.0:.1f} s with compilation)")
@@ -357,26 +412,63 @@ def run(ctx) -> None:
         _plot(ctx, grid, reach)
 
 
-def _resume(ctx, key, start, stop, reach, fields, planes) -> int:
+def _seal(key: str, planes_done: int, start: int, stop: int) -> str:
+    """Checksum of the attributes a resume trusts (the datasets carry their own checksums, deltajax.io)."""
+    import hashlib
+
+    return hashlib.sha256(json.dumps([key, int(planes_done), int(start), int(stop)]).encode()).hexdigest()
+
+
+def _resume(ctx, key, plan, reach, fields, planes) -> int:
+    """Load the finished planes of the checkpoint in results.h5 into the arrays; refuse a damaged one."""
     import h5py
 
+    from ..io import ChecksumError, read_checked
+
+    path = ctx.results.path
+    n_local = plan.x_stop - plan.x_start
+
+    def refuse(what: str):
+        return CheckpointError(f"cannot resume from {path}: {what}; move it away to keep it, or add fresh=true to "
+                               f"start over")
+
     try:
-        with h5py.File(ctx.results.path, "r") as f:
+        with h5py.File(path, "r") as f:
             g = f.get(GROUP)
-            same_shard = g is not None and [int(g.attrs.get(k, -1)) for k in ("shard_start", "shard_stop")] \
-                == [start, stop]
-            if g is None or g.attrs.get("resume_key") != key or not same_shard:
-                ctx.log("results.h5 exists but is from a different job: starting afresh")
-                return 0
-            done = int(g.attrs["planes_done"])
-            reach[:done] = g["reachable"][:done]
-            for name in fields:
-                fields[name][:done] = g[name][:done]
-            for k in planes:
-                planes[k][:done] = g[k][:done]
+            if g is None:
+                raise refuse(f"it has no group {GROUP!r}")
+            a = g.attrs
+            try:
+                done = int(a["planes_done"])
+                ok_seal = a.get("resume_seal") == _seal(a["resume_key"], done, a["shard_start"], a["shard_stop"])
+            except (KeyError, TypeError, ValueError):
+                raise refuse("its checkpoint attributes are missing or malformed") from None
+            if not ok_seal:
+                raise refuse("its checkpoint attributes (planes_done, resume_key, shard range) do not match their "
+                             "checksum (the file is damaged or was edited)")
+            if a["resume_key"] != key or [int(a["shard_start"]), int(a["shard_stop"])] != [plan.x_start, plan.x_stop]:
+                raise refuse("it was written by another grid, robot, backend or shard")
+            if not 0 <= done <= n_local:
+                raise refuse(f"planes_done={done} is outside 0..{n_local}")
+            data = {"reachable": read_checked(g["reachable"])}
+            for name in list(fields) + list(planes):
+                data[name] = read_checked(g[name])
+    except ChecksumError as e:
+        raise refuse(str(e).split(": ", 1)[-1].replace(f"{path}:", "")) from None
     except (OSError, KeyError) as e:
-        ctx.log(f"cannot resume from {ctx.results.path} ({e}): starting afresh")
-        return 0
+        raise refuse(f"it is unreadable or incomplete ({type(e).__name__}: {str(e).split('(')[0].strip()})") from None
+    for name, arr in data.items():
+        want = reach.shape if name == "reachable" or name in fields else planes[name].shape
+        if arr.shape != want:
+            raise refuse(f"{GROUP}/{name} has shape {arr.shape}, this run expects {want}")
+    counts = data["reachable"][:done].reshape(done, -1).sum(axis=1, dtype=np.int64)
+    if not np.array_equal(counts, data["plane_count"][:done]):
+        raise refuse("plane_count does not match the reachable mask")
+    reach[:done] = data["reachable"][:done]
+    for name in fields:
+        fields[name][:done] = data[name][:done]
+    for k in planes:
+        planes[k][:done] = data[k][:done]
     ctx.log(f"resuming: {done} x-planes already done")
     return done
 

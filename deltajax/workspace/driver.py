@@ -8,9 +8,11 @@ computing it.
 
 Checkpoint/resume: with ``checkpoint_dir`` the outputs live in ``<dir>/<name>.npy`` memory maps and
 ``<dir>/state.json`` records the number of finished chunks, rewritten atomically (temporary file + rename)
-after the chunk's data is flushed. A killed run restarts at the first unfinished chunk; chunks are
-deterministic, so the result is bit-for-bit that of an uninterrupted run. A checkpoint written with other
-parameters (its fingerprint differs) is refused with an error rather than silently mixed.
+after the chunk's data is flushed, with a sha256 of every finished chunk's outputs. A killed run restarts at the
+first unfinished chunk; chunks are deterministic, so the result is bit-for-bit that of an uninterrupted run. A
+checkpoint written with other parameters (its fingerprint differs), or one whose state or data is damaged (an
+unreadable state.json, a chunk count out of range, a missing or resized array, a finished chunk whose data no
+longer matches its checksum) is refused with an error naming the directory rather than silently used.
 
 Jobs::
 
@@ -36,11 +38,11 @@ from ..indices import INDEX_NAMES
 from .grid import Grid
 
 __all__ = ["GridJob", "run_chunks", "fixed_workspace", "reconfigurable_workspace", "redundancy_grid",
-           "CheckpointMismatch"]
+           "CheckpointMismatch", "reach_box", "face_count"]
 
 
 class CheckpointMismatch(RuntimeError):
-    """The checkpoint directory holds a run with different parameters."""
+    """The checkpoint directory holds a run with different parameters, or a damaged checkpoint."""
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -101,19 +103,39 @@ def run_chunks(n_items: int, chunk_size: int, compute: Callable[[int, int], dict
         ck.mkdir(parents=True, exist_ok=True)
         state_path = ck / "state.json"
         if state_path.exists():
-            state = json.loads(state_path.read_text())
+            def damaged(what):
+                return CheckpointMismatch(f"checkpoint {ck} is damaged ({what}); delete that directory to recompute it")
+
+            try:
+                state = json.loads(state_path.read_text())
+                done = int(state["done_chunks"])
+                sums = [str(h) for h in state["chunk_sha256"]]
+            except (OSError, ValueError, KeyError, TypeError) as e:
+                raise damaged(f"state.json unreadable: {type(e).__name__}") from None
             if state.get("fingerprint") != fp:
                 raise CheckpointMismatch(f"checkpoint {ck} was written by a different job "
                                          f"(fingerprint {state.get('fingerprint')} != {fp}); use another directory")
-            done = int(state["done_chunks"])
-            for name in outputs:
-                arrays[name] = np.load(ck / f"{name}.npy", mmap_mode="r+")
+            if not 0 <= done <= n_chunks or len(sums) != done:
+                raise damaged(f"done_chunks={done} with {len(sums)} checksums, {n_chunks} chunks in the job")
+            for name, (dtype, _) in outputs.items():
+                try:
+                    arrays[name] = np.load(ck / f"{name}.npy", mmap_mode="r+")
+                except (OSError, ValueError) as e:
+                    raise damaged(f"{name}.npy unreadable: {type(e).__name__}") from None
+                if arrays[name].shape != (n_items,) or arrays[name].dtype != np.dtype(dtype):
+                    raise damaged(f"{name}.npy holds {arrays[name].dtype}{arrays[name].shape}, expected "
+                                  f"{np.dtype(dtype)}({n_items},)")
+            for c in range(done):
+                a, b = c * chunk_size, min(n_items, (c + 1) * chunk_size)
+                if _chunk_sha256({k: v[a:b] for k, v in arrays.items()}) != sums[c]:
+                    raise damaged(f"chunk {c} (items {a}:{b}) does not match its checksum")
         else:
             for name, (dtype, fill) in outputs.items():
                 arr = np.lib.format.open_memmap(ck / f"{name}.npy", mode="w+", dtype=dtype, shape=(n_items,))
                 arr[:] = fill
                 arrays[name] = arr
-            _write_state(state_path, fp, 0, n_chunks)
+            sums = []
+            _write_state(state_path, fp, 0, n_chunks, sums)
     else:
         arrays = {name: np.full(n_items, fill, dtype=dtype) for name, (dtype, fill) in outputs.items()}
     if progress is not None and done:
@@ -132,16 +154,26 @@ def run_chunks(n_items: int, chunk_size: int, compute: Callable[[int, int], dict
         if state_path is not None:
             for a in arrays.values():
                 a.flush()
-            _write_state(state_path, fp, done, n_chunks)
+            sums.append(_chunk_sha256({k: arrays[k][start:stop] for k in outputs}))
+            _write_state(state_path, fp, done, n_chunks, sums)
         if progress is not None:
             progress(stop - start)
     return arrays, done >= n_chunks
 
 
-def _write_state(path: Path, fp: str, done: int, n_chunks: int) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps({"fingerprint": fp, "done_chunks": done, "n_chunks": n_chunks}))
-    os.replace(tmp, path)
+def _chunk_sha256(arrays: dict) -> str:
+    h = hashlib.sha256()
+    for k in sorted(arrays):
+        h.update(k.encode())
+        h.update(memoryview(np.ascontiguousarray(arrays[k])).cast("B"))
+    return h.hexdigest()
+
+
+def _write_state(path: Path, fp: str, done: int, n_chunks: int, sums: list) -> None:
+    from ..io import write_atomic
+
+    write_atomic(path, json.dumps({"fingerprint": fp, "done_chunks": done, "n_chunks": n_chunks,
+                                   "chunk_sha256": sums}).encode())
 
 
 # -- grid layout (mirror halving) ------------------------------------------------------------------------
@@ -347,3 +379,62 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
         work.update(counters)
     out = {n: lay.expand(arrays[n]) for n in outputs if n != "ok"}
     return GridJob(ok=lay.expand(arrays["ok"]), fields=out, complete=complete)
+
+
+# -- box from the reach bound, truncation -----------------------------------------------------------------
+
+def _sin_range(lo: float, hi: float) -> tuple[float, float]:
+    """(min, max) of sin over the angle interval [lo, hi] (rad)."""
+    if hi - lo >= 2 * math.pi:
+        return -1.0, 1.0
+    ends = [math.sin(lo), math.sin(hi)]
+    k_hi = math.floor((hi - math.pi / 2) / (2 * math.pi))  # largest pi/2 + 2 pi k <= hi
+    k_lo = math.floor((hi + math.pi / 2) / (2 * math.pi))  # largest -pi/2 + 2 pi k <= hi
+    top = 1.0 if math.pi / 2 + 2 * math.pi * k_hi >= lo else max(ends)
+    bottom = -1.0 if -math.pi / 2 + 2 * math.pi * k_lo >= lo else min(ends)
+    return bottom, top
+
+
+def reach_box(robot: Delta, R_max: Optional[float] = None) -> tuple[tuple[float, float], ...]:
+    """A box (m, z down) holding every point the platform centre can reach: ((x0, x1), (y0, y1), (z0, z1)).
+
+    Closed form: chain i's platform joint is within L2 of its elbow, which lies at (R - r + L1 cos theta) u_i +
+    L1 sin theta e_z from the base centre shifted by the platform offset, so the centre p satisfies, for every
+    chain, |p_h - (R - r) u_i| <= L1 max|cos theta| + L2 horizontally and L1 min sin theta - L2 <= p_z <=
+    L1 max sin theta + L2 over the joint range. The box is the intersection of the three chains' boxes.
+
+    Args:
+        robot: the robot (concrete values).
+        R_max: for a reconfigurable robot, the largest base radius (the box then holds every R up to it;
+            R - r enters only through the horizontal centres, and the union over R is taken end to end).
+    """
+    q = _robot_desc(robot)
+    L1, L2 = q["upper_arm"], q["forearm"]
+    lo, hi = q["theta_min"], q["theta_max"]
+    if not (math.isfinite(lo) and math.isfinite(hi)):
+        lo, hi = -math.pi, math.pi
+    s_lo, s_hi = _sin_range(lo, hi)
+    c_lo, c_hi = _sin_range(lo + math.pi / 2, hi + math.pi / 2)  # cos theta = sin(theta + pi/2)
+    rho = L1 * max(abs(c_lo), abs(c_hi)) + L2
+    ds = [q["base_radius"] - q["platform_radius"]]
+    if R_max is not None:
+        ds.append(float(R_max) - q["platform_radius"])
+    boxes = []
+    for d in ds:
+        cx = [d * math.cos(2 * math.pi * i / 3) for i in range(3)]
+        cy = [d * math.sin(2 * math.pi * i / 3) for i in range(3)]
+        boxes.append(((max(cx) - rho, min(cx) + rho), (max(cy) - rho, min(cy) + rho)))
+    x = (min(b[0][0] for b in boxes), max(b[0][1] for b in boxes))
+    y = (min(b[1][0] for b in boxes), max(b[1][1] for b in boxes))
+    return x, y, (L1 * s_lo - L2, L1 * s_hi + L2)
+
+
+def face_count(mask: np.ndarray) -> int:
+    """Number of True points of a 3-D mask on the faces of its box (each counted once).
+
+    A reachable point on a face means the reachable set may continue outside the grid: a volume computed from
+    the mask is then a lower bound, not the workspace volume.
+    """
+    m = np.asarray(mask, dtype=bool)
+    inner = m[1:-1, 1:-1, 1:-1].sum() if min(m.shape) > 2 else 0
+    return int(m.sum() - inner)
