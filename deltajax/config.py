@@ -415,6 +415,8 @@ class MassSchema:
     elbow_mass: Optional[float] = None
     forearm_mass: Optional[float] = None
     forearm_elbow_fraction: Optional[float] = None
+    forearm_model: Optional[str] = None  # rigid_rod | point_split (deltajax/mass.py validates the value)
+    forearm_inertia_factor: Optional[float] = None
     platform_mass: Optional[float] = None
     payload_mass: Optional[float] = None
     carriage_mass: Optional[float] = None
