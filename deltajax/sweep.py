@@ -218,6 +218,8 @@ def _scheduler_ids() -> dict[str, Any]:
 
             paths = submitit.JobEnvironment().paths
             ids.update(stdout=str(paths.stdout), stderr=str(paths.stderr))
+            # logs are appended across requeues: what SLURM says about *this* run comes after this offset
+            ids["stderr_offset"] = paths.stderr.stat().st_size if paths.stderr.exists() else 0
         except Exception as e:  # not inside a submitit job after all: say so in the status file
             ids["submitit_paths"] = f"unavailable: {e}"
     return ids
@@ -683,11 +685,16 @@ _KILL_LINE = re.compile(r"(slurmstepd\S*: error: .*)|(.*\bCANCELLED AT .*)|(.*DU
 def _killed_by_scheduler(job: Mapping[str, Any]) -> str:
     """The scheduler's last word on a job that started and never ended (from its error log), or ``""``."""
     try:
-        text = Path(str(job["stderr"])).read_text(errors="replace")
-    except (KeyError, OSError):
+        with open(str(job["stderr"]), "rb") as fh:
+            fh.seek(int(job.get("stderr_offset", 0)))
+            text = fh.read().decode(errors="replace")
+    except (KeyError, OSError, ValueError):
         return ""
     hits = [m.group(0).strip() for m in _KILL_LINE.finditer(text)]
-    return hits[-1][:300] if hits else ""
+    memory = [h for h in hits if "exceeded memory limit" in h]  # the line with the figures
+    ended = [h for h in hits if "CANCELLED AT" in h or "DUE TO" in h]
+    best = memory[0] if memory else ended[-1] if ended else hits[-1] if hits else ""
+    return best[:300]
 
 
 def summarize_sweep(sweep_dir: os.PathLike) -> dict[str, Path]:

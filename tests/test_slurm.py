@@ -233,7 +233,8 @@ def test_mem_gb_is_enforced_and_reported(cluster):
                                  f"hydra.sweep.dir={sweep}"]), "memory sweep", ok=False)
     status = {r["run"]: r["status"] for r in _rows(sweep)}
     assert status["0"] == "ok"
-    assert re.match(r"killed: slurmstepd\S*: error: .*(memory limit|Exceeded job memory)", status["1"]), status["1"]
+    assert re.match(r"killed: slurmstepd\S*: error: StepId=\S+ exceeded memory limit \(\d+ > 1073741824\), being killed",
+                    status["1"]), status["1"]
     job = _job(sweep / "1")
     rec = _slurm_record(cluster, job["SLURM_JOB_ID"])
     assert "mem=1G" in rec["Tres"] and rec["JobState"] in ("FAILED", "OUT_OF_MEMORY", "CANCELLED"), rec
@@ -316,7 +317,9 @@ def test_summary_status_from_job_records(tmp_path):
     records = {
         "0": {"status": "ok"},
         "1": {"status": "failed", "error": "ConfigError: robot: forearm must be > 0 m, got -1.0"},
-        "2": {"status": "running", "err": "submitit WARNING - Bypassing signal SIGTERM\n"
+        "2": {"status": "running", "err": "slurmstepd-n1: error: *** JOB 6 ON n1 CANCELLED AT 2026-12-01T11:00:00 "
+                                          "DUE TO JOB REQUEUE ***\n(an earlier run of the same job, before the offset)\n"
+                                          "submitit WARNING - Bypassing signal SIGTERM\n"
                                           "slurmstepd-n1: error: *** STEP 7.0 ON n1 CANCELLED AT 2026-12-01T12:00:00 ***\n"},
         "3": {"status": "running", "err": "still computing\n"},
         "4": None,
@@ -333,8 +336,10 @@ def test_summary_status_from_job_records(tmp_path):
             continue
         rec = dict(rec)
         if "err" in rec:
-            (d / "err.log").write_text(rec.pop("err"))
+            text = rec.pop("err")
+            (d / "err.log").write_text(text)
             rec["stderr"] = str(d / "err.log")
+            rec["stderr_offset"] = text.index("\n(") + 1 if "\n(" in text else 0
         (d / ".hydra" / "job_status.json").write_text(json.dumps(rec))
     rows = _rows(Path(summarize_sweep(tmp_path)["json"]).parent)
     status = {r["run"]: r["status"] for r in rows}
