@@ -8,7 +8,7 @@ from deltajax.io import load
 from deltajax.run import run_experiment
 
 TINY = ["experiment.R_step=0.007", "experiment.cases.adept.n_samples=11", "experiment.cases.task.samples_per_segment=5",
-        "experiment.refine.steps=3", "experiment.refine.n_ctrl=6", "progress=false", "plots=false",
+        "experiment.refine.enabled=false", "progress=false", "plots=false",
         "experiment.cases.task.points=[[0.0,0.0,0.30],[0.15,0.08,0.42],[-0.12,0.12,0.45]]"]
 
 
