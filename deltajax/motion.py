@@ -691,9 +691,13 @@ def refine_path(recon: ReconfigurableDelta, cycle: Cycle, dp: PathResult, criter
 
     def project(c):
         c = jnp.clip(c, Rlo, Rhi)
-        if boundary in ("rest", "closed"):
+        if boundary == "rest":
             # Rdot(0) = (c2 - c0) / 2h for the uniform cubic B-spline: c0 = c2 (and c_{n-1} = c_{n-3}) makes it 0
             c = c.at[0].set(c[2]).at[-1].set(c[-3])
+        elif boundary == "closed":
+            # and R(T) = R(0): the last three control points mirror the first three
+            c = c.at[0].set(c[2])
+            c = c.at[-1].set(c[2]).at[-2].set(c[1]).at[-3].set(c[2])
         return c
 
     @jax.jit
@@ -716,11 +720,14 @@ def refine_path(recon: ReconfigurableDelta, cycle: Cycle, dp: PathResult, criter
         (_, _, best), _ = jax.lax.scan(body, (c, st, best), None, length=steps)
         return best
 
-    c_init = jnp.asarray(c0, dtype)
-    if boundary in ("rest", "closed"):
-        c_init = project(c_init)
-        if boundary == "closed":
-            c_init = c_init.at[-3:].set(c_init[:3][::-1])  # symmetric ends: R(T) = R(0), Rdot = 0 at both
+    c_init = project(jnp.asarray(c0, dtype))
+    # start inside the rate limits: shrink the fit toward its mean (scales every difference, stays in range)
+    lam = 1.0
+    cc = np.asarray(c_init)
+    for lim_v, d in ((sp, np.abs(np.diff(cc)) / h), (ac, np.abs(np.diff(cc, 2)) / (h * h))):
+        if math.isfinite(lim_v) and d.size and d.max() > lim_v * (1 - margin):
+            lam = min(lam, lim_v * (1 - margin) / d.max())
+    c_init = project(jnp.asarray(cc.mean() + lam * (cc - cc.mean()), dtype))
     c_best, p_best, s_best = run(c_init)
     spline_score = (float(p_best), float(s_best))
     dp_score = tuple(float(v) for v in dp.score)

@@ -267,7 +267,8 @@ def run(ctx) -> None:
         else:
             rf = None
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
-        jump = float(lim.speed) * dt if math.isfinite(float(lim.speed)) else float(recon.R_step)
+        # a "jump": a step the drive cannot make in one sample (the DP's own steps sit exactly at the limit)
+        jump = (float(lim.speed) * dt if math.isfinite(float(lim.speed)) else float(recon.R_step)) * (1 + 1e-6)
         profiles = {"fixed": fixed, "pointwise": pw, "path_dp": dp}
         data, rows = {}, {}
         for m in METHODS:
