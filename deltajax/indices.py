@@ -387,11 +387,10 @@ def point_kernel(robot: Delta, p: Float[Array, "3"], *, sign: float = 1.0, sv_me
     L2 = jnp.where(valid, robot.forearm, 2.0 * one)
     L = L1 if length is None else jnp.where(valid, jnp.asarray(length, dtype), one)
     lim = limit_terms(robot.theta_min, robot.theta_max)
-    shift = robot.platform_radius - robot.base_radius
     chains, rows, d = [], [], []
     for i in range(3):
         x, y, z = chain_local(p[0], p[1], p[2], i)
-        lc = loop_closure(x + shift, y, z, L1, L2, lim, sign)
+        lc = loop_closure(x + robot.platform_radius - robot.base_radius, y, z, L1, L2, lim, sign)  # (x + r) - R
         ux, uy, uz = loop_vectors(lc.dx, lc.py, lc.pz, lc.cos, lc.sin, L1, L2)
         rows.extend(jx_row(ux, uy, uz, i))
         di = jq_theta(ux, uz, lc.cos, lc.sin)
