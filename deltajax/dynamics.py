@@ -367,9 +367,7 @@ def _lagrange(robot: Delta, m: Motion):
     lhs_R = 3.0 * mm.radial_mass() * m.R_ddot - s_arm * jnp.sum(s * thdd + c * thd ** 2)
     lhs_p = M * (m.p_ddot - g * ez)
     # Constraint gradients of Gamma_i = |w_i|^2 - L2^2, w_i = rot_i(p) + (r - R - L1 cos th, 0, -L1 sin th).
-    loc = to_chain_frames(m.p)
-    w = jnp.stack([loc[:, 0] + robot.platform_radius - robot.base_radius - L1 * c, loc[:, 1],
-                   loc[:, 2] - L1 * s], axis=-1)
+    w, _, _ = _chain_terms(robot, m.p, th, c, s)               # loop vectors from the core (chain frames)
     dG_dp = 2.0 * _from_chain_frames(w)                       # (3 constraints, 3 coords), base frame
     dG_dR = -2.0 * w[:, 0]                                    # (3,)
     dG_dth = 2.0 * L1 * (w[:, 0] * s - w[:, 2] * c)           # (3,) diagonal
