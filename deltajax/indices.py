@@ -387,11 +387,10 @@ def point_kernel(robot: Delta, p: Float[Array, "3"], *, sign: float = 1.0, sv_me
     L2 = jnp.where(valid, robot.forearm, 2.0 * one)
     L = L1 if length is None else jnp.where(valid, jnp.asarray(length, dtype), one)
     lim = limit_terms(robot.theta_min, robot.theta_max)
-    shift = robot.platform_radius - robot.base_radius
     chains, rows, d = [], [], []
     for i in range(3):
         x, y, z = chain_local(p[0], p[1], p[2], i)
-        lc = loop_closure(x + shift, y, z, L1, L2, lim, sign)
+        lc = loop_closure(x + robot.platform_radius - robot.base_radius, y, z, L1, L2, lim, sign)  # (x + r) - R
         ux, uy, uz = loop_vectors(lc.dx, lc.py, lc.pz, lc.cos, lc.sin, L1, L2)
         rows.extend(jx_row(ux, uy, uz, i))
         di = jq_theta(ux, uz, lc.cos, lc.sin)
@@ -508,12 +507,17 @@ class Singularity(NamedTuple):
         type2: all chains theta3 = pi/2 and theta1 + theta2 = pi/2 (forearms vertical).
         type3: number of chains (0..3) with theta2 = 0 and theta1 = pi/2 (vertical, stretched).
         type4: theta2 = 0 for two or more chains that are not of type 3.
-        jx_rank: numerical rank of Jx (3 = regular).
-        jq_rank: numerical rank of the theta-block of Jq (fixed robot).
-        jq_full_rank: numerical rank of the 3x4 Jq (reconfigurable robot, R column included).
+        jx_rank: numerical rank of Jx (3 = regular; -1 where not ``ok``).
+        jq_rank: numerical rank of the theta-block of Jq (fixed robot; -1 where not ``ok``).
+        jq_full_rank: numerical rank of the 3x4 Jq (reconfigurable robot, R column included; -1 where not ``ok``).
         near_singular: any of 1/k, sigma_min_v, sigma_min_f below ``near_tol`` or omega_v, omega_f below
             ``omega_tol`` (paper §5.1: 0.1 and 1e-3).
         singular: any exact (within tolerance) singularity above.
+        ok: the input is a valid configuration: design valid, p and theta finite and every loop closes
+            (| |C_i - B_i| - L2 | <= 1e-6 L2). Where False every flag is False and the ranks are -1.
+        stretched_or_folded: number of chains with sin(theta2) sin(theta3) = 0 within ``rank_tol``
+            (theta2 = 0 stretched, pi folded, or the forearm perpendicular to the chain plane):
+            exactly the chains whose Jq diagonal entry vanishes.
     """
 
     type1: Bool[Array, ""]
@@ -525,6 +529,8 @@ class Singularity(NamedTuple):
     jq_full_rank: Int[Array, ""]
     near_singular: Bool[Array, ""]
     singular: Bool[Array, ""]
+    ok: Bool[Array, ""]
+    stretched_or_folded: Int[Array, ""]
 
 
 def _angle_close(a, b, tol):
@@ -532,37 +538,57 @@ def _angle_close(a, b, tol):
     return jnp.abs(d) <= tol
 
 
+#: Default relative tolerance of :func:`classify_singularity`'s ranks and stretched/folded test. The IK
+#: recovers theta at a stretched/folded chain only to ~sqrt(eps) (its discriminant vanishes there and enters
+#: through a square root: ~1e-8 rad in float64), so an exact singularity reached through ``ik`` shows up as
+#: |sin th2 sin th3| ~ 1e-8; 1e-6 catches it with margin and is still far below any pose a user would call
+#: regular (1/k ~ 1e-6).
+SINGULAR_TOL = 1e-6
+
+
 def classify_singularity(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], *,
-                         angle_tol: float = 1e-6, rank_tol: float = 1e-9, near_tol: float = 0.1,
+                         angle_tol: float = 1e-6, rank_tol: float = SINGULAR_TOL, near_tol: float = 0.1,
                          omega_tol: float = 1e-3) -> Singularity:
     """Classify the singularities of a configuration.
 
     Args:
-        robot, p, theta: the configuration (m, rad).
-        angle_tol: tolerance on the analytic angle conditions (rad).
-        rank_tol: relative singular-value tolerance for the numerical ranks of Jx and Jq.
+        robot, p, theta: the configuration (m, rad), e.g. theta from :func:`deltajax.ik`.
+        angle_tol: tolerance on the analytic angle conditions (rad); the stretched test (theta2 = 0) of
+            types 3/4 uses ``max(angle_tol, rank_tol)`` (theta2 from IK carries ~1e-8 rad round-off).
+        rank_tol: relative tolerance (dimensionless) for the numerical ranks of Jx (singular values of Jx,
+            whose rows are unit vectors, below ``rank_tol``) and of Jq (|sin th2 sin th3| below ``rank_tol``);
+            default :data:`SINGULAR_TOL` = 1e-6, robust to IK round-off.
         near_tol: threshold on 1/k, sigma_min_v and sigma_min_f for "near singular".
         omega_tol: threshold on omega_v and omega_f for "near singular".
     """
     theta = jnp.asarray(theta)
+    p = jnp.asarray(p)
+    dtype = jnp.result_type(p.dtype, theta.dtype, robot.upper_arm.dtype)
+    finite = design_ok(robot) & jnp.all(jnp.isfinite(p)) & jnp.all(jnp.isfinite(theta))
+    theta = jnp.where(finite, theta, jnp.asarray([0.3, 0.5, 0.7], dtype)).astype(dtype)
+    p = jnp.where(finite, p, jnp.asarray([0.01, 0.02, 0.3], dtype)).astype(dtype)
+    robot = _harmless_design(robot, finite)
+    u_local = forearm_units(robot, p, theta)
+    closes = jnp.all(jnp.abs(jnp.sqrt(jnp.sum(u_local * u_local, axis=-1)) - 1.0) <= 1e-6)
+    ok = finite & closes
     th2, th3 = passive_angles(robot, p, theta)
     half_pi = 0.5 * jnp.pi
     th12 = theta + th2
     t3_plane = _angle_close(th3, half_pi, angle_tol)
     type1 = jnp.all(t3_plane & _angle_close(th12, jnp.pi, angle_tol))
     type2 = jnp.all(t3_plane & _angle_close(th12, half_pi, angle_tol))
-    stretched = _angle_close(th2, 0.0, angle_tol)
-    vertical = stretched & _angle_close(theta, half_pi, angle_tol)
+    stretched = _angle_close(th2, 0.0, max(angle_tol, rank_tol))
+    vertical = stretched & _angle_close(theta, half_pi, max(angle_tol, rank_tol))
     type3 = jnp.sum(vertical).astype(jnp.int32)
     type4 = jnp.sum(stretched & ~vertical) >= 2
 
-    u_local = forearm_units(robot, p, theta)
     Jx = _from_chain_frames(u_local)
     diag = jq_diagonal(robot, u_local, theta)
     Jq = jnp.concatenate([u_local[:, :1], jnp.diag(diag)], axis=1)
     sx = jnp.linalg.svd(Jx, compute_uv=False)
     jx_rank = jnp.sum(sx > rank_tol * jnp.maximum(sx[0], 1e-300)).astype(jnp.int32)
-    jq_rank = jnp.sum(jnp.abs(diag) > rank_tol * robot.upper_arm).astype(jnp.int32)
+    flat = jnp.abs(diag) <= rank_tol * robot.upper_arm
+    jq_rank = jnp.sum(~flat).astype(jnp.int32)
     sq = jnp.linalg.svd(homogenise(Jq, robot.upper_arm), compute_uv=False)
     jq_full_rank = jnp.sum(sq > rank_tol * jnp.maximum(sq[0], 1e-300)).astype(jnp.int32)
 
@@ -570,5 +596,10 @@ def classify_singularity(robot: Delta, p: Float[Array, "3"], theta: Float[Array,
     near = ((ind.inv_cond < near_tol) | (ind.sigma_min_v < near_tol) | (ind.sigma_min_f < near_tol)
             | (ind.omega_v < omega_tol) | (ind.omega_f < omega_tol))
     singular = type1 | type2 | (type3 > 0) | type4 | (jx_rank < 3) | (jq_rank < 3)
-    return Singularity(type1=type1, type2=type2, type3=type3, type4=type4, jx_rank=jx_rank, jq_rank=jq_rank,
-                       jq_full_rank=jq_full_rank, near_singular=near | singular, singular=singular)
+    no = jnp.asarray(False)
+    m1 = jnp.asarray(-1, jnp.int32)
+    return Singularity(type1=type1 & ok, type2=type2 & ok, type3=jnp.where(ok, type3, 0), type4=type4 & ok,
+                       jx_rank=jnp.where(ok, jx_rank, m1), jq_rank=jnp.where(ok, jq_rank, m1),
+                       jq_full_rank=jnp.where(ok, jq_full_rank, m1), near_singular=(near | singular) & ok,
+                       singular=singular & ok, ok=ok | no,
+                       stretched_or_folded=jnp.where(ok, jnp.sum(flat), 0).astype(jnp.int32))
