@@ -367,9 +367,7 @@ def _lagrange(robot: Delta, m: Motion):
     lhs_R = 3.0 * mm.radial_mass() * m.R_ddot - s_arm * jnp.sum(s * thdd + c * thd ** 2)
     lhs_p = M * (m.p_ddot - g * ez)
     # Constraint gradients of Gamma_i = |w_i|^2 - L2^2, w_i = rot_i(p) + (r - R - L1 cos th, 0, -L1 sin th).
-    loc = to_chain_frames(m.p)
-    w = jnp.stack([loc[:, 0] + robot.platform_radius - robot.base_radius - L1 * c, loc[:, 1],
-                   loc[:, 2] - L1 * s], axis=-1)
+    w, _, _ = _chain_terms(robot, m.p, th, c, s)               # loop vectors from the core (chain frames)
     dG_dp = 2.0 * _from_chain_frames(w)                       # (3 constraints, 3 coords), base frame
     dG_dR = -2.0 * w[:, 0]                                    # (3,)
     dG_dth = 2.0 * L1 * (w[:, 0] * s - w[:, 2] * c)           # (3,) diagonal
@@ -656,23 +654,45 @@ class CycleMetrics(NamedTuple):
     n_bad: jax.Array
 
 
-def _sample(robot: Delta, cycle, k_x, k_dx, k_ddx, k_R, k_dR, k_ddR, method):
-    """One sample of a cycle at T = 1: motion, (inertial, gravity) efforts, R and Rdot."""
+class _Columns(NamedTuple):
+    """A cycle at T = 1 as per-chain columns (tuples of 3 arrays of shape (K,)), the layout both
+    :func:`cycle_profile` and :func:`cycle_metrics` consume: under a vmap over designs every column is one
+    flat (P, K) array (no (P, K, 3) arrays, whose transposes XLA:CPU would materialise)."""
+
+    p: tuple
+    p_dot: tuple
+    p_ddot: tuple
+    theta: tuple
+    theta_dot: tuple
+    theta_ddot: tuple
+    tau_in: tuple
+    tau_g: tuple
+    fR_in: jax.Array
+    fR_g: jax.Array
+    R: jax.Array
+    R_dot: jax.Array
+    ok: jax.Array
+
+
+def _sample(robot: Delta, cycle, k_x, k_dx, k_ddx, k_R, k_dR, k_ddR, method) -> _Columns:
+    """One sample of a cycle at T = 1: joint motion and (inertial, gravity) efforts, as per-chain scalars."""
     rob = robot if k_R is None else robot.with_base_radius(k_R)
     dR = jnp.zeros((), k_x.dtype) if k_dR is None else k_dR
     ddR = jnp.zeros((), k_x.dtype) if k_ddR is None else k_ddR
     nan = jnp.asarray(jnp.nan, k_x.dtype)
+    R = rob.base_radius * jnp.ones((), k_x.dtype)
+    split = lambda v: tuple(v[k] for k in range(3))  # noqa: E731
     if cycle.space == "cartesian" and method == "virtual_work":
-        # the hot path (GA fitness, motor sizing): flat scalars from IK to efforts, stacked only at the end
-        cols = tuple(tuple(v[k] for k in range(3)) for v in (k_x, k_dx, k_ddx))
+        # the hot path (GA fitness, motor sizing): flat scalars from IK to efforts
+        cols = tuple(split(v) for v in (k_x, k_dx, k_ddx))
         chains, ok, rows, det = _flat_motion(rob, *cols, dR, ddR)
         tau_in, tau_g, fR_in, fR_g = _flat_efforts(rob, chains, rows, det, cols[2], ddR)
-        stack = lambda xs: jnp.where(ok, jnp.stack(xs), nan)  # noqa: E731
-        motion = Motion(p=k_x, p_dot=k_dx, p_ddot=k_ddx, theta=stack([jnp.arctan2(ch.s, ch.c) for ch in chains]),
-                        theta_dot=stack([ch.thd for ch in chains]), theta_ddot=stack([ch.thdd for ch in chains]),
-                        R_dot=dR, R_ddot=ddR, ok=ok)
-        efforts = (stack(tau_in), stack(tau_g), jnp.where(ok, fR_in, nan), jnp.where(ok, fR_g, nan))
-        return motion, efforts, rob.base_radius * jnp.ones((), k_x.dtype), dR
+        mask = lambda xs: tuple(jnp.where(ok, x, nan) for x in xs)  # noqa: E731
+        return _Columns(p=cols[0], p_dot=cols[1], p_ddot=cols[2],
+                        theta=mask([jnp.arctan2(ch.s, ch.c) for ch in chains]),
+                        theta_dot=mask([ch.thd for ch in chains]), theta_ddot=mask([ch.thdd for ch in chains]),
+                        tau_in=mask(tau_in), tau_g=mask(tau_g), fR_in=jnp.where(ok, fR_in, nan),
+                        fR_g=jnp.where(ok, fR_g, nan), R=R, R_dot=dR, ok=ok)
     if cycle.space == "cartesian":
         motion = joint_motion(rob, k_x, k_dx, k_ddx, dR, ddR)
     else:
@@ -688,9 +708,26 @@ def _sample(robot: Delta, cycle, k_x, k_dx, k_ddx, k_R, k_dR, k_ddR, method):
         tau_in, tau_g = full.tau - grav.tau, grav.tau
         fR_in, fR_g = full.force_R - grav.force_R, grav.force_R
     ok = motion.ok
-    efforts = tuple(jnp.where(ok, e, nan) for e in (tau_in, tau_g, fR_in, fR_g))
-    R = rob.base_radius * jnp.ones((), k_x.dtype)
-    return motion, efforts, R, dR
+    tau_in, tau_g, fR_in, fR_g = (jnp.where(ok, e, nan) for e in (tau_in, tau_g, fR_in, fR_g))
+    return _Columns(p=split(motion.p), p_dot=split(motion.p_dot), p_ddot=split(motion.p_ddot),
+                    theta=split(motion.theta), theta_dot=split(motion.theta_dot),
+                    theta_ddot=split(motion.theta_ddot), tau_in=split(tau_in), tau_g=split(tau_g), fR_in=fR_in,
+                    fR_g=fR_g, R=R, R_dot=dR, ok=ok)
+
+
+def _columns(robot: Delta, cycle, method: str) -> _Columns:
+    _require_mass(robot)
+    if method not in ("virtual_work", "lagrange"):
+        raise ValueError(f"method must be 'virtual_work' or 'lagrange', got {method!r}")
+    has_R = cycle.R is not None
+    args = (cycle.x, cycle.dx, cycle.ddx) + ((cycle.R, cycle.dR, cycle.ddR) if has_R else ())
+
+    def one(*a):
+        x, dx, ddx = a[:3]
+        R, dR, ddR = a[3:] if has_R else (None, None, None)
+        return _sample(robot, cycle, x, dx, ddx, R, dR, ddR, method)
+
+    return jax.vmap(one)(*args)
 
 
 def cycle_profile(robot: Delta, cycle, duration: Any = None, *, method: str = "virtual_work") -> CycleProfile:
@@ -702,44 +739,38 @@ def cycle_profile(robot: Delta, cycle, duration: Any = None, *, method: str = "v
         duration: cycle time T (s).
         method: inverse-dynamics formulation (``"virtual_work"`` or ``"lagrange"``).
     """
-    _require_mass(robot)
+    col = _columns(robot, cycle, method)
     T = cycle.duration if duration is None else jnp.asarray(duration, cycle.duration.dtype)
-    has_R = cycle.R is not None
-    args = (cycle.x, cycle.dx, cycle.ddx) + ((cycle.R, cycle.dR, cycle.ddR) if has_R else ())
-
-    def one(*a):
-        x, dx, ddx = a[:3]
-        R, dR, ddR = a[3:] if has_R else (None, None, None)
-        return _sample(robot, cycle, x, dx, ddx, R, dR, ddR, method)
-
-    if method not in ("virtual_work", "lagrange"):
-        raise ValueError(f"method must be 'virtual_work' or 'lagrange', got {method!r}")
-    motion, (a_tau, g_tau, a_fR, g_fR), R, dR = jax.vmap(one)(*args)
     inv_T2 = 1.0 / (T * T)
+
+    def st(cols, scale=None):
+        # Arithmetic on the flat columns, the stack last: XLA:CPU emits a root concatenation as one
+        # vectorised loop per column, but an elementwise op *on* concatenations element by element (2.3x
+        # slower profile, measured).
+        return jnp.stack(cols if scale is None else [c * scale for c in cols], axis=-1)
+
     return CycleProfile(
-        t=cycle.u * T, p=motion.p, p_dot=motion.p_dot / T, p_ddot=motion.p_ddot * inv_T2, theta=motion.theta,
-        theta_dot=motion.theta_dot / T, theta_ddot=motion.theta_ddot * inv_T2, R=R, R_dot=dR / T,
-        tau=a_tau * inv_T2 + g_tau, force_R=a_fR * inv_T2 + g_fR, tau_gravity=g_tau,
-        force_R_gravity=g_fR, tau_inertial_unit=a_tau, force_R_inertial_unit=a_fR, ok=motion.ok)
+        t=cycle.u * T, p=st(col.p), p_dot=st(col.p_dot, 1.0 / T), p_ddot=st(col.p_ddot, inv_T2),
+        theta=st(col.theta), theta_dot=st(col.theta_dot, 1.0 / T), theta_ddot=st(col.theta_ddot, inv_T2), R=col.R,
+        R_dot=col.R_dot / T, tau=st([a * inv_T2 + g for a, g in zip(col.tau_in, col.tau_g)]),
+        force_R=col.fR_in * inv_T2 + col.fR_g, tau_gravity=st(col.tau_g), force_R_gravity=col.fR_g,
+        tau_inertial_unit=st(col.tau_in), force_R_inertial_unit=col.fR_in, ok=col.ok)
 
 
-def _min_duration_torque(a, g, limit):
-    """Smallest T with |a / T^2 + g| <= limit elementwise (a, g broadcast with limit); inf if |g| > limit.
+def _min_T2(a, g, limit):
+    """(feasible, T^2): smallest T^2 with |a / T^2 + g| <= limit at every sample (a, g: (K,), limit scalar).
 
-    With x = 1 / T^2 >= 0 the feasible set of each constraint is [0, (limit - sign(a) g) / |a|].
+    With x = 1 / T^2 >= 0 the feasible set of each sample is [0, (limit - sign(a) g) / |a|]; infeasible
+    if |g| > limit somewhere; no bound (0) for an infinite limit.
     """
-    limit = jnp.broadcast_to(limit, jnp.shape(a))
     feasible = jnp.all(jnp.abs(g) <= limit)
     denom = limit - jnp.sign(a) * g
     ratio = jnp.where(jnp.abs(a) > 0, jnp.abs(a) / jnp.where(denom > 0, denom, 1.0), 0.0)
-    T2 = jnp.max(jnp.where(jnp.isinf(limit), 0.0, ratio))
-    return jnp.where(feasible, jnp.sqrt(T2), jnp.inf)
+    return feasible, jnp.where(jnp.isinf(limit), 0.0, jnp.max(ratio))
 
 
-def _trapezoid_mean(y, axis=0):
-    n = y.shape[axis]
-    w = jnp.ones((n,), y.dtype).at[0].set(0.5).at[-1].set(0.5) / (n - 1)
-    return jnp.tensordot(w, y, axes=([0], [axis]))
+def _trapezoid_weights(n, dtype):
+    return jnp.ones((n,), dtype).at[0].set(0.5).at[-1].set(0.5) / (n - 1)
 
 
 def cycle_metrics(robot: Delta, cycle, limits: Limits, *, method: str = "virtual_work") -> CycleMetrics:
@@ -759,33 +790,45 @@ def cycle_metrics(robot: Delta, cycle, limits: Limits, *, method: str = "virtual
     Returns:
         :class:`CycleMetrics`.
     """
-    prof = cycle_profile(robot, cycle, method=method)
-    reachable = jnp.all(prof.ok)
-    n_bad = jnp.sum(~prof.ok)
+    col = _columns(robot, cycle, method)
+    ok = col.ok
+    reachable = jnp.all(ok)
+    n_bad = jnp.sum(~ok)
     T = cycle.duration
-    safe = lambda x: jnp.where(prof.ok[:, None] if x.ndim == 2 else prof.ok, x, 0.0)  # noqa: E731
-    tau = safe(prof.tau)
-    thd_unit = safe(prof.theta_dot) * T
-    peak_torque = jnp.max(jnp.abs(tau), axis=0)
-    rms_torque = jnp.sqrt(_trapezoid_mean(tau * tau))
-    peak_speed = jnp.max(jnp.abs(thd_unit), axis=0) / T
-    peak_acc = jnp.max(jnp.abs(safe(prof.theta_ddot)), axis=0)
-    peak_fR = jnp.max(jnp.abs(safe(prof.force_R)))
+    inv_T2 = 1.0 / (T * T)
+    safe = lambda x: jnp.where(ok, x, 0.0)  # noqa: E731
+    w = _trapezoid_weights(ok.shape[0], col.fR_in.dtype)
     tq = jnp.broadcast_to(limits.torque, (3,))
     sp = jnp.broadcast_to(limits.speed, (3,))
-    T_tau = _min_duration_torque(safe(prof.tau_inertial_unit), safe(prof.tau_gravity), tq)
-    T_fR = _min_duration_torque(safe(prof.force_R_inertial_unit), safe(prof.force_R_gravity), limits.force_R)
-    T_speed = jnp.max(jnp.where(jnp.isinf(sp), 0.0, jnp.max(jnp.abs(thd_unit), axis=0) / sp))
-    R_speed = jnp.max(jnp.abs(safe(prof.R_dot))) * T
-    T_Rspeed = jnp.where(jnp.isinf(limits.speed_R), 0.0, R_speed / limits.speed_R)
-    cycle_time = jnp.maximum(jnp.maximum(T_tau, T_fR), jnp.maximum(T_speed, T_Rspeed))
-    nan = jnp.asarray(jnp.nan, tau.dtype)
+    peak_tau, rms_tau, peak_thd, peak_thdd, feasible, T2 = [], [], [], [], [], []
+    for i in range(3):   # per actuator on flat (K,) columns
+        a, g = safe(col.tau_in[i]), safe(col.tau_g[i])
+        tau = a * inv_T2 + g
+        peak_tau.append(jnp.max(jnp.abs(tau)))
+        rms_tau.append(jnp.sqrt(jnp.sum(w * tau * tau)))
+        thd_unit = jnp.max(jnp.abs(safe(col.theta_dot[i])))
+        peak_thd.append(thd_unit / T)
+        peak_thdd.append(jnp.max(jnp.abs(safe(col.theta_ddot[i]))) * inv_T2)
+        f_i, T2_i = _min_T2(a, g, tq[i])
+        feasible.append(f_i)
+        T2.append(T2_i)
+        T2.append(jnp.where(jnp.isinf(sp[i]), 0.0, (thd_unit / sp[i]) ** 2))
+    a_R, g_R = safe(col.fR_in), safe(col.fR_g)
+    f_R, T2_R = _min_T2(a_R, g_R, limits.force_R)
+    peak_fR = jnp.max(jnp.abs(a_R * inv_T2 + g_R))
+    R_speed = jnp.max(jnp.abs(safe(col.R_dot)))          # at T = 1
+    T2.append(T2_R)
+    T2.append(jnp.where(jnp.isinf(limits.speed_R), 0.0, (R_speed / limits.speed_R) ** 2))
+    feasible = f_R & feasible[0] & feasible[1] & feasible[2]
+    cycle_time = jnp.where(feasible, jnp.sqrt(jnp.max(jnp.stack(T2))), jnp.inf)
+    nan = jnp.asarray(jnp.nan, a_R.dtype)
     nan_if = lambda x: jnp.where(reachable, x, nan)  # noqa: E731
     cycle_time = nan_if(cycle_time)
     return CycleMetrics(
-        peak_torque=nan_if(peak_torque), rms_torque=nan_if(rms_torque), peak_speed=nan_if(peak_speed),
-        cycle_time=cycle_time, ok=reachable & jnp.isfinite(cycle_time), peak_acceleration=nan_if(peak_acc),
-        peak_force_R=nan_if(peak_fR), cycles_per_minute=60.0 / cycle_time, reachable=reachable, n_bad=n_bad)
+        peak_torque=nan_if(jnp.stack(peak_tau)), rms_torque=nan_if(jnp.stack(rms_tau)),
+        peak_speed=nan_if(jnp.stack(peak_thd)), cycle_time=cycle_time, ok=reachable & jnp.isfinite(cycle_time),
+        peak_acceleration=nan_if(jnp.stack(peak_thdd)), peak_force_R=nan_if(peak_fR),
+        cycles_per_minute=60.0 / cycle_time, reachable=reachable, n_bad=n_bad)
 
 
 def within_limits(profile: CycleProfile, limits: Limits, rtol: float = 0.0) -> jax.Array:
