@@ -134,6 +134,7 @@ def run(ctx) -> None:
     lines.append(f"numpy (same algebra, f64)      : {rate_np / 1e6:8.2f} M eval/s")
 
     ref_np = numpy_kernel(*geo, pts[:nb])
+    plot_rates = {"numpy f64 (same algebra)": rate_np}
     for dt_name in e.dtypes:
         dt = jnp.float32 if dt_name == "float32" else jnp.float64
         robot = jax.tree_util.tree_map(lambda x: x.astype(dt), robot64)
@@ -153,6 +154,8 @@ def run(ctx) -> None:
         jax.block_until_ready(naive_c(robot, p_b))
         t_naive = _best(lambda: jax.block_until_ready(naive_c(robot, p_b)), reps)
         rate_naive = nb / t_naive
+        plot_rates[f"jax fast {dt_name}"] = rate
+        plot_rates[f"jax naive {dt_name}"] = rate_naive
         g = f"bench/{dt_name}"
         res.put(g, "rate", rate, units="1/s")
         res.put(g, "compile_time", t_compile, units="s")
@@ -167,3 +170,9 @@ def run(ctx) -> None:
     res.set_attrs("bench", device=str(jax.devices()[0]), report="\n".join(lines))
     for line in lines:
         ctx.log(line)
+    if ctx.cfg.get("plots", True):
+        from ..plots import bench_rates
+
+        ctx.savefig(bench_rates(plot_rates, "numpy f64 (same algebra)",
+                                f"IK + Jacobian + indices, {n} points, {len(devices)} {jax.default_backend()} "
+                                "device(s)"), "bench_kernel")
