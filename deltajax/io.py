@@ -66,6 +66,10 @@ LONG_NAMES = {
     "p": "platform centre position (base frame)",
     "p_dot": "platform centre velocity (base frame)",
     "p_ddot": "platform centre acceleration (base frame)",
+    "peak_joint_speed": "peak actuated joint speed max |theta_dot|",
+    "peak_joint_acceleration": "peak actuated joint acceleration max |theta_ddot|",
+    "peak_speed": "peak end-effector speed the motors give (m/s; joint speeds are peak_joint_speed)",
+    "R_operating": "operating base radius R on the pick-and-place cycle",
     "volume": "workspace volume",
     "count": "number of reachable grid points",
 }
