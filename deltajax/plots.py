@@ -9,7 +9,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-__all__ = ["workspace_3d", "index_slices", "robust_limits", "bench_rates"]
+__all__ = ["workspace_3d", "index_slices", "robust_limits", "bench_rates", "actuator_lines"]
 
 
 def _plt():
@@ -174,3 +174,21 @@ def bench_rates(rates: dict, baseline: str, title: str = "kernel throughput"):
     ax.set_title(title, fontsize=10)
     ax.grid(axis="x", alpha=0.3, which="both")
     return fig
+
+
+#: line styles of actuators 1, 2, 3 (and the R actuator): distinguishable in colour, dash and width, so that
+#: equal curves (e.g. actuators 1 and 3 of a motion symmetric in them) stay visible as a striped line
+ACTUATOR_STYLES = ({"color": "tab:blue", "ls": "-", "lw": 2.6, "alpha": 0.75},
+                   {"color": "tab:orange", "ls": "--", "lw": 1.8},
+                   {"color": "tab:green", "ls": (0, (1, 1.5)), "lw": 2.2},
+                   {"color": "k", "ls": "-.", "lw": 1.4})
+
+
+def actuator_lines(ax, t, values, label: str = "actuator {i}"):
+    """Plot one line per actuator (columns of ``values``, shape (n, k)) with :data:`ACTUATOR_STYLES` and a
+    legend; overlapping actuators remain distinguishable (wide solid under dashed/dotted)."""
+    values = np.asarray(values)
+    for j in range(values.shape[1]):
+        ax.plot(t, values[:, j], label=label.format(i=j + 1), **ACTUATOR_STYLES[j % len(ACTUATOR_STYLES)])
+    ax.legend(fontsize=8)
+    return ax

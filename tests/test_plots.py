@@ -45,3 +45,16 @@ def test_bench_rates_plot():
     ax = fig.axes[0]
     assert ax.get_xscale() == "log" and "higher is better" in ax.get_xlabel()
     assert any("x5" in t.get_text() for t in ax.texts)
+
+
+def test_actuator_lines_stay_distinguishable_when_equal():
+    import matplotlib.pyplot as plt
+
+    t = np.linspace(0, 1, 50)
+    tau = np.stack([np.sin(t), np.cos(t), np.sin(t)], axis=1)  # actuators 1 and 3 coincide
+    fig, ax = plt.subplots()
+    plots.actuator_lines(ax, t, tau)
+    l1, _, l3 = ax.get_lines()
+    assert (l1.get_linestyle(), l1.get_linewidth()) != (l3.get_linestyle(), l3.get_linewidth())
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["actuator 1", "actuator 2", "actuator 3"]
+    plt.close(fig)
