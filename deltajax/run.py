@@ -260,6 +260,7 @@ def main(cfg: DictConfig) -> None:
     from hydra.types import RunMode
 
     hc = HydraConfig.get()
+    logging.captureWarnings(True)  # Python warnings as log lines: in run.log, and not across progress bars
     try:
         execute(cfg, Path(hc.runtime.output_dir))
     except _user_errors() as e:
