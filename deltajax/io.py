@@ -3,12 +3,8 @@
 Layout: root attributes (version, git commit, resolved config as YAML, experiment, seed, precision,
 backend/device, start/end time); one group per kind of result (``robot``, ``workspace``, ``boundary``,
 ``dynamics``, ``ga``, ``pareto``, ``refine``, ``bench``, nested groups allowed with "a/b" names). Every dataset
-has CF-style ``units`` and ``long_name`` attributes (a ``z`` axis in m also ``positive: "down"``, the base
-frame's convention) and every dimension is an HDF5 dimension scale, so that :func:`open_xarray` (or
-``xarray.open_dataset(path, group=..., engine="h5netcdf")``) opens each group with its coordinates. Datasets of
-:data:`COMPRESS_MIN_ELEMENTS` or more elements are chunked (about :data:`CHUNK_BYTES` per chunk, whole trailing
-axes first) and gzip-compressed with the shuffle filter: reachability masks shrink ~100x, index fields
-several-fold, and any HDF5/netCDF reader decodes them.
+has a ``units`` attribute and every dimension is an HDF5 dimension scale, so that
+``xarray.open_dataset(path, group=..., engine="h5netcdf")`` opens each group.
 
 Writes are atomic: the whole file is written to ``<name>.tmp`` and renamed over the old one, so a reader
 (or a killed run) never sees a half-written file. Host-side only; never call inside jit.
@@ -17,7 +13,6 @@ Writes are atomic: the whole file is written to ``<name>.tmp`` and renamed over 
 from __future__ import annotations
 
 import datetime as _dt
-import math
 import os
 import subprocess
 from pathlib import Path
@@ -26,9 +21,17 @@ from typing import Any, Mapping, Optional, Sequence
 import h5py
 import numpy as np
 
-__all__ = ["ResultsFile", "load", "groups", "git_commit", "RESERVED_NAMES", "ResultsGroupError"]
+__all__ = ["ResultsFile", "load", "git_commit", "RESERVED_NAMES"]
 
 RESERVED_NAMES = ("attrs", "units")
+
+# Self-describing, compact files (issue 13): every dataset also gets a CF-style ``long_name`` (LONG_NAMES, or
+# the writer's, or its name) and a ``z`` axis in m ``positive: "down"`` (the base frame's convention);
+# datasets of COMPRESS_MIN_ELEMENTS or more elements are chunked (about CHUNK_BYTES per chunk, whole trailing
+# axes first) and gzip-compressed with the shuffle filter, which every HDF5/netCDF reader decodes:
+# reachability masks shrink ~50-100x, index fields several-fold. :func:`groups` lists a file's groups, and
+# :func:`load`/:func:`open_xarray` name them when asked for a missing one.
+__all__ += ["groups", "ResultsGroupError"]
 
 #: datasets with at least this many elements are chunked and compressed (smaller ones are stored contiguous)
 COMPRESS_MIN_ELEMENTS = 4096
@@ -168,6 +171,11 @@ class ResultsFile:
             raise ValueError(f"axis {group}/{name} must be 1-D, got shape {arr.shape}")
         self.put(group, name, arr, units=units, dims=(name,), attrs=attrs, long_name=long_name)
 
+    def staged(self, prefix: str = "") -> list:
+        """(group, name, data, units) of every staged dataset whose group starts with ``prefix`` (axes too)."""
+        return [(g, n, v.data, v.units) for g, variables in self._groups.items() if g.startswith(prefix)
+                for n, v in variables.items()]
+
     def set_attrs(self, group: Optional[str] = None, **attrs: Any) -> None:
         """Set root attributes (``group=None``) or attributes of a group."""
         if group is None:
@@ -237,7 +245,7 @@ def _chunk_shape(shape: Sequence[int], itemsize: int, target: int = CHUNK_BYTES)
         total = int(np.prod(chunk)) * itemsize
         if total <= target:
             break
-        chunk[i] = max(1, math.ceil(chunk[i] / math.ceil(total / target)))
+        chunk[i] = max(1, -(-chunk[i] // -(-total // target)))  # ceil divisions in integers
     return tuple(chunk)
 
 

@@ -9,7 +9,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-__all__ = ["workspace_3d", "index_slices", "robust_limits", "bench_rates", "actuator_lines"]
+__all__ = ["workspace_3d", "index_slices", "robust_limits", "bench_rates", "bench_rates_from_results", "actuator_lines"]
 
 
 def _plt():
@@ -192,3 +192,20 @@ def actuator_lines(ax, t, values, label: str = "actuator {i}"):
         ax.plot(t, values[:, j], label=label.format(i=j + 1), **ACTUATOR_STYLES[j % len(ACTUATOR_STYLES)])
     ax.legend(fontsize=8)
     return ax
+
+
+def bench_rates_from_results(results, title: str = "kernel throughput"):
+    """:func:`bench_rates` of every scalar rate (units ``1/s``) staged under the ``bench`` group of a
+    :class:`deltajax.io.ResultsFile`, labelled ``<subgroup> <name>``; the baseline is the NumPy rate."""
+    rates = {}
+    for g, name, data, units in results.staged("bench"):
+        if units == "1/s" and np.ndim(data) == 0:
+            words = " ".join([*g.split("/")[1:], name]).replace("_", " ").split()
+            words = [{"cpu": "(CPU time)", "wall": "(wall)"}.get(w, w) for w in words if w != "rate"]
+            if words in (["float32"], ["float64"]):
+                words.append("jax fast")
+            rates[" ".join(words)] = float(data)
+    if not rates:
+        raise ValueError("no rates (datasets in 1/s) staged under 'bench'")
+    baseline = next((k for k in rates if "numpy" in k), next(iter(rates)))
+    return bench_rates(rates, baseline, title)

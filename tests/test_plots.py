@@ -58,3 +58,15 @@ def test_actuator_lines_stay_distinguishable_when_equal():
     assert (l1.get_linestyle(), l1.get_linewidth()) != (l3.get_linestyle(), l3.get_linewidth())
     assert [t.get_text() for t in ax.get_legend().get_texts()] == ["actuator 1", "actuator 2", "actuator 3"]
     plt.close(fig)
+
+
+def test_bench_rates_from_staged_results(tmp_path):
+    from deltajax.io import ResultsFile
+
+    res = ResultsFile(tmp_path / "r.h5")
+    res.put("bench", "numpy_rate", 1e5, units="1/s")
+    res.put("bench/float64", "rate", 4e5, units="1/s")
+    res.put("bench/float64", "compile_time", 3.0, units="s")
+    fig = plots.bench_rates_from_results(res)
+    labels = [t.get_text() for t in fig.axes[0].get_yticklabels()]
+    assert labels == ["numpy", "float64 jax fast"]
