@@ -78,6 +78,17 @@ LONG_NAMES = {
 }
 
 
+def _chunk_shape(shape: Sequence[int], itemsize: int, target: int = CHUNK_BYTES) -> tuple:
+    """Chunk of about ``target`` bytes: whole trailing axes, the leading axes cut first (x-slabs of a grid)."""
+    chunk = [max(1, int(n)) for n in shape]
+    for i in range(len(chunk)):
+        total = int(np.prod(chunk)) * itemsize
+        if total <= target:
+            break
+        chunk[i] = max(1, -(-chunk[i] // -(-total // target)))  # ceil divisions in integers
+    return tuple(chunk)
+
+
 class ResultsGroupError(KeyError):
     """A group that the results file does not have; the message lists the groups it has."""
 
@@ -236,17 +247,6 @@ class ResultsFile:
                 continue
             for i, d in enumerate(v.dims):
                 dsets[n].dims[i].attach_scale(dsets[d])
-
-
-def _chunk_shape(shape: Sequence[int], itemsize: int, target: int = CHUNK_BYTES) -> tuple:
-    """Chunk of about ``target`` bytes: whole trailing axes, the leading axes cut first (x-slabs of a grid)."""
-    chunk = [max(1, int(n)) for n in shape]
-    for i in range(len(chunk)):
-        total = int(np.prod(chunk)) * itemsize
-        if total <= target:
-            break
-        chunk[i] = max(1, -(-chunk[i] // -(-total // target)))  # ceil divisions in integers
-    return tuple(chunk)
 
 
 def _attr_value(v: Any) -> Any:
