@@ -3,12 +3,8 @@
 Layout: root attributes (version, git commit, resolved config as YAML, experiment, seed, precision,
 backend/device, start/end time); one group per kind of result (``robot``, ``workspace``, ``boundary``,
 ``dynamics``, ``ga``, ``pareto``, ``refine``, ``bench``, nested groups allowed with "a/b" names). Every dataset
-has CF-style ``units`` and ``long_name`` attributes (a ``z`` axis in m also ``positive: "down"``, the base
-frame's convention) and every dimension is an HDF5 dimension scale, so that :func:`open_xarray` (or
-``xarray.open_dataset(path, group=..., engine="h5netcdf")``) opens each group with its coordinates. Datasets of
-:data:`COMPRESS_MIN_ELEMENTS` or more elements are chunked (about :data:`CHUNK_BYTES` per chunk, whole trailing
-axes first) and gzip-compressed with the shuffle filter: reachability masks shrink ~100x, index fields
-several-fold, and any HDF5/netCDF reader decodes them.
+has a ``units`` attribute and every dimension is an HDF5 dimension scale, so that
+``xarray.open_dataset(path, group=..., engine="h5netcdf")`` opens each group.
 
 Writes are atomic: the whole file is built in memory, written to a temporary name unique to the writer
 (``.<name>.<pid>.<random>.tmp`` in the same directory) and renamed over the old one, so a reader (or a killed
@@ -22,7 +18,6 @@ never call inside jit.
 from __future__ import annotations
 
 import datetime as _dt
-import math
 import errno as _errno
 import hashlib
 import itertools
@@ -39,6 +34,14 @@ __all__ = ["ResultsFile", "ResultsWriteError", "ChecksumError", "ResultsGroupErr
            "read_checked", "checksum", "write_atomic", "git_commit", "RESERVED_NAMES"]
 
 RESERVED_NAMES = ("attrs", "units")
+
+# Self-describing, compact files (issue 13): every dataset also gets a CF-style ``long_name`` (LONG_NAMES, or
+# the writer's, or its name) and a ``z`` axis in m ``positive: "down"`` (the base frame's convention);
+# datasets of COMPRESS_MIN_ELEMENTS or more elements are chunked (about CHUNK_BYTES per chunk, whole trailing
+# axes first) and gzip-compressed with the shuffle filter, which every HDF5/netCDF reader decodes:
+# reachability masks shrink ~50-100x, index fields several-fold. :func:`groups` lists a file's groups, and
+# :func:`load`/:func:`open_xarray` name them when asked for a missing one.
+__all__ += ["groups", "ResultsGroupError"]
 
 #: datasets with at least this many elements are chunked and compressed (smaller ones are stored contiguous)
 COMPRESS_MIN_ELEMENTS = 4096
@@ -76,9 +79,24 @@ LONG_NAMES = {
     "p": "platform centre position (base frame)",
     "p_dot": "platform centre velocity (base frame)",
     "p_ddot": "platform centre acceleration (base frame)",
+    "peak_joint_speed": "peak actuated joint speed max |theta_dot|",
+    "peak_joint_acceleration": "peak actuated joint acceleration max |theta_ddot|",
+    "peak_speed": "peak end-effector speed the motors give (m/s; joint speeds are peak_joint_speed)",
+    "R_operating": "operating base radius R on the pick-and-place cycle",
     "volume": "workspace volume",
     "count": "number of reachable grid points",
 }
+
+
+def _chunk_shape(shape: Sequence[int], itemsize: int, target: int = CHUNK_BYTES) -> tuple:
+    """Chunk of about ``target`` bytes: whole trailing axes, the leading axes cut first (x-slabs of a grid)."""
+    chunk = [max(1, int(n)) for n in shape]
+    for i in range(len(chunk)):
+        total = int(np.prod(chunk)) * itemsize
+        if total <= target:
+            break
+        chunk[i] = max(1, -(-chunk[i] // -(-total // target)))  # ceil divisions in integers
+    return tuple(chunk)
 
 
 class ResultsGroupError(KeyError):
@@ -174,6 +192,11 @@ class ResultsFile:
             raise ValueError(f"axis {group}/{name} must be 1-D, got shape {arr.shape}")
         self.put(group, name, arr, units=units, dims=(name,), attrs=attrs, long_name=long_name)
 
+    def staged(self, prefix: str = "") -> list:
+        """(group, name, data, units) of every staged dataset whose group starts with ``prefix`` (axes too)."""
+        return [(g, n, v.data, v.units) for g, variables in self._groups.items() if g.startswith(prefix)
+                for n, v in variables.items()]
+
     def set_attrs(self, group: Optional[str] = None, **attrs: Any) -> None:
         """Set root attributes (``group=None``) or attributes of a group."""
         if group is None:
@@ -253,15 +276,6 @@ class ResultsFile:
                 dsets[n].dims[i].attach_scale(dsets[d])
 
 
-def _chunk_shape(shape: Sequence[int], itemsize: int, target: int = CHUNK_BYTES) -> tuple:
-    """Chunk of about ``target`` bytes: whole trailing axes, the leading axes cut first (x-slabs of a grid)."""
-    chunk = [max(1, int(n)) for n in shape]
-    for i in range(len(chunk)):
-        total = int(np.prod(chunk)) * itemsize
-        if total <= target:
-            break
-        chunk[i] = max(1, math.ceil(chunk[i] / math.ceil(total / target)))
-    return tuple(chunk)
 _IMAGE_IDS = itertools.count()
 
 

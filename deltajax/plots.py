@@ -9,7 +9,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-__all__ = ["workspace_3d", "index_slices"]
+__all__ = ["workspace_3d", "index_slices", "robust_limits", "bench_rates", "bench_rates_from_results", "actuator_lines"]
 
 
 def _plt():
@@ -32,62 +32,180 @@ def _boundary(mask: np.ndarray) -> np.ndarray:
     return m & ~inner
 
 
+def _limits(masks: dict, axes) -> list:
+    """Common (lo, hi) of every axis over the points reachable in any of the masks (one cell of margin)."""
+    any_mask = np.zeros_like(np.asarray(next(iter(masks.values())), bool))
+    for m in masks.values():
+        any_mask |= np.asarray(m, bool)
+    out = []
+    for d, ax in enumerate(axes):
+        other = tuple(k for k in range(3) if k != d)
+        hit = np.flatnonzero(any_mask.any(axis=other))
+        ax = np.asarray(ax, float)
+        step = float(ax[1] - ax[0]) if len(ax) > 1 else 0.0
+        out.append((ax[hit[0]] - step, ax[hit[-1]] + step) if hit.size else (ax[0], ax[-1]))
+    return out
+
+
 def workspace_3d(x, y, z, masks: dict, max_points: int = 40000, seed: int = 0):
     """3-D view of one or more workspaces (Fig 7): their surface points, one panel per mask.
+
+    The panels share their axis limits (those of the largest workspace), aspect ratio and colour scale (depth
+    z), so they compare at a glance.
 
     Args:
         x, y, z: grid axes (m, z down: plotted with z increasing downward).
         masks: title -> bool (nx, ny, nz).
         max_points: surface points drawn per panel (random subsample).
     """
+    import matplotlib.colors as mcolors
+
     plt = _plt()
-    fig = plt.figure(figsize=(5.5 * len(masks), 5))
+    lims = _limits(masks, (x, y, z))
+    norm = mcolors.Normalize(vmin=lims[2][0], vmax=lims[2][1])
+    fig = plt.figure(figsize=(5.2 * len(masks) + 0.8, 5), layout="constrained")
     rng = np.random.default_rng(seed)
+    sc = None
     for i, (title, mask) in enumerate(masks.items()):
         ax = fig.add_subplot(1, len(masks), i + 1, projection="3d")
         b = np.argwhere(_boundary(mask))
         if len(b) > max_points:
             b = b[rng.choice(len(b), max_points, replace=False)]
         px, py, pz = x[b[:, 0]], y[b[:, 1]], z[b[:, 2]]
-        ax.scatter(px, py, pz, c=pz, s=1, cmap="viridis")
+        sc = ax.scatter(px, py, pz, c=pz, s=1, cmap="viridis", norm=norm)
+        ax.set_xlim(*lims[0])
+        ax.set_ylim(*lims[1])
+        ax.set_zlim(*lims[2])
+        ax.set_box_aspect([hi - lo for lo, hi in lims])  # true proportions, the same in every panel
         ax.set_xlabel("x [m]")
         ax.set_ylabel("y [m]")
         ax.set_zlabel("z [m] (down)")
         ax.invert_zaxis()
-        ax.set_title(title)
-    fig.tight_layout()
+        ax.set_title(f"{title}\n{int(np.count_nonzero(mask))} reachable grid points")
+    if sc is not None:
+        fig.colorbar(sc, ax=fig.axes, shrink=0.6, label="depth z [m] (down)")
     return fig
 
 
+def robust_limits(values, lo_pct: float = 1.0, hi_pct: float = 99.0) -> tuple[float, float]:
+    """Colour limits (lo_pct, hi_pct percentiles of the finite values): a few near-singular points must not
+    squash the whole map into one colour."""
+    v = np.asarray(values, float).ravel()
+    v = v[np.isfinite(v)]
+    if not v.size:
+        return 0.0, 1.0
+    lo, hi = (float(t) for t in np.percentile(v, [lo_pct, hi_pct]))
+    return (lo, hi) if hi > lo else (float(v.min()), float(v.max()) if v.max() > v.min() else float(v.min()) + 1)
+
+
 def index_slices(x, y, z_values: Sequence[float], columns: dict, label: str = "index",
-                 vmin: Optional[float] = None, vmax: Optional[float] = None):
+                 vmin: Optional[float] = None, vmax: Optional[float] = None, units: str = "1"):
     """Heat maps of an index on x-y planes (Fig 8): rows = heights, columns = robots.
+
+    Every panel shares the axes and one colour scale. The default colour range is the 1st-99th percentile of
+    all panels' values (:func:`robust_limits`); values beyond it show in the end colours, marked by the colour
+    bar's arrows, so that the few near-singular points do not wash out the rest.
 
     Args:
         x, y: axes (m).
         z_values: heights of the rows (m).
         columns: title -> array (len(z_values), nx, ny), NaN outside the workspace.
-        label: colour-bar label.
-        vmin, vmax: colour range (default: common range of all panels).
+        label: colour-bar label (the index name).
+        vmin, vmax: colour range (default: robust common range of all panels).
+        units: the index's units ("1": dimensionless).
     """
+    from matplotlib.ticker import MaxNLocator
+
     plt = _plt()
     vals = np.concatenate([np.asarray(v, float).ravel() for v in columns.values()])
-    vals = vals[np.isfinite(vals)]
-    if vmin is None:
-        vmin = float(vals.min()) if vals.size else 0.0
-    if vmax is None:
-        vmax = float(vals.max()) if vals.size else 1.0
+    finite = vals[np.isfinite(vals)]
+    r_lo, r_hi = robust_limits(finite)
+    vmin = r_lo if vmin is None else vmin
+    vmax = r_hi if vmax is None else vmax
     nr, nc = len(z_values), len(columns)
-    fig, axes = plt.subplots(nr, nc, figsize=(4.2 * nc, 3.8 * nr), squeeze=False)
+    fig, axes = plt.subplots(nr, nc, figsize=(3.6 * nc + 1.2, 3.4 * nr), squeeze=False, sharex=True, sharey=True,
+                             layout="constrained")
     im = None
+    cmap = plt.get_cmap("viridis").with_extremes(bad="white")
     for c, (title, data) in enumerate(columns.items()):
         for r, zv in enumerate(z_values):
             ax = axes[r, c]
-            im = ax.pcolormesh(x, y, np.asarray(data[r]).T, vmin=vmin, vmax=vmax, cmap="jet", shading="nearest")
+            im = ax.pcolormesh(x, y, np.asarray(data[r]).T, vmin=vmin, vmax=vmax, cmap=cmap, shading="nearest")
             ax.set_aspect("equal")
-            ax.set_title(f"{title}, z = {zv:.3f} m")
-            ax.set_xlabel("x [m]")
-            ax.set_ylabel("y [m]")
+            if r == 0:
+                ax.set_title(title, fontsize=10)
+            if c == 0:
+                ax.set_ylabel(f"z = {zv:.3f} m\ny [m]")
+            if r == nr - 1:
+                ax.set_xlabel("x [m]")
+                ax.xaxis.set_major_locator(MaxNLocator(5, prune="both"))  # no clash between neighbours
     if im is not None:
-        fig.colorbar(im, ax=axes, label=label, shrink=0.8)
+        extend = {(False, False): "neither", (True, False): "min", (False, True): "max", (True, True): "both"}[
+            (bool(finite.size and finite.min() < vmin), bool(finite.size and finite.max() > vmax))]
+        u = "" if units in ("1", "") else f" [{units}]"
+        robust = (vmin, vmax) == (r_lo, r_hi)
+        fig.colorbar(im, ax=axes, label=f"{label}{u}" + (" (colour range: 1st-99th percentile)" if robust else ""),
+                     shrink=0.8, extend=extend)
     return fig
+
+
+def bench_rates(rates: dict, baseline: str, title: str = "kernel throughput"):
+    """Horizontal bars of throughputs (evaluations/s, log scale), each labelled with its ratio to ``baseline``.
+
+    Args:
+        rates: label -> evaluations per second.
+        baseline: the label the ratios are taken against (e.g. the NumPy reference).
+        title: figure title (say what was measured and where).
+    """
+    plt = _plt()
+    names = list(rates)
+    v = np.asarray([rates[n] for n in names], float)
+    fig, ax = plt.subplots(figsize=(7.5, 0.55 * len(names) + 1.4), layout="constrained")
+    colors = ["0.55" if n == baseline else "tab:blue" for n in names]
+    ax.barh(range(len(names)), v, color=colors)
+    ax.set_yticks(range(len(names)), names)
+    ax.invert_yaxis()
+    ax.set_xscale("log")
+    ax.set_xlabel(f"evaluations per second (warm; higher is better); x = ratio to {baseline}")
+    ax.set_xlim(v[v > 0].min() / 3 if np.any(v > 0) else 1, v.max() * 12 if v.size else 10)
+    base = rates[baseline]
+    for i, val in enumerate(v):
+        ax.text(val * 1.08, i, f"{val / 1e6:.3g} M/s, x{val / base:.2g}", va="center", fontsize=8)
+    ax.set_title(title, fontsize=10)
+    ax.grid(axis="x", alpha=0.3, which="both")
+    return fig
+
+
+#: line styles of actuators 1, 2, 3 (and the R actuator): distinguishable in colour, dash and width, so that
+#: equal curves (e.g. actuators 1 and 3 of a motion symmetric in them) stay visible as a striped line
+ACTUATOR_STYLES = ({"color": "tab:blue", "ls": "-", "lw": 2.6, "alpha": 0.75},
+                   {"color": "tab:orange", "ls": "--", "lw": 1.8},
+                   {"color": "tab:green", "ls": (0, (1, 1.5)), "lw": 2.2},
+                   {"color": "k", "ls": "-.", "lw": 1.4})
+
+
+def actuator_lines(ax, t, values, label: str = "actuator {i}"):
+    """Plot one line per actuator (columns of ``values``, shape (n, k)) with :data:`ACTUATOR_STYLES` and a
+    legend; overlapping actuators remain distinguishable (wide solid under dashed/dotted)."""
+    values = np.asarray(values)
+    for j in range(values.shape[1]):
+        ax.plot(t, values[:, j], label=label.format(i=j + 1), **ACTUATOR_STYLES[j % len(ACTUATOR_STYLES)])
+    ax.legend(fontsize=8)
+    return ax
+
+
+def bench_rates_from_results(results, title: str = "kernel throughput"):
+    """:func:`bench_rates` of every scalar rate (units ``1/s``) staged under the ``bench`` group of a
+    :class:`deltajax.io.ResultsFile`, labelled ``<subgroup> <name>``; the baseline is the NumPy rate."""
+    rates = {}
+    for g, name, data, units in results.staged("bench"):
+        if units == "1/s" and np.ndim(data) == 0:
+            words = " ".join([*g.split("/")[1:], name]).replace("_", " ").split()
+            words = [{"cpu": "(CPU time)", "wall": "(wall)"}.get(w, w) for w in words if w != "rate"]
+            if words in (["float32"], ["float64"]):
+                words.append("jax fast")
+            rates[" ".join(words)] = float(data)
+    if not rates:
+        raise ValueError("no rates (datasets in 1/s) staged under 'bench'")
+    baseline = next((k for k in rates if "numpy" in k), next(iter(rates)))
+    return bench_rates(rates, baseline, title)

@@ -67,6 +67,8 @@ class RunContext:
         results: the run's :class:`deltajax.io.ResultsFile` (flushed at the end; flush it yourself to checkpoint).
         robot: the fixed robot built from ``cfg.robot`` (validated).
         recon: the reconfigurable robot, or ``None`` if ``cfg.robot.R_range`` is null.
+        complete: set it to False when the run stops before its end (to be resumed): ``<run_dir>/checkpoint``
+            is then kept; a complete run's checkpoint directory is removed after the final flush.
     """
 
     cfg: DictConfig
@@ -214,7 +216,7 @@ def _drop_checkpoints(ctx: RunContext) -> None:
     """Remove ``<run_dir>/checkpoint`` once the complete results are safely in results.h5 (after the final
     flush): a finished run keeps its results, not gigabytes of resume state. Partial runs keep it."""
     ck = ctx.run_dir / "checkpoint"
-    if not ck.is_dir():
+    if not ck.is_dir() or not ctx.complete:
         return
     size = sum(p.stat().st_size for p in ck.rglob("*") if p.is_file())
     shutil.rmtree(ck)
@@ -285,6 +287,7 @@ def main(cfg: DictConfig) -> None:
     from hydra.types import RunMode
 
     hc = HydraConfig.get()
+    logging.captureWarnings(True)  # Python warnings as log lines: in run.log, and not across progress bars
     run_dir = Path(hc.runtime.output_dir)
 
     def write_hydra_files() -> None:  # what Hydra's output_subdir would have written, once the dir is ours

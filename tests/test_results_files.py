@@ -43,6 +43,11 @@ def test_xarray_opens_every_group_with_units(name, tmp_path):
         ds = open_xarray(path, g)
         for v in [*ds.data_vars.values(), *ds.coords.values()]:
             assert "units" in v.attrs and "long_name" in v.attrs, f"{g}/{v.name}: {dict(v.attrs)}"
+            # one name, one meaning across experiments: peak_speed is the end-effector's (joints: peak_joint_speed)
+            if v.name == "peak_speed" or str(v.name).startswith("peak_speed_"):
+                assert v.attrs["units"] == "m/s", f"{g}/{v.name}"
+            if str(v.name).startswith("R_operating"):
+                assert v.attrs["units"] == "m", f"{g}/{v.name}"
         if "z" in ds.coords and ds["z"].attrs["units"] == "m":
             assert ds["z"].attrs["positive"] == "down", g
     assert not (tmp_path / "checkpoint").exists()  # a completed run keeps no resume state

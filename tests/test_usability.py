@@ -130,3 +130,28 @@ def test_workspace_volume_one_call_matches_a_big_grid_and_flags_truncation(monke
     with tqdm(total=g.n_points, file=io.StringIO()) as bar:
         ws.fixed_workspace(robot, g, fields=False, chunk_size=500, progress=bar.update)
         assert bar.n == bar.total and bar.total < g.n_points
+
+
+def test_console_logging_goes_through_tqdm_and_keeps_routing():
+    import io
+    import logging
+
+    from deltajax.run import BelowWarning, _console_through_tqdm, _TqdmHandler
+
+    root = logging.getLogger()
+    out, err = logging.StreamHandler(sys.stdout), logging.StreamHandler(sys.stderr)
+    out.addFilter(BelowWarning())
+    err.setLevel(logging.WARNING)
+    f = logging.StreamHandler(io.StringIO())  # a file-like handler: left alone
+    saved = list(root.handlers)
+    root.handlers = [out, err, f]
+    try:
+        with _console_through_tqdm():
+            new = list(root.handlers)
+            assert [type(h) for h in new] == [_TqdmHandler, _TqdmHandler, logging.StreamHandler]
+            assert new[0].stream is sys.stdout and new[0].filters == out.filters  # info -> stdout only
+            assert new[1].stream is sys.stderr and new[1].level == logging.WARNING  # warnings -> stderr
+            assert new[2] is f
+        assert root.handlers == [out, err, f]  # restored
+    finally:
+        root.handlers = saved

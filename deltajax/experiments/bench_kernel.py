@@ -129,3 +129,9 @@ def run(ctx) -> None:
     res.set_attrs("bench", device=str(jax.devices()[0]), report="\n".join(lines))
     for line in lines:
         ctx.log(line)
+    if ctx.cfg.get("plots", True):
+        from ..plots import bench_rates_from_results
+
+        ctx.savefig(bench_rates_from_results(res, f"kernel throughput (IK + Jacobian + indices), {n} points, "
+                                                  f"{len(devices)} {jax.default_backend()} device(s)"),
+                    "bench_kernel")

@@ -235,9 +235,11 @@ def run(ctx) -> None:
             _save_case(res, g, prof, dict(duration=float(cyc.duration), method=method, limits_torque=s["torque_limit"],
                                           limits_speed=s["speed_limit"], formulation_gap_Nm=gap))
             mg = f"dynamics/{name}/{case}_metrics"
-            for key, unit in (("peak_torque", "N m"), ("rms_torque", "N m"), ("peak_speed", "rad/s"),
-                              ("peak_acceleration", "rad/s^2")):
-                res.put(mg, key, np.asarray(getattr(m, key)), units=unit, dims=("chain",))
+            # stored as peak_joint_*: actuator (joint) rates, unlike the GA's end-effector peak_speed (m/s)
+            for key, name, unit in (("peak_torque", "peak_torque", "N m"), ("rms_torque", "rms_torque", "N m"),
+                                    ("peak_speed", "peak_joint_speed", "rad/s"),
+                                    ("peak_acceleration", "peak_joint_acceleration", "rad/s^2")):
+                res.put(mg, name, np.asarray(getattr(m, key)), units=unit, dims=("chain",))
             for key, unit in (("cycle_time", "s"), ("cycles_per_minute", "1/min"), ("peak_force_R", "N"),
                               ("ok", "1"), ("reachable", "1"), ("n_bad", "1")):
                 res.put(mg, key, np.asarray(getattr(m, key)), units=unit)
@@ -300,7 +302,7 @@ def run(ctx) -> None:
             units="N m", dims=("case", "chain"))
     res.put("dynamics/summary", "rms_torque", np.asarray([np.asarray(m.rms_torque) for _, _, m, _ in summary]),
             units="N m", dims=("case", "chain"))
-    res.put("dynamics/summary", "peak_speed", np.asarray([np.asarray(m.peak_speed) for _, _, m, _ in summary]),
+    res.put("dynamics/summary", "peak_joint_speed", np.asarray([np.asarray(m.peak_speed) for _, _, m, _ in summary]),
             units="rad/s", dims=("case", "chain"))
     _save_forearm_summary(res, comparison)
     res.set_attrs("dynamics", method=method, law=str(e.law), blend=float(e.blend), n_samples=K,

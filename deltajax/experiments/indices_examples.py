@@ -104,7 +104,8 @@ def run(ctx) -> None:
         res.put("curves", f"argmax_R_{k}", argmax[k], units="m", dims=("point",))
     for i, pt in enumerate(pts):
         feas = R[ok[i]]
-        ctx.log(f"point {tuple(pt)}: feasible R in [{feas.min():.5f}, {feas.max():.5f}] m; argmax R: "
+        where = ", ".join(f"{float(c):g}" for c in pt)
+        ctx.log(f"point ({where}) m: feasible R in [{feas.min():.5f}, {feas.max():.5f}] m; argmax R: "
                 + ", ".join(f"{k}={argmax[k][i]:.5f}" for k in ("k_tilde", "omega_v", "omega_f", "sigma_min_v",
                                                                   "sigma_min_f", "inv_cond")))
     res.set_attrs("curves", note="argmax over finite values with ties to the smallest R; omega_v is "

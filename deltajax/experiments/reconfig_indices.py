@@ -129,5 +129,5 @@ def run(ctx) -> None:
     if ctx.cfg.get("plots", True):
         fig = plots.index_slices(grid.x, grid.y, grid.z[kz], {"RDR (R* by " + criterion + ")": sl_rdr,
                                                               f"ODR (R = {float(ctx.robot.base_radius):.3f} m)": sl_odr},
-                                 label=slice_index)
+                                 label=slice_index, units="1")
         ctx.savefig(fig, f"fig8_{slice_index}_slices")

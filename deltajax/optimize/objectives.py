@@ -74,7 +74,7 @@ METRICS = ("volume", "volume_fixed", "good_volume", "task_index_mean", "task_ind
            "peak_torque", "cycle_time", "peak_speed")
 METRIC_UNITS = {"volume": "m^3", "volume_fixed": "m^3", "good_volume": "m^3", "task_index_mean": "1",
                 "task_index_min": "1", "task_coverage": "1", "peak_torque": "N m", "cycle_time": "s",
-                "peak_speed": "m/s"}
+                "peak_speed": "m/s", "R_operating": "m", "violation": "1", "feasible": "1"}
 #: +1: minimise, -1: maximise.
 SENSE = {"volume": -1, "volume_fixed": -1, "good_volume": -1, "task_index_mean": -1, "task_index_min": -1,
          "task_coverage": -1, "peak_torque": 1, "cycle_time": 1, "peak_speed": -1}

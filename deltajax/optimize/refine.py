@@ -152,6 +152,9 @@ def refine(pb: Problem, space, genes: np.ndarray, *, steps: int = 30, learning_r
         true_fn = jax.jit(lambda G: jax.vmap(lambda g: evaluate_design(pb, space.decode(g)))(G))
     Wn = np.asarray(W)
     d = genes.shape[1]
+    tick = progress or (lambda n: None)
+    jax.block_until_ready(path)
+    tick(1)  # the descent
     # Verify on the truth along the whole descent: every iterate is evaluated with the true metrics and the
     # best feasible one (true objective) is kept; the start itself is a candidate, so "accepted" means a
     # strict improvement of the true objective.

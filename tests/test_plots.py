@@ -1,0 +1,72 @@
+"""Plots a reader can use: robust colour limits, shared scales, the benchmark figure."""
+
+import numpy as np
+
+from deltajax import plots
+
+
+def test_robust_limits_ignore_a_few_near_singular_values():
+    v = np.concatenate([np.linspace(0.5, 1.2, 10_000), [7.5, 9.0, np.nan]])
+    lo, hi = plots.robust_limits(v)
+    assert 0.5 <= lo < 0.52 and 1.18 < hi <= 1.2
+
+
+def test_index_slices_share_one_robust_colour_scale_and_axes():
+    x = y = np.linspace(-0.4, 0.4, 41)
+    rng = np.random.default_rng(0)
+    a = rng.uniform(0.5, 1.2, (2, 41, 41))
+    a[0, 0, 0] = 50.0  # one near-singular point
+    fig = plots.index_slices(x, y, [0.3, 0.4], {"A": a, "B": a * 0.9}, label="omega_v")
+    axes = [ax for ax in fig.axes if ax.get_label() != "<colorbar>"]
+    meshes = [ax.collections[0] for ax in axes]
+    assert len(meshes) == 4 and len({m.get_clim() for m in meshes}) == 1
+    assert meshes[0].get_clim()[1] < 2.0  # not stretched to 50 by one point
+    (cbar,) = [ax for ax in fig.axes if ax.get_label() == "<colorbar>"]
+    assert "percentile" in cbar.get_ylabel()
+    assert len({ax.get_xlim() for ax in axes}) == 1 and len({ax.get_ylim() for ax in axes}) == 1
+
+
+def test_workspace_3d_panels_share_limits_and_colour_scale():
+    x = y = np.linspace(-0.4, 0.4, 21)
+    z = np.linspace(0.0, 0.6, 16)
+    X, Y, Z = np.meshgrid(x, y, z, indexing="ij")
+    big = X ** 2 + Y ** 2 + (Z - 0.35) ** 2 < 0.09
+    small = X ** 2 + Y ** 2 + (Z - 0.35) ** 2 < 0.03
+    fig = plots.workspace_3d(x, y, z, {"big": big, "small": small})
+    axes = [ax for ax in fig.axes if ax.get_label() != "<colorbar>"]
+    assert len(axes) == 2
+    for get in ("get_xlim", "get_ylim", "get_zlim"):
+        assert getattr(axes[0], get)() == getattr(axes[1], get)()
+    assert axes[0].collections[0].norm.vmin == axes[1].collections[0].norm.vmin
+
+
+def test_bench_rates_plot():
+    fig = plots.bench_rates({"numpy": 1e5, "jax fast float64": 5e5}, "numpy")
+    ax = fig.axes[0]
+    assert ax.get_xscale() == "log" and "higher is better" in ax.get_xlabel()
+    assert any("x5" in t.get_text() for t in ax.texts)
+
+
+def test_actuator_lines_stay_distinguishable_when_equal():
+    import matplotlib.pyplot as plt
+
+    t = np.linspace(0, 1, 50)
+    tau = np.stack([np.sin(t), np.cos(t), np.sin(t)], axis=1)  # actuators 1 and 3 coincide
+    fig, ax = plt.subplots()
+    plots.actuator_lines(ax, t, tau)
+    l1, _, l3 = ax.get_lines()
+    assert (l1.get_linestyle(), l1.get_linewidth()) != (l3.get_linestyle(), l3.get_linewidth())
+    assert [t.get_text() for t in ax.get_legend().get_texts()] == ["actuator 1", "actuator 2", "actuator 3"]
+    plt.close(fig)
+
+
+def test_bench_rates_from_staged_results(tmp_path):
+    from deltajax.io import ResultsFile
+
+    res = ResultsFile(tmp_path / "r.h5")
+    res.put("bench", "numpy_rate", 1e5, units="1/s")
+    res.put("bench/float64", "rate", 4e5, units="1/s")
+    res.put("bench/float64", "compile_time", 3.0, units="s")
+    fig = plots.bench_rates_from_results(res)
+    labels = [t.get_text() for t in fig.axes[0].get_yticklabels()]
+    assert labels == ["numpy", "float64 jax fast"]
