@@ -227,6 +227,28 @@ def test_enospc_at_a_checkpoint_keeps_the_last_one_and_resume_finishes(tmp_path,
     _assert_same_results(run_experiment("workspace_grid", WG, run_dir=d), reference_grid)
 
 
+def test_results_are_written_before_plots(tmp_path, monkeypatch, reference_grid):
+    """The disk fills while the figures are written: results.h5 is already final; a rerun writes the plots."""
+    real = dio._write_all
+
+    def full_at_png(fd, data):
+        if bytes(data[:4]) == b"\x89PNG":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real(fd, data)
+
+    d = tmp_path / "run"
+    monkeypatch.setattr(dio, "_write_all", full_at_png)
+    with pytest.raises(dio.ResultsWriteError, match="workspace_grid.png.*no space left on device"):
+        run_experiment("workspace_grid", [*WG, "plots=true"], run_dir=d)
+    assert "end_time" in dio.load(d / "results.h5")["attrs"]
+    _assert_same_results(d / "results.h5", reference_grid)
+    assert not (d / "workspace_grid.png").exists()
+    monkeypatch.setattr(dio, "_write_all", real)
+    run_experiment("workspace_grid", [*WG, "plots=true"], run_dir=d)  # not complete yet: resumes, plots
+    assert (d / "workspace_grid.png").stat().st_size > 1000
+    assert json.loads((d / "deltajax_run.json").read_text())["status"] == "complete"
+
+
 def test_enospc_on_the_first_write_says_nothing_was_written(tmp_path, monkeypatch):
     def full_disk(fd, data):
         raise OSError(errno.ENOSPC, "No space left on device")
