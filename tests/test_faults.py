@@ -410,7 +410,8 @@ BAD = [
     ("ga_reconfig", "experiment.refine.steps=-1", "experiment.refine.steps must be >= 0, got -1"),
     ("ga_reconfig", "experiment.verify.n_r=0", "experiment.verify.n_r must be >= 1, got 0"),
     ("ga_reconfig", "experiment.ga.sigma=inf", "experiment.ga.sigma must be a finite number"),
-    ("workspace_grid", "robot.R_range.max=10", r"robot.R_range.max=10.0 m: at R = 10 m the geometry can reach nothing"),
+    ("reconfig_indices", "robot.R_range.max=10", r"robot.R_range.max=10.0 m: at R = 10 m the geometry can reach nothing"),
+    ("ga_reconfig", "robot.forearm=0.35", r"robot.R_range.max=0.495 m: at R = 0.495 m the geometry can reach nothing"),
     ("workspace_grid", "experiment.checkpoint_s=-1", "experiment.checkpoint_s must be >= 0, got -1"),
     ("workspace_grid", "experiment.grid.h=0", "experiment.grid.h must be > 0, got 0"),
     ("workspace_grid", "experiment.beta=1.5", r"experiment.beta must be in \(0, 1\), got 1.5"),
@@ -449,6 +450,7 @@ def test_every_experiment_composes_and_validates_at_its_defaults():
                  "dynamics_cycle", "boundary_search", "ga_reconfig"):
         _validate(_compose(name))
     _validate(_compose("workspace_grid", "robot=industrial"))
+    _validate(_compose("workspace_grid", "robot.forearm=0.35"))  # the R range is not used by this job
 
 
 def test_rejected_config_leaves_the_run_directory_untouched(tmp_path):
