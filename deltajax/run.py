@@ -8,6 +8,7 @@ settings live in ``configs/experiment/<name>.yaml`` (``# @package _global_``, wi
 from __future__ import annotations
 
 import dataclasses
+import datetime
 import importlib
 import os
 import sys
@@ -205,7 +206,8 @@ def run_experiment(name: str, overrides: Iterable[str] = (), run_dir: Optional[o
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         cfg = compose(config_name="config", overrides=[f"experiment={name}", *overrides])
     if run_dir is None:
-        run_dir = Path("outputs") / name / time.strftime("%Y-%m-%d_%H-%M-%S")
+        # microseconds: two calls in one second must not share (and be refused by) one run directory
+        run_dir = Path("outputs") / name / datetime.datetime.now().strftime("%Y-%m-%d_%H-%M-%S_%f")
     return execute(cfg, Path(run_dir))
 
 

@@ -494,7 +494,7 @@ def test_reach_box_contains_every_reachable_point():
     for robot in (dj.presets.franco2026().robot, dj.Delta.from_degrees(base_radius=0.2, platform_radius=0.05,
                                                                         upper_arm=0.3, forearm=0.5)):
         box = reach_box(robot)
-        big = make_grid((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0), 0.025)
+        big = make_grid((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0), 0.04)
         ok = np.asarray(reachable_mask(robot, jnp.asarray(big.points()))).reshape(big.shape)
         pts = big.points()[ok.reshape(-1)]
         assert len(pts) > 0
