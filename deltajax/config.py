@@ -11,7 +11,7 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 from .geometry import Delta, GeometryError, ReconfigurableDelta
 
-__all__ = ["ConfigError", "robot_from_config", "validate_config", "check_keys", "register_schemas", "TOP_LEVEL_KEYS",
+__all__ = ["ConfigError", "robot_from_config", "validate_config", "check_keys", "valid_keys", "register_schemas", "TOP_LEVEL_KEYS",
            "EXPERIMENT_VALIDATORS", "EXPERIMENT_SCHEMAS"]
 
 
@@ -750,3 +750,24 @@ def check_keys(cfg: Mapping[str, Any]) -> None:
     schema = EXPERIMENT_SCHEMAS.get(e.get("name")) if e is not None else None
     if schema is not None:
         _check_keys(e, schema, "experiment")
+
+
+def valid_keys(full_key: str, experiment: Optional[str] = None) -> Optional[list]:
+    """The valid keys of the block holding ``full_key`` (e.g. ``"robot.forarm"`` -> the robot's keys), from the
+    schemas; ``None`` when no schema covers it. For error messages of Hydra's composition, which name the
+    unknown key but not the valid ones (``Key 'forarm' not in 'RobotSchema'``)."""
+    parts = full_key.split(".")
+    if len(parts) == 1:
+        return list(TOP_LEVEL_KEYS)
+    schema = RobotSchema if parts[0] == "robot" else EXPERIMENT_SCHEMAS.get(experiment or "")
+    if parts[0] not in ("robot", "experiment") or schema is None:
+        return None
+    for name in parts[1:-1]:
+        fields = _schema_fields(schema)
+        if name not in fields:
+            return None
+        sub, is_dict = _unwrap(fields[name])
+        if sub is None or is_dict:
+            return None
+        schema = sub
+    return sorted(_schema_fields(schema))

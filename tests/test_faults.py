@@ -445,6 +445,15 @@ def test_schema_rejects_wrong_types_and_mistyped_keys_at_composition(override, k
     assert key in str(err.value) + str(err.value.__cause__)
 
 
+def test_valid_keys_for_composition_errors():
+    from deltajax.config import valid_keys
+
+    assert "forearm" in valid_keys("robot.forarm") and "step" in valid_keys("robot.R_range.stp")
+    assert "h" in valid_keys("experiment.grid.hh", "workspace_grid")
+    assert "ref_max_factor" in valid_keys("experiment.pareto.ref_max", "ga_reconfig")
+    assert "seed" in valid_keys("sed") and valid_keys("experiment.x", "no_such_job") is None
+
+
 def test_every_experiment_composes_and_validates_at_its_defaults():
     for name in ("workspace_grid", "reconfig_workspace", "reconfig_indices", "indices_examples", "bench_kernel",
                  "dynamics_cycle", "boundary_search", "ga_reconfig"):
