@@ -11,7 +11,7 @@ from typing import Any, Dict, List, Mapping, Optional, Tuple
 
 from .geometry import Delta, GeometryError, ReconfigurableDelta
 
-__all__ = ["ConfigError", "robot_from_config", "validate_config", "check_keys", "register_schemas", "TOP_LEVEL_KEYS",
+__all__ = ["ConfigError", "robot_from_config", "validate_config", "check_keys", "valid_keys", "register_schemas", "TOP_LEVEL_KEYS",
            "EXPERIMENT_VALIDATORS", "EXPERIMENT_SCHEMAS"]
 
 
@@ -80,17 +80,21 @@ def robot_from_config(cfg: Mapping[str, Any], prefix: str = "robot") -> Tuple[De
         recon = ReconfigurableDelta.from_range(robot, r_min, r_max, r_step)
     except GeometryError as e:
         raise ConfigError(f"{p}: {e}") from None
-    # something must be reachable over the whole range: the reach test is monotone in R, so both ends suffice
-    for end, R in (("min", r_min), ("max", float(recon.R_max))):
-        try:
-            Delta.from_degrees(theta_min_deg=lo, theta_max_deg=hi, mass=mass, **{**kw, "base_radius": R})
-        except GeometryError as e:
-            raise ConfigError(f"{p}.{end}={_cfg_value(rng, end)!r} m: at R = {R:g} m the {e}") from None
     return robot, recon
 
 
-def _cfg_value(cfg: Mapping[str, Any], key: str) -> Any:
-    return cfg.get(key) if hasattr(cfg, "get") else None
+def check_reach_over_range(cfg: Mapping[str, Any], recon: ReconfigurableDelta, prefix: str = "robot") -> None:
+    """Something must be reachable at every R of ``robot.R_range`` (for jobs that use the range).
+
+    The "can reach nothing" test of :class:`deltajax.Delta` is monotone in R, so both ends suffice.
+    """
+    rb, rng = recon.robot, cfg.get("R_range")
+    for end, R in (("min", float(recon.R_min)), ("max", float(recon.R_max))):
+        try:
+            Delta(base_radius=R, platform_radius=rb.platform_radius, upper_arm=rb.upper_arm, forearm=rb.forearm,
+                  theta_min=rb.theta_min, theta_max=rb.theta_max, mass=rb.mass)
+        except GeometryError as e:
+            raise ConfigError(f"{prefix}.R_range.{end}={rng.get(end)!r} m: at R = {R:g} m the {e}") from None
 
 
 # =============================================================================================================
@@ -353,6 +357,9 @@ def _v_ga_reconfig(e, cfg, robot, recon) -> None:
 # ---- end of ga_reconfig block ----
 
 
+#: Experiments that use the robot's R range (the others only use the fixed robot, R = base_radius).
+R_RANGE_EXPERIMENTS = ("reconfig_workspace", "reconfig_indices", "indices_examples", "ga_reconfig", "dynamics_cycle")
+
 #: experiment name -> validator(experiment cfg, whole cfg, robot, recon); experiments not listed get the
 #: top-level checks only (their job validates its own fields).
 EXPERIMENT_VALIDATORS = {
@@ -379,6 +386,8 @@ def validate_config(cfg: Mapping[str, Any], robot=None, recon=None) -> None:
     check_keys(cfg)
     _validate_top(cfg)
     e = cfg.get("experiment") or {}
+    if recon is not None and e.get("name") in R_RANGE_EXPERIMENTS:
+        check_reach_over_range(cfg.get("robot"), recon)
     check = EXPERIMENT_VALIDATORS.get(e.get("name"))
     if check is not None:
         check(e, cfg, robot, recon)
@@ -743,3 +752,24 @@ def check_keys(cfg: Mapping[str, Any]) -> None:
     schema = EXPERIMENT_SCHEMAS.get(e.get("name")) if e is not None else None
     if schema is not None:
         _check_keys(e, schema, "experiment")
+
+
+def valid_keys(full_key: str, experiment: Optional[str] = None) -> Optional[list]:
+    """The valid keys of the block holding ``full_key`` (e.g. ``"robot.forarm"`` -> the robot's keys), from the
+    schemas; ``None`` when no schema covers it. For error messages of Hydra's composition, which name the
+    unknown key but not the valid ones (``Key 'forarm' not in 'RobotSchema'``)."""
+    parts = full_key.split(".")
+    if len(parts) == 1:
+        return list(TOP_LEVEL_KEYS)
+    schema = RobotSchema if parts[0] == "robot" else EXPERIMENT_SCHEMAS.get(experiment or "")
+    if parts[0] not in ("robot", "experiment") or schema is None:
+        return None
+    for name in parts[1:-1]:
+        fields = _schema_fields(schema)
+        if name not in fields:
+            return None
+        sub, is_dict = _unwrap(fields[name])
+        if sub is None or is_dict:
+            return None
+        schema = sub
+    return sorted(_schema_fields(schema))

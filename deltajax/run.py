@@ -10,6 +10,7 @@ from __future__ import annotations
 import ast
 import contextlib
 import dataclasses
+import datetime
 import importlib
 import logging
 import os
@@ -77,6 +78,7 @@ class RunContext:
     robot: Any
     recon: Any
     complete: bool = True  # a job that stops early (resumable) sets False: the run dir then stays resumable
+    figures: list = dataclasses.field(default_factory=list)  # (path, PNG bytes), written after results.h5
 
     @property
     def dtype(self):
@@ -92,15 +94,31 @@ class RunContext:
                     file=sys.stderr, mininterval=1.0)
 
     def savefig(self, fig, name: str) -> Optional[Path]:
-        """Save a matplotlib figure as ``<run_dir>/<name>.png`` (if ``plots=true``) and close it."""
+        """Render a matplotlib figure for ``<run_dir>/<name>.png`` (if ``plots=true``) and close it.
+
+        The PNG is rendered now and written after the final results.h5 (:meth:`write_figures`), so a failure
+        while writing figures (a full disk) never costs results. Returns the path the figure will have.
+        """
+        import io
+
         import matplotlib.pyplot as plt
 
         path = None
         if self.cfg.get("plots", True):
             path = self.run_dir / f"{name}.png"
-            fig.savefig(path, dpi=120, bbox_inches="tight")
+            buf = io.BytesIO()
+            fig.savefig(buf, format="png", dpi=120, bbox_inches="tight")
+            self.figures.append((path, buf.getvalue()))
         plt.close(fig)
         return path
+
+    def write_figures(self) -> None:
+        """Write the rendered figures (atomically, like results.h5)."""
+        from .io import write_atomic
+
+        while self.figures:
+            path, png = self.figures.pop(0)
+            write_atomic(path, png)
 
     def log(self, msg: str) -> None:
         """Log a line of the run (console and ``<run_dir>/run.log``; through the progress bars, not across)."""
@@ -205,6 +223,7 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
             module.run(ctx)
             results.set_attrs(wall_time_s=time.perf_counter() - t0)
             path = results.flush(final=True)
+            ctx.write_figures()  # after the results: a failure here costs no result (the run stays resumable)
             if ctx.complete and cfg.experiment.get("stop_after") is None:
                 owner.mark_complete()
                 _drop_checkpoints(ctx)
@@ -354,7 +373,8 @@ def run_experiment(name: str, overrides: Iterable[str] = (), run_dir: Optional[o
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         cfg = compose(config_name="config", overrides=[f"experiment={name}", *overrides])
     if run_dir is None:
-        run_dir = Path("outputs") / name / time.strftime("%Y-%m-%d_%H-%M-%S")
+        # microseconds: two calls in one second must not share (and be refused by) one run directory
+        run_dir = Path("outputs") / name / datetime.datetime.now().strftime("%Y-%m-%d_%H-%M-%S_%f")
     with _api_logging(Path(run_dir)):
         return execute(cfg, Path(run_dir))
 

@@ -32,7 +32,7 @@ import math
 import os
 import shutil
 from pathlib import Path
-from typing import Any, Mapping, Optional
+from typing import Any, Mapping
 
 __all__ = ["RunDirError", "CheckpointError", "RunDirectory", "claim", "config_differences", "MANIFEST", "LOCK", "NEUTRAL"]
 

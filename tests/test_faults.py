@@ -227,6 +227,28 @@ def test_enospc_at_a_checkpoint_keeps_the_last_one_and_resume_finishes(tmp_path,
     _assert_same_results(run_experiment("workspace_grid", WG, run_dir=d), reference_grid)
 
 
+def test_results_are_written_before_plots(tmp_path, monkeypatch, reference_grid):
+    """The disk fills while the figures are written: results.h5 is already final; a rerun writes the plots."""
+    real = dio._write_all
+
+    def full_at_png(fd, data):
+        if bytes(data[:4]) == b"\x89PNG":
+            raise OSError(errno.ENOSPC, "No space left on device")
+        real(fd, data)
+
+    d = tmp_path / "run"
+    monkeypatch.setattr(dio, "_write_all", full_at_png)
+    with pytest.raises(dio.ResultsWriteError, match="workspace_grid.png.*no space left on device"):
+        run_experiment("workspace_grid", [*WG, "plots=true"], run_dir=d)
+    assert "end_time" in dio.load(d / "results.h5")["attrs"]
+    _assert_same_results(d / "results.h5", reference_grid)
+    assert not (d / "workspace_grid.png").exists()
+    monkeypatch.setattr(dio, "_write_all", real)
+    run_experiment("workspace_grid", [*WG, "plots=true"], run_dir=d)  # not complete yet: resumes, plots
+    assert (d / "workspace_grid.png").stat().st_size > 1000
+    assert json.loads((d / "deltajax_run.json").read_text())["status"] == "complete"
+
+
 def test_enospc_on_the_first_write_says_nothing_was_written(tmp_path, monkeypatch):
     def full_disk(fd, data):
         raise OSError(errno.ENOSPC, "No space left on device")
@@ -388,7 +410,8 @@ BAD = [
     ("ga_reconfig", "experiment.refine.steps=-1", "experiment.refine.steps must be >= 0, got -1"),
     ("ga_reconfig", "experiment.verify.n_r=0", "experiment.verify.n_r must be >= 1, got 0"),
     ("ga_reconfig", "experiment.ga.sigma=inf", "experiment.ga.sigma must be a finite number"),
-    ("workspace_grid", "robot.R_range.max=10", r"robot.R_range.max=10.0 m: at R = 10 m the geometry can reach nothing"),
+    ("reconfig_indices", "robot.R_range.max=10", r"robot.R_range.max=10.0 m: at R = 10 m the geometry can reach nothing"),
+    ("ga_reconfig", "robot.forearm=0.35", r"robot.R_range.max=0.495 m: at R = 0.495 m the geometry can reach nothing"),
     ("workspace_grid", "experiment.checkpoint_s=-1", "experiment.checkpoint_s must be >= 0, got -1"),
     ("workspace_grid", "experiment.grid.h=0", "experiment.grid.h must be > 0, got 0"),
     ("workspace_grid", "experiment.beta=1.5", r"experiment.beta must be in \(0, 1\), got 1.5"),
@@ -422,11 +445,21 @@ def test_schema_rejects_wrong_types_and_mistyped_keys_at_composition(override, k
     assert key in str(err.value) + str(err.value.__cause__)
 
 
+def test_valid_keys_for_composition_errors():
+    from deltajax.config import valid_keys
+
+    assert "forearm" in valid_keys("robot.forarm") and "step" in valid_keys("robot.R_range.stp")
+    assert "h" in valid_keys("experiment.grid.hh", "workspace_grid")
+    assert "ref_max_factor" in valid_keys("experiment.pareto.ref_max", "ga_reconfig")
+    assert "seed" in valid_keys("sed") and valid_keys("experiment.x", "no_such_job") is None
+
+
 def test_every_experiment_composes_and_validates_at_its_defaults():
     for name in ("workspace_grid", "reconfig_workspace", "reconfig_indices", "indices_examples", "bench_kernel",
                  "dynamics_cycle", "boundary_search", "ga_reconfig"):
         _validate(_compose(name))
     _validate(_compose("workspace_grid", "robot=industrial"))
+    _validate(_compose("workspace_grid", "robot.forearm=0.35"))  # the R range is not used by this job
 
 
 def test_rejected_config_leaves_the_run_directory_untouched(tmp_path):
@@ -470,7 +503,7 @@ def test_reach_box_contains_every_reachable_point():
     for robot in (dj.presets.franco2026().robot, dj.Delta.from_degrees(base_radius=0.2, platform_radius=0.05,
                                                                         upper_arm=0.3, forearm=0.5)):
         box = reach_box(robot)
-        big = make_grid((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0), 0.025)
+        big = make_grid((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0), 0.04)
         ok = np.asarray(reachable_mask(robot, jnp.asarray(big.points()))).reshape(big.shape)
         pts = big.points()[ok.reshape(-1)]
         assert len(pts) > 0

@@ -27,6 +27,7 @@ STATS = ("min", "max", "mean")
 def run(ctx) -> None:
     from .. import plots
     from ..workspace import PAPER_TABLES, fixed_workspace, index_stats, redundancy_grid
+    from ..workspace.driver import face_count
     from ..workspace.redundancy import resolve_redundancy_host
 
     cfg = ctx.cfg.experiment
@@ -97,6 +98,11 @@ def run(ctx) -> None:
     res.put(g, "paper_stats", ptab, units="1", dims=("robot", "index", "stat"),
             attrs={"source": "Franco-Lopez 2026 Tables 6 (beta 0.5), 7 (0.75), 8 (0.25)"})
     res.put(g, "count_odr", int(odr.ok.sum()), units="1", dims=())
+    faces = face_count(odr.ok)  # ODR points on the box faces: the statistics then miss part of the workspace
+    res.put(g, "face_count_odr", faces, units="1", dims=())
+    if faces:
+        ctx.log(f"WARNING: {faces} points of the fixed robot's workspace lie on the faces of the grid box: the "
+                f"statistics cover only the part inside the box")
     res.set_attrs(g, beta=beta, b_v=b_v, b_f=b_f, criterion=criterion, mode=mode, h=h,
                   time_odr_s=t1 - t0, time_rdr_s=t2 - t1, time_stats_s=t3 - t2,
                   rdr_ik_tests=work.get("samples", 0), rdr_full_kernels=work.get("full", 0))

@@ -31,6 +31,7 @@ def grid_from_config(cfg):
 def run(ctx) -> None:
     from .. import plots
     from ..workspace import fixed_workspace, reconfigurable_workspace
+    from ..workspace.driver import face_count
 
     cfg = ctx.cfg.experiment
     if ctx.recon is None:
@@ -58,6 +59,11 @@ def run(ctx) -> None:
         res.put(g, f"count_{tag}", c, units="1", dims=())
         res.put(g, f"volume_count_{tag}", out[tag][1], units="m^3", dims=())
         res.put(g, f"volume_box_{tag}", out[tag][2], units="m^3", dims=())
+        faces = face_count(job.ok)  # reachable points on the box faces: the volume is then a lower bound
+        res.put(g, f"face_count_{tag}", faces, units="1", dims=())
+        if faces:
+            ctx.log(f"WARNING: {faces} points reachable by the {tag} robot lie on the faces of the grid box: its "
+                    f"workspace continues outside the box, so its volume is a lower bound")
     inc = 100.0 * (out["reconfigurable"][0] / out["fixed"][0] - 1.0)
     res.put(g, "increase_percent", inc, units="%", dims=())
     res.set_attrs(g, h=h, n_points=grid.n_points, box_volume=grid.box_volume, fixed_R=float(ctx.robot.base_radius),
