@@ -26,7 +26,7 @@ STATS = ("min", "max", "mean")
 
 def run(ctx) -> None:
     from .. import plots
-    from ..workspace import PAPER_TABLES, fixed_workspace, index_stats, redundancy_grid
+    from ..workspace import PAPER_TABLES, fixed_workspace, redundancy_grid
     from ..workspace.redundancy import resolve_redundancy_host
 
     cfg = ctx.cfg.experiment
@@ -60,17 +60,18 @@ def run(ctx) -> None:
 
     t0 = time.perf_counter()
     with ctx.progress(total=grid.n_points, desc="ODR fields") as bar:
+        # only the fields written below are kept on the grid; the statistics accumulate chunk by chunk
         odr = fixed_workspace(ctx.robot, grid, fields=True, field_dtype=np.float32, chunk_size=1 << 20,
-                              progress=bar.update, checkpoint_dir=None if ck is None else ck / "odr", **kw)
+                              keep=sorted(set(store) | {slice_index}), stats=True, progress=bar.update, checkpoint_dir=None if ck is None else ck / "odr", **kw)
     t1 = time.perf_counter()
     work: dict = {}
     with ctx.progress(total=grid.n_points, desc=f"RDR R* ({mode})") as bar:
         rdr = redundancy_grid(ctx.recon, grid, mask=odr.ok, criterion=criterion, mode=mode, field_dtype=np.float32,
-                              chunk_size=chunk, progress=bar.update, work=work,
+                              chunk_size=chunk, keep=["R_star", *store], stats=True, progress=bar.update, work=work,
                               checkpoint_dir=None if ck is None else ck / f"rdr_{mode}", **kw)
     t2 = time.perf_counter()
-    s_odr = index_stats(odr.fields, odr.ok)
-    s_rdr = index_stats(rdr.fields, odr.ok)
+    s_odr = odr.stats
+    s_rdr = rdr.stats  # over the ODR workspace: the mask of the redundancy job
     t3 = time.perf_counter()
 
     res = ctx.results
