@@ -15,14 +15,19 @@ cyclic Jacobi sweeps, not Cardano, to stay exact on the robot's axis). ``sv_meth
 
 from __future__ import annotations
 
+import functools
+import math
 from typing import NamedTuple, Optional
 
+import equinox as eqx
+import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
 from .geometry import Delta
-from .jacobian import _resolve_length, homogenise, jq_diagonal
-from .kinematics import _from_chain_frames, forearm_units, passive_angles
+from .jacobian import _resolve_length, homogenise, jq_diagonal, jq_theta, jx_det, jx_row
+from .kinematics import (_branch_sign, _from_chain_frames, chain_local, design_ok, forearm_units, limit_terms,
+                         loop_closure, loop_vectors, passive_angles)
 
 __all__ = [
     "Indices",
@@ -36,6 +41,12 @@ __all__ = [
     "MATRICES",
     "INDEX_NAMES",
     "point_indices",
+    "point_kernel",
+    "PointKernel",
+    "sym3_top2",
+    "indices_from_sv",
+    "singular_values_closed_form",
+    "SV_METHODS",
 ]
 
 MATRICES = ("theta3x3", "full3x4")
@@ -75,15 +86,70 @@ def sigma_tilde(sigma, a, b):
 
     1 - ((s - a)/a)^2 on [0, a], 1 - ((s - a)/(b - a))^2 on (a, b], 0 beyond b; NaN stays NaN.
     """
-    left = 1.0 - ((sigma - a) / a) ** 2
-    right = 1.0 - ((sigma - a) / (b - a)) ** 2
-    val = jnp.where(sigma <= a, left, jnp.where(sigma <= b, right, 0.0))
+    inside = sigma <= b  # False for NaN and +inf
+    s = jnp.where(inside, sigma, a)  # double where: inf/NaN never reach the squares (finite gradients)
+    left = 1.0 - ((s - a) / a) ** 2
+    right = 1.0 - ((s - a) / (b - a)) ** 2
+    val = jnp.where(inside, jnp.where(s <= a, left, right), 0.0)
     return jnp.where(jnp.isnan(sigma), jnp.nan, val)
 
 
 def k_tilde(sigma_min_v, sigma_min_f, *, b_v=2.0, b_f=4.2, beta=0.5):
     """Singularity-sensitive index k~ = s~_v(sigma_min_v) * s~_f(sigma_min_f), a_v = beta b_v, a_f = (1-beta) b_f."""
     return sigma_tilde(sigma_min_v, beta * b_v, b_v) * sigma_tilde(sigma_min_f, (1.0 - beta) * b_f, b_f)
+
+
+# -- eigenvalues of a symmetric 3x3 (flat scalars) -----------------------------------------------------------
+
+#: t = u P(u), u = sqrt(c), approximates the root t in [0, 1] of t^2 (t + 3) = c (c in [0, 4]) to 3.2e-6
+#: relative (least-squares Chebyshev fit); one Halley step then gives ~3e-16 relative (measured over 4e5 c).
+_T_POLY = (0.5773484152710456, -0.055513434266994274, 0.013131880611233873, -0.0035774990190131535,
+           0.0007894847448390405, -8.944924427049106e-05)
+
+
+def _cubic_root01(c):
+    """The root t in [0, 1] of t^2 (t + 3) = c for c in [0, 4]: polynomial start in sqrt(c), one Halley step."""
+    u = jnp.sqrt(c)
+    poly = _T_POLY[-1]
+    for a in _T_POLY[-2::-1]:
+        poly = poly * u + a
+    t = u * poly
+    g = t * t * (t + 3.0) - c
+    g1 = 3.0 * t * (t + 2.0)
+    g2 = 6.0 * (t + 1.0)
+    den = 2.0 * g1 * g1 - g * g2
+    return t - jnp.where(den > 0.0, 2.0 * g * g1 / jnp.where(den > 0.0, den, 1.0), 0.0)
+
+
+def _eig_top2_fast(x00, x11, x22, x01, x02, x12):
+    """Two largest eigenvalues of a symmetric 3x3 by the closed-form cubic, without inverse trig.
+
+    With q = tr/3, p^2 = ||X - q I||_F^2 / 6 and r = det((X - q I)/p) / 2 in [-1, 1], the eigenvalues are
+    q + p x with x^3 - 3x = 2r. The largest x = 1 + t, t^2 (t + 3) = 2 (1 + r); the smallest x = -(1 + t'),
+    t'^2 (t' + 3) = 2 (1 - r); the middle one is t' - t (the three sum to 0). Each root: polynomial start and
+    one Halley step (:func:`_cubic_root01`). Near a repeated eigenvalue r carries an absolute error ~eps, so
+    the *split* of the pair is ~sqrt(eps) p (their product and sum stay accurate, which is what s3 uses).
+    """
+    q = (x00 + x11 + x22) * (1.0 / 3.0)
+    b00, b11, b22 = x00 - q, x11 - q, x22 - q
+    p2 = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (x01 * x01 + x02 * x02 + x12 * x12)) * (1.0 / 6.0)
+    pos = p2 > 0.0
+    p = jnp.where(pos, jnp.sqrt(jnp.where(pos, p2, 1.0)), 0.0)
+    det_b = b00 * (b11 * b22 - x12 * x12) - x01 * (x01 * b22 - x12 * x02) + x02 * (x01 * x12 - b11 * x02)
+    r = jnp.clip(0.5 * det_b / jnp.where(pos, p2 * p, 1.0), -1.0, 1.0)
+    t = _cubic_root01(2.0 * (1.0 + r))
+    t2 = _cubic_root01(2.0 * (1.0 - r))
+    l1, l2 = q + p * (1.0 + t), q + p * (t2 - t)
+    # A split below the cubic's sqrt(eps) noise is noise (e.g. exactly on the robot's axis): report the mean,
+    # which is accurate to eps (the sum of the pair is), instead of two values sqrt(eps) apart.
+    eps = jnp.finfo(jnp.result_type(x00)).eps
+    # r carries an absolute error ~eps (1 + |q| / p) (cancellation in X - q I), t moves by sqrt of that
+    noise2 = 64.0 * eps * p * (p + jnp.abs(q))
+    l3 = 3.0 * q - l1 - l2
+    tie12 = (l1 - l2) ** 2 <= noise2
+    tie23 = (l2 - l3) ** 2 <= noise2
+    mean12 = 0.5 * (l1 + l2)
+    return jnp.where(tie12, mean12, l1), jnp.where(tie12, mean12, jnp.where(tie23, 0.5 * (l2 + l3), l2))
 
 
 def _jacobi_rotate(A, p: int, q: int):
@@ -106,14 +172,13 @@ def _jacobi_rotate(A, p: int, q: int):
     return out
 
 
-def _sym_eig_desc_entries(A: dict, sweeps: int = 4) -> tuple[Float[Array, ""], Float[Array, ""]]:
-    """Two largest eigenvalues of a symmetric 3x3 matrix, given as a dict of scalar entries, by cyclic Jacobi.
+def _eig_top2_jacobi(x00, x11, x22, x01, x02, x12, sweeps: int = 4):
+    """Two largest eigenvalues of a symmetric 3x3 by cyclic Jacobi (exact to ~eps ||X||, repeated ones too).
 
-    Scalar entries keep the batched code structure-of-arrays under vmap. Jacobi (sqrt only, no inverse trig)
-    keeps the eigenvalues accurate to ~eps ||S|| even for repeated eigenvalues (on the robot's axis two
-    singular values coincide; the trigonometric Cardano formula loses sqrt(eps) there). Convergence is
-    quadratic; 4 sweeps reach machine precision for 3x3.
+    Convergence is quadratic; 4 sweeps reach machine precision for 3x3. sqrt only, no inverse trig.
     """
+    A = {(0, 0): x00, (1, 1): x11, (2, 2): x22, (0, 1): x01, (1, 0): x01, (0, 2): x02, (2, 0): x02,
+         (1, 2): x12, (2, 1): x12}
     for _ in range(sweeps):
         for p, q in ((0, 1), (0, 2), (1, 2)):
             A = _jacobi_rotate(A, p, q)
@@ -123,161 +188,316 @@ def _sym_eig_desc_entries(A: dict, sweeps: int = 4) -> tuple[Float[Array, ""], F
     return hi, e0 + e1 + e2 - hi - lo
 
 
-def _adj_sym_entries(G: dict) -> dict:
-    """Adjugate of a symmetric 3x3 matrix given as a dict of scalar entries."""
-    g00, g11, g22, g01, g02, g12 = G[(0, 0)], G[(1, 1)], G[(2, 2)], G[(0, 1)], G[(0, 2)], G[(1, 2)]
-    c00 = g11 * g22 - g12 * g12
-    c11 = g00 * g22 - g02 * g02
-    c22 = g00 * g11 - g01 * g01
-    c01 = g02 * g12 - g01 * g22
-    c02 = g01 * g12 - g02 * g11
-    c12 = g01 * g02 - g00 * g12
-    return {(0, 0): c00, (1, 1): c11, (2, 2): c22, (0, 1): c01, (1, 0): c01, (0, 2): c02, (2, 0): c02,
-            (1, 2): c12, (2, 1): c12}
+SV_METHODS = ("fast", "jacobi", "svd")
 
 
-def singular_values_closed_form(Jx: Float[Array, "3 3"], dhat: Float[Array, "3"]) -> Float[Array, "3"]:
-    """Singular values (descending) of M = Jx^-1 diag(dhat) without forming the inverse or an SVD.
+@functools.partial(jax.custom_jvp, nondiff_argnums=(6,))
+def sym3_top2(x00, x11, x22, x01, x02, x12, method: str = "fast"):
+    """(lambda_1, lambda_2), the two largest eigenvalues of the symmetric 3x3 [[x00, x01, x02], [., x11, x12],
+    [., ., x22]]; scalars. ``method``: ``"fast"`` (closed-form cubic) or ``"jacobi"`` (exact sweeps).
 
-    Two exact reformulations, chosen per point by which factor is closer to singular:
-
-    * Jq-side (|det Jx| >= |prod dhat|): M^T M = D adj(G) D / det G, so s1, s2 = sqrt(eig(D adj(G) D)) / |det Jx|;
-    * Jx-side (otherwise): M^-1 M^-T = D^-1 G D^-1 = adj(D) G adj(D) / prod(d)^2, so s3, s2 = |prod d| /
-      sqrt(eig(adj(D) G adj(D))).
-
-    The remaining (smallest-eigenvalue) singular value comes from the exact determinant
-    s1 s2 s3 = |prod dhat| / |det Jx|, so it keeps full relative accuracy near either kind of singularity.
+    Custom JVP (finite everywhere): d lambda = tr(adj(X - lambda I) dX) / tr(adj(X - lambda I)) (the
+    eigen-projector) for an eigenvalue separated from the others by more than eps^0.4 max|lambda|; a pair
+    closer than that gets the derivative of its mean (tr(dX) minus the isolated one's, halved), a triple
+    tr(dX) / 3. The projector eigenvalues come from Jacobi in both methods.
     """
-    # Scalars only (structure of arrays): under vmap, stacking into small matrices gives (N, 3, 3) arrays whose
-    # entries are strided and do not vectorise on XLA:CPU.
-    J = [[Jx[i, k] for k in range(3)] for i in range(3)]
-    d = [dhat[0], dhat[1], dhat[2]]
-    G = {(i, j): J[i][0] * J[j][0] + J[i][1] * J[j][1] + J[i][2] * J[j][2] for i in range(3) for j in range(3)}
-    det_jx = jnp.abs(  # explicit cofactor expansion, no LU
-        J[0][0] * (J[1][1] * J[2][2] - J[1][2] * J[2][1])
-        - J[0][1] * (J[1][0] * J[2][2] - J[1][2] * J[2][0])
-        + J[0][2] * (J[1][0] * J[2][1] - J[1][1] * J[2][0]))
+    if method == "fast":
+        return _eig_top2_fast(x00, x11, x22, x01, x02, x12)
+    if method == "jacobi":
+        return _eig_top2_jacobi(x00, x11, x22, x01, x02, x12)
+    raise ValueError(f"method must be 'fast' or 'jacobi', got {method!r}")
+
+
+@sym3_top2.defjvp
+def _sym3_top2_jvp(method, primals, tangents):
+    x00, x11, x22, x01, x02, x12 = primals
+    d00, d11, d22, d01, d02, d12 = tangents
+    lam1, lam2 = sym3_top2(*primals, method)
+    l1, l2 = (lam1, lam2) if method == "jacobi" else _eig_top2_jacobi(*primals)
+    l3 = x00 + x11 + x22 - l1 - l2
+    dtr = d00 + d11 + d22
+
+    def proj(lam):
+        a00, a11, a22 = x00 - lam, x11 - lam, x22 - lam
+        c00 = a11 * a22 - x12 * x12
+        c11 = a00 * a22 - x02 * x02
+        c22 = a00 * a11 - x01 * x01
+        c01 = x02 * x12 - x01 * a22
+        c02 = x01 * x12 - x02 * a11
+        c12 = x01 * x02 - a00 * x12
+        num = c00 * d00 + c11 * d11 + c22 * d22 + 2.0 * (c01 * d01 + c02 * d02 + c12 * d12)
+        return num, c00 + c11 + c22
+
+    eps = jnp.finfo(jnp.result_type(x00)).eps
+    tol = eps ** 0.4 * jnp.maximum(jnp.maximum(jnp.abs(l1), jnp.abs(l3)), jnp.finfo(jnp.result_type(x00)).tiny)
+    sep12 = (l1 - l2) > tol
+    sep23 = (l2 - l3) > tol
+    n1, den1 = proj(l1)
+    n3, den3 = proj(l3)
+    g1 = n1 / jnp.where(sep12, den1, 1.0)
+    g3 = n3 / jnp.where(sep23, den3, 1.0)
+    dl1 = jnp.where(sep12, g1, jnp.where(sep23, 0.5 * (dtr - g3), dtr / 3.0))
+    dl2 = jnp.where(sep12, jnp.where(sep23, dtr - g1 - g3, 0.5 * (dtr - g1)), dl1)
+    return (lam1, lam2), (dl1, dl2)
+
+
+def _sqrt0(x):
+    """sqrt(max(x, 0)) with a finite (zero) derivative at and below 0."""
+    pos = x > 0.0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
+
+
+def singular_values(jx, d=None, *, method: str = "fast"):
+    """Singular values s1 >= s2 >= s3 of M = Jx^-1 diag(d), flat (no inverse, no SVD); or, legacy, of a matrix.
+
+    ``singular_values(M)`` (one argument, a 3 x n matrix) is the reference ``jnp.linalg.svd`` and returns an
+    array. The kernel form takes ``jx`` = the 9 entries of Jx row-major (row i = unit forearm vector u_i,
+    base frame) and ``d`` = the 3 homogenised Jq diagonal entries (:func:`deltajax.jacobian.jq_theta`) as
+    scalars and returns the tuple (s1, s2, s3) of scalars. Two exact reformulations, chosen per point by
+    which factor is closer to singular (G = Jx Jx^T, D = diag(d)):
+
+    * Jq side (|det Jx| >= |prod d|): M^T M = D adj(G) D / det G, so s1, s2 = sqrt(eig(D adj(G) D)) / |det Jx|;
+    * Jx side (otherwise): M^-1 M^-T = adj(D) G adj(D) / prod(d)^2, so s3, s2 = |prod d| / sqrt(eig(...)).
+
+    The remaining singular value comes from the exact determinant s1 s2 s3 = |prod d| / |det Jx|, so it keeps
+    full relative accuracy near either kind of singularity. The two largest eigenvalues come from
+    :func:`sym3_top2` (``method="fast"`` closed-form cubic, default; ``"jacobi"`` exact sweeps); both have
+    finite derivatives everywhere, repeated singular values (the robot's axis) included.
+
+    Accuracy of ``"fast"`` against ``jnp.linalg.svd`` (float64, tests/test_kernel.py): <= 1e-9 relative
+    on every singular value for 1/k > 1e-3 off the axis; on the axis (s1 = s2 or s2 = s3) the split of the
+    repeated pair is ~sqrt(eps) relative (<= 1e-7 measured), s3 on the Jq side stays ~1e-12.
+    """
+    if d is None:
+        return jnp.linalg.svd(jx, compute_uv=False)
+    if method not in ("fast", "jacobi"):
+        raise ValueError(f"method must be 'fast' or 'jacobi', got {method!r}")
+    J = [[jx[3 * i + k] for k in range(3)] for i in range(3)]
+    G = {(i, j): J[i][0] * J[j][0] + J[i][1] * J[j][1] + J[i][2] * J[j][2] for i in range(3) for j in range(i, 3)}
+    det_jx = jnp.abs(jx_det(*jx))
     prod_d = jnp.abs(d[0] * d[1] * d[2])
     jx_side = det_jx < prod_d
-    adj_d = [d[1] * d[2], d[0] * d[2], d[0] * d[1]]
-    adj_g = _adj_sym_entries(G)
-    X = {(i, j): jnp.where(jx_side, adj_d[i] * G[(i, j)] * adj_d[j], d[i] * adj_g[(i, j)] * d[j])
-         for i in range(3) for j in range(3)}
-    e1, e2 = _sym_eig_desc_entries(X)
-    r1 = jnp.sqrt(jnp.maximum(e1, 0.0))
-    r2 = jnp.sqrt(jnp.maximum(e2, 0.0))
-    # Jq side
-    a1 = r1 / det_jx
-    a2 = r2 / det_jx
+    adj_d = (d[1] * d[2], d[0] * d[2], d[0] * d[1])
+    g00, g11, g22, g01, g02, g12 = G[(0, 0)], G[(1, 1)], G[(2, 2)], G[(0, 1)], G[(0, 2)], G[(1, 2)]
+    adj_g = {(0, 0): g11 * g22 - g12 * g12, (1, 1): g00 * g22 - g02 * g02, (2, 2): g00 * g11 - g01 * g01,
+             (0, 1): g02 * g12 - g01 * g22, (0, 2): g01 * g12 - g02 * g11, (1, 2): g01 * g02 - g00 * g12}
+    X = [jnp.where(jx_side, adj_d[i] * G[(i, j)] * adj_d[j], d[i] * adj_g[(i, j)] * d[j])
+         for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))]
+    e1, e2 = sym3_top2(*X, method)
+    r1, r2 = _sqrt0(e1), _sqrt0(e2)
+    # Jq side (det_jx >= prod_d); det_jx = 0 there means both factors singular: s1 = inf
+    det_pos = det_jx > 0.0
+    det_safe = jnp.where(det_pos, det_jx, 1.0)
+    a1 = jnp.where(det_pos, r1 / det_safe, jnp.inf)
+    a2 = jnp.where(det_pos, r2 / det_safe, jnp.inf)
     a12 = a1 * a2
-    a3 = prod_d / (det_jx * jnp.where(a12 > 0, a12, 1.0))
-    a3 = jnp.where(a12 > 0, a3, 0.0)
-    # Jx side (only used when prod_d > det_jx >= 0, so prod_d > 0)
+    a12_pos = det_pos & (a12 > 0)
+    a3 = jnp.where(a12_pos, prod_d / (det_safe * jnp.where(a12_pos, a12, 1.0)), 0.0)
+    # Jx side (prod_d > det_jx >= 0, so prod_d > 0)
     b3 = prod_d / jnp.where(r1 > 0, r1, 1.0)
     b2 = prod_d / jnp.where(r2 > 0, r2, 1.0)
     b23 = b2 * b3
-    b1 = prod_d / jnp.where(det_jx * b23 > 0, det_jx * b23, 1.0)
-    b1 = jnp.where(det_jx * b23 > 0, b1, jnp.inf)
-    return jnp.stack([jnp.where(jx_side, b1, a1), jnp.where(jx_side, b2, a2), jnp.where(jx_side, b3, a3)])
+    db = det_jx * b23
+    b1 = jnp.where(db > 0, prod_d / jnp.where(db > 0, db, 1.0), jnp.inf)
+    return jnp.where(jx_side, b1, a1), jnp.where(jx_side, b2, a2), jnp.where(jx_side, b3, a3)
 
 
-def singular_values(M: Float[Array, "3 n"]) -> Float[Array, "3"]:
-    """Singular values (descending) of a 3 x n matrix by ``jnp.linalg.svd`` (reference method)."""
-    return jnp.linalg.svd(M, compute_uv=False)
+def singular_values_closed_form(Jx: Float[Array, "3 3"], dhat: Float[Array, "3"], *,
+                                method: str = "jacobi") -> Float[Array, "3"]:
+    """Stacked form of :func:`singular_values` for a (3, 3) Jx and (3,) diagonal (kept for callers)."""
+    s = singular_values(tuple(Jx[i, k] for i in range(3) for k in range(3)), (dhat[0], dhat[1], dhat[2]),
+                        method=method)
+    return jnp.stack(s)
+
+
+def indices_from_sv(s1, s2, s3, *, b_v=2.0, b_f=4.2, beta=0.5, raw_scale=1.0) -> Indices:
+    """All indices from the singular values s1 >= s2 >= s3 (scalars) of the homogenised matrix.
+
+    ``raw_scale`` converts the homogenised manipulability to the raw one (length**3 for theta3x3). No masking:
+    NaN in gives NaN out; s3 = 0 gives inv_cond = sigma_min_v = 0, omega_f = imi = inf.
+    """
+    omega_v = s1 * s2 * s3
+    manip = omega_v * raw_scale
+    sigma_min_f = 1.0 / s1
+    return Indices(
+        inv_cond=s3 / s1,
+        sigma_min_v=s3,
+        sigma_min_f=sigma_min_f,
+        omega_v=omega_v,
+        omega_f=1.0 / omega_v,
+        k_tilde=k_tilde(s3, sigma_min_f, b_v=b_v, b_f=b_f, beta=beta),
+        manipulability=manip,
+        imi=1.0 / manip,
+        singular_values=jnp.stack([s1, s2, s3]),
+    )
 
 
 def indices_from_singular_values(s: Float[Array, "3"], *, b_v=2.0, b_f=4.2, beta=0.5,
                                  raw_scale: Float[Array, ""] | float = 1.0) -> Indices:
-    """All indices from the singular values ``s`` (descending) of the homogenised matrix.
+    """All indices from the stacked singular values ``s`` (descending); see :func:`indices_from_sv`."""
+    return indices_from_sv(s[0], s[1], s[2], b_v=b_v, b_f=b_f, beta=beta, raw_scale=raw_scale)
 
-    ``raw_scale`` converts the homogenised manipulability to the raw one (length**3 for theta3x3).
+
+def _nan_where_not(ok, ind: Indices) -> Indices:
+    nan = jnp.asarray(jnp.nan, ind.sigma_min_v.dtype)
+    return Indices(*(jnp.where(ok if v.ndim == jnp.ndim(ok) else ok[..., None], v, nan) for v in ind))
+
+
+class PointKernel(NamedTuple):
+    """Everything the per-point kernel computes (scalars per point; vmap for batches).
+
+    Attributes:
+        ok: valid design, finite point, all three loops close within the joint limits.
+        chains: the three :class:`~deltajax.kinematics.LoopClosure` (chain 0, 1, 2).
+        det_jx: signed det Jx (0 exactly: skip this sample in redundancy resolution); computed on the
+            guarded loop, meaningful where ``ok``.
+        indices: every index (theta3x3, homogenised by ``length``), NaN where not ``ok``.
     """
-    s1, s2, s3 = s[0], s[1], s[2]
-    omega_v = s1 * s2 * s3
-    manip = omega_v * raw_scale
-    return Indices(
-        inv_cond=s3 / s1,
-        sigma_min_v=s3,
-        sigma_min_f=1.0 / s1,
-        omega_v=omega_v,
-        omega_f=1.0 / omega_v,
-        k_tilde=k_tilde(s3, 1.0 / s1, b_v=b_v, b_f=b_f, beta=beta),
-        manipulability=manip,
-        imi=1.0 / manip,
-        singular_values=s,
-    )
+
+    ok: Bool[Array, ""]
+    chains: tuple
+    det_jx: Float[Array, ""]
+    indices: Indices
+
+
+def point_kernel(robot: Delta, p: Float[Array, "3"], *, sign: float = 1.0, sv_method: str = "fast",
+                 length: Optional[float] = None, b_v: float = 2.0, b_f: float = 4.2, beta: float = 0.5
+                 ) -> PointKernel:
+    """The one per-point kernel: loop closure -> loop vectors -> Jacobian blocks -> singular values -> indices.
+
+    Flat scalars throughout (under vmap every intermediate is an (N,) array), cos/sin passed through (no
+    atan2), no small stacked matrices. Failed points (invalid design, unreachable, non-finite, huge) run
+    the algebra on finite stand-ins (double where) so values *and gradients* stay finite; their indices are
+    NaN.
+
+    Args:
+        robot: the robot (R = ``robot.base_radius``), possibly traced/vmapped.
+        p: platform centre (m, base frame).
+        sign: IK branch, +1.0 outer (default) or -1.0 inner.
+        sv_method: ``"fast"`` (closed-form cubic, default) or ``"jacobi"`` (exact).
+        length: homogenising length (default L1).
+        b_v, b_f, beta: parameters of k~.
+    """
+    p = jnp.asarray(p)
+    dtype = jnp.result_type(p.dtype, robot.upper_arm.dtype)
+    p = p.astype(dtype)
+    valid = design_ok(robot)
+    one = jnp.asarray(1.0, dtype)
+    L1 = jnp.where(valid, robot.upper_arm, one)
+    L2 = jnp.where(valid, robot.forearm, 2.0 * one)
+    L = L1 if length is None else jnp.where(valid, jnp.asarray(length, dtype), one)
+    lim = limit_terms(robot.theta_min, robot.theta_max)
+    shift = robot.platform_radius - robot.base_radius
+    chains, rows, d = [], [], []
+    for i in range(3):
+        x, y, z = chain_local(p[0], p[1], p[2], i)
+        lc = loop_closure(x + shift, y, z, L1, L2, lim, sign)
+        ux, uy, uz = loop_vectors(lc.dx, lc.py, lc.pz, lc.cos, lc.sin, L1, L2)
+        rows.extend(jx_row(ux, uy, uz, i))
+        di = jq_theta(ux, uz, lc.cos, lc.sin)
+        d.append(di if length is None else di * (L1 / L))
+        chains.append(lc)
+    ok = valid & chains[0].ok & chains[1].ok & chains[2].ok
+    s1, s2, s3 = singular_values(tuple(rows), tuple(d), method=sv_method)
+    ind = indices_from_sv(s1, s2, s3, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L ** 3)
+    return PointKernel(ok=ok, chains=tuple(chains), det_jx=jx_det(*rows), indices=_nan_where_not(ok, ind))
+
+
+def _resolve_sv_method(sv_method: str, default: str) -> str:
+    aliases = {"closed_form": "jacobi", None: default}
+    m = aliases.get(sv_method, sv_method)
+    if m not in SV_METHODS:
+        raise ValueError(f"sv_method must be one of {SV_METHODS} (or 'closed_form' = 'jacobi'), got {sv_method!r}")
+    return m
 
 
 def indices(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], *, matrix: str = "theta3x3",
             b_v: float = 2.0, b_f: float = 4.2, beta: float = 0.5, length: Optional[float] = None,
-            sv_method: str = "closed_form") -> Indices:
+            sv_method: str = "jacobi") -> Indices:
     """Performance indices at platform position ``p`` (m, base frame) and actuated angles ``theta`` (rad).
 
     Args:
         robot: the robot (R frozen at ``robot.base_radius``).
         p: platform centre (m).
-        theta: actuated angles (rad), NaN for an invalid configuration (all indices then NaN).
+        theta: actuated angles (rad). Every index is NaN when theta or p is not finite or the (traced)
+            design is invalid (failure as data); p and theta are assumed to be one configuration (use
+            :func:`classify_singularity` ``ok`` to check the loop closes).
         matrix: ``"theta3x3"`` (default; the paper's numbers) or ``"full3x4"`` (the homogenised 3x4 J).
         b_v, b_f, beta: parameters of k~ (paper: 2, 4.2, 0.5).
         length: homogenising length (default L1).
-        sv_method: ``"closed_form"`` (default, theta3x3 only) or ``"svd"``.
+        sv_method: ``"jacobi"`` (default, exact closed form of :func:`singular_values`; ``"closed_form"`` is
+            its old name), ``"fast"`` (closed-form cubic) or ``"svd"`` (``jnp.linalg.svd``); theta3x3 only
+            for the first two.
 
     Returns:
         :class:`Indices`.
     """
     if matrix not in MATRICES:
         raise ValueError(f"matrix must be one of {MATRICES}, got {matrix!r}")
-    if sv_method not in ("closed_form", "svd"):
-        raise ValueError(f"sv_method must be 'closed_form' or 'svd', got {sv_method!r}")
+    method = _resolve_sv_method(sv_method, "jacobi")
     theta = jnp.asarray(theta)
+    p = jnp.asarray(p)
+    dtype = jnp.result_type(p.dtype, theta.dtype, robot.upper_arm.dtype)
+    ok = design_ok(robot) & jnp.all(jnp.isfinite(p)) & jnp.all(jnp.isfinite(theta))
+    # double where: invalid inputs are replaced by a harmless configuration before any algebra
+    theta = jnp.where(ok, theta, jnp.asarray([0.3, 0.5, 0.7], dtype)).astype(dtype)
+    p = jnp.where(ok, p, jnp.asarray([0.01, 0.02, 0.3], dtype)).astype(dtype)
+    robot = _harmless_design(robot, ok)
     L = _resolve_length(robot, length)
     u_local = forearm_units(robot, p, theta)
     Jx = _from_chain_frames(u_local)
     dhat = jq_diagonal(robot, u_local, theta) / L  # homogenised theta-block diagonal
     if matrix == "theta3x3":
-        if sv_method == "closed_form":
-            s = singular_values_closed_form(Jx, dhat)
-        else:
+        if method == "svd":
             s = singular_values(jnp.linalg.solve(Jx, jnp.diag(dhat)))
-        return indices_from_singular_values(s, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L ** 3)
+            ind = indices_from_singular_values(s, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L ** 3)
+        else:
+            c, s_ = jnp.cos(theta), jnp.sin(theta)
+            rows, d = [], []
+            for i in range(3):
+                ux, uy, uz = u_local[i, 0], u_local[i, 1], u_local[i, 2]
+                rows.extend(jx_row(ux, uy, uz, i))
+                d.append(jq_theta(ux, uz, c[i], s_[i]) * (robot.upper_arm / L))
+            sv = singular_values(tuple(rows), tuple(d), method=method)
+            ind = indices_from_sv(*sv, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L ** 3)
+        return _nan_where_not(ok, ind)
     Jq = jnp.concatenate([u_local[:, :1], jnp.diag(dhat * L)], axis=1)
     J = jnp.linalg.solve(Jx, Jq)
     s = singular_values(homogenise(J, L))
     ind = indices_from_singular_values(s, b_v=b_v, b_f=b_f, beta=beta)
     manip = jnp.sqrt(jnp.abs(jnp.linalg.det(J @ J.T)))
-    return ind._replace(manipulability=manip, imi=1.0 / manip)
+    return _nan_where_not(ok, ind._replace(manipulability=manip, imi=1.0 / manip))
+
+
+def _harmless_design(robot: Delta, ok) -> Delta:
+    """``robot`` where ``ok``, else a valid stand-in design (double where for traced invalid designs)."""
+    f = lambda v, good: jnp.where(ok, v, jnp.asarray(good, v.dtype))  # noqa: E731
+    return eqx.tree_at(lambda r: (r.base_radius, r.platform_radius, r.upper_arm, r.forearm, r.theta_min,
+                                  r.theta_max), robot,
+                       (f(robot.base_radius, 0.2), f(robot.platform_radius, 0.05), f(robot.upper_arm, 0.2),
+                        f(robot.forearm, 0.4), f(robot.theta_min, -1.0), f(robot.theta_max, 2.0)))
 
 
 def point_indices(robot: Delta, p: Float[Array, "3"], *, branch: str = "outer", b_v: float = 2.0,
-                  b_f: float = 4.2, beta: float = 0.5, length: Optional[float] = None):
-    """IK and all indices of one point in the hot-path form (the workspace/benchmark kernel).
+                  b_f: float = 4.2, beta: float = 0.5, length: Optional[float] = None,
+                  sv_method: str = "fast"):
+    """IK and all indices of one point (theta3x3): the hot-path kernel :func:`point_kernel`.
 
-    No inverse trig and no SVD: cos/sin of theta come from the algebraic IK, the Jacobians from them, the
-    singular values from :func:`singular_values_closed_form`. Equals ``indices(robot, p, ik(robot, p).theta)``
-    (theta3x3 matrix) to rounding, with NaN indices where the point is not reachable.
+    No inverse trig and no SVD. Equals ``indices(robot, p, ik(robot, p).theta)`` to rounding (1e-9 relative
+    away from singular poses with the default ``sv_method="fast"``; ``"jacobi"`` for the exact form), with
+    NaN indices where the point is not reachable.
 
     Returns:
-        (``IKCosSin``, :class:`Indices`).
+        (``IKCosSin``, :class:`Indices`); the ``IKCosSin`` is exactly :func:`deltajax.ik_cos_sin`'s.
     """
-    from .kinematics import ik_cos_sin, to_chain_frames
+    from .kinematics import ik_cos_sin
 
-    cs = ik_cos_sin(robot, p, branch=branch)
-    ok = jnp.all(cs.ok)
-    # double-where guard: failed points run the kernel on a harmless angle, so gradients stay finite
-    c = jnp.where(ok, cs.cos, 1.0)
-    s = jnp.where(ok, cs.sin, 0.0)
-    L = _resolve_length(robot, length)
-    loc = to_chain_frames(jnp.asarray(p, cs.cos.dtype))
-    L1 = robot.upper_arm
-    ux = (loc[:, 0] + robot.platform_radius - robot.base_radius - L1 * c) / robot.forearm
-    uz = (loc[:, 2] - L1 * s) / robot.forearm
-    u_local = jnp.stack([ux, loc[:, 1] / robot.forearm, uz], axis=-1)
-    Jx = _from_chain_frames(u_local)
-    dhat = (L1 / L) * (uz * c - ux * s)
-    sv = singular_values_closed_form(Jx, dhat)
-    ind = indices_from_singular_values(sv, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L ** 3)
-    nan = jnp.asarray(jnp.nan, sv.dtype)
-    return cs, Indices(*(jnp.where(ok, v, nan) for v in ind))
+    sign = _branch_sign(branch)
+    method = _resolve_sv_method(sv_method, "fast")
+    if method == "svd":
+        raise ValueError("point_indices supports sv_method 'fast' or 'jacobi'; use indices(..., sv_method='svd')")
+    k = point_kernel(robot, p, sign=sign, sv_method=method, length=length, b_v=b_v, b_f=b_f, beta=beta)
+    return ik_cos_sin(robot, p, branch=branch), k.indices
 
 
 class Singularity(NamedTuple):

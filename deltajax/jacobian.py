@@ -19,9 +19,40 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .geometry import Delta
-from .kinematics import _from_chain_frames, forearm_units
+from .kinematics import _COS_A, _SIN_A, _from_chain_frames, forearm_units
 
-__all__ = ["Jacobians", "jacobians", "jacobian", "homogenise", "jq_diagonal"]
+__all__ = ["Jacobians", "jacobians", "jacobian", "homogenise", "jq_diagonal", "jx_row", "jq_theta", "jx_det"]
+
+
+def jx_row(ux, uy, uz, i: int):
+    """Row i of Jx: chain i's unit forearm vector rotated from its local frame to the base frame (scalars).
+
+    ``i`` is the static chain number (alpha_i = 2 pi i / 3).
+    """
+    if i == 0:
+        return ux, uy, uz
+    ca, sa = _COS_A[i], _SIN_A[i]
+    return ca * ux - sa * uy, sa * ux + ca * uy, uz
+
+
+def jq_theta(ux, uz, c, s):
+    """Homogenised theta-diagonal of Jq for one chain: sin th2 sin th3 = uz cos th - ux sin th (dimensionless).
+
+    ``L1 * jq_theta`` is the Jq diagonal entry (m/rad); divide by a homogenising length L instead of L1 for
+    ``length != L1`` (times L1 / L). u in the chain's local frame (:func:`deltajax.kinematics.loop_vectors`).
+    The R column of Jq is ``ux`` itself.
+    """
+    return uz * c - ux * s
+
+
+def jx_det(j00, j01, j02, j10, j11, j12, j20, j21, j22):
+    """Signed determinant of Jx given row-major as 9 scalars (explicit cofactor expansion, no LU).
+
+    ``det Jx == 0`` exactly is the rule redundancy resolution uses to skip a sample (SPEC §1).
+    """
+    return (j00 * (j11 * j22 - j12 * j21)
+            - j01 * (j10 * j22 - j12 * j20)
+            + j02 * (j10 * j21 - j11 * j20))
 
 
 class Jacobians(NamedTuple):
@@ -38,7 +69,7 @@ class Jacobians(NamedTuple):
 
 def jq_diagonal(robot: Delta, u_local: Float[Array, "3 3"], theta: Float[Array, "3"]) -> Float[Array, "3"]:
     """Diagonal of the theta-block of Jq, L1 sin th_i2 sin th_i3 = L1 (u_z cos th - u_x sin th) (m/rad)."""
-    return robot.upper_arm * (u_local[:, 2] * jnp.cos(theta) - u_local[:, 0] * jnp.sin(theta))
+    return robot.upper_arm * jq_theta(u_local[:, 0], u_local[:, 2], jnp.cos(theta), jnp.sin(theta))
 
 
 def jacobians(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]) -> Jacobians:

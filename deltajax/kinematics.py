@@ -35,6 +35,16 @@ __all__ = [
     "IK_UNREACHABLE",
     "IK_JOINT_LIMIT",
     "IK_NONFINITE",
+    "IK_INVALID_DESIGN",
+    "FK_JOINT_LIMIT",
+    "FK_INVALID_DESIGN",
+    "LimitTerms",
+    "limit_terms",
+    "design_ok",
+    "chain_local",
+    "LoopClosure",
+    "loop_closure",
+    "loop_vectors",
     "FK_OK",
     "FK_NO_INTERSECTION",
     "FK_DEGENERATE_CENTRES",
@@ -43,8 +53,9 @@ __all__ = [
 ]
 
 # Reason codes (per chain for IK, per pose for FK). 0 always means fine.
-IK_OK, IK_UNREACHABLE, IK_JOINT_LIMIT, IK_NONFINITE = 0, 1, 2, 3
-FK_OK, FK_NO_INTERSECTION, FK_DEGENERATE_CENTRES, FK_NONFINITE, FK_TANGENT = 0, 1, 2, 3, 4
+IK_OK, IK_UNREACHABLE, IK_JOINT_LIMIT, IK_NONFINITE, IK_INVALID_DESIGN = 0, 1, 2, 3, 4
+FK_OK, FK_NO_INTERSECTION, FK_DEGENERATE_CENTRES, FK_NONFINITE, FK_TANGENT, FK_JOINT_LIMIT, FK_INVALID_DESIGN = (
+    0, 1, 2, 3, 4, 5, 6)
 
 _COS_A = tuple(math.cos(a) for a in CHAIN_ANGLES)
 _SIN_A = tuple(math.sin(a) for a in CHAIN_ANGLES)
@@ -101,21 +112,149 @@ class IKResult(NamedTuple):
     reason: Int[Array, "3"]
 
 
-def _within_limits(c, s, lo, hi):
-    """Is theta (given by cos, sin) inside the inclusive interval [lo, hi] (mod 2 pi)?
+class LimitTerms(NamedTuple):
+    """Joint-limit interval [lo, hi] in the form the kernel tests it (robot-level scalars).
 
-    theta is in [lo, hi] iff cos(theta - mid) >= cos(half) with mid, half the interval's centre and half
-    width (< pi by validation). Unlimited joints (infinite bounds) always pass.
+    theta is inside [lo, hi] (mod 2 pi) iff cos(theta - mid) >= cos(half), i.e.
+    ``c * cos_mid + s * sin_mid - cos_half >= 0`` with c, s = cos, sin theta.
+
+    Attributes:
+        cos_mid, sin_mid: cos/sin of the interval centre mid = (lo + hi) / 2 (0 when unlimited).
+        cos_half: cos of the half width (hi - lo) / 2 (-2 when unlimited: every theta passes).
     """
-    finite = jnp.isfinite(lo) & jnp.isfinite(hi)
-    mid = jnp.where(finite, 0.5 * (lo + hi), 0.0)
-    half = jnp.where(finite, 0.5 * (hi - lo), 0.0)
-    inside = c * jnp.cos(mid) + s * jnp.sin(mid) >= jnp.cos(half)
-    return inside | ~finite
+
+    cos_mid: Float[Array, ""]
+    sin_mid: Float[Array, ""]
+    cos_half: Float[Array, ""]
+
+
+def limit_terms(theta_min, theta_max) -> LimitTerms:
+    """:class:`LimitTerms` of the inclusive joint range [theta_min, theta_max] (rad); an infinite bound means
+    no limit (the margin then is c cos 0 + 2 >= 1)."""
+    lo, hi = jnp.asarray(theta_min), jnp.asarray(theta_max)
+    limited = jnp.isfinite(lo) & jnp.isfinite(hi)
+    mid = jnp.where(limited, 0.5 * (lo + hi), 0.0)
+    half = jnp.where(limited, 0.5 * (hi - lo), 0.0)
+    return LimitTerms(cos_mid=jnp.cos(mid), sin_mid=jnp.sin(mid),
+                      cos_half=jnp.where(limited, jnp.cos(half), -2.0))
+
+
+def design_ok(robot: Delta) -> Bool[Array, ""]:
+    """Whether the (possibly traced) design is valid: R > 0, r >= 0, L1 > 0, L2 > 0, all finite, joint limits
+    not NaN with theta_min < theta_max and a finite range < 2 pi (or an infinite bound: unlimited).
+
+    The traced twin of :meth:`Delta.__check_init__` (which raises for concrete input): inside a vmapped
+    population an invalid design gets ``ok=False`` everywhere instead of numbers.
+    """
+    R, r, L1, L2 = robot.base_radius, robot.platform_radius, robot.upper_arm, robot.forearm
+    lo, hi = robot.theta_min, robot.theta_max
+    lengths = (R > 0) & (r >= 0) & (L1 > 0) & (L2 > 0) & jnp.isfinite(R + r + L1 + L2)
+    finite_range = jnp.isfinite(lo) & jnp.isfinite(hi)
+    limits = (lo < hi) & ~(finite_range & (hi - lo >= 2.0 * jnp.pi))  # NaN compares False
+    return lengths & limits
+
+
+def chain_local(px, py, pz, i: int):
+    """Base-frame point (px, py, pz) (m) in chain ``i``'s local frame (x along the chain's axis); scalars.
+
+    ``i`` is a static chain number 0, 1, 2 (alpha_i = 2 pi i / 3).
+    """
+    ca, sa = _COS_A[i], _SIN_A[i]
+    if i == 0:
+        return px, py, pz
+    return ca * px + sa * py, ca * py - sa * px, pz
+
+
+class LoopClosure(NamedTuple):
+    """One chain's loop closure at one point (scalars; see :func:`loop_closure`).
+
+    Attributes:
+        cos, sin: cos/sin of the actuated angle theta_i; (1, 0) where the loop does not close (a harmless
+            finite stand-in so that downstream algebra and its gradients stay finite: mask with ``reach``).
+        disc: IK discriminant rho^2 - m^2 (m^2); >= 0 iff the loop closes (``-inf`` for inputs outside the
+            chain's reach box or non-finite).
+        reach: the loop closes (disc >= 0, rho > 0, input finite and inside the reach box).
+        margin: joint-limit margin cos(theta - mid) - cos(half) (>= 0 inside the limits; >= 1 unlimited);
+            computed from the stand-in (1, 0) where not ``reach``.
+        ok: ``reach & (margin >= 0)``.
+        dx, py, pz: the (sanitised) chain-local loop inputs the other kernel functions must use: equal to the
+            inputs wherever ``reach``, a harmless finite point otherwise.
+    """
+
+    cos: Float[Array, ""]
+    sin: Float[Array, ""]
+    disc: Float[Array, ""]
+    reach: Bool[Array, ""]
+    margin: Float[Array, ""]
+    ok: Bool[Array, ""]
+    dx: Float[Array, ""]
+    py: Float[Array, ""]
+    pz: Float[Array, ""]
+
+
+def loop_closure(dx, py, pz, L1, L2, lim: LimitTerms, sign: float = 1.0) -> LoopClosure:
+    """Algebraic IK of one chain: the loop-closure equation solved for cos/sin theta, no inverse trig.
+
+    With the point in chain i's local frame and dx = p_x,i + r - R: |C - B|^2 = L2^2 reads
+    ``dx cos(theta) + pz sin(theta) = m``, m = (rho^2 + py^2 + L1^2 - L2^2) / (2 L1), rho^2 = dx^2 + pz^2.
+    It closes iff disc = rho^2 - m^2 >= 0; then with w = sqrt(disc),
+    cos theta = (dx m + sign pz w) / rho^2, sin theta = (pz m - sign dx w) / rho^2
+    (sign = +1: outer elbow, theta = atan2(pz, dx) - acos(m / rho); -1: the inner branch).
+
+    Gradient guards (double where): inputs outside the box |dx|, |pz| <= L1 + L2, |py| <= L2 (nothing there
+    closes; this also catches NaN, inf and huge finite values) are replaced by a harmless point before any
+    squaring; sqrt(disc) and 1/rho^2 are guarded; exactly on the reach boundary (disc = 0) w = 0 with a zero
+    (one-sided) derivative instead of an infinite one.
+
+    Args:
+        dx, py, pz: chain-local loop inputs (m), scalars (vmap for batches).
+        L1, L2: upper arm and forearm (m), > 0.
+        lim: :func:`limit_terms` of the joint range.
+        sign: +1.0 outer elbow (default), -1.0 inner.
+
+    Returns:
+        :class:`LoopClosure`.
+    """
+    reach_box = L1 + L2
+    inside = (jnp.abs(dx) <= reach_box) & (jnp.abs(pz) <= reach_box) & (jnp.abs(py) <= L2)
+    dx = jnp.where(inside, dx, reach_box)
+    py = jnp.where(inside, py, 0.0)
+    pz = jnp.where(inside, pz, 0.0)
+    rho2 = dx * dx + pz * pz
+    m = (rho2 + py * py + L1 * L1 - L2 * L2) / (2.0 * L1)  # = K / (2 L1): the loop-closure equation
+    disc = rho2 - m * m  # rho^2 sin^2(acos(m / rho))
+    reach = inside & (disc >= 0.0) & (rho2 > 0.0)
+    pos = reach & (disc > 0.0)
+    w = jnp.where(pos, jnp.sqrt(jnp.where(pos, disc, 1.0)), 0.0)
+    inv_rho2 = 1.0 / jnp.where(reach, rho2, 1.0)
+    c = jnp.where(reach, (dx * m + sign * pz * w) * inv_rho2, 1.0)
+    s = jnp.where(reach, (pz * m - sign * dx * w) * inv_rho2, 0.0)
+    margin = c * lim.cos_mid + s * lim.sin_mid - lim.cos_half
+    return LoopClosure(cos=c, sin=s, disc=jnp.where(inside, disc, -jnp.inf), reach=reach, margin=margin,
+                       ok=reach & (margin >= 0.0), dx=dx, py=py, pz=pz)
+
+
+def loop_vectors(dx, py, pz, c, s, L1, L2):
+    """Unit forearm vector u = (C - B) / L2 of one chain in its local frame, (ux, uy, uz) scalars.
+
+    C - B = (dx - L1 cos theta, py, pz - L1 sin theta) with dx, py, pz the (sanitised) inputs of
+    :func:`loop_closure` and c, s its cos/sin theta. In the paper's angles u = (sin th3 cos(th1 + th2),
+    cos th3, sin th3 sin(th1 + th2)).
+    """
+    inv = 1.0 / L2
+    return (dx - L1 * c) * inv, py * inv, (pz - L1 * s) * inv
+
+
+def _branch_sign(branch: str) -> float:
+    if branch not in ("outer", "inner"):
+        raise ValueError(f"branch must be 'outer' or 'inner', got {branch!r}")
+    return 1.0 if branch == "outer" else -1.0
 
 
 def ik_cos_sin(robot: Delta, p: Float[Array, "3"], *, branch: str = "outer") -> IKCosSin:
     """Algebraic inverse kinematics: cos and sin of the actuated angles, no inverse trig.
+
+    Built from :func:`loop_closure` per chain.
 
     Args:
         robot: the robot (its ``base_radius`` is the R used).
@@ -124,37 +263,32 @@ def ik_cos_sin(robot: Delta, p: Float[Array, "3"], *, branch: str = "outer") -> 
             ``"inner"`` (the other root).
 
     Returns:
-        :class:`IKCosSin` with per-chain cos, sin, ok and reason.
+        :class:`IKCosSin` with per-chain cos, sin (NaN where the loop does not close), ok and reason. An
+        invalid (traced) design gives ok=False, reason IK_INVALID_DESIGN on every chain.
     """
-    if branch not in ("outer", "inner"):
-        raise ValueError(f"branch must be 'outer' or 'inner', got {branch!r}")
+    sign = _branch_sign(branch)
     p = jnp.asarray(p)
     dtype = jnp.result_type(p.dtype, robot.upper_arm.dtype)
     p = p.astype(dtype)
     finite_p = jnp.all(jnp.isfinite(p))
-    p_safe = jnp.where(finite_p, p, jnp.zeros_like(p))
-    loc = to_chain_frames(p_safe)
-    L1, L2 = robot.upper_arm, robot.forearm
-    dx = loc[:, 0] + robot.platform_radius - robot.base_radius
-    py, pz = loc[:, 1], loc[:, 2]
-    rho2 = dx * dx + pz * pz
-    m = (rho2 + py * py + L1 * L1 - L2 * L2) / (2.0 * L1)  # = K / (2 L1)
-    disc = rho2 - m * m  # rho^2 sin^2(acos(m / rho)) >= 0 when reachable
-    reach = (disc >= 0.0) & (rho2 > 0.0)
-    w = jnp.sqrt(jnp.where(reach, disc, 1.0))
-    sign = 1.0 if branch == "outer" else -1.0
-    inv_rho2 = 1.0 / jnp.where(reach, rho2, 1.0)
-    # theta = phi -/+ psi with cos(phi) = dx/rho, sin(phi) = pz/rho, cos(psi) = m/rho, sin(psi) = w/rho.
-    c = (dx * m + sign * pz * w) * inv_rho2
-    s = (pz * m - sign * dx * w) * inv_rho2
-    limits = _within_limits(c, s, robot.theta_min, robot.theta_max)
-    ok = reach & limits & finite_p
+    valid = design_ok(robot)
+    lim = limit_terms(robot.theta_min, robot.theta_max)
+    shift = robot.platform_radius - robot.base_radius
+    out = []
+    for i in range(3):
+        x, y, z = chain_local(p[0], p[1], p[2], i)
+        out.append(loop_closure(x + shift, y, z, robot.upper_arm, robot.forearm, lim, sign))
+    reach = jnp.stack([o.reach for o in out]) & valid
+    inside = jnp.stack([o.margin >= 0.0 for o in out])
+    ok = reach & inside & finite_p
     reason = jnp.where(
-        ~finite_p, IK_NONFINITE, jnp.where(~reach, IK_UNREACHABLE, jnp.where(~limits, IK_JOINT_LIMIT, IK_OK))
-    ).astype(jnp.int32)
+        ~valid, IK_INVALID_DESIGN,
+        jnp.where(~finite_p, IK_NONFINITE,
+                  jnp.where(~reach, IK_UNREACHABLE, jnp.where(~inside, IK_JOINT_LIMIT, IK_OK)))).astype(jnp.int32)
     nan = jnp.asarray(jnp.nan, dtype)
-    return IKCosSin(cos=jnp.where(reach & finite_p, c, nan), sin=jnp.where(reach & finite_p, s, nan),
-                    ok=ok, reason=reason)
+    good = reach & finite_p
+    return IKCosSin(cos=jnp.where(good, jnp.stack([o.cos for o in out]), nan),
+                    sin=jnp.where(good, jnp.stack([o.sin for o in out]), nan), ok=ok, reason=reason)
 
 
 def ik(robot: Delta, p: Float[Array, "3"], *, branch: str = "outer") -> IKResult:
@@ -189,9 +323,12 @@ class FKResult(NamedTuple):
 
     Attributes:
         p: platform centre in the base frame (m); NaN when not ok.
-        ok: the three forearm spheres intersect (non-degenerate).
+        ok: the three forearm spheres intersect (non-degenerate), every theta_i is within the joint limits
+            and the design is valid (README: out-of-limit gives ``ok=False``).
         reason: FK_* code (0 ok, 1 no intersection, 2 degenerate/collinear centres, 3 non-finite input,
-            4 tangent spheres: the pose exists but sits on a singularity; ``ok`` stays True).
+            4 tangent spheres: the pose exists but sits on a singularity; ``ok`` stays True, 5 some theta_i
+            outside the joint limits, 6 invalid design). For reason 5 ``p`` still holds the assembled pose
+            (where the platform would be), only ``ok`` is False; for every other failure ``p`` is NaN.
     """
 
     p: Float[Array, "3"]
@@ -252,27 +389,34 @@ def fk(robot: Delta, theta: Float[Array, "3"], *, mode: str = "lower", tangent_t
     lower = jnp.where(a_lower, sol_a, sol_b)
     upper = jnp.where(a_lower, sol_b, sol_a)
     p = lower if mode == "lower" else upper
-    ok = finite & nondegenerate & meet
+    valid = design_ok(robot)
+    assembled = finite & nondegenerate & meet & valid
+    lim = limit_terms(robot.theta_min, robot.theta_max)
+    within = jnp.all(jnp.cos(theta_safe) * lim.cos_mid + jnp.sin(theta_safe) * lim.sin_mid - lim.cos_half >= 0.0)
+    ok = assembled & within
     tangent = ok & (jnp.abs(h2) <= tangent_tol * L2 * L2)
-    reason = jnp.where(~finite, FK_NONFINITE,
+    reason = jnp.where(~valid, FK_INVALID_DESIGN, jnp.where(~finite, FK_NONFINITE,
                        jnp.where(~nondegenerate, FK_DEGENERATE_CENTRES,
-                                 jnp.where(~meet, FK_NO_INTERSECTION, jnp.where(tangent, FK_TANGENT, FK_OK))))
-    return FKResult(p=jnp.where(ok, p, jnp.nan), ok=ok, reason=reason.astype(jnp.int32))
+                                 jnp.where(~meet, FK_NO_INTERSECTION, jnp.where(
+                                     ~within, FK_JOINT_LIMIT, jnp.where(tangent, FK_TANGENT, FK_OK))))))
+    return FKResult(p=jnp.where(assembled, p, jnp.nan), ok=ok, reason=reason.astype(jnp.int32))
 
 
 def forearm_units(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]) -> Float[Array, "3 3"]:
     """Unit forearm vectors u_i = (C_i - B_i) / L2 in each chain's *local* frame; row i is chain i.
 
-    In the local frame u = (sin th3 cos(th1 + th2), cos th3, sin th3 sin(th1 + th2)) (paper §2.1).
+    In the local frame u = (sin th3 cos(th1 + th2), cos th3, sin th3 sin(th1 + th2)) (paper §2.1); built
+    from :func:`loop_vectors` with cos/sin of the given theta.
     """
     p = jnp.asarray(p)
-    loc = to_chain_frames(p)
     theta = jnp.asarray(theta)
-    L1 = robot.upper_arm
-    bx = robot.base_radius + L1 * jnp.cos(theta)
-    bz = L1 * jnp.sin(theta)
-    v = jnp.stack([loc[:, 0] + robot.platform_radius - bx, loc[:, 1], loc[:, 2] - bz], axis=-1)
-    return v / robot.forearm
+    c, s = jnp.cos(theta), jnp.sin(theta)
+    shift = robot.platform_radius - robot.base_radius
+    rows = []
+    for i in range(3):
+        x, y, z = chain_local(p[0], p[1], p[2], i)
+        rows.append(jnp.stack(loop_vectors(x + shift, y, z, c[i], s[i], robot.upper_arm, robot.forearm)))
+    return jnp.stack(rows)
 
 
 def passive_angles(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]
