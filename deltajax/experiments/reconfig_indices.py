@@ -67,7 +67,8 @@ def run(ctx) -> None:
     work: dict = {}
     with ctx.progress(total=grid.n_points, desc=f"RDR R* ({mode})") as bar:
         rdr = redundancy_grid(ctx.recon, grid, mask=odr.ok, criterion=criterion, mode=mode, field_dtype=np.float32,
-                              chunk_size=chunk, keep=["R_star", *store], stats=True, progress=bar.update, work=work,
+                              chunk_size=chunk, keep=["R_star", *store], stats=True, R_dtype=np.float32,
+                              progress=bar.update, work=work,
                               checkpoint_dir=None if ck is None else ck / f"rdr_{mode}", **kw)
     t2 = time.perf_counter()
     s_odr = odr.stats
@@ -79,7 +80,7 @@ def run(ctx) -> None:
     for name, ax in (("x", grid.x), ("y", grid.y), ("z", grid.z)):
         res.put_axis(g, name, ax, units="m")
     res.put(g, "reachable_fixed", odr.ok.astype(np.uint8), units="1", dims=("x", "y", "z"))
-    res.put(g, "R_star", rdr.fields["R_star"].astype(np.float32), units="m", dims=("x", "y", "z"))
+    res.put(g, "R_star", rdr.fields["R_star"].astype(np.float32, copy=False), units="m", dims=("x", "y", "z"))
     for n in store:
         res.put(g, f"{n}_rdr", rdr.fields[n], units="1", dims=("x", "y", "z"))
         res.put(g, f"{n}_odr", odr.fields[n], units="1", dims=("x", "y", "z"))

@@ -17,11 +17,11 @@ import math
 import numba as nb
 import numpy as np
 
-from ._nb_kernel import (CA0, CA1, CA2, CRITERION, CUBIC, JACOBI, N_IDX, OPTS, SA0, SA1, SA2, SV_METHODS,
-                         as_tuple4, ik_ok, kt_tuple, limits_tuple, point_indices, point_value, tcubic, tcubic2)
-from ._nb_screen import resolve_screened, screen_audit, screen_window
+from ._nb_kernel import (CA0, CA1, CA2, CRITERION, CUBIC, FAST, JACOBI, N_IDX, OPTS, SA0, SA1, SA2, SV_METHODS,
+                         as_tuple4, ik_ok, kt_tuple, limits_tuple, point_indices, point_value)
+from ._nb_screen import resolve_screened, screen_audit, screen_window, tcubic, tcubic2
 
-__all__ = ["N_IDX", "CRITERION", "SV_METHODS", "JACOBI", "CUBIC", "limits_tuple", "kt_tuple", "fixed_fields",
+__all__ = ["N_IDX", "CRITERION", "SV_METHODS", "JACOBI", "FAST", "limits_tuple", "kt_tuple", "fixed_fields",
            "fields_at", "fixed_mask", "resolve", "resolve_screened", "screen_window", "screen_audit", "any_reach",
            "reach_k_range", "parallel"]
 

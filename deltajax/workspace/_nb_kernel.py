@@ -24,15 +24,42 @@ import numba as nb
 import numpy as np
 
 from ..geometry import CHAIN_ANGLES
-from ..indices import INDEX_NAMES
+from ..indices import INDEX_NAMES, _T_POLY as _CORE_T_POLY
+
+def _drop_stale_cache() -> None:
+    """Numba's on-disk cache checks only the file that defines a function, but the drivers (:mod:`._nb`,
+    :mod:`._nb_screen`) inline this module's functions: after an edit here their cached machine code would be
+    stale. Key the cache on all three sources and drop it when they change."""
+    import hashlib
+    from pathlib import Path
+
+    here = Path(__file__).parent
+    digest = hashlib.sha256(b"".join((here / f).read_bytes() for f in ("_nb_kernel.py", "_nb_screen.py", "_nb.py")
+                                     if (here / f).exists())).hexdigest()
+    cache = here / "__pycache__"
+    stamp = cache / "_nb_sources.sha256"
+    try:
+        if stamp.exists() and stamp.read_text() == digest:
+            return
+        for f in cache.glob("_nb*.nb[ic]"):
+            f.unlink()
+        cache.mkdir(exist_ok=True)
+        stamp.write_text(digest)
+    except OSError:  # read-only install: numba then falls back to its own cache locator
+        pass
+
+
+_drop_stale_cache()
 
 # error_model="numpy": x / 0 gives inf/nan like NumPy and JAX instead of raising (Python semantics)
 OPTS = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
 _inline = dict(inline="always", **OPTS)
 
-#: cos, sin of the chain angles (compile-time constants inside the kernels)
-CA0, CA1, CA2 = (math.cos(a) for a in CHAIN_ANGLES)
-SA0, SA1, SA2 = (math.sin(a) for a in CHAIN_ANGLES)
+#: cos, sin of the chain angles (the core's constants; compile-time constants inside the kernels)
+_COS_A = tuple(math.cos(a) for a in CHAIN_ANGLES)
+_SIN_A = tuple(math.sin(a) for a in CHAIN_ANGLES)
+CA0, CA1, CA2 = _COS_A
+SA0, SA1, SA2 = _SIN_A
 
 #: column of each index in the kernels' outputs and its criterion code: :data:`deltajax.INDEX_NAMES` order
 N_IDX = len(INDEX_NAMES)
@@ -40,19 +67,21 @@ CRITERION = {name: i for i, name in enumerate(INDEX_NAMES)}
 INV_COND, SIGMA_MIN_V, SIGMA_MIN_F, OMEGA_V, OMEGA_F, K_TILDE, MANIPULABILITY, IMI = (CRITERION[n] for n in (
     "inv_cond", "sigma_min_v", "sigma_min_f", "omega_v", "omega_f", "k_tilde", "manipulability", "imi"))
 
-#: eigenvalue solvers of :func:`singular_values`
+#: eigenvalue solvers of :func:`sym3_top2` / :func:`singular_values` (the core's ``method`` names)
 JACOBI = 0  # exact: 4 cyclic Jacobi sweeps (~eps ||A||, repeated eigenvalues included)
-CUBIC = 1  # fast: trigonometric Cardano without inverse trig (polynomial start + one Halley step)
-SV_METHODS = {"jacobi": JACOBI, "cubic": CUBIC}
+FAST = 1  # closed-form cubic without inverse trig (polynomial start + one Halley step)
+CUBIC = FAST
+SV_METHODS = {"jacobi": JACOBI, "fast": FAST}
 
 
 def limits_tuple(theta_min: float, theta_max: float) -> np.ndarray:
-    """(cos mid, sin mid, cos half, has_limits) of the joint range [theta_min, theta_max] (rad)."""
+    """(cos mid, sin mid, cos half, has_limits) of the joint range [theta_min, theta_max] (rad): the core's
+    :func:`deltajax.kinematics.limit_terms` (cos half = -2 when a bound is infinite: every theta passes)."""
     if math.isfinite(theta_min) and math.isfinite(theta_max):
         mid = 0.5 * (theta_min + theta_max)
         half = 0.5 * (theta_max - theta_min)
         return np.array([math.cos(mid), math.sin(mid), math.cos(half), 1.0])
-    return np.array([1.0, 0.0, -1.0, 0.0])
+    return np.array([1.0, 0.0, -2.0, 0.0])
 
 
 def kt_tuple(b_v: float, b_f: float, beta: float) -> np.ndarray:
@@ -60,103 +89,133 @@ def kt_tuple(b_v: float, b_f: float, beta: float) -> np.ndarray:
     return np.array([beta * b_v, b_v, (1.0 - beta) * b_f, b_f], dtype=np.float64)
 
 
-# -- kinematics ------------------------------------------------------------------------------------------------
 @nb.njit(**_inline)
 def as_tuple4(a):
     """(a[0], a[1], a[2], a[3]) of a parameter array: loop-invariant scalars (an array read inside a loop that
-    also stores to arrays blocks LLVM's vectoriser, which cannot prove the two do not alias)."""
+    also stores to arrays blocks LLVM's vectoriser, which cannot prove that they do not alias)."""
     return a[0], a[1], a[2], a[3]
 
 
+# -- kinematics (twins of deltajax.kinematics) ------------------------------------------------------------------
 @nb.njit(**_inline)
-def to_chain_frame(x, y, ca, sa):
-    """(p_x,i, p_y,i) of P in the frame of the chain at angle alpha (ca, sa = cos, sin alpha); z is unchanged."""
-    return ca * x + sa * y, -sa * x + ca * y
+def chain_local(px, py, pz, i):
+    """P in the local frame of chain ``i`` (0, 1, 2; a constant after inlining); chain 0 is the base frame."""
+    if i == 0:
+        return px, py, pz
+    ca = _COS_A[i]
+    sa = _SIN_A[i]
+    return ca * px + sa * py, ca * py - sa * px, pz
 
 
 @nb.njit(**_inline)
-def loop_closure(dx, py, z, L1, L2):
-    """Algebraic IK of one chain (outer branch): (reach, cos theta, sin theta).
+def loop_closure(dx, py, pz, L1, L2, lim):
+    """Algebraic IK of one chain (outer elbow): twin of :func:`deltajax.kinematics.loop_closure`.
 
-    ``dx = p_x,i + r - R``, ``py = p_y,i``, ``z = p_z`` (chain frame). With rho^2 = dx^2 + z^2 and
-    m = K / (2 L1) = (rho^2 + py^2 + L1^2 - L2^2) / (2 L1), the loop closes iff disc = rho^2 - m^2 >= 0;
-    cos/sin are meaningless (not NaN-guarded: cheap) where ``reach`` is False.
+    ``dx = (p_x,i + r) - R``, ``py = p_y,i``, ``pz = p_z`` (chain frame); ``lim`` = (cos mid, sin mid, cos half,
+    _) of :func:`limits_tuple`. Returns (cos, sin, disc, reach, margin, ok, dx, py, pz) with the inputs
+    sanitised outside the box |dx|, |pz| <= L1 + L2, |py| <= L2 (nothing there closes; catches NaN, inf and
+    huge values) and cos, sin = 1, 0 where the loop does not close; theta is within the joint limits iff
+    margin >= 0.
     """
-    rho2 = dx * dx + z * z
+    box = L1 + L2
+    inside = (abs(dx) <= box) & (abs(pz) <= box) & (abs(py) <= L2)
+    dx = dx if inside else box
+    py = py if inside else 0.0
+    pz = pz if inside else 0.0
+    rho2 = dx * dx + pz * pz
     m = (rho2 + py * py + L1 * L1 - L2 * L2) / (2.0 * L1)
     disc = rho2 - m * m
-    reach = (disc >= 0.0) & (rho2 > 0.0)
-    w = math.sqrt(disc if disc >= 0.0 else 0.0)
-    inv = 1.0 / rho2
-    c = (dx * m + z * w) * inv
-    s = (z * m - dx * w) * inv
-    return reach, c, s
+    reach = inside & (disc >= 0.0) & (rho2 > 0.0)
+    w = math.sqrt(disc) if (reach & (disc > 0.0)) else 0.0
+    inv_rho2 = 1.0 / (rho2 if reach else 1.0)
+    c = (dx * m + pz * w) * inv_rho2 if reach else 1.0
+    s = (pz * m - dx * w) * inv_rho2 if reach else 0.0
+    margin = c * lim[0] + s * lim[1] - lim[2]
+    return c, s, (disc if inside else -math.inf), reach, margin, reach & (margin >= 0.0), dx, py, pz
 
 
 @nb.njit(**_inline)
-def within_limits(c, s, lim):
-    """theta (given by cos, sin) inside the joint range: cos(theta - mid) >= cos(half), or no limits."""
-    return (c * lim[0] + s * lim[1] >= lim[2]) | (not (lim[3] > 0.0))
+def loop_vectors(dx, py, pz, c, s, L1, L2):
+    """Unit forearm vector u = (C - B) / L2 of one chain in its local frame (sanitised loop inputs)."""
+    inv = 1.0 / L2
+    return (dx - L1 * c) * inv, py * inv, (pz - L1 * s) * inv
+
+
+# -- Jacobian blocks (twins of deltajax.jacobian) ----------------------------------------------------------------
+@nb.njit(**_inline)
+def jx_row(ux, uy, uz, i):
+    """Row i of Jx in the base frame: the unit forearm vector of chain ``i`` rotated back."""
+    if i == 0:
+        return ux, uy, uz
+    ca = _COS_A[i]
+    sa = _SIN_A[i]
+    return ca * ux - sa * uy, sa * ux + ca * uy, uz
 
 
 @nb.njit(**_inline)
-def loop_vectors(dx, py, z, c, s, L1, L2):
-    """Unit forearm vector u_i = (C_i - B_i) / L2 of one chain, in the chain's frame."""
-    return (dx - L1 * c) / L2, py / L2, (z - L1 * s) / L2
+def jq_theta(ux, uz, c, s):
+    """Homogenised Jq diagonal entry d = uz cos theta - ux sin theta = sin theta2 sin theta3 (chain frame)."""
+    return uz * c - ux * s
 
 
 @nb.njit(**_inline)
-def chain(x, y, z, R, r, L1, L2, lim, ca, sa):
-    """One chain of the kernel: (ok, Jx row in the base frame (3 floats), Jq diagonal entry d_i / L1).
+def jx_det(j00, j01, j02, j10, j11, j12, j20, j21, j22):
+    """Signed det Jx by cofactor expansion along the first row (0 exactly: the sample is skipped)."""
+    return (j00 * (j11 * j22 - j12 * j21)
+            - j01 * (j10 * j22 - j12 * j20)
+            + j02 * (j10 * j21 - j11 * j20))
 
-    ``ok``: the loop closes and theta_i is within the joint limits. The Jx row is the unit forearm vector
-    rotated back to the base frame; d_i = u_z c - u_x s (chain frame) is the homogenised Jq diagonal.
+
+@nb.njit(**_inline)
+def chain(x, y, z, R, r, L1, L2, lim, i):
+    """One chain of :func:`point_kernel`: (ok, Jx row i (3 floats, base frame), d_i).
+
+    chain_local -> loop_closure (dx = (x + r) - R) -> loop_vectors -> jx_row, jq_theta.
     """
-    px, py = to_chain_frame(x, y, ca, sa)
-    dx = px + r - R
-    reach, c, s = loop_closure(dx, py, z, L1, L2)
-    ok = reach & within_limits(c, s, lim)
-    u0, u1, u2 = loop_vectors(dx, py, z, c, s, L1, L2)
-    return ok, ca * u0 - sa * u1, sa * u0 + ca * u1, u2, u2 * c - u0 * s
+    px, py, pz = chain_local(x, y, z, i)
+    c, s, disc, reach, margin, ok, dx, py, pz = loop_closure(px + r - R, py, pz, L1, L2, lim)
+    ux, uy, uz = loop_vectors(dx, py, pz, c, s, L1, L2)
+    j0, j1, j2 = jx_row(ux, uy, uz, i)
+    return ok, j0, j1, j2, jq_theta(ux, uz, c, s)
 
 
 @nb.njit(**_inline)
-def chain_ok(x, y, z, R, r, L1, L2, lim, ca, sa):
-    """``ok`` of :func:`chain` alone (the same expressions, hence the same decision)."""
-    px, py = to_chain_frame(x, y, ca, sa)
-    dx = px + r - R
-    reach, c, s = loop_closure(dx, py, z, L1, L2)
-    return reach & within_limits(c, s, lim)
+def chain_ok(x, y, z, R, r, L1, L2, lim, i):
+    """``ok`` of :func:`chain` alone (the same loop closure, hence the same decision)."""
+    px, py, pz = chain_local(x, y, z, i)
+    return loop_closure(px + r - R, py, pz, L1, L2, lim)[5]
 
 
 @nb.njit(**OPTS)
 def ik_ok(x, y, z, R, r, L1, L2, lim):
-    """All three chains close within limits at canonical P (y = |y|); early exit at the first failing chain."""
-    if not chain_ok(x, y, z, R, r, L1, L2, lim, CA0, SA0):
+    """All three chains close within limits at canonical P (y = |y|); stops at the first failing chain."""
+    if not chain_ok(x, y, z, R, r, L1, L2, lim, 0):
         return False
-    if not chain_ok(x, y, z, R, r, L1, L2, lim, CA1, SA1):
+    if not chain_ok(x, y, z, R, r, L1, L2, lim, 1):
         return False
-    return chain_ok(x, y, z, R, r, L1, L2, lim, CA2, SA2)
+    return chain_ok(x, y, z, R, r, L1, L2, lim, 2)
 
 
-# -- Jacobian blocks -------------------------------------------------------------------------------------------
 @nb.njit(**_inline)
-def det3(a00, a01, a02, a10, a11, a12, a20, a21, a22):
-    """Determinant of a 3 x 3 matrix by cofactor expansion along the first row (det Jx, signed)."""
-    return (a00 * (a11 * a22 - a12 * a21)
-            - a01 * (a10 * a22 - a12 * a20)
-            + a02 * (a10 * a21 - a11 * a20))
+def jacobian_blocks(x, y, z, R, r, L1, L2, lim):
+    """The three chains at P (canonical, y = |y|): (ok, det Jx signed, Jx (9 floats, rows), d (3 floats))."""
+    ok0, j00, j01, j02, d0 = chain(x, y, z, R, r, L1, L2, lim, 0)
+    ok1, j10, j11, j12, d1 = chain(x, y, z, R, r, L1, L2, lim, 1)
+    ok2, j20, j21, j22, d2 = chain(x, y, z, R, r, L1, L2, lim, 2)
+    det_s = jx_det(j00, j01, j02, j10, j11, j12, j20, j21, j22)
+    return ok0 & ok1 & ok2, det_s, j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2
 
 
+# -- singular values (twins of deltajax.indices) ---------------------------------------------------------------
 @nb.njit(**_inline)
 def sv_matrix(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2):
-    """The symmetric matrix whose eigenvalues give the singular values of M = Jx^-1 diag(d) (two-sided).
+    """The symmetric matrix X whose two largest eigenvalues give the singular values of M = Jx^-1 diag(d).
 
-    Returns (jx_side, prod_d = |d0 d1 d2|, det_jx = |det Jx|, a00, a11, a22, a01, a02, a12): on the Jx side
-    (|det Jx| < |prod d|) A = adj(D) G adj(D), else A = D adj(G) D, with G = Jx Jx^T (see
-    :func:`deltajax.indices.singular_values_closed_form`).
+    Returns (jx_side, prod_d = |d0 d1 d2|, det_jx = |det Jx|, x00, x11, x22, x01, x02, x12): on the Jx side
+    (|det Jx| < |prod d|) X = adj(D) G adj(D), else X = D adj(G) D, G = Jx Jx^T (the first half of
+    :func:`deltajax.indices.singular_values`, same expressions).
     """
-    det_jx = abs(det3(j00, j01, j02, j10, j11, j12, j20, j21, j22))
+    det_jx = abs(jx_det(j00, j01, j02, j10, j11, j12, j20, j21, j22))
     g00 = j00 * j00 + j01 * j01 + j02 * j02
     g11 = j10 * j10 + j11 * j11 + j12 * j12
     g22 = j20 * j20 + j21 * j21 + j22 * j22
@@ -165,12 +224,10 @@ def sv_matrix(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2):
     g12 = j10 * j20 + j11 * j21 + j12 * j22
     prod_d = abs(d0 * d1 * d2)
     jx_side = det_jx < prod_d
-    # Jx side: adj(D) G adj(D)
-    e0 = d1 * d2
+    e0 = d1 * d2  # adj(D)
     e1 = d0 * d2
     e2 = d0 * d1
-    # Jq side: D adj(G) D
-    c00 = g11 * g22 - g12 * g12
+    c00 = g11 * g22 - g12 * g12  # adj(G)
     c11 = g00 * g22 - g02 * g02
     c22 = g00 * g11 - g01 * g01
     c01 = g02 * g12 - g01 * g22
@@ -188,7 +245,6 @@ def sv_matrix(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2):
             x1 * (g12 if jx_side else c12) * x2)
 
 
-# -- eigenvalues of the 3 x 3 symmetric matrix -----------------------------------------------------------------
 @nb.njit(**_inline)
 def _jacobi_rotate(app, aqq, apq, arp, arq):
     """One Jacobi rotation zeroing a_pq: (a_pp, a_qq, a_rp, a_rq) after it (r the third index)."""
@@ -214,124 +270,100 @@ def _jacobi_sweep(a00, a11, a22, a01, a02, a12):
 
 
 @nb.njit(**_inline)
-def eig_jacobi(a00, a11, a22, a01, a02, a12):
-    """The two largest eigenvalues (hi, mid) by 4 cyclic Jacobi sweeps (unrolled; sqrt only)."""
-    a00, a11, a22, a01, a02, a12 = _jacobi_sweep(a00, a11, a22, a01, a02, a12)
-    a00, a11, a22, a01, a02, a12 = _jacobi_sweep(a00, a11, a22, a01, a02, a12)
-    a00, a11, a22, a01, a02, a12 = _jacobi_sweep(a00, a11, a22, a01, a02, a12)
-    a00, a11, a22, a01, a02, a12 = _jacobi_sweep(a00, a11, a22, a01, a02, a12)
-    hi = max(max(a00, a11), a22)
-    lo = min(min(a00, a11), a22)
-    return hi, a00 + a11 + a22 - hi - lo
+def _eig_top2_jacobi(x00, x11, x22, x01, x02, x12):
+    """The two largest eigenvalues by 4 cyclic Jacobi sweeps (unrolled; sqrt only)."""
+    x00, x11, x22, x01, x02, x12 = _jacobi_sweep(x00, x11, x22, x01, x02, x12)
+    x00, x11, x22, x01, x02, x12 = _jacobi_sweep(x00, x11, x22, x01, x02, x12)
+    x00, x11, x22, x01, x02, x12 = _jacobi_sweep(x00, x11, x22, x01, x02, x12)
+    x00, x11, x22, x01, x02, x12 = _jacobi_sweep(x00, x11, x22, x01, x02, x12)
+    hi = max(max(x00, x11), x22)
+    lo = min(min(x00, x11), x22)
+    return hi, x00 + x11 + x22 - hi - lo
 
 
-#: least-squares fit of t / s, s = sqrt(w / 3), on [0, 2 / sqrt 3] (max error of the guess 1.1e-5)
-_TC4, _TC3, _TC2, _TC1, _TC0 = (0.004862740934509117, -0.02386905831264214, 0.06417057523483471,
-                                -0.16573685947992756, 0.9999539697770844)
-
-
-@nb.njit(**_inline)
-def _guess(w):
-    s = math.sqrt(w * (1.0 / 3.0))
-    return s * ((((_TC4 * s + _TC3) * s + _TC2) * s + _TC1) * s + _TC0)
+_T_POLY = _CORE_T_POLY
+_EPS = 2.220446049250313e-16
 
 
 @nb.njit(**_inline)
-def tcubic(w):
-    """Root t in [0, 1] of t^2 (t + 3) = w, w in [0, 4]; branch-free, one sqrt and one division.
-
-    With c = (1 + t) / 2 this is the largest root of the Chebyshev equation 4 c^3 - 3 c = w / 2 - 1, i.e.
-    cos(acos(r) / 3) of the trigonometric Cardano formula, without inverse trigonometry (vectorisable).
-    A polynomial guess in s = sqrt(w / 3) (t = s (1 - s / 6 + ...)) and one Halley step (cubic convergence).
-    """
-    t = _guess(w)
-    f = t * t * (t + 3.0) - w
-    fp = 3.0 * t * (t + 2.0)
-    den = 2.0 * fp * fp - f * (6.0 * t + 6.0)
-    return t - 2.0 * f * fp / max(den, 1e-300)
+def _cubic_root01(c):
+    """The root t in [0, 1] of t^2 (t + 3) = c, c in [0, 4]: polynomial start in sqrt(c), one Halley step."""
+    u = math.sqrt(c)
+    t = u * (((((_T_POLY[5] * u + _T_POLY[4]) * u + _T_POLY[3]) * u + _T_POLY[2]) * u + _T_POLY[1]) * u
+             + _T_POLY[0])
+    g = t * t * (t + 3.0) - c
+    g1 = 3.0 * t * (t + 2.0)
+    g2 = 6.0 * (t + 1.0)
+    den = 2.0 * g1 * g1 - g * g2
+    return t - (2.0 * g * g1 / (den if den > 0.0 else 1.0) if den > 0.0 else 0.0)
 
 
 @nb.njit(**_inline)
-def tcubic2(wp, wm):
-    """:func:`tcubic` of two arguments with one shared division (x / a, y / b = x b / (a b), y a / (a b))."""
-    tp = _guess(wp)
-    tm = _guess(wm)
-    fp_ = tp * tp * (tp + 3.0) - wp
-    dp_ = 3.0 * tp * (tp + 2.0)
-    np_ = 2.0 * fp_ * dp_
-    ep_ = max(2.0 * dp_ * dp_ - fp_ * (6.0 * tp + 6.0), 1e-150)
-    fm_ = tm * tm * (tm + 3.0) - wm
-    dm_ = 3.0 * tm * (tm + 2.0)
-    nm_ = 2.0 * fm_ * dm_
-    em_ = max(2.0 * dm_ * dm_ - fm_ * (6.0 * tm + 6.0), 1e-150)
-    inv = 1.0 / (ep_ * em_)
-    return tp - np_ * em_ * inv, tm - nm_ * ep_ * inv
+def _eig_top2_fast(x00, x11, x22, x01, x02, x12):
+    """The two largest eigenvalues by the closed-form cubic without inverse trig (q + p x, x^3 - 3x = 2r);
+    a split below the cubic's sqrt(eps) noise is reported as the pair's mean (the core's expressions)."""
+    q = (x00 + x11 + x22) * (1.0 / 3.0)
+    b00 = x00 - q
+    b11 = x11 - q
+    b22 = x22 - q
+    p2 = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (x01 * x01 + x02 * x02 + x12 * x12)) * (1.0 / 6.0)
+    pos = p2 > 0.0
+    p = math.sqrt(p2) if pos else 0.0
+    det_b = b00 * (b11 * b22 - x12 * x12) - x01 * (x01 * b22 - x12 * x02) + x02 * (x01 * x12 - b11 * x02)
+    r = min(max(0.5 * det_b / (p2 * p if pos else 1.0), -1.0), 1.0)
+    t = _cubic_root01(2.0 * (1.0 + r))
+    t2 = _cubic_root01(2.0 * (1.0 - r))
+    l1 = q + p * (1.0 + t)
+    l2 = q + p * (t2 - t)
+    noise2 = 64.0 * _EPS * p * (p + abs(q))
+    l3 = 3.0 * q - l1 - l2
+    tie12 = (l1 - l2) * (l1 - l2) <= noise2
+    tie23 = (l2 - l3) * (l2 - l3) <= noise2
+    mean12 = 0.5 * (l1 + l2)
+    return (mean12 if tie12 else l1), (mean12 if tie12 else (0.5 * (l2 + l3) if tie23 else l2))
 
 
 @nb.njit(**_inline)
-def eig_cubic_parts(a00, a11, a22, a01, a02, a12):
-    """Trigonometric Cardano form of the eigenvalues: (q, p, tp, tm, ip) with lambda_max = q + p (1 + tp),
-    lambda_mid = q + p (tm - tp), lambda_min = q - p (1 + tm); ip = 1 / p (0 where p = 0).
-
-    q = tr A / 3, p^2 = ||A - q I||_F^2 / 6, r = det((A - q I) / p) / 2 in [-1, 1], tp, tm the roots of
-    t^2 (t + 3) = 2 (1 +- r) (:func:`tcubic2`).
-    """
-    q = (a00 + a11 + a22) * (1.0 / 3.0)
-    b00 = a00 - q
-    b11 = a11 - q
-    b22 = a22 - q
-    p2 = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) * (1.0 / 6.0)
-    p = math.sqrt(p2)
-    ip = 1.0 / p if p > 0.0 else 0.0
-    n00 = b00 * ip
-    n11 = b11 * ip
-    n22 = b22 * ip
-    n01 = a01 * ip
-    n02 = a02 * ip
-    n12 = a12 * ip
-    rr = 0.5 * (n00 * (n11 * n22 - n12 * n12) - n01 * (n01 * n22 - n12 * n02) + n02 * (n01 * n12 - n11 * n02))
-    rr = min(max(rr, -1.0), 1.0)
-    tp, tm = tcubic2(2.0 * (1.0 + rr), 2.0 * (1.0 - rr))
-    return q, p, tp, tm, ip
+def sym3_top2(x00, x11, x22, x01, x02, x12, method):
+    """(lambda_1, lambda_2), the two largest eigenvalues of a symmetric 3x3; ``method`` :data:`FAST` or
+    :data:`JACOBI` (a constant inside the kernels' loops: LLVM unswitches it)."""
+    if method == JACOBI:
+        return _eig_top2_jacobi(x00, x11, x22, x01, x02, x12)
+    return _eig_top2_fast(x00, x11, x22, x01, x02, x12)
 
 
 @nb.njit(**_inline)
-def eig_cubic(a00, a11, a22, a01, a02, a12):
-    """The two largest eigenvalues (hi, mid) by the closed-form cubic (:func:`eig_cubic_parts`)."""
-    q, p, tp, tm, ip = eig_cubic_parts(a00, a11, a22, a01, a02, a12)
-    return q + p * (1.0 + tp), q + p * (tm - tp)
-
-
-# -- singular values and indices -------------------------------------------------------------------------------
-@nb.njit(**_inline)
-def singular_values_from_eig(hi, mid, jx_side, prod_d, det_jx):
-    """(s1, s2, s3) of M from the two largest eigenvalues of :func:`sv_matrix`'s matrix; the third singular
-    value from the exact determinant s1 s2 s3 = |prod d| / |det Jx| (keeps its relative accuracy near
-    either kind of singularity). Jx side: s3, s2 = |prod d| / sqrt(hi, mid); Jq side: s1, s2 = sqrt(hi,
-    mid) / |det Jx|. Three divisions, shared by both sides."""
-    r1 = math.sqrt(max(hi, 0.0))
-    r2 = math.sqrt(max(mid, 0.0))
-    x1 = (prod_d if jx_side else r1) / ((r1 if r1 > 0.0 else 1.0) if jx_side else det_jx)  # s3 | s1
-    x2 = (prod_d if jx_side else r2) / ((r2 if r2 > 0.0 else 1.0) if jx_side else det_jx)  # s2
-    den = det_jx * (x1 * x2)
-    x3 = prod_d / (den if den > 0.0 else 1.0)
-    x3 = x3 if den > 0.0 else (math.inf if jx_side else 0.0)  # s1 | s3
+def singular_values_from_eig(e1, e2, jx_side, prod_d, det_jx):
+    """(s1, s2, s3) from the two largest eigenvalues of :func:`sv_matrix`'s X (the second half of the core's
+    singular_values): the third from the exact determinant s1 s2 s3 = |prod d| / |det Jx|. Three divisions
+    shared by both sides."""
+    r1 = math.sqrt(e1) if e1 > 0.0 else 0.0
+    r2 = math.sqrt(e2) if e2 > 0.0 else 0.0
+    det_pos = det_jx > 0.0
+    det_safe = det_jx if det_pos else 1.0
+    # Jx side: b3 = prod / r1, b2 = prod / r2; Jq side: a1 = r1 / det, a2 = r2 / det
+    x1 = (prod_d if jx_side else r1) / ((r1 if r1 > 0.0 else 1.0) if jx_side else det_safe)
+    x2 = (prod_d if jx_side else r2) / ((r2 if r2 > 0.0 else 1.0) if jx_side else det_safe)
+    x1 = x1 if (jx_side or det_pos) else math.inf
+    x2 = x2 if (jx_side or det_pos) else math.inf
+    x12 = x1 * x2  # b3 b2 | a1 a2
+    den = det_jx * x12 if jx_side else det_safe * x12
+    pos = (den > 0.0) if jx_side else (det_pos & (x12 > 0.0))
+    x3 = prod_d / (den if pos else 1.0)
+    x3 = x3 if pos else (math.inf if jx_side else 0.0)  # b1 | a3
     return (x3 if jx_side else x1), x2, (x1 if jx_side else x3)
 
 
 @nb.njit(**_inline)
 def singular_values(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2, method):
-    """Singular values (s1 >= s2 >= s3) of M = Jx^-1 diag(d) (twin of the core's closed-form singular values);
-    ``method``: :data:`JACOBI` (exact) or :data:`CUBIC` (fast closed form)."""
-    jx_side, prod_d, det_jx, a00, a11, a22, a01, a02, a12 = sv_matrix(j00, j01, j02, j10, j11, j12, j20, j21, j22,
+    """Singular values (s1 >= s2 >= s3) of M = Jx^-1 diag(d): twin of the core's ``singular_values(jx, d)``."""
+    jx_side, prod_d, det_jx, x00, x11, x22, x01, x02, x12 = sv_matrix(j00, j01, j02, j10, j11, j12, j20, j21, j22,
                                                                        d0, d1, d2)
-    if method == JACOBI:
-        hi, mid = eig_jacobi(a00, a11, a22, a01, a02, a12)
-    else:
-        hi, mid = eig_cubic(a00, a11, a22, a01, a02, a12)
-    return singular_values_from_eig(hi, mid, jx_side, prod_d, det_jx)
+    e1, e2 = sym3_top2(x00, x11, x22, x01, x02, x12, method)
+    return singular_values_from_eig(e1, e2, jx_side, prod_d, det_jx)
 
 
+# -- indices (twins of deltajax.indices) -------------------------------------------------------------------------
 @nb.njit(**_inline)
 def sigma_tilde(sig, a, b):
     """The paper's piecewise quadratic: 1 - ((sig - a) / a)^2 up to a, 1 - ((sig - a) / (b - a))^2 up to b,
@@ -342,32 +374,28 @@ def sigma_tilde(sig, a, b):
 
 
 @nb.njit(**_inline)
-def indices(s1, s2, s3, L1, kt):
-    """All indices from the singular values, in :data:`deltajax.INDEX_NAMES` order (8 floats)."""
-    ov = s1 * s2 * s3
-    man = ov * (L1 * L1 * L1)
-    return (s3 / s1, s3, 1.0 / s1, ov, 1.0 / ov,
-            sigma_tilde(s3, kt[0], kt[1]) * sigma_tilde(1.0 / s1, kt[2], kt[3]), man, 1.0 / man)
+def indices_from_sv(s1, s2, s3, raw_scale, kt):
+    """All indices from the singular values, in :data:`deltajax.INDEX_NAMES` order (8 floats); ``kt`` =
+    (a_v, b_v, a_f, b_f); ``raw_scale`` = L1^3 (homogenised -> raw manipulability)."""
+    omega_v = s1 * s2 * s3
+    manip = omega_v * raw_scale
+    sigma_min_f = 1.0 / s1
+    return (s3 / s1, s3, sigma_min_f, omega_v, 1.0 / omega_v,
+            sigma_tilde(s3, kt[0], kt[1]) * sigma_tilde(sigma_min_f, kt[2], kt[3]), manip, 1.0 / manip)
 
 
 @nb.njit(**_inline)
-def jacobian_blocks(x, y, z, R, r, L1, L2, lim):
-    """The three chains at P (canonical, y = |y|): (ok, det Jx signed, Jx (9 floats, rows), d (3 floats))."""
-    ok0, j00, j01, j02, d0 = chain(x, y, z, R, r, L1, L2, lim, CA0, SA0)
-    ok1, j10, j11, j12, d1 = chain(x, y, z, R, r, L1, L2, lim, CA1, SA1)
-    ok2, j20, j21, j22, d2 = chain(x, y, z, R, r, L1, L2, lim, CA2, SA2)
-    det_s = det3(j00, j01, j02, j10, j11, j12, j20, j21, j22)
-    return ok0 & ok1 & ok2, det_s, j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2
-
-
-@nb.njit(**_inline)
-def point_indices(x, y, z, R, r, L1, L2, lim, kt, method):
-    """The whole kernel at one canonical point: (feasible, 8 indices); feasible = IK within limits on every
-    chain and det Jx != 0 exactly. Branch-free: the indices are meaningless where not feasible."""
+def point_kernel(x, y, z, R, r, L1, L2, lim, kt, method):
+    """The whole kernel at one point (twin of :func:`deltajax.indices.point_kernel`, theta3x3 homogenised by
+    L1): (feasible, 8 indices). Feasible = every loop closes within the joint limits and det Jx != 0
+    exactly (redundancy resolution's rule). Branch-free: the indices are meaningless where not feasible."""
     ok, det_s, j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2 = jacobian_blocks(x, y, z, R, r, L1, L2, lim)
     s1, s2, s3 = singular_values(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2, method)
-    i0, i1, i2, i3, i4, i5, i6, i7 = indices(s1, s2, s3, L1, kt)
+    i0, i1, i2, i3, i4, i5, i6, i7 = indices_from_sv(s1, s2, s3, L1 * L1 * L1, kt)
     return ok & (det_s != 0.0), i0, i1, i2, i3, i4, i5, i6, i7
+
+
+point_indices = point_kernel  # the drivers' name
 
 
 @nb.njit(**_inline)
@@ -385,6 +413,6 @@ def criterion_of(crit, i0, i1, i2, i3, i4, i5, i6, i7):
 
 @nb.njit(**OPTS)
 def point_value(x, y, z, R, r, L1, L2, lim, kt, crit, method):
-    """(feasible, criterion value) of the exact kernel at one canonical point (redundancy resolution)."""
-    f, i0, i1, i2, i3, i4, i5, i6, i7 = point_indices(x, y, z, R, r, L1, L2, lim, kt, method)
+    """(feasible, criterion value) of the kernel at one canonical point (redundancy resolution)."""
+    f, i0, i1, i2, i3, i4, i5, i6, i7 = point_kernel(x, y, z, R, r, L1, L2, lim, kt, method)
     return f, criterion_of(crit, i0, i1, i2, i3, i4, i5, i6, i7)

@@ -17,7 +17,7 @@ import numba as nb
 import numpy as np
 
 from ._nb_kernel import (INV_COND, JACOBI, K_TILDE, MANIPULABILITY, OMEGA_F, OMEGA_V, OPTS, SIGMA_MIN_F,
-                         SIGMA_MIN_V, as_tuple4, eig_cubic_parts, ik_ok, jacobian_blocks, point_value, sv_matrix)
+                         SIGMA_MIN_V, as_tuple4, ik_ok, jacobian_blocks, point_value, sv_matrix)
 
 _inline = dict(inline="always", **OPTS)
 
@@ -32,6 +32,79 @@ _C_LAMBDA = 512.0
 _C_R = 512.0
 #: residual of tcubic (polynomial guess + one Halley step) over w in [0, 4]: measured 5.6e-16 (tested).
 _T_NEWTON = 1e-14
+
+
+# -- the screen's eigenvalues: trigonometric Cardano form with an error bound ---------------------------------
+# (the kernel's fast cubic, :func:`._nb_kernel._eig_top2_fast`, has the same roots; this form exposes q, p and
+# the roots t, t' that the bound below needs.)
+#: least-squares fit of t / s, s = sqrt(w / 3), on [0, 2 / sqrt 3] (max error of the guess 1.1e-5)
+_TC4, _TC3, _TC2, _TC1, _TC0 = (0.004862740934509117, -0.02386905831264214, 0.06417057523483471,
+                                -0.16573685947992756, 0.9999539697770844)
+
+
+@nb.njit(**_inline)
+def _guess(w):
+    s = math.sqrt(w * (1.0 / 3.0))
+    return s * ((((_TC4 * s + _TC3) * s + _TC2) * s + _TC1) * s + _TC0)
+
+
+@nb.njit(**_inline)
+def tcubic(w):
+    """Root t in [0, 1] of t^2 (t + 3) = w, w in [0, 4]; branch-free, one sqrt and one division.
+
+    With c = (1 + t) / 2 this is the largest root of the Chebyshev equation 4 c^3 - 3 c = w / 2 - 1, i.e.
+    cos(acos(r) / 3) of the trigonometric Cardano formula, without inverse trigonometry (vectorisable).
+    A polynomial guess in s = sqrt(w / 3) (t = s (1 - s / 6 + ...)) and one Halley step (cubic convergence).
+    """
+    t = _guess(w)
+    f = t * t * (t + 3.0) - w
+    fp = 3.0 * t * (t + 2.0)
+    den = 2.0 * fp * fp - f * (6.0 * t + 6.0)
+    return t - 2.0 * f * fp / max(den, 1e-300)
+
+
+@nb.njit(**_inline)
+def tcubic2(wp, wm):
+    """:func:`tcubic` of two arguments with one shared division (x / a, y / b = x b / (a b), y a / (a b))."""
+    tp = _guess(wp)
+    tm = _guess(wm)
+    fp_ = tp * tp * (tp + 3.0) - wp
+    dp_ = 3.0 * tp * (tp + 2.0)
+    np_ = 2.0 * fp_ * dp_
+    ep_ = max(2.0 * dp_ * dp_ - fp_ * (6.0 * tp + 6.0), 1e-150)
+    fm_ = tm * tm * (tm + 3.0) - wm
+    dm_ = 3.0 * tm * (tm + 2.0)
+    nm_ = 2.0 * fm_ * dm_
+    em_ = max(2.0 * dm_ * dm_ - fm_ * (6.0 * tm + 6.0), 1e-150)
+    inv = 1.0 / (ep_ * em_)
+    return tp - np_ * em_ * inv, tm - nm_ * ep_ * inv
+
+
+@nb.njit(**_inline)
+def eig_cubic_parts(a00, a11, a22, a01, a02, a12):
+    """Trigonometric Cardano form of the eigenvalues: (q, p, tp, tm, ip) with lambda_max = q + p (1 + tp),
+    lambda_mid = q + p (tm - tp), lambda_min = q - p (1 + tm); ip = 1 / p (0 where p = 0).
+
+    q = tr A / 3, p^2 = ||A - q I||_F^2 / 6, r = det((A - q I) / p) / 2 in [-1, 1], tp, tm the roots of
+    t^2 (t + 3) = 2 (1 +- r) (:func:`tcubic2`).
+    """
+    q = (a00 + a11 + a22) * (1.0 / 3.0)
+    b00 = a00 - q
+    b11 = a11 - q
+    b22 = a22 - q
+    p2 = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (a01 * a01 + a02 * a02 + a12 * a12)) * (1.0 / 6.0)
+    p = math.sqrt(p2)
+    ip = 1.0 / p if p > 0.0 else 0.0
+    n00 = b00 * ip
+    n11 = b11 * ip
+    n22 = b22 * ip
+    n01 = a01 * ip
+    n02 = a02 * ip
+    n12 = a12 * ip
+    rr = 0.5 * (n00 * (n11 * n22 - n12 * n12) - n01 * (n01 * n22 - n12 * n02) + n02 * (n01 * n12 - n11 * n02))
+    rr = min(max(rr, -1.0), 1.0)
+    tp, tm = tcubic2(2.0 * (1.0 + rr), 2.0 * (1.0 - rr))
+    return q, p, tp, tm, ip
 
 
 @nb.njit(**_inline)
@@ -95,7 +168,7 @@ def screen_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, kt, crit, tol,
     vectorise it over the samples.
 
     Eigenvalues: the exact kernel's matrix (:func:`._nb_kernel.sv_matrix`), by the trigonometric Cardano
-    formula (:func:`._nb_kernel.eig_cubic_parts`) instead of Jacobi.
+    formula (:func:`eig_cubic_parts`) instead of Jacobi.
     """
     lim, kt = as_tuple4(lim), as_tuple4(kt)
     L13 = L1 * L1 * L1

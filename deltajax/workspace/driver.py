@@ -277,7 +277,8 @@ def fixed_workspace(robot: Delta, grid: Grid, *, fields: bool = True, b_v: float
         stats: also return min / max / mean of every index over the reachable points (``GridJob.stats``, the
             format of :func:`deltajax.workspace.index_stats`, of the values in ``field_dtype``), accumulated
             chunk by chunk.
-        sv_method: ``"jacobi"`` (exact singular values) or ``"cubic"`` (fast closed form, ~1e-8 relative).
+        sv_method: ``"jacobi"`` (exact singular values, default) or ``"fast"`` (the closed-form cubic of
+            :func:`deltajax.indices.sym3_top2`, ~1e-9 relative, ~1e-8 within 1e-5 m of the robot's axis).
     """
     from . import _nb
 
@@ -386,7 +387,7 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
                     checkpoint_dir: Optional[os.PathLike] = None, progress=None,
                     max_chunks: Optional[int] = None, work: Optional[dict] = None, screen: bool = True,
                     screen_margin: Optional[float] = None, keep: Optional[Sequence[str]] = None,
-                    stats: bool = False) -> GridJob:
+                    stats: bool = False, R_dtype=np.float64) -> GridJob:
     """Redundancy resolution at every grid point (or those in ``mask``), with every index at R*.
 
     Args:
@@ -408,6 +409,8 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
         stats: also return min / max / mean of every index at R* over the solved points (``GridJob.stats``,
             the format of :func:`deltajax.workspace.index_stats`, of the values in ``field_dtype``),
             accumulated chunk by chunk.
+        R_dtype: dtype of the stored ``"R_star"`` (float32 halves its memory on 2 mm grids; the selection is
+            ``k_star`` either way).
 
     Returns:
         :class:`GridJob`: ``ok`` (a feasible sample exists), fields: every index at R*, ``"R_star"`` (m),
@@ -417,7 +420,7 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
 
     if screen_margin is None:
         screen_margin = SCREEN_MARGIN
-    all_fields = {"k_star": (np.int32, -1), "R_star": (np.float64, np.nan)}
+    all_fields = {"k_star": (np.int32, -1), "R_star": (R_dtype, np.nan)}
     all_fields.update({n: (field_dtype, np.nan) for n in INDEX_NAMES})
     keep = _check_keep(keep, tuple(all_fields))
     lay = _Layout(grid, mirror=(mode == "fast"))
@@ -466,8 +469,8 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
     fp = {"job": "redundancy", "robot": _recon_desc(recon), "grid": _grid_desc(grid), "criterion": criterion,
           "mode": mode, "kt": [b_v, b_f, beta],
           "mask": None if mask is None else hashlib.sha256(np.packbits(mask)).hexdigest()[:16]}
-    if keep != tuple(all_fields) or acc is not None:  # older checkpoints stay valid
-        fp.update(keep=list(keep), stats=acc is not None)
+    if keep != tuple(all_fields) or acc is not None or np.dtype(R_dtype) != np.float64:
+        fp.update(keep=list(keep), stats=acc is not None)  # (the defaults keep older checkpoints valid)
     arrays, complete = run_chunks(lay.n, chunk_size, compute, outputs, checkpoint_dir=checkpoint_dir,
                                   fingerprint=fp, progress=progress, max_chunks=max_chunks)
     if work is not None:
