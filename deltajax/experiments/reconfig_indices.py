@@ -26,7 +26,7 @@ STATS = ("min", "max", "mean")
 
 def run(ctx) -> None:
     from .. import plots
-    from ..workspace import PAPER_TABLES, fixed_workspace, index_stats, redundancy_grid
+    from ..workspace import PAPER_TABLES, fixed_workspace, redundancy_grid
     from ..workspace.driver import face_count
     from ..workspace.redundancy import resolve_redundancy_host
 
@@ -61,17 +61,19 @@ def run(ctx) -> None:
 
     t0 = time.perf_counter()
     with ctx.progress(total=grid.n_points, desc="ODR fields") as bar:
+        # only the fields written below are kept on the grid; the statistics accumulate chunk by chunk
         odr = fixed_workspace(ctx.robot, grid, fields=True, field_dtype=np.float32, chunk_size=1 << 20,
-                              progress=bar.update, checkpoint_dir=None if ck is None else ck / "odr", **kw)
+                              keep=sorted(set(store) | {slice_index}), stats=True, progress=bar.update, checkpoint_dir=None if ck is None else ck / "odr", **kw)
     t1 = time.perf_counter()
     work: dict = {}
     with ctx.progress(total=grid.n_points, desc=f"RDR R* ({mode})") as bar:
         rdr = redundancy_grid(ctx.recon, grid, mask=odr.ok, criterion=criterion, mode=mode, field_dtype=np.float32,
-                              chunk_size=chunk, progress=bar.update, work=work,
+                              chunk_size=chunk, keep=["R_star", *store], stats=True, R_dtype=np.float32,
+                              progress=bar.update, work=work,
                               checkpoint_dir=None if ck is None else ck / f"rdr_{mode}", **kw)
     t2 = time.perf_counter()
-    s_odr = index_stats(odr.fields, odr.ok)
-    s_rdr = index_stats(rdr.fields, odr.ok)
+    s_odr = odr.stats
+    s_rdr = rdr.stats  # over the ODR workspace: the mask of the redundancy job
     t3 = time.perf_counter()
 
     res = ctx.results
@@ -79,7 +81,7 @@ def run(ctx) -> None:
     for name, ax in (("x", grid.x), ("y", grid.y), ("z", grid.z)):
         res.put_axis(g, name, ax, units="m")
     res.put(g, "reachable_fixed", odr.ok.astype(np.uint8), units="1", dims=("x", "y", "z"))
-    res.put(g, "R_star", rdr.fields["R_star"].astype(np.float32), units="m", dims=("x", "y", "z"))
+    res.put(g, "R_star", rdr.fields["R_star"].astype(np.float32, copy=False), units="m", dims=("x", "y", "z"))
     for n in store:
         res.put(g, f"{n}_rdr", rdr.fields[n], units="1", dims=("x", "y", "z"))
         res.put(g, f"{n}_odr", odr.fields[n], units="1", dims=("x", "y", "z"))

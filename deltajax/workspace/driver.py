@@ -29,7 +29,7 @@ import json
 import math
 import os
 from pathlib import Path
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
@@ -55,11 +55,14 @@ class GridJob:
         ok: reachable / feasible mask.
         fields: name -> array (NaN outside ``ok``).
         complete: False when stopped early by ``max_chunks`` (resume to finish).
+        stats: with ``stats=True``: {index: {"min", "max", "mean", "count"}} over the job's points (None when
+            not asked for or not complete).
     """
 
     ok: np.ndarray
     fields: dict
     complete: bool
+    stats: Optional[dict] = None
 
     @property
     def count(self) -> int:
@@ -188,6 +191,9 @@ class _Layout:
         self.j0 = ny // 2 if self.mirror else 0
         self.shape = (nx, ny - self.j0, nz)
         self.n = int(np.prod(self.shape))
+        # weights of the items in full-grid statistics: a mirror-half item stands for itself and its image,
+        # except on the mirror plane y = 0 (the half's first row when ny is odd)
+        self.weights = (1.0 if ny % 2 else 2.0, 2.0) if self.mirror else (1.0, 1.0)
 
     def points(self, start: int, stop: int) -> np.ndarray:
         nx, nyh, nz = self.shape
@@ -197,9 +203,21 @@ class _Layout:
         g = self.grid
         return np.stack([g.x[i], g.y[j + self.j0], g.z[k]], axis=-1)
 
+    def points_into(self, start: int, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> None:
+        """Coordinates of items start, start + 1, ... (``len(x)`` of them) written into preallocated buffers."""
+        from . import _nb
+
+        g = self.grid
+        _nb.grid_points(np.asarray(g.x, np.float64), np.asarray(g.y, np.float64), np.asarray(g.z, np.float64),
+                        self.j0, self.shape[1], start, x, y, z)
+
     def take(self, full: np.ndarray, start: int, stop: int) -> np.ndarray:
         """Values of a full-grid array at items start:stop."""
         return full[:, self.j0:, :].reshape(-1)[start:stop] if full.ndim == 3 else full[start:stop]
+
+    def take_all(self, full: np.ndarray) -> np.ndarray:
+        """Per-item values (flat, contiguous) of a full-grid array: one copy for the whole job."""
+        return np.ascontiguousarray(full[:, self.j0:, :]).reshape(-1) if full.ndim == 3 else np.asarray(full)
 
     def expand(self, flat: np.ndarray) -> np.ndarray:
         """Full-grid array (nx, ny, nz) from per-item values."""
@@ -211,6 +229,57 @@ class _Layout:
         full[:, self.j0:, :] = half
         full[:, :self.j0, :] = half[:, ::-1, :][:, :self.j0, :]
         return full
+
+    def expand_all(self, arrays: dict, names) -> dict:
+        """:meth:`expand` of each named per-item array, releasing each one (and its memory map) once expanded:
+        the peak is the full-grid outputs plus one per-item array, not both sets."""
+        out = {}
+        for n in names:
+            out[n] = self.expand(arrays.pop(n))
+        return out
+
+
+class _ChunkStats:
+    """Per-chunk partial statistics (min, max, weighted sum, weighted count) of the index fields, kept in
+    ``<checkpoint_dir>/stats_partials.npy`` when checkpointing so that a resumed job still has those of the
+    chunks it does not recompute (a chunk without them is an error, never a silently shorter mean)."""
+
+    def __init__(self, lay: _Layout, n_chunks: int, names, checkpoint_dir):
+        self.lay, self.names = lay, tuple(names)
+        shape = (n_chunks, len(self.names), 4)
+        path = None if checkpoint_dir is None else Path(checkpoint_dir) / "stats_partials.npy"
+        if path is not None and path.exists() and (Path(checkpoint_dir) / "state.json").exists():
+            self.parts = np.load(path, mmap_mode="r+")
+            if self.parts.shape != shape:
+                raise CheckpointMismatch(f"{path} has shape {self.parts.shape}, this job needs {shape}; use another "
+                                         f"directory")
+        elif path is not None:
+            Path(checkpoint_dir).mkdir(parents=True, exist_ok=True)
+            self.parts = np.lib.format.open_memmap(path, mode="w+", dtype=np.float64, shape=shape)
+            self.parts[:] = np.nan
+            self.parts.flush()
+        else:
+            self.parts = np.full(shape, np.nan)
+
+    def add(self, chunk: int, start: int, vals: np.ndarray) -> None:
+        """Partial statistics of chunk ``chunk`` (items from ``start``), ``vals`` (len(names), n)."""
+        from . import _nb
+
+        _nb.partial_stats(vals, start, self.lay.shape[2], self.lay.shape[1], *self.lay.weights,
+                          np.asarray(self.parts[chunk]))
+        if isinstance(self.parts, np.memmap):
+            self.parts.flush()  # before run_chunks records the chunk as done
+
+    def result(self, complete: bool) -> Optional[dict]:
+        from .stats import stats_from_partials
+
+        if not complete:
+            return None
+        missing = np.flatnonzero(np.isnan(self.parts[:, 0, 3]))
+        if missing.size:
+            raise CheckpointMismatch(f"index statistics of chunks {missing[:5].tolist()} are missing from the checkpoint "
+                                     f"(written by an older version?); rerun into a fresh directory")
+        return stats_from_partials(self.parts, self.names)
 
 
 def _robot_desc(robot: Delta) -> dict:
@@ -233,7 +302,8 @@ def _progress_total(progress, total):
 def fixed_workspace(robot: Delta, grid: Grid, *, fields: bool = True, b_v: float = 2.0, b_f: float = 4.2,
                     beta: float = 0.5, field_dtype=np.float64, chunk_size: int = 1 << 20, mirror: bool = True,
                     checkpoint_dir: Optional[os.PathLike] = None, progress=None,
-                    max_chunks: Optional[int] = None) -> GridJob:
+                    max_chunks: Optional[int] = None, keep: Optional[Sequence[str]] = None,
+                    stats: bool = False, sv_method: str = "jacobi") -> GridJob:
     """Reachable mask (and every index, NaN outside) of a fixed robot over ``grid``.
 
     Args:
@@ -246,39 +316,77 @@ def fixed_workspace(robot: Delta, grid: Grid, *, fields: bool = True, b_v: float
         mirror: compute the y >= 0 half only (exact, see module docstring).
         checkpoint_dir, max_chunks: checkpoint/resume (see :func:`run_chunks`).
         progress: callable(n) called with the points finished per chunk (``tqdm.update``).
+        keep: index fields returned on the grid (default: all of :data:`deltajax.INDEX_NAMES`); the others
+            are still computed for ``stats`` but never stored (memory of 2 mm grids).
+        stats: also return min / max / mean of every index over the reachable points (``GridJob.stats``, the
+            format of :func:`deltajax.workspace.index_stats`, of the values in ``field_dtype``), accumulated
+            chunk by chunk.
+        sv_method: ``"jacobi"`` (exact singular values, default) or ``"fast"`` (the closed-form cubic of
+            :func:`deltajax.indices.sym3_top2`, ~1e-9 relative, ~1e-8 within 1e-5 m of the robot's axis).
     """
     from . import _nb
 
+    keep = _check_keep(keep, INDEX_NAMES) if fields else ()
+    if sv_method not in _nb.SV_METHODS:
+        raise ValueError(f"sv_method must be one of {tuple(_nb.SV_METHODS)}, got {sv_method!r}")
+    method = _nb.SV_METHODS[sv_method]
     lay = _Layout(grid, mirror)
     q = _robot_desc(robot)
     lim = _nb.limits_tuple(q["theta_min"], q["theta_max"])
     kt = _nb.kt_tuple(b_v, b_f, beta)
     outputs = {"ok": (np.bool_, False)}
-    if fields:
-        outputs.update({n: (field_dtype, np.nan) for n in INDEX_NAMES})
+    outputs.update({n: (field_dtype, np.nan) for n in keep})
+    n_chunks = max(1, math.ceil(lay.n / chunk_size))
+    acc = _ChunkStats(lay, n_chunks, INDEX_NAMES, checkpoint_dir) if (stats and fields) else None
+    # chunk buffers, allocated once and reused: fresh arrays per chunk cost page faults, not arithmetic
+    m = min(chunk_size, lay.n)
+    xb, yb, zb = np.empty(m), np.empty(m), np.empty(m)
+    okb = np.empty(m, np.bool_)
+    outb = np.empty((_nb.N_IDX, m)) if fields else None
+    castb = outb if (outb is None or np.dtype(field_dtype) == np.float64) else np.empty((_nb.N_IDX, m), field_dtype)
+    cols = {n: i for i, n in enumerate(INDEX_NAMES)}
+    R, r, L1, L2 = q["base_radius"], q["platform_radius"], q["upper_arm"], q["forearm"]
 
     def compute(start, stop):
-        pts = lay.points(start, stop)
-        ok = np.empty(len(pts), np.bool_)
+        n = stop - start
+        x, y, z, ok = xb[:n], yb[:n], zb[:n], okb[:n]
+        lay.points_into(start, x, y, z)
         if not fields:
-            _nb.parallel(lambda a, b: _nb.fixed_mask(pts[a:b], q["base_radius"], q["platform_radius"], q["upper_arm"],
-                                                     q["forearm"], lim, ok[a:b]), len(pts))
+            _nb.parallel(lambda a, b: _nb.fixed_mask(x[a:b], y[a:b], z[a:b], R, r, L1, L2, lim, ok[a:b]), n)
             return {"ok": ok}
-        out = np.empty((len(pts), _nb.N_IDX))
-        _nb.parallel(lambda a, b: _nb.fixed_fields(pts[a:b], q["base_radius"], q["platform_radius"], q["upper_arm"],
-                                                   q["forearm"], lim, kt, out[a:b], ok[a:b]), len(pts))
+        out = outb[:, :n]
+        _nb.parallel(lambda a, b: _nb.fixed_fields(x[a:b], y[a:b], z[a:b], R, r, L1, L2, lim, kt, out[:, a:b],
+                                                   ok[a:b], method), n)
+        vals = castb[:, :n]
+        if vals is not out:
+            vals[...] = out
+        if acc is not None:
+            acc.add(start // chunk_size, start, vals)
         res = {"ok": ok}
-        res.update({n: out[:, i] for i, n in enumerate(INDEX_NAMES)})
+        res.update({k: vals[cols[k]] for k in keep})
         return res
 
     _progress_total(progress, lay.n)
+    fp = {"job": "fixed", "robot": q, "grid": _grid_desc(grid), "fields": fields, "kt": [b_v, b_f, beta],
+          "mirror": lay.mirror}
+    if keep != tuple(INDEX_NAMES) or acc is not None or method != _nb.JACOBI:  # older checkpoints stay valid
+        fp.update(keep=list(keep), stats=acc is not None, sv_method=sv_method)
     arrays, complete = run_chunks(lay.n, chunk_size, compute, outputs, checkpoint_dir=checkpoint_dir,
-                                  fingerprint={"job": "fixed", "robot": q, "grid": _grid_desc(grid), "fields": fields,
-                                               "kt": [b_v, b_f, beta], "mirror": lay.mirror},
-                                  progress=progress, max_chunks=max_chunks)
-    ok = lay.expand(arrays["ok"])
-    out = {n: lay.expand(arrays[n]) for n in outputs if n != "ok"}
-    return GridJob(ok=ok, fields=out, complete=complete)
+                                  fingerprint=fp, progress=progress, max_chunks=max_chunks)
+    st = None if acc is None else acc.result(complete)
+    out = lay.expand_all(arrays, list(outputs))
+    ok = out.pop("ok")
+    return GridJob(ok=ok, fields=out, complete=complete, stats=st)
+
+
+def _check_keep(keep, names) -> tuple:
+    if keep is None:
+        return tuple(names)
+    keep = tuple(keep)
+    for n in keep:
+        if n not in names:
+            raise ValueError(f"keep: {n!r} is not one of {tuple(names)}")
+    return keep
 
 
 def _recon_desc(recon: ReconfigurableDelta) -> dict:
@@ -322,7 +430,8 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
                     beta: float = 0.5, field_dtype=np.float64, chunk_size: int = 1 << 18,
                     checkpoint_dir: Optional[os.PathLike] = None, progress=None,
                     max_chunks: Optional[int] = None, work: Optional[dict] = None, screen: bool = True,
-                    screen_margin: Optional[float] = None) -> GridJob:
+                    screen_margin: Optional[float] = None, keep: Optional[Sequence[str]] = None,
+                    stats: bool = False, R_dtype=np.float64) -> GridJob:
     """Redundancy resolution at every grid point (or those in ``mask``), with every index at R*.
 
     Args:
@@ -339,46 +448,81 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
             samples, fallbacks; see :func:`deltajax.workspace.resolve_redundancy_host`) of this call.
         screen, screen_margin: fast mode's screen-and-verify (see ``resolve_redundancy_host``); the selection
             does not depend on them, so they are not part of the checkpoint fingerprint.
+        keep: fields returned on the grid, among :data:`deltajax.INDEX_NAMES`, ``"R_star"`` and ``"k_star"``
+            (default: all); the others are never stored (memory of 2 mm grids).
+        stats: also return min / max / mean of every index at R* over the solved points (``GridJob.stats``,
+            the format of :func:`deltajax.workspace.index_stats`, of the values in ``field_dtype``),
+            accumulated chunk by chunk.
+        R_dtype: dtype of the stored ``"R_star"`` (float32 halves its memory on 2 mm grids; the selection is
+            ``k_star`` either way).
 
     Returns:
         :class:`GridJob`: ``ok`` (a feasible sample exists), fields: every index at R*, ``"R_star"`` (m),
-        ``"k_star"`` (int32, -1 where none).
+        ``"k_star"`` (int32, -1 where none) -- those in ``keep``.
     """
     from .redundancy import SCREEN_MARGIN, resolve_redundancy_host
 
     if screen_margin is None:
         screen_margin = SCREEN_MARGIN
+    all_fields = {"k_star": (np.int32, -1), "R_star": (R_dtype, np.nan)}
+    all_fields.update({n: (field_dtype, np.nan) for n in INDEX_NAMES})
+    keep = _check_keep(keep, tuple(all_fields))
     lay = _Layout(grid, mirror=(mode == "fast"))
-    outputs = {"ok": (np.bool_, False), "k_star": (np.int32, -1), "R_star": (np.float64, np.nan)}
-    outputs.update({n: (field_dtype, np.nan) for n in INDEX_NAMES})
+    outputs = {"ok": (np.bool_, False)}
+    outputs.update({n: all_fields[n] for n in all_fields if n in keep})
     counters = {"samples": 0, "full": 0, "points": 0, "screened": 0, "fallback": 0}
+    n_chunks = max(1, math.ceil(lay.n / chunk_size))
+    acc = _ChunkStats(lay, n_chunks, INDEX_NAMES, checkpoint_dir) if stats else None
+    need_indices = acc is not None or any(n in INDEX_NAMES for n in keep)
+    sel_all = None if mask is None else lay.take_all(np.asarray(mask, bool))  # once, not per chunk
+    # chunk buffers, allocated once and reused
+    m = min(chunk_size, lay.n)
+    ptsb = np.empty((m, 3))
+    okb, kb, Rb = np.empty(m, np.bool_), np.empty(m, np.int32), np.empty(m)
+    valsb = np.empty((len(INDEX_NAMES), m), field_dtype)
+    cols = {n: i for i, n in enumerate(INDEX_NAMES)}
 
     def compute(start, stop):
-        pts = lay.points(start, stop)
-        sel = np.ones(len(pts), bool) if mask is None else lay.take(mask, start, stop).astype(bool)
-        res = {n: np.full(len(pts), fill, dtype=dt) for n, (dt, fill) in outputs.items()}
-        if sel.any():
-            red, w = resolve_redundancy_host(recon, pts[sel], criterion, mode=mode, b_v=b_v, b_f=b_f, beta=beta,
-                                             mirror=False, screen=screen, screen_margin=screen_margin)
-            for k in counters:
-                counters[k] += w[k]
-            res["ok"][sel] = red.ok
-            res["k_star"][sel] = red.k
-            res["R_star"][sel] = red.R
-            for i, n in enumerate(INDEX_NAMES):
-                res[n][sel] = red.indices[:, i]
+        n = stop - start
+        pts, ok, k, R, vals = ptsb[:n], okb[:n], kb[:n], Rb[:n], valsb[:, :n]
+        lay.points_into(start, pts[:, 0], pts[:, 1], pts[:, 2])
+        ok.fill(False)
+        k.fill(-1)
+        R.fill(np.nan)
+        vals.fill(np.nan)
+        sel = None if sel_all is None else sel_all[start:stop]
+        if sel is None or sel.any():
+            red, w = resolve_redundancy_host(recon, pts if sel is None else pts[sel], criterion, mode=mode, b_v=b_v,
+                                             b_f=b_f, beta=beta, mirror=False, screen=screen,
+                                             screen_margin=screen_margin, return_indices=need_indices)
+            for c in counters:
+                counters[c] += w[c]
+            idx = slice(None) if sel is None else sel
+            ok[idx] = red.ok
+            k[idx] = red.k
+            R[idx] = red.R
+            if need_indices:
+                vals[:, idx] = red.indices.T
+        if acc is not None:
+            acc.add(start // chunk_size, start, vals)
+        res = {"ok": ok, "k_star": k, "R_star": R}
+        res.update({c: vals[i] for c, i in cols.items()})
         return res
 
     _progress_total(progress, lay.n)
     fp = {"job": "redundancy", "robot": _recon_desc(recon), "grid": _grid_desc(grid), "criterion": criterion,
           "mode": mode, "kt": [b_v, b_f, beta],
           "mask": None if mask is None else hashlib.sha256(np.packbits(mask)).hexdigest()[:16]}
+    if keep != tuple(all_fields) or acc is not None or np.dtype(R_dtype) != np.float64:
+        fp.update(keep=list(keep), stats=acc is not None)  # (the defaults keep older checkpoints valid)
     arrays, complete = run_chunks(lay.n, chunk_size, compute, outputs, checkpoint_dir=checkpoint_dir,
                                   fingerprint=fp, progress=progress, max_chunks=max_chunks)
     if work is not None:
         work.update(counters)
-    out = {n: lay.expand(arrays[n]) for n in outputs if n != "ok"}
-    return GridJob(ok=lay.expand(arrays["ok"]), fields=out, complete=complete)
+    st = None if acc is None else acc.result(complete)
+    out = lay.expand_all(arrays, list(outputs))
+    ok = out.pop("ok")
+    return GridJob(ok=ok, fields=out, complete=complete, stats=st)
 
 
 # -- box from the reach bound, truncation -----------------------------------------------------------------

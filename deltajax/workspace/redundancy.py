@@ -352,10 +352,11 @@ def indices_at_host(recon: ReconfigurableDelta, points: np.ndarray, k: np.ndarra
     from . import _nb
 
     q = _nb_params(recon)
-    pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
-    out = np.empty((pts.shape[0], _nb.N_IDX))
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    x, y, z = (np.ascontiguousarray(pts[:, i]) for i in range(3))
+    out = np.empty((_nb.N_IDX, pts.shape[0]))  # structure of arrays: the kernel loop vectorises
     k = np.ascontiguousarray(k, np.int64)
     kt = _nb.kt_tuple(b_v, b_f, beta)
-    _nb.parallel(lambda a, b: _nb.fields_at(pts[a:b], k[a:b], q["R_min"], q["R_step"], q["r"], q["L1"], q["L2"], q["lim"],
-                                            kt, out[a:b]), pts.shape[0])
-    return out
+    _nb.parallel(lambda a, b: _nb.fields_at(x[a:b], y[a:b], z[a:b], k[a:b], q["R_min"], q["R_step"], q["r"], q["L1"],
+                                            q["L2"], q["lim"], kt, out[:, a:b]), pts.shape[0])
+    return out.T

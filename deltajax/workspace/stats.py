@@ -61,3 +61,20 @@ def index_stats(fields: dict, mask: np.ndarray, names=INDEX_NAMES, chunk: int = 
         out[n] = {"min": lo if c else np.nan, "max": hi if c else np.nan, "mean": s / c if c else np.nan,
                   "count": c}
     return out
+
+
+def stats_from_partials(partials: np.ndarray, names=INDEX_NAMES) -> dict:
+    """min / max / mean of each field from per-chunk partial statistics, in the format of :func:`index_stats`.
+
+    Args:
+        partials: (n_chunks, len(names), 4) rows [min, max, weighted sum, weighted count] over the finite
+            values of each chunk (the grid drivers' ``stats=True``; mirror-half items weighted 2).
+        names: the fields, in the order of the partials' second axis.
+    """
+    p = np.asarray(partials, dtype=np.float64)
+    out = {}
+    for a, n in enumerate(names):
+        c = float(p[:, a, 3].sum())
+        out[n] = {"min": float(p[:, a, 0].min()) if c else np.nan, "max": float(p[:, a, 1].max()) if c else np.nan,
+                  "mean": float(p[:, a, 2].sum()) / c if c else np.nan, "count": int(c)}
+    return out
