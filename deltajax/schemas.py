@@ -1,0 +1,311 @@
+"""Hydra structured-config schemas: the keys and types of the robot block and of every experiment block.
+
+Registered in the ConfigStore by :func:`register_schemas` (``deltajax.run`` calls it at import). A mistyped key,
+a wrong type or an unknown ``+key`` is rejected at composition (``configs/config.yaml`` puts
+``schema/robot`` before the robot group and ``schema/experiment/<name>`` before the experiment group;
+``optional``: an experiment without a schema is validated by its job only). Values and defaults live in the
+YAML files; ranges and cross-field rules are checked by :func:`deltajax.config.validate_config`. Pure data:
+imports nothing from deltajax.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Dict, List, Optional
+
+__all__ = ["RobotSchema", "EXPERIMENT_SCHEMAS", "register_schemas"]
+
+_REQ = "???"  # omegaconf.MISSING: the YAML must give a value
+
+
+def _list(*items):
+    return dataclasses.field(default_factory=lambda: list(items))
+
+
+@dataclasses.dataclass
+class RRangeSchema:
+    min: Optional[float] = None
+    max: Optional[float] = None
+    step: Optional[float] = None
+
+
+@dataclasses.dataclass
+class MassSchema:
+    upper_arm_mass: Optional[float] = None
+    upper_arm_com_fraction: Optional[float] = None
+    upper_arm_inertia_factor: Optional[float] = None
+    upper_arm_inertia: Optional[float] = None
+    rotor_inertia: Optional[float] = None
+    gear_ratio: Optional[float] = None
+    elbow_mass: Optional[float] = None
+    forearm_mass: Optional[float] = None
+    forearm_elbow_fraction: Optional[float] = None
+    forearm_model: Optional[str] = None  # rigid_rod | point_split (deltajax/mass.py validates the value)
+    forearm_inertia_factor: Optional[float] = None
+    platform_mass: Optional[float] = None
+    payload_mass: Optional[float] = None
+    carriage_mass: Optional[float] = None
+    gravity: Optional[float] = None
+
+
+@dataclasses.dataclass
+class RobotSchema:
+    name: str = "custom"
+    base_radius: Optional[float] = None
+    platform_radius: Optional[float] = None
+    upper_arm: Optional[float] = None
+    forearm: Optional[float] = None
+    theta_min_deg: Optional[float] = None
+    theta_max_deg: Optional[float] = None
+    R_range: Optional[RRangeSchema] = None
+    mass: Optional[MassSchema] = None
+
+
+@dataclasses.dataclass
+class GridSchema:
+    x: Optional[List[float]] = None
+    y: Optional[List[float]] = None
+    z: Optional[List[float]] = None
+    h: float = _REQ
+    bounds: Optional[List[List[float]]] = None
+
+
+@dataclasses.dataclass
+class WorkspaceGridSchema:
+    name: str = "workspace_grid"
+    grid: GridSchema = dataclasses.field(default_factory=GridSchema)
+    b_v: float = _REQ
+    b_f: float = _REQ
+    beta: float = _REQ
+    store: List[str] = _list()
+    chunk_points: int = _REQ
+    backend: str = "auto"
+    devices: Any = "all"  # 'all' or a count
+    checkpoint_s: float = 60.0
+    resume: bool = True
+    stop_after: Optional[int] = None
+
+
+@dataclasses.dataclass
+class ReconfigWorkspaceSchema:
+    name: str = "reconfig_workspace"
+    h: float = _REQ
+    chunk_points: int = _REQ
+    checkpoint: bool = True
+
+
+@dataclasses.dataclass
+class ReconfigIndicesSchema:
+    name: str = "reconfig_indices"
+    h: float = _REQ
+    criterion: str = "k_tilde"
+    mode: str = "fast"
+    b_v: float = _REQ
+    b_f: float = _REQ
+    slices_z: List[float] = _list()
+    slice_index: str = "omega_v"
+    chunk_points: int = _REQ
+    checkpoint: bool = True
+    store_fields: List[str] = _list()
+
+
+@dataclasses.dataclass
+class IndicesExamplesSchema:
+    name: str = "indices_examples"
+    R_step: float = _REQ
+    points: List[List[float]] = _list()
+    b_v: float = _REQ
+    b_f: float = _REQ
+    beta: float = _REQ
+    matrix: str = "theta3x3"
+
+
+@dataclasses.dataclass
+class BenchKernelSchema:
+    name: str = "bench_kernel"
+    n_points: int = _REQ
+    n_baseline: int = _REQ
+    block: int = 1000
+    repeats: int = _REQ
+    R: float = _REQ
+    dtypes: List[str] = _list()
+
+
+@dataclasses.dataclass
+class CycleSetupSchema:
+    centre: List[float] = _list()
+    heading_deg: float = 0.0
+    duration: float = _REQ
+    torque_limit: float = _REQ
+    speed_limit: float = _REQ
+
+
+@dataclasses.dataclass
+class GAMotionSchema:
+    amplitude: float = _REQ
+    duration: float = _REQ
+
+
+@dataclasses.dataclass
+class DynamicsCycleSchema:
+    name: str = "dynamics_cycle"
+    robots: List[str] = _list()
+    method: str = "virtual_work"
+    n_samples: int = _REQ
+    law: str = "poly5"
+    blend: float = _REQ
+    setups: Dict[str, CycleSetupSchema] = dataclasses.field(default_factory=dict)
+    ga_motion: GAMotionSchema = dataclasses.field(default_factory=GAMotionSchema)
+    recon_R_amplitude: float = _REQ
+
+
+@dataclasses.dataclass
+class BoundarySearchSchema:
+    name: str = "boundary_search"
+    centre: List[float] = _list()
+    eps: float = _REQ
+    steps_deg: List[float] = _list()
+    rho_max: float = _REQ
+    predictor: str = "tangent"
+    half_space: bool = True
+    volume_rule: str = "pyramid"
+    profile_samples: int = _REQ
+    grid_h: float = _REQ
+    grid_box: List[List[float]] = _list()
+    centre_sweep_z: List[float] = _list()
+    sweep_step_deg: float = _REQ
+    timing_repeats: int = _REQ
+
+
+# ---- ga_reconfig schema: today's keys (designer is rewriting them; update with config._v_ga_reconfig) -------
+@dataclasses.dataclass
+class GADesignSchema:
+    n_R: int = _REQ
+    bounds: Dict[str, List[float]] = dataclasses.field(default_factory=dict)
+
+
+@dataclasses.dataclass
+class GASchema:
+    algorithm: str = "simple_ga"
+    population_size: int = _REQ
+    generations: int = _REQ
+    sigma: float = _REQ
+    crossover_rate: float = _REQ
+    elite_ratio: float = _REQ
+    checkpoint_every: int = _REQ
+    init: str = "uniform"
+
+
+@dataclasses.dataclass
+class GAWorkspaceSchema:
+    n_r: int = _REQ
+    n_phi: int = _REQ
+    n_z: int = _REQ
+    r_max: Optional[float] = None
+    z_max: Optional[float] = None
+    good_threshold: float = _REQ
+
+
+@dataclasses.dataclass
+class GATaskSchema:
+    diameter: float = _REQ
+    height: float = _REQ
+    z_top: float = _REQ
+    n_r: int = _REQ
+    n_phi: int = _REQ
+    n_z: int = _REQ
+    index: str = "k_tilde"
+    beta: float = _REQ
+
+
+@dataclasses.dataclass
+class GACycleSchema:
+    duration: float = _REQ
+    n_samples: int = _REQ
+    law: str = "poly5"
+    torque_limit: float = _REQ
+    speed_limit: float = _REQ
+    motor_speed: float = _REQ
+    n_R_operating: int = _REQ
+
+
+@dataclasses.dataclass
+class GAObjectivesSchema:
+    weights: Dict[str, float] = dataclasses.field(default_factory=dict)
+
+
+@dataclasses.dataclass
+class GAConstraintsSchema:
+    handling: str = "feasibility_first"
+    coverage_min: float = _REQ
+    k_min: float = _REQ
+    max_arm_sum: Optional[float] = None
+    penalty: float = _REQ
+
+
+@dataclasses.dataclass
+class GAParetoSchema:
+    enabled: bool = True
+    objectives: List[str] = _list()
+    population_size: int = _REQ
+    generations: int = _REQ
+    ref_max_factor: float = _REQ
+    ref_min_factor: float = _REQ
+
+
+@dataclasses.dataclass
+class GARefineSchema:
+    enabled: bool = True
+    steps: int = _REQ
+    learning_rate: float = _REQ
+    tau: float = _REQ
+    pareto_points: int = _REQ
+
+
+@dataclasses.dataclass
+class GAVerifySchema:
+    n_r: int = _REQ
+    n_phi: int = _REQ
+    n_z: int = _REQ
+    cycle_samples: int = _REQ
+
+
+@dataclasses.dataclass
+class GAReconfigSchema:
+    name: str = "ga_reconfig"
+    resume: str = "auto"
+    stop_after: Optional[int] = None
+    design: GADesignSchema = dataclasses.field(default_factory=GADesignSchema)
+    ga: GASchema = dataclasses.field(default_factory=GASchema)
+    workspace: GAWorkspaceSchema = dataclasses.field(default_factory=GAWorkspaceSchema)
+    task: GATaskSchema = dataclasses.field(default_factory=GATaskSchema)
+    cycle: GACycleSchema = dataclasses.field(default_factory=GACycleSchema)
+    objectives: GAObjectivesSchema = dataclasses.field(default_factory=GAObjectivesSchema)
+    constraints: GAConstraintsSchema = dataclasses.field(default_factory=GAConstraintsSchema)
+    pareto: GAParetoSchema = dataclasses.field(default_factory=GAParetoSchema)
+    refine: GARefineSchema = dataclasses.field(default_factory=GARefineSchema)
+    verify: GAVerifySchema = dataclasses.field(default_factory=GAVerifySchema)
+# ---- end of ga_reconfig schema ----
+
+
+#: experiment name -> schema, registered as ``schema/experiment/<name>``.
+EXPERIMENT_SCHEMAS = {
+    "workspace_grid": WorkspaceGridSchema,
+    "reconfig_workspace": ReconfigWorkspaceSchema,
+    "reconfig_indices": ReconfigIndicesSchema,
+    "indices_examples": IndicesExamplesSchema,
+    "bench_kernel": BenchKernelSchema,
+    "dynamics_cycle": DynamicsCycleSchema,
+    "boundary_search": BoundarySearchSchema,
+    "ga_reconfig": GAReconfigSchema,
+}
+
+
+def register_schemas() -> None:
+    """Register the schemas in Hydra's ConfigStore (idempotent; run.py calls it at import)."""
+    from hydra.core.config_store import ConfigStore
+
+    cs = ConfigStore.instance()
+    cs.store(group="schema/robot", name="delta", node=RobotSchema)
+    for name, node in EXPERIMENT_SCHEMAS.items():
+        cs.store(group="schema/experiment", name=name, node=node)
