@@ -330,8 +330,8 @@ def _api_logging(run_dir: Path):
     """Logging for :func:`run_experiment`: the run's lines always go to ``<run_dir>/run.log`` (as under the
     CLI) and, when the caller has configured no logging, to stdout (warnings and errors to stderr)."""
     root = logging.getLogger()
-    run_dir.mkdir(parents=True, exist_ok=True)
-    file = logging.FileHandler(run_dir / "run.log")
+    # delay: opened at the first line, so a config rejected before the run starts leaves no directory behind
+    file = logging.FileHandler(run_dir / "run.log", delay=True)
     file.setFormatter(logging.Formatter("[%(asctime)s][%(name)s][%(levelname)s] - %(message)s"))
     file.setLevel(logging.INFO)
     added = [file]

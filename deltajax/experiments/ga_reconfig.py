@@ -304,11 +304,8 @@ def run(ctx) -> None:
             return batch_eval(np.asarray(G))
 
         dirs = [dict(pb.weights)] + [{o: 1.0 for o in objs}] * (len(G0) - 1)
-        from ..optimize.refine import REFINE_PHASES
-
-        with ctx.progress(total=len(REFINE_PHASES), desc=f"refine {len(G0)} designs (optax)") as rbar:
-            rr = refine(pb, space, G0, steps=int(e.refine.steps), learning_rate=float(e.refine.learning_rate),
-                        tau=float(e.refine.tau), directions=dirs, true_fn=true_fn, progress=rbar.update)
+        rr = refine(pb, space, G0, steps=int(e.refine.steps), learning_rate=float(e.refine.learning_rate),
+                    tau=float(e.refine.tau), directions=dirs, true_fn=true_fn)
         res.put_axis("refine", "design", np.arange(len(G0)), units="1")
         res.put_axis("refine", "gene", np.arange(space.dim), units="1")
         res.put("refine", "kind", np.asarray(kinds, dtype=object), units="1", dims=("design",))
@@ -356,9 +353,7 @@ def run(ctx) -> None:
         if np.any(dom):
             pick = int(np.argmax(np.where(dom, gain.min(axis=1), -np.inf)))
             cands.append(front.X[pick])
-    with ctx.progress(total=1, desc="verify (finer quadrature)") as vbar:
-        mv = {k: np.asarray(x) for k, x in ev(jnp.asarray(np.stack(cands))).items()}
-        vbar.update(1)
+    mv = {k: np.asarray(x) for k, x in ev(jnp.asarray(np.stack(cands))).items()}
     rows = []
     for k in ("volume", "volume_fixed", "good_volume", "task_index_mean", "task_index_min", "peak_torque",
               "cycle_time", "peak_speed"):
