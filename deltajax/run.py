@@ -290,12 +290,9 @@ class BelowWarning(logging.Filter):
 def _user_errors() -> tuple:
     from .config import ConfigError
     from .geometry import GeometryError
-    from .io import ResultsWriteError
     from .rundir import RunDirError
 
-    # RunDirError: busy/foreign/damaged run directory; ResultsWriteError: disk full or I/O error (the previous
-    # results are intact). Each message already says what to do.
-    return (ConfigError, GeometryError, RunDirError, ResultsWriteError)
+    return (ConfigError, GeometryError, RunDirError)  # RunDirError: busy, foreign or damaged run directory
 
 
 @hydra.main(config_path=CONFIG_DIR, config_name="config", version_base="1.3")
@@ -323,6 +320,11 @@ def main(cfg: DictConfig) -> None:
             raise  # a sweep records the failed job; the launcher reports it
         log.error("%s", e)
         sys.exit(EXIT_USER_ERROR)
+    except ResultsWriteError as e:  # disk full / I/O error: one line (the previous results are intact), status 1
+        if os.environ.get("HYDRA_FULL_ERROR") == "1" or hc.mode == RunMode.MULTIRUN:
+            raise
+        log.error("%s", e)
+        sys.exit(1)
 
 
 @contextlib.contextmanager
