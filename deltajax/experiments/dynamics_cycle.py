@@ -233,7 +233,8 @@ def run(ctx) -> None:
             max_formulation_gap = max(max_formulation_gap, gap)
             g = f"dynamics/{name}/{case}"
             _save_case(res, g, prof, dict(duration=float(cyc.duration), method=method, limits_torque=s["torque_limit"],
-                                          limits_speed=s["speed_limit"], formulation_gap_Nm=gap))
+                                          limits_speed=s["speed_limit"], formulation_gap_Nm=gap,
+                                          forearm_model=robot.mass.forearm_model))
             mg = f"dynamics/{name}/{case}_metrics"
             for key, unit in (("peak_torque", "N m"), ("rms_torque", "N m"), ("peak_speed", "rad/s"),
                               ("peak_acceleration", "rad/s^2")):
