@@ -321,6 +321,15 @@ def test_vmap_over_designs_no_retrace_and_finite_gradient():
     fd = (cycle_time(jnp.asarray(0.2 + h), _metrics) - cycle_time(jnp.asarray(0.2 - h), _metrics)) / (2 * h)
     assert np.isfinite(float(g)) and abs(float(g) - float(fd)) < 1e-4 * abs(float(fd))
 
+    # peak and RMS torque (one variadic reduction with its own JVP) against central differences too
+    def peak_rms(L1, metrics=dyn.cycle_metrics):
+        m = metrics(eqx.tree_at(lambda d: d.upper_arm, robot, L1), cycle, LIMITS)
+        return m.peak_torque[0] + 10.0 * m.rms_torque[1]
+
+    g = jax.jit(jax.grad(peak_rms))(jnp.asarray(0.2))
+    fd = (peak_rms(jnp.asarray(0.2 + h), _metrics) - peak_rms(jnp.asarray(0.2 - h), _metrics)) / (2 * h)
+    assert np.isfinite(float(g)) and abs(float(g) - float(fd)) < 1e-4 * abs(float(fd))
+
 
 def test_reconfiguration_force_static():
     """At rest the R actuator carries the radial components of the forearm forces: sum_i Jq_i0 y_i."""
