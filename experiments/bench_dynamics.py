@@ -10,7 +10,7 @@ Compares in the same process (the machine is shared, ratios are what we report; 
   Jacobians under two vmaps, theta by atan2 and cos/sin again); point-split forearms only;
 * ``jax_torque``: ``vmap(designs) o vmap(samples)`` of the library's flat form (``cycle_profile``'s sample
   function: scalars per chain from the core's loop_closure / loop_vectors / jq_theta / jx_det), jitted;
-* ``jax_metrics``: the full ``cycle_metrics`` (profile + peaks + RMS + closed-form cycle time), what a GA
+* ``jax_metrics``: the full ``cycle_metrics`` (profile, peaks, RMS and closed-form cycle time in one variadic reduction), what a GA
   fitness calls; reported as designs/s and sample evaluations/s.
 
 Usage: ``python experiments/bench_dynamics.py [--designs 2000] [--samples 201] [--repeats 3]
