@@ -551,7 +551,8 @@ def energy(robot: Delta, motion: Motion) -> tuple[Float[Array, ""], Float[Array,
     T = (jnp.sum(0.5 * mm.radial_mass() * motion.R_dot ** 2 - s_arm * s * motion.R_dot * thd
                  + 0.5 * mm.arm_inertia(L1) * thd ** 2) + 0.5 * M * jnp.sum(motion.p_dot ** 2))
     if mm.forearm_model == "rigid_rod":
-        b_dot, _ = _elbow_rates(robot, motion.theta, thd, jnp.zeros_like(thd), motion.R_dot, jnp.zeros_like(motion.R_dot))
+        zero = jnp.zeros_like(motion.R_dot)
+        b_dot, _ = _elbow_rates(robot, motion.theta, thd, jnp.zeros_like(thd), motion.R_dot, zero)
         w_dot = to_chain_frames(motion.p_dot) - b_dot
         T = T - 0.5 * mm.forearm_rotation_deficit() * jnp.sum(w_dot * w_dot)
     V = -mm.gravity * (s_arm * jnp.sum(s) + M * motion.p[2])

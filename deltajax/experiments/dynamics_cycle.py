@@ -131,7 +131,8 @@ def _forearm_line(name, case, by_model):
     rms = (float(np.max(rod.rms_torque)), float(np.max(split.rms_torque)))
     ct = (float(rod.cycle_time), float(split.cycle_time))
     return (f"{name:12s} {case:10s} forearm rigid_rod vs point_split: peak torque {pk[0]:.4f} vs {pk[1]:.4f} N m "
-            f"({100 * float(_rel(*pk)):+.2f} %), RMS {rms[0]:.4f} vs {rms[1]:.4f} N m ({100 * float(_rel(*rms)):+.2f} %), "
+            f"({100 * float(_rel(*pk)):+.2f} %), RMS {rms[0]:.4f} vs {rms[1]:.4f} N m "
+            f"({100 * float(_rel(*rms)):+.2f} %), "
             f"min cycle time {ct[0]:.4f} vs {ct[1]:.4f} s ({100 * float(_rel(*ct)):+.2f} %)")
 
 
