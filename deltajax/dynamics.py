@@ -551,7 +551,8 @@ def energy(robot: Delta, motion: Motion) -> tuple[Float[Array, ""], Float[Array,
     T = (jnp.sum(0.5 * mm.radial_mass() * motion.R_dot ** 2 - s_arm * s * motion.R_dot * thd
                  + 0.5 * mm.arm_inertia(L1) * thd ** 2) + 0.5 * M * jnp.sum(motion.p_dot ** 2))
     if mm.forearm_model == "rigid_rod":
-        b_dot, _ = _elbow_rates(robot, motion.theta, thd, jnp.zeros_like(thd), motion.R_dot, jnp.zeros_like(motion.R_dot))
+        zero = jnp.zeros_like(motion.R_dot)
+        b_dot, _ = _elbow_rates(robot, motion.theta, thd, jnp.zeros_like(thd), motion.R_dot, zero)
         w_dot = to_chain_frames(motion.p_dot) - b_dot
         T = T - 0.5 * mm.forearm_rotation_deficit() * jnp.sum(w_dot * w_dot)
     V = -mm.gravity * (s_arm * jnp.sum(s) + M * motion.p[2])
@@ -757,16 +758,40 @@ def cycle_profile(robot: Delta, cycle, duration: Any = None, *, method: str = "v
         tau_inertial_unit=st(col.tau_in), force_R_inertial_unit=col.fR_in, ok=col.ok)
 
 
-def _min_T2(a, g, limit):
-    """(feasible, T^2): smallest T^2 with |a / T^2 + g| <= limit at every sample (a, g: (K,), limit scalar).
+def _T2_bound(a, g, limit):
+    """Per sample, the smallest T^2 with |a / T^2 + g| <= limit (0: no bound; limit infinite: 0).
 
-    With x = 1 / T^2 >= 0 the feasible set of each sample is [0, (limit - sign(a) g) / |a|]; infeasible
-    if |g| > limit somewhere; no bound (0) for an infinite limit.
+    With x = 1 / T^2 >= 0 the feasible set of a sample is [0, (limit - sign(a) g) / |a|]; a sample with
+    |g| > limit is infeasible for every T (the caller checks max |g| <= limit).
     """
-    feasible = jnp.all(jnp.abs(g) <= limit)
     denom = limit - jnp.sign(a) * g
     ratio = jnp.where(jnp.abs(a) > 0, jnp.abs(a) / jnp.where(denom > 0, denom, 1.0), 0.0)
-    return feasible, jnp.where(jnp.isinf(limit), 0.0, jnp.max(ratio))
+    return jnp.where(jnp.isinf(limit), 0.0, ratio)
+
+
+@jax.custom_jvp
+def _max_sum_reduce(maxed: tuple, summed: tuple) -> tuple:
+    """(max over axis 0 of each of ``maxed`` (all >= 0), sum over axis 0 of each of ``summed``) in ONE
+    variadic reduction: one loop over the samples evaluates every operand's producers once."""
+    n_max = len(maxed)
+
+    def combine(u, v):
+        return tuple(jnp.maximum(x, y) if k < n_max else x + y for k, (x, y) in enumerate(zip(u, v)))
+
+    ops = maxed + summed
+    zeros = tuple(jnp.zeros((), x.dtype) for x in ops)
+    return tuple(jax.lax.reduce(ops, zeros, combine, (0,)))
+
+
+@_max_sum_reduce.defjvp
+def _max_sum_reduce_jvp(primals, tangents):
+    # Written out because JAX's generic reduce JVP fails on symbolic-zero tangents (e.g. a constant R'):
+    # a max moves with its (first) maximising sample, a sum with the sum of the tangents.
+    maxed, summed = primals
+    t_max, t_sum = tangents
+    out = _max_sum_reduce(maxed, summed)
+    t_out = tuple(jnp.take(t, jnp.argmax(x, axis=0), axis=0) for x, t in zip(maxed, t_max))
+    return out, t_out + tuple(jnp.sum(t, axis=0) for t in t_sum)
 
 
 def _trapezoid_weights(n, dtype):
@@ -792,42 +817,41 @@ def cycle_metrics(robot: Delta, cycle, limits: Limits, *, method: str = "virtual
     """
     col = _columns(robot, cycle, method)
     ok = col.ok
-    reachable = jnp.all(ok)
-    n_bad = jnp.sum(~ok)
     T = cycle.duration
     inv_T2 = 1.0 / (T * T)
     safe = lambda x: jnp.where(ok, x, 0.0)  # noqa: E731
     w = _trapezoid_weights(ok.shape[0], col.fR_in.dtype)
     tq = jnp.broadcast_to(limits.torque, (3,))
+    a = [safe(x) for x in col.tau_in] + [safe(col.fR_in)]
+    g = [safe(x) for x in col.tau_g] + [safe(col.fR_g)]
+    lim = [tq[0], tq[1], tq[2], limits.force_R]
+    effort = [ai * inv_T2 + gi for ai, gi in zip(a, g)]
+    ratio = [_T2_bound(ai, gi, li) for ai, gi, li in zip(a, g, lim)]
+    # Every per-sample quantity goes through ONE variadic reduction over the samples, so the per-sample kernel
+    # is evaluated once per sample; separate reductions make XLA:CPU fuse a copy of the kernel into each
+    # (measured 2x slower). All max-type quantities are >= 0, so 0 is their identity.
+    maxed = ([jnp.abs(x) for x in effort] + ratio + [jnp.abs(x) for x in g]
+             + [jnp.abs(safe(x)) for x in col.theta_dot] + [jnp.abs(safe(x)) for x in col.theta_ddot]
+             + [jnp.abs(safe(col.R_dot))])
+    summed = [w * x * x for x in effort[:3]] + [jnp.where(ok, 0.0, 1.0)]
+    red = _max_sum_reduce(tuple(maxed), tuple(summed))
+    peak_effort, T2_effort, g_max = red[0:4], red[4:8], red[8:12]
+    thd_unit, thdd_unit, R_speed = jnp.stack(red[12:15]), jnp.stack(red[15:18]), red[18]
+    sq_sum, n_bad_f = red[19:22], red[22]
+    n_bad = n_bad_f.astype(jnp.int32)
+    reachable = n_bad == 0
     sp = jnp.broadcast_to(limits.speed, (3,))
-    peak_tau, rms_tau, peak_thd, peak_thdd, feasible, T2 = [], [], [], [], [], []
-    for i in range(3):   # per actuator on flat (K,) columns
-        a, g = safe(col.tau_in[i]), safe(col.tau_g[i])
-        tau = a * inv_T2 + g
-        peak_tau.append(jnp.max(jnp.abs(tau)))
-        rms_tau.append(jnp.sqrt(jnp.sum(w * tau * tau)))
-        thd_unit = jnp.max(jnp.abs(safe(col.theta_dot[i])))
-        peak_thd.append(thd_unit / T)
-        peak_thdd.append(jnp.max(jnp.abs(safe(col.theta_ddot[i]))) * inv_T2)
-        f_i, T2_i = _min_T2(a, g, tq[i])
-        feasible.append(f_i)
-        T2.append(T2_i)
-        T2.append(jnp.where(jnp.isinf(sp[i]), 0.0, (thd_unit / sp[i]) ** 2))
-    a_R, g_R = safe(col.fR_in), safe(col.fR_g)
-    f_R, T2_R = _min_T2(a_R, g_R, limits.force_R)
-    peak_fR = jnp.max(jnp.abs(a_R * inv_T2 + g_R))
-    R_speed = jnp.max(jnp.abs(safe(col.R_dot)))          # at T = 1
-    T2.append(T2_R)
-    T2.append(jnp.where(jnp.isinf(limits.speed_R), 0.0, (R_speed / limits.speed_R) ** 2))
-    feasible = f_R & feasible[0] & feasible[1] & feasible[2]
-    cycle_time = jnp.where(feasible, jnp.sqrt(jnp.max(jnp.stack(T2))), jnp.inf)
-    nan = jnp.asarray(jnp.nan, a_R.dtype)
+    feasible = jnp.all(jnp.stack(g_max) <= jnp.stack(lim))
+    T2 = jnp.concatenate([jnp.stack(T2_effort), jnp.where(jnp.isinf(sp), 0.0, (thd_unit / sp) ** 2),
+                          jnp.where(jnp.isinf(limits.speed_R), 0.0, (R_speed / limits.speed_R) ** 2)[None]])
+    cycle_time = jnp.where(feasible, jnp.sqrt(jnp.max(T2)), jnp.inf)
+    nan = jnp.asarray(jnp.nan, w.dtype)
     nan_if = lambda x: jnp.where(reachable, x, nan)  # noqa: E731
     cycle_time = nan_if(cycle_time)
     return CycleMetrics(
-        peak_torque=nan_if(jnp.stack(peak_tau)), rms_torque=nan_if(jnp.stack(rms_tau)),
-        peak_speed=nan_if(jnp.stack(peak_thd)), cycle_time=cycle_time, ok=reachable & jnp.isfinite(cycle_time),
-        peak_acceleration=nan_if(jnp.stack(peak_thdd)), peak_force_R=nan_if(peak_fR),
+        peak_torque=nan_if(jnp.stack(peak_effort[:3])), rms_torque=nan_if(jnp.sqrt(jnp.stack(sq_sum))),
+        peak_speed=nan_if(thd_unit / T), cycle_time=cycle_time, ok=reachable & jnp.isfinite(cycle_time),
+        peak_acceleration=nan_if(thdd_unit * inv_T2), peak_force_R=nan_if(peak_effort[3]),
         cycles_per_minute=60.0 / cycle_time, reachable=reachable, n_bad=n_bad)
 
 

@@ -10,8 +10,9 @@ Compares in the same process (the machine is shared, ratios are what we report; 
   Jacobians under two vmaps, theta by atan2 and cos/sin again); point-split forearms only;
 * ``jax_torque``: ``vmap(designs) o vmap(samples)`` of the library's flat form (``cycle_profile``'s sample
   function: scalars per chain from the core's loop_closure / loop_vectors / jq_theta / jx_det), jitted;
-* ``jax_metrics``: the full ``cycle_metrics`` (profile + peaks + RMS + closed-form cycle time), what a GA
-  fitness calls; reported as designs/s and sample evaluations/s.
+* ``jax_point_api``: the per-point public API (``joint_motion`` + ``inverse_dynamics_motion``) under two vmaps;
+* ``jax_metrics``: the full ``cycle_metrics`` (profile, peaks, RMS and closed-form cycle time in one variadic
+  reduction), what a GA fitness calls; reported as designs/s and sample evaluations/s.
 
 Usage: ``python experiments/bench_dynamics.py [--designs 2000] [--samples 201] [--repeats 3]
 [--forearm-model point_split|rigid_rod] [--json out.json]``.
@@ -244,7 +245,8 @@ def main():
     res["all_ok"] = bool(np.all(np.asarray(out["jax_metrics"].ok)))
     res["compile_s"] = compile_s
     print(f"  cycle_metrics: {res['jax_metrics_designs_per_cpu_s']:.0f} designs per CPU-s; all designs ok: "
-          f"{res['all_ok']}; max |tau_numpy - tau_jax| = " + ", ".join(f"{k} {v:.1e}" for k, v in errs.items()) + " N m")
+          f"{res['all_ok']}; max |tau_numpy - tau_jax| = "
+          + ", ".join(f"{k} {v:.1e}" for k, v in errs.items()) + " N m")
     assert all(v < 1e-9 for v in errs.values()), "NumPy and JAX torques disagree"
     if args.json:
         with open(args.json, "w") as f:

@@ -321,6 +321,15 @@ def test_vmap_over_designs_no_retrace_and_finite_gradient():
     fd = (cycle_time(jnp.asarray(0.2 + h), _metrics) - cycle_time(jnp.asarray(0.2 - h), _metrics)) / (2 * h)
     assert np.isfinite(float(g)) and abs(float(g) - float(fd)) < 1e-4 * abs(float(fd))
 
+    # peak and RMS torque (one variadic reduction with its own JVP) against central differences too
+    def peak_rms(L1, metrics=dyn.cycle_metrics):
+        m = metrics(eqx.tree_at(lambda d: d.upper_arm, robot, L1), cycle, LIMITS)
+        return m.peak_torque[0] + 10.0 * m.rms_torque[1]
+
+    g = jax.jit(jax.grad(peak_rms))(jnp.asarray(0.2))
+    fd = (peak_rms(jnp.asarray(0.2 + h), _metrics) - peak_rms(jnp.asarray(0.2 - h), _metrics)) / (2 * h)
+    assert np.isfinite(float(g)) and abs(float(g) - float(fd)) < 1e-4 * abs(float(fd))
+
 
 def test_reconfiguration_force_static():
     """At rest the R actuator carries the radial components of the forearm forces: sum_i Jq_i0 y_i."""
@@ -543,3 +552,23 @@ def test_dynamics_cycle_experiment_reports_both_forearm_models(tmp_path):
     assert float(ind["rel_change_cycle_time"]) < 0
     # the robot's own model (rigid_rod, the preset default) is what the main metrics hold
     np.testing.assert_array_equal(ind["peak_torque"][0], d["industrial"]["adept_metrics"]["peak_torque"])
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("model", ["point_split", "rigid_rod"])
+def test_benchmark_agrees_with_its_numpy_baseline(model, tmp_path):
+    """experiments/bench_dynamics.py at a tiny size: every JAX form matches the independent NumPy torques."""
+    import json
+    import os
+    import subprocess
+    import sys
+
+    repo = CONFIGS.parent
+    out = subprocess.run([sys.executable, str(repo / "experiments" / "bench_dynamics.py"), "--designs", "6",
+                          "--samples", "21", "--repeats", "1", "--forearm-model", model, "--json",
+                          str(tmp_path / "b.json")], cwd=repo, env={**os.environ, "PYTHONPATH": str(repo)},
+                         capture_output=True, text=True, timeout=600)
+    assert out.returncode == 0, out.stderr[-3000:]
+    res = json.loads((tmp_path / "b.json").read_text())
+    assert res["all_ok"] and max(res["max_abs_diff_numpy_jax_Nm"].values()) < 1e-9
+    assert ("jax_old" in res["max_abs_diff_numpy_jax_Nm"]) == (model == "point_split")

@@ -131,7 +131,8 @@ def _forearm_line(name, case, by_model):
     rms = (float(np.max(rod.rms_torque)), float(np.max(split.rms_torque)))
     ct = (float(rod.cycle_time), float(split.cycle_time))
     return (f"{name:12s} {case:10s} forearm rigid_rod vs point_split: peak torque {pk[0]:.4f} vs {pk[1]:.4f} N m "
-            f"({100 * float(_rel(*pk)):+.2f} %), RMS {rms[0]:.4f} vs {rms[1]:.4f} N m ({100 * float(_rel(*rms)):+.2f} %), "
+            f"({100 * float(_rel(*pk)):+.2f} %), RMS {rms[0]:.4f} vs {rms[1]:.4f} N m "
+            f"({100 * float(_rel(*rms)):+.2f} %), "
             f"min cycle time {ct[0]:.4f} vs {ct[1]:.4f} s ({100 * float(_rel(*ct)):+.2f} %)")
 
 
@@ -233,7 +234,8 @@ def run(ctx) -> None:
             max_formulation_gap = max(max_formulation_gap, gap)
             g = f"dynamics/{name}/{case}"
             _save_case(res, g, prof, dict(duration=float(cyc.duration), method=method, limits_torque=s["torque_limit"],
-                                          limits_speed=s["speed_limit"], formulation_gap_Nm=gap))
+                                          limits_speed=s["speed_limit"], formulation_gap_Nm=gap,
+                                          forearm_model=robot.mass.forearm_model))
             mg = f"dynamics/{name}/{case}_metrics"
             # stored as peak_joint_*: actuator (joint) rates, unlike the GA's end-effector peak_speed (m/s)
             for key, name, unit in (("peak_torque", "peak_torque", "N m"), ("rms_torque", "rms_torque", "N m"),
