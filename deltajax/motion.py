@@ -75,6 +75,8 @@ __all__ = [
     "path_tables",
     "resolve_path",
     "resolve_tables",
+    "path_bands",
+    "path_optimum",
     "pointwise_path",
     "fixed_path",
     "path_score",
@@ -513,6 +515,40 @@ def resolve_tables(tables: PathTables, dt: float, w: int, a: int, force_limit: f
     P, S, path = _dp_jit(*args, k0, w=w, a=a, primary_min=pm, boundary=boundary, backtrack=True)
     ok = bool(np.isfinite(float(P)))
     return _evaluate(tables, np.asarray(path), aggregate, float(dt), (w, a), ok)
+
+
+def path_bands(recon: ReconfigurableDelta, cycle: Cycle, limits: RDriveLimits) -> tuple[int, int]:
+    """(w, a): the speed and acceleration bands in R samples for this robot's R step and the cycle's dt (host)."""
+    return _bands(recon, cycle, limits)
+
+
+def path_optimum(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_tilde", *, w: int, a: int,
+                 force_limit: Any = math.inf, aggregate: str = "integral", boundary: str = "free",
+                 b_v: float = 2.0, b_f: float = 4.2, beta: float = 0.5, start_batch: int = 16
+                 ) -> tuple[Float[Array, ""], Float[Array, ""]]:
+    """The DP's optimal (primary, secondary) score, pure and jit/vmap-able over designs (no path returned).
+
+    What an optimiser needs to score a design in the "R(t) along the cycle" mode: the same DP as
+    :func:`resolve_path` (``-inf`` where no path meets the limits). The bands are static: compute them once with
+    :func:`path_bands` (they depend only on the R step and dt, shared by a population);
+    ``jax.vmap(lambda r: path_optimum(r, cycle, w=w, a=a))(population)``. For ``boundary="closed"`` every start
+    sample is tried (no host filter), ``start_batch`` at a time.
+    """
+    _check_names(criterion, aggregate, boundary)
+    tab = path_tables(recon, cycle, criterion, b_v=b_v, b_f=b_f, beta=beta)
+    dt = cycle.duration / (cycle.n_samples - 1)
+    n = tab.value.shape[1]
+    w = int(min(max(w, 0), n - 1))
+    a = int(min(max(a, 0), 2 * w))
+    args = (tab.value, tab.feasible, tab.force_coef, tab.weights, tab.R_step, dt, force_limit)
+    pm = aggregate == "min"
+    if boundary != "closed":
+        P, S, _ = _dp(*args, 0, w=w, a=a, primary_min=pm, boundary=boundary, backtrack=False)
+        return P, S
+    one = lambda k0: _dp(*args, k0, w=w, a=a, primary_min=pm, boundary="closed", backtrack=False)[:2]  # noqa: E731
+    P, S = jax.lax.map(one, jnp.arange(n), batch_size=start_batch)
+    best = jnp.argmax(jnp.where(P == jnp.max(P), S, -jnp.inf))
+    return P[best], S[best]
 
 
 def pointwise_path(tables: PathTables, aggregate: str = "integral", dt: float = 1.0) -> PathResult:

@@ -162,3 +162,20 @@ def test_refinement_accepts_only_improvements_within_limits():
     # the exact criterion of the returned profile is the reported score
     vals = [float(getattr(dj.point_indices(recon.at(r), p)[1], "k_tilde")) for r, p in zip(ref.R, np.asarray(cyc.x))]
     np.testing.assert_allclose(vals, ref.value, rtol=1e-12)
+
+
+def test_path_optimum_is_vmappable_over_designs(tiny):
+    recon, cyc, _ = tiny
+    lim = dj.RDriveLimits(speed=0.45, acceleration=4.5, force=40.0)
+    w, a = mo.path_bands(recon, cyc, lim)
+    designs = [recon, jax.tree.map(lambda x: x, recon)]
+    designs[1] = ReconfigurableDelta(robot=recon.robot.__class__(**{**{f: getattr(recon.robot, f) for f in (
+        "base_radius", "platform_radius", "upper_arm", "theta_min", "theta_max", "mass")}, "forearm": 0.42}),
+        R_min=recon.R_min, R_step=recon.R_step, n_R=recon.n_R)
+    pop = jax.tree.map(lambda *xs: jnp.stack(xs), *designs)
+    for boundary in ("rest", "closed"):
+        P, S = jax.jit(jax.vmap(lambda r: mo.path_optimum(r, cyc, "sigma_min_v", w=w, a=a, force_limit=40.0,
+                                                          boundary=boundary)))(pop)
+        for i, d in enumerate(designs):
+            ref = dj.resolve_path(d, cyc, "sigma_min_v", limits=lim, boundary=boundary)
+            assert (float(P[i]), float(S[i])) == pytest.approx(ref.score, rel=1e-12)

@@ -324,10 +324,12 @@ def run(ctx) -> None:
         ctx.log(f"{name}: bands w={dp.bands[0]}, a={dp.bands[1]} samples; DP {t_dp:.1f} s wall; case {wall:.1f} s wall, "
                 f"{cpu:.1f} CPU-s" + (f"; refinement {'accepted' if rf.accepted else 'rejected'}: {rf.reason}"
                                       if rf is not None else ""))
-        paths = {m: d["R"] for m, d in data.items()}
+        # a rejected refinement repeats the DP: draw it only when it differs
+        shown = {m: d for m, d in data.items() if m != "path_refined" or (rf is not None and rf.accepted)}
+        paths = {m: d["R"] for m, d in shown.items()}
         _plot_landscape(ctx, name, t, np.asarray(tab.R), np.asarray(tab.value), paths, s["criterion"])
-        _plot_profiles(ctx, name, t, data, s)
-        _plot_torques(ctx, name, t, data)
+        _plot_profiles(ctx, name, t, shown, s)
+        _plot_torques(ctx, name, t, shown)
     if "mech_info" in s:
         res.set_attrs("reconfig_motion", mechanism="screw_linkage",
                       **{f"mechanism_{k}": float(np.asarray(getattr(mech, k))) for k in
