@@ -39,6 +39,7 @@ from ..dynamics import Limits, cycle_metrics, cycle_profile
 from ..geometry import GeometryError, ReconfigurableDelta
 from ..indices import INDEX_NAMES
 from ..mechanism import MECHANISMS, DirectRadial, drive_profile, example_screw_linkage
+from ..motion_refine import refine_path
 
 METHODS = ("fixed", "pointwise", "path_dp", "path_refined")
 SUMMARY = (("mean_value", "1"), ("min_value", "1"), ("max_abs_R_dot", "m/s"), ("max_abs_R_ddot", "m/s^2"),
@@ -260,7 +261,7 @@ def run(ctx) -> None:
         if not dp.ok:
             raise RuntimeError(f"case {name!r}: no R(t) meets the drive limits {lim} on this path (bands {dp.bands})")
         if s["refine"]["enabled"]:
-            rf = mo.refine_path(recon, cyc, dp, s["criterion"], limits=lim, aggregate=s["aggregate"],
+            rf = refine_path(recon, cyc, dp, s["criterion"], limits=lim, aggregate=s["aggregate"],
                                 boundary=boundary, n_ctrl=s["refine"]["n_ctrl"], steps=s["refine"]["steps"],
                                 learning_rate=s["refine"]["learning_rate"], **kw)
         else:
