@@ -21,9 +21,9 @@ from .trajectory import Cycle, adept_cycle, ga_paper_motion
 from . import optimize
 from . import workspace
 from .optimize import DesignSpace, GAConfig, Problem, nsga2, refine, run_ga
-from . import mechanism, motion
+from . import mechanism, motion, motion_refine
 from .mechanism import DirectRadial, ScrewLinkage, drive_profile, example_screw_linkage, reconfiguration_drive
-from .motion import (PathResult, RDriveLimits, fixed_path, path_tables, pointwise_path, refine_path, resolve_path,
-                     task_path)
+from .motion import PathResult, RDriveLimits, fixed_path, path_tables, pointwise_path, resolve_path, task_path
+from .motion_refine import refine_path
 
 __version__ = "0.1.0"

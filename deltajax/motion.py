@@ -38,7 +38,10 @@ Quantisation: the smallest non-zero speed and acceleration of the discrete motio
 dR / dt^2; choose the path's sample count and the R step so that w >= 1 and a >= 1 (``PathResult.bands``
 reports them; w = 0 leaves only fixed R).
 
-**Smooth refinement** (:func:`refine_path`): R(t) as a uniform cubic B-spline (``n_ctrl`` control points),
+For optimisers, :func:`path_optimum` returns the DP's optimal score as a pure function (jit/vmap over a
+population of designs; bands from :func:`path_bands`).
+
+**Smooth refinement** (:func:`deltajax.motion_refine.refine_path`): R(t) as a uniform cubic B-spline (``n_ctrl`` control points),
 initialised by least squares on the DP solution and improved with optax (Adam) on a smooth surrogate (the
 integral, or a soft-min for "min") with quadratic penalties on the limits. The spline's speed and acceleration
 are bounded in *continuous time* by its control-point differences (the derivative of a cubic B-spline is a
@@ -58,7 +61,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float, Int
+from jaxtyping import Array, Bool, Float
 
 from .dynamics import cycle_profile
 from .geometry import ReconfigurableDelta
@@ -71,17 +74,16 @@ __all__ = [
     "RDriveLimits",
     "PathTables",
     "PathResult",
-    "RefineResult",
     "path_tables",
     "resolve_path",
     "resolve_tables",
+    "path_bands",
+    "path_optimum",
     "pointwise_path",
     "fixed_path",
     "path_score",
     "discrete_rates",
     "path_constraints_ok",
-    "refine_path",
-    "spline_basis",
     "task_path",
     "with_R",
 ]
@@ -515,6 +517,40 @@ def resolve_tables(tables: PathTables, dt: float, w: int, a: int, force_limit: f
     return _evaluate(tables, np.asarray(path), aggregate, float(dt), (w, a), ok)
 
 
+def path_bands(recon: ReconfigurableDelta, cycle: Cycle, limits: RDriveLimits) -> tuple[int, int]:
+    """(w, a): the speed and acceleration bands in R samples for this robot's R step and the cycle's dt (host)."""
+    return _bands(recon, cycle, limits)
+
+
+def path_optimum(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_tilde", *, w: int, a: int,
+                 force_limit: Any = math.inf, aggregate: str = "integral", boundary: str = "free",
+                 b_v: float = 2.0, b_f: float = 4.2, beta: float = 0.5, start_batch: int = 16
+                 ) -> tuple[Float[Array, ""], Float[Array, ""]]:
+    """The DP's optimal (primary, secondary) score, pure and jit/vmap-able over designs (no path returned).
+
+    What an optimiser needs to score a design in the "R(t) along the cycle" mode: the same DP as
+    :func:`resolve_path` (``-inf`` where no path meets the limits). The bands are static: compute them once with
+    :func:`path_bands` (they depend only on the R step and dt, shared by a population);
+    ``jax.vmap(lambda r: path_optimum(r, cycle, w=w, a=a))(population)``. For ``boundary="closed"`` every start
+    sample is tried (no host filter), ``start_batch`` at a time.
+    """
+    _check_names(criterion, aggregate, boundary)
+    tab = path_tables(recon, cycle, criterion, b_v=b_v, b_f=b_f, beta=beta)
+    dt = cycle.duration / (cycle.n_samples - 1)
+    n = tab.value.shape[1]
+    w = int(min(max(w, 0), n - 1))
+    a = int(min(max(a, 0), 2 * w))
+    args = (tab.value, tab.feasible, tab.force_coef, tab.weights, tab.R_step, dt, force_limit)
+    pm = aggregate == "min"
+    if boundary != "closed":
+        P, S, _ = _dp(*args, 0, w=w, a=a, primary_min=pm, boundary=boundary, backtrack=False)
+        return P, S
+    one = lambda k0: _dp(*args, k0, w=w, a=a, primary_min=pm, boundary="closed", backtrack=False)[:2]  # noqa: E731
+    P, S = jax.lax.map(one, jnp.arange(n), batch_size=start_batch)
+    best = jnp.argmax(jnp.where(P == jnp.max(P), S, -jnp.inf))
+    return P[best], S[best]
+
+
 def pointwise_path(tables: PathTables, aggregate: str = "integral", dt: float = 1.0) -> PathResult:
     """Pointwise resolution along the path: k_j = argmax_k value[j, k] (ties: smallest R); no drive limits.
 
@@ -543,202 +579,6 @@ def fixed_path(tables: PathTables, limits: RDriveLimits, aggregate: str = "integ
     if best < 0:
         return _evaluate(tables, None, aggregate, dt, (0, 0), False)
     return _evaluate(tables, np.full(K, best), aggregate, dt, (0, 0), True)
-
-
-# -- smooth refinement ---------------------------------------------------------------------------------------
-
-def spline_basis(t: np.ndarray, T: float, n_ctrl: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
-    """Uniform cubic B-spline basis on [0, T] with ``n_ctrl`` control points: (B, B', B'') at times t, and h.
-
-    The knot spacing is h = T / (n_ctrl - 3); R(t) = B c, Rdot = B' c, Rddot = B'' c (rows = samples).
-    """
-    if n_ctrl < 4:
-        raise ValueError(f"n_ctrl must be >= 4, got {n_ctrl!r}")
-    h = T / (n_ctrl - 3)
-    t = np.asarray(t, float)
-    seg = np.clip(np.floor(t / h).astype(int), 0, n_ctrl - 4)
-    u = t / h - seg
-    # uniform cubic B-spline blending functions and their derivatives in u
-    b = np.stack([(1 - u) ** 3, 3 * u ** 3 - 6 * u ** 2 + 4, -3 * u ** 3 + 3 * u ** 2 + 3 * u + 1, u ** 3], -1) / 6
-    db = np.stack([-3 * (1 - u) ** 2, 9 * u ** 2 - 12 * u, -9 * u ** 2 + 6 * u + 3, 3 * u ** 2], -1) / 6
-    ddb = np.stack([6 * (1 - u), 18 * u - 12, -18 * u + 6, 6 * u], -1) / 6
-    n = t.shape[0]
-    B, B1, B2 = (np.zeros((n, n_ctrl)) for _ in range(3))
-    for i in range(4):
-        np.add.at(B, (np.arange(n), seg + i), b[:, i])
-        np.add.at(B1, (np.arange(n), seg + i), db[:, i] / h)
-        np.add.at(B2, (np.arange(n), seg + i), ddb[:, i] / (h * h))
-    return B, B1, B2, h
-
-
-class RefineResult(NamedTuple):
-    """Outcome of :func:`refine_path`.
-
-    Attributes:
-        accepted: the spline beat the DP's exact criterion with every constraint satisfied.
-        R, R_dot, R_ddot, value, force_R: (K,) the returned profile (the spline if accepted, else the DP's).
-        score: (primary, secondary) of the returned profile.
-        dp_score: the DP's score.
-        spline_score: best feasible spline iterate's score (-inf if none was feasible).
-        ctrl: (n_ctrl,) control points of the best feasible iterate (NaN if none).
-        reason: why it was or was not accepted.
-    """
-
-    accepted: bool
-    R: np.ndarray
-    R_dot: np.ndarray
-    R_ddot: np.ndarray
-    value: np.ndarray
-    force_R: np.ndarray
-    score: tuple
-    dp_score: tuple
-    spline_score: tuple
-    ctrl: np.ndarray
-    reason: str
-
-
-def refine_path(recon: ReconfigurableDelta, cycle: Cycle, dp: PathResult, criterion: str = "k_tilde", *,
-                limits: RDriveLimits = RDriveLimits(), aggregate: str = "integral", boundary: str = "free",
-                n_ctrl: int = 12, steps: int = 200, learning_rate: float = 2e-4, softmin_scale: float = 0.01,
-                penalty: float = 1e4, margin: float = 0.02, b_v: float = 2.0, b_f: float = 4.2,
-                beta: float = 0.5) -> RefineResult:
-    """Smooth refinement of a DP solution: optax Adam on a cubic B-spline R(t) (see the module docstring).
-
-    Args:
-        recon, cycle, criterion, limits, aggregate, b_v, b_f, beta: as in :func:`resolve_path`.
-        dp: the DP's :class:`PathResult` (its ``ok`` must be True).
-        boundary: ``"rest"``/``"closed"`` add Rdot = 0 at the ends (and R(0) = R(T)) as penalties and checks.
-        n_ctrl: control points; steps, learning_rate (m per step scale): Adam settings.
-        softmin_scale: temperature of the soft-min surrogate for aggregate "min" (index units).
-        penalty: weight of the quadratic constraint penalties (relative violations).
-        margin: the penalties aim at limits * (1 - margin) so that iterates end strictly inside.
-
-    Returns:
-        :class:`RefineResult`.
-    """
-    import optax
-
-    _check_names(criterion, aggregate, boundary)
-    if not dp.ok:
-        raise ValueError("refine_path needs a feasible DP solution (dp.ok is False)")
-    robot = recon.robot
-    x, xd, xdd = cycle.rates()
-    dtype = x.dtype
-    T = float(cycle.duration)
-    t = np.asarray(cycle.time())
-    K = t.shape[0]
-    B, B1, B2, h = spline_basis(t, T, n_ctrl)
-    c0 = np.linalg.lstsq(B, np.asarray(dp.R), rcond=None)[0]
-    Bj, B1j, B2j = (jnp.asarray(M, dtype) for M in (B, B1, B2))
-    wts = _trapezoid_weights(K, T / (K - 1), dtype)
-    Rlo, Rhi = float(recon.R_min), float(recon.R_max)
-    sp, ac, fm = float(limits.speed), float(limits.acceleration), float(limits.force)
-    pm = aggregate == "min"
-
-    def profile(c):
-        return Bj @ c, B1j @ c, B2j @ c
-
-    def evaluate(c):
-        R, Rd, Rdd = profile(c)
-        feas, val = jax.vmap(lambda p, r: _criterion_at(robot, p, r, criterion, b_v, b_f, beta))(x, R)
-        F, _, okd = _forces(robot, cycle, x, xd, xdd, R, Rd, Rdd)
-        return R, Rd, Rdd, feas & okd, val, F
-
-    def viol(c, scale):
-        R, Rd, Rdd, feas, val, F = evaluate(c)
-        dc1 = jnp.abs(jnp.diff(c)) / h
-        dc2 = jnp.abs(jnp.diff(c, 2)) / (h * h)
-        terms = [jnp.sum(jnp.maximum(Rlo - c, 0.0) ** 2 + jnp.maximum(c - Rhi, 0.0) ** 2) / recon.R_step ** 2]
-        if math.isfinite(sp):
-            terms.append(jnp.sum(jnp.maximum(dc1 - sp * scale, 0.0) ** 2) / sp ** 2)
-        if math.isfinite(ac):
-            terms.append(jnp.sum(jnp.maximum(dc2 - ac * scale, 0.0) ** 2) / ac ** 2)
-        if math.isfinite(fm):
-            Fs = jnp.where(feas, F, 0.0)
-            terms.append(jnp.sum(jnp.maximum(jnp.abs(Fs) - fm * scale, 0.0) ** 2) / fm ** 2)
-        if boundary in ("rest", "closed"):
-            terms.append((Rd[0] ** 2 + Rd[-1] ** 2) / max(sp if math.isfinite(sp) else 1.0, 1e-12) ** 2)
-        if boundary == "closed":
-            terms.append((R[-1] - R[0]) ** 2 / recon.R_step ** 2)
-        return sum(terms), (R, Rd, Rdd, feas, val, F)
-
-    def loss(c):
-        pen, (R, Rd, Rdd, feas, val, F) = viol(c, 1.0 - margin)
-        v = jnp.where(feas, val, -1.0)
-        if pm:
-            obj = -softmin_scale * jax.nn.logsumexp(-v / softmin_scale)
-        else:
-            obj = jnp.sum(wts * v) / T
-        return -obj + penalty * pen
-
-    def exact(c):
-        """(feasible, primary, secondary) with the hard checks: range, bounds on rates, force, boundary."""
-        R, Rd, Rdd, feas, val, F = evaluate(c)
-        ok = jnp.all(feas) & jnp.all(c >= Rlo) & jnp.all(c <= Rhi)
-        ok = ok & jnp.all(jnp.abs(jnp.diff(c)) / h <= sp) & jnp.all(jnp.abs(jnp.diff(c, 2)) / (h * h) <= ac)
-        ok = ok & jnp.all(jnp.abs(F) <= fm)
-        if boundary in ("rest", "closed"):
-            ok = ok & (jnp.abs(Rd[0]) <= 1e-9) & (jnp.abs(Rd[-1]) <= 1e-9)
-        if boundary == "closed":
-            ok = ok & (jnp.abs(R[-1] - R[0]) <= 1e-12)
-        vv = jnp.where(feas, val, 0.0)
-        integral, mn = jnp.sum(wts * vv), jnp.min(vv)
-        p, s = (mn, integral) if pm else (integral, mn)
-        neg = -jnp.inf
-        return ok, jnp.where(ok, p, neg), jnp.where(ok, s, neg)
-
-    opt = optax.adam(learning_rate)
-
-    def project(c):
-        c = jnp.clip(c, Rlo, Rhi)
-        if boundary == "rest":
-            # Rdot(0) = (c2 - c0) / 2h for the uniform cubic B-spline: c0 = c2 (and c_{n-1} = c_{n-3}) makes it 0
-            c = c.at[0].set(c[2]).at[-1].set(c[-3])
-        elif boundary == "closed":
-            # and R(T) = R(0): the last three control points mirror the first three
-            c = c.at[0].set(c[2])
-            c = c.at[-1].set(c[2]).at[-2].set(c[1]).at[-3].set(c[2])
-        return c
-
-    @jax.jit
-    def run(c):
-        st = opt.init(c)
-        ok, p, s = exact(c)
-        best = (jnp.where(ok, c, jnp.nan * c), p, s)
-
-        def body(carry, _):
-            c, st, best = carry
-            g = jax.grad(loss)(c)
-            g = jnp.where(jnp.isfinite(g), g, 0.0)
-            upd, st = opt.update(g, st, c)
-            c = project(optax.apply_updates(c, upd))
-            ok, p, s = exact(c)
-            better = ok & _lex_better(p, s, best[1], best[2])
-            best = jax.tree.map(lambda new, old: jnp.where(better, new, old), (c, p, s), best)
-            return (c, st, best), None
-
-        (_, _, best), _ = jax.lax.scan(body, (c, st, best), None, length=steps)
-        return best
-
-    c_init = project(jnp.asarray(c0, dtype))
-    # start inside the rate limits: shrink the fit toward its mean (scales every difference, stays in range)
-    lam = 1.0
-    cc = np.asarray(c_init)
-    for lim_v, d in ((sp, np.abs(np.diff(cc)) / h), (ac, np.abs(np.diff(cc, 2)) / (h * h))):
-        if math.isfinite(lim_v) and d.size and d.max() > lim_v * (1 - margin):
-            lam = min(lam, lim_v * (1 - margin) / d.max())
-    c_init = project(jnp.asarray(cc.mean() + lam * (cc - cc.mean()), dtype))
-    c_best, p_best, s_best = run(c_init)
-    spline_score = (float(p_best), float(s_best))
-    dp_score = tuple(float(v) for v in dp.score)
-    if np.isfinite(spline_score[0]) and spline_score > dp_score:
-        R, Rd, Rdd, feas, val, F = (np.asarray(a) for a in evaluate(c_best))
-        return RefineResult(True, R, Rd, Rdd, val, F, spline_score, dp_score, spline_score, np.asarray(c_best),
-                            "spline improves the exact criterion and meets every constraint")
-    reason = ("no spline iterate met every constraint" if not np.isfinite(spline_score[0])
-              else f"spline score {spline_score[0]:.6g} does not beat the DP's {dp_score[0]:.6g}")
-    return RefineResult(False, np.asarray(dp.R), np.asarray(dp.R_dot), np.asarray(dp.R_ddot), np.asarray(dp.value),
-                        np.asarray(dp.force_R), dp_score, dp_score, spline_score, np.asarray(c_best), reason)
 
 
 # -- tasks ---------------------------------------------------------------------------------------------------

@@ -137,3 +137,18 @@ def test_drive_profile_along_R():
     assert bool(jnp.all(dp.ok))
     np.testing.assert_allclose(np.asarray(dp.q_dot * dp.ratio), 0.2, rtol=1e-12)
     assert dj.mechanism.MECHANISMS["screw_linkage"] is example_screw_linkage
+
+
+def test_reconfiguration_drive_reports_motor_torque_along_R():
+    robot = dj.presets.franco2026(fixed_R=0.2, with_mass=True)
+    cyc = dj.trajectory.with_R_profile(
+        dj.trajectory.point_to_point([-0.05, 0.0, 0.38], [0.05, 0.02, 0.42], duration=0.5, n_samples=21), 0.20, 0.26)
+    prof, drv = dj.reconfiguration_drive(robot, cyc, MECH)
+    assert bool(jnp.all(prof.ok)) and bool(jnp.all(drv.ok))
+    # virtual work: motor power = F_R Rdot / eta while driving, * eta_back when back-driven
+    p_motor = np.asarray(drv.effort * drv.q_dot)
+    p_load = np.asarray(prof.force_R * prof.R_dot)
+    eta = np.where(p_load >= 0, 1 / float(MECH.efficiency), float(MECH.back_efficiency))
+    np.testing.assert_allclose(p_motor, p_load * eta, rtol=1e-10, atol=1e-12)
+    with pytest.raises(ValueError, match="cycle.R is None"):
+        dj.reconfiguration_drive(robot, dj.trajectory.point_to_point([0, 0, 0.4], [0.01, 0, 0.4]), MECH)

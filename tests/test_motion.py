@@ -51,6 +51,7 @@ def _random_tables(seed, K=5, n=4):
                          weights=jnp.asarray(np.r_[0.5, np.ones(K - 2), 0.5] * 0.25), R_step=jnp.asarray(0.01))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", range(2))
 def test_dp_equals_brute_force_on_random_tables(seed):
     tab = _random_tables(seed)
@@ -79,6 +80,7 @@ def tiny():
     return recon, cyc, tab
 
 
+@pytest.mark.slow
 def test_robot_instance_exact_limits_and_baselines(tiny):
     recon, cyc, tab = tiny
     dt = 0.1
@@ -97,6 +99,7 @@ def test_robot_instance_exact_limits_and_baselines(tiny):
     assert res.bands == (recon.n_R - 1, 2 * (recon.n_R - 1))   # unlimited drive
 
 
+@pytest.mark.slow
 def test_pointwise_equals_workspace_resolver(tiny):
     recon, cyc, tab = tiny
     pw = dj.pointwise_path(tab, dt=0.1)
@@ -106,6 +109,7 @@ def test_pointwise_equals_workspace_resolver(tiny):
     np.testing.assert_allclose(pw.R, np.asarray(ref.R), rtol=0, atol=1e-15)
 
 
+@pytest.mark.slow
 def test_force_is_exactly_quadratic_in_Rdot_and_affine_in_Rddot(tiny):
     recon, cyc, tab = tiny
     x, xd, xdd = cyc.rates()
@@ -162,3 +166,21 @@ def test_refinement_accepts_only_improvements_within_limits():
     # the exact criterion of the returned profile is the reported score
     vals = [float(getattr(dj.point_indices(recon.at(r), p)[1], "k_tilde")) for r, p in zip(ref.R, np.asarray(cyc.x))]
     np.testing.assert_allclose(vals, ref.value, rtol=1e-12)
+
+
+@pytest.mark.slow
+def test_path_optimum_is_vmappable_over_designs(tiny):
+    recon, cyc, _ = tiny
+    lim = dj.RDriveLimits(speed=0.45, acceleration=4.5, force=40.0)
+    w, a = mo.path_bands(recon, cyc, lim)
+    designs = [recon, jax.tree.map(lambda x: x, recon)]
+    designs[1] = ReconfigurableDelta(robot=recon.robot.__class__(**{**{f: getattr(recon.robot, f) for f in (
+        "base_radius", "platform_radius", "upper_arm", "theta_min", "theta_max", "mass")}, "forearm": 0.42}),
+        R_min=recon.R_min, R_step=recon.R_step, n_R=recon.n_R)
+    pop = jax.tree.map(lambda *xs: jnp.stack(xs), *designs)
+    for boundary in ("rest", "closed"):
+        P, S = jax.jit(jax.vmap(lambda r: mo.path_optimum(r, cyc, "sigma_min_v", w=w, a=a, force_limit=40.0,
+                                                          boundary=boundary)))(pop)
+        for i, d in enumerate(designs):
+            ref = dj.resolve_path(d, cyc, "sigma_min_v", limits=lim, boundary=boundary)
+            assert (float(P[i]), float(S[i])) == pytest.approx(ref.score, rel=1e-12)

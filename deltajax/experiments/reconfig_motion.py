@@ -39,6 +39,7 @@ from ..dynamics import Limits, cycle_metrics, cycle_profile
 from ..geometry import GeometryError, ReconfigurableDelta
 from ..indices import INDEX_NAMES
 from ..mechanism import MECHANISMS, DirectRadial, drive_profile, example_screw_linkage
+from ..motion_refine import refine_path
 
 METHODS = ("fixed", "pointwise", "path_dp", "path_refined")
 SUMMARY = (("mean_value", "1"), ("min_value", "1"), ("max_abs_R_dot", "m/s"), ("max_abs_R_ddot", "m/s^2"),
@@ -247,7 +248,6 @@ def run(ctx) -> None:
     kw = dict(b_v=s["b_v"], b_f=s["b_f"], beta=s["beta"])
     tables_jit = jax.jit(mo.path_tables, static_argnames=("criterion",))
     lim = s["drive"]
-    table_rows = []
     for name, (cyc, boundary) in s["cases"].items():
         t0 = time.perf_counter()
         c0 = time.process_time()
@@ -261,7 +261,7 @@ def run(ctx) -> None:
         if not dp.ok:
             raise RuntimeError(f"case {name!r}: no R(t) meets the drive limits {lim} on this path (bands {dp.bands})")
         if s["refine"]["enabled"]:
-            rf = mo.refine_path(recon, cyc, dp, s["criterion"], limits=lim, aggregate=s["aggregate"],
+            rf = refine_path(recon, cyc, dp, s["criterion"], limits=lim, aggregate=s["aggregate"],
                                 boundary=boundary, n_ctrl=s["refine"]["n_ctrl"], steps=s["refine"]["steps"],
                                 learning_rate=s["refine"]["learning_rate"], **kw)
         else:
@@ -304,9 +304,10 @@ def run(ctx) -> None:
         for key, unit in SUMMARY:
             res.put(f"{g}/summary", key, np.asarray([rows[m][key] for m in present], float), units=unit,
                     dims=("method",))
-        attrs = dict(boundary=boundary, criterion=s["criterion"], aggregate=s["aggregate"], duration=float(cyc.duration),
-                     n_samples=int(cyc.n_samples), R_step=float(recon.R_step), band_speed=dp.bands[0],
-                     band_acceleration=dp.bands[1], dp_score=list(dp.score), wall_s=wall, cpu_s=cpu, dp_wall_s=t_dp,
+        attrs = dict(boundary=boundary, criterion=s["criterion"], aggregate=s["aggregate"],
+                     duration=float(cyc.duration), n_samples=int(cyc.n_samples), R_step=float(recon.R_step),
+                     band_speed=dp.bands[0], band_acceleration=dp.bands[1], dp_score=list(dp.score), wall_s=wall,
+                     cpu_s=cpu, dp_wall_s=t_dp,
                      drive_speed=float(lim.speed), drive_acceleration=float(lim.acceleration),
                      drive_force=float(lim.force), jump_threshold_m=jump)
         if rf is not None:
@@ -315,19 +316,21 @@ def run(ctx) -> None:
         res.flush()
         for m in present:
             r = rows[m]
-            table_rows.append((name, m, r))
             ctx.log(f"{name:6s} {m:12s} mean {s['criterion']} {r['mean_value']:.4f} min {r['min_value']:.4f} | "
                     f"max|Rdot| {r['max_abs_R_dot']:.3f} m/s max|Rddot| {r['max_abs_R_ddot']:.2f} m/s^2 "
                     f"max|F_R| {r['max_abs_force_R']:.1f} N screw {r['max_abs_screw_torque']:.3f} N m | "
-                    f"jumps {r['n_jumps']} (max {1000 * r['max_jump']:.1f} mm) | arm torque {r['peak_arm_torque']:.2f} N m"
-                    f" | T_min arms {r['cycle_time_arms']:.3f} s, with R drive {r['cycle_time_with_drive']:.3f} s")
-        ctx.log(f"{name}: bands w={dp.bands[0]}, a={dp.bands[1]} samples; DP {t_dp:.1f} s wall; case {wall:.1f} s wall, "
-                f"{cpu:.1f} CPU-s" + (f"; refinement {'accepted' if rf.accepted else 'rejected'}: {rf.reason}"
-                                      if rf is not None else ""))
-        paths = {m: d["R"] for m, d in data.items()}
+                    f"jumps {r['n_jumps']} (max {1000 * r['max_jump']:.1f} mm) | "
+                    f"arm torque {r['peak_arm_torque']:.2f} N m | T_min arms {r['cycle_time_arms']:.3f} s, "
+                    f"with R drive {r['cycle_time_with_drive']:.3f} s")
+        note = "" if rf is None else f"; refinement {'accepted' if rf.accepted else 'rejected'}: {rf.reason}"
+        ctx.log(f"{name}: bands w={dp.bands[0]}, a={dp.bands[1]} samples; DP {t_dp:.1f} s wall; "
+                f"case {wall:.1f} s wall, {cpu:.1f} CPU-s{note}")
+        # a rejected refinement repeats the DP: draw it only when it differs
+        shown = {m: d for m, d in data.items() if m != "path_refined" or (rf is not None and rf.accepted)}
+        paths = {m: d["R"] for m, d in shown.items()}
         _plot_landscape(ctx, name, t, np.asarray(tab.R), np.asarray(tab.value), paths, s["criterion"])
-        _plot_profiles(ctx, name, t, data, s)
-        _plot_torques(ctx, name, t, data)
+        _plot_profiles(ctx, name, t, shown, s)
+        _plot_torques(ctx, name, t, shown)
     if "mech_info" in s:
         res.set_attrs("reconfig_motion", mechanism="screw_linkage",
                       **{f"mechanism_{k}": float(np.asarray(getattr(mech, k))) for k in
