@@ -89,13 +89,19 @@ def _job(run_dir):
     return json.loads((Path(run_dir) / ".hydra" / "job_status.json").read_text())
 
 
-def _slurm_record(cluster, job_id):
-    """SLURM's completion record of a job (jobcomp/filetxt, written by slurmctld) as a dict."""
-    for line in reversed(cluster["jobcomp"].read_text().splitlines()):
-        rec = dict(re.findall(r"(\w+)=(\S*)", line))
-        if rec.get("JobId") == str(job_id):
-            return rec
-    raise AssertionError(f"SLURM has no completion record of job {job_id} in {cluster['jobcomp']}")
+def _slurm_record(cluster, job_id, wait_s=60.0):
+    """SLURM's completion record of a job (jobcomp/filetxt, written by slurmctld) as a dict. The job's result
+    file, which the submitter waits for, is written before the job ends in SLURM: wait for the record."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        text = cluster["jobcomp"].read_text() if cluster["jobcomp"].exists() else ""
+        for line in reversed(text.splitlines()):
+            rec = dict(re.findall(r"(\w+)=(\S*)", line))
+            if rec.get("JobId") == str(job_id):
+                return rec
+        if time.monotonic() > deadline:
+            raise AssertionError(f"SLURM has no completion record of job {job_id} in {cluster['jobcomp']}")
+        time.sleep(0.5)
 
 
 def _rows(sweep):
@@ -233,8 +239,9 @@ def test_mem_gb_is_enforced_and_reported(cluster):
                                  f"hydra.sweep.dir={sweep}"]), "memory sweep", ok=False)
     status = {r["run"]: r["status"] for r in _rows(sweep)}
     assert status["0"] == "ok"
-    assert re.match(r"killed: slurmstepd\S*: error: StepId=\S+ exceeded memory limit \(\d+ > 1073741824\), being killed",
-                    status["1"]), status["1"]
+    # OverMemoryKill (.ci/slurm-up's default) or the cgroup OOM killer (DELTAJAX_SLURM_CGROUP=1)
+    assert re.match(r"killed: slurmstepd\S*: error: (StepId=\S+ exceeded memory limit \(\d+ > 1073741824\), being "
+                    r"killed|Detected \d+ oom-kill event)", status["1"]), status["1"]
     job = _job(sweep / "1")
     rec = _slurm_record(cluster, job["SLURM_JOB_ID"])
     assert "mem=1G" in rec["Tres"] and rec["JobState"] in ("FAILED", "OUT_OF_MEMORY", "CANCELLED"), rec
