@@ -59,7 +59,7 @@ from .kinematics import elbows, forearm_units, ik
 
 __all__ = ["JointModel", "LinkModel", "Motor", "GoodSpec", "JointAngles", "Interference", "DriveLoads",
            "joint_angles", "joint_margin", "segment_distance", "interference", "with_drive", "drive_loads",
-           "min_cycle_time", "picks_per_minute", "good_point", "largest_cylinder", "regular_workspace",
+           "min_cycle_time", "picks_per_minute", "cycle_rate", "CycleRate", "PointCheck", "good_point", "largest_cylinder", "regular_workspace",
            "RegularWorkspace", "polar_grid", "ConstraintError"]
 
 
@@ -370,21 +370,9 @@ def drive_loads(robot: Delta, cycle, motor: Motor, gear_ratio, *, duration=None,
     return _loads_from_unit(a, g, thd, T, jnp.asarray(dwell, a.dtype), motor, jnp.asarray(gear_ratio, a.dtype), ok)
 
 
-def min_cycle_time(robot: Delta, cycle, motor: Motor, gear_ratio, *, dwell=0.0, payload_mass=None,
-                   T_low: float = 1e-3, T_high: float = 60.0, n_iter: int = 60) -> Float[Array, ""]:
-    """Shortest motion time T (s) of ``cycle`` inside the torque-speed envelope and the thermal (RMS) limit.
-
-    Bisection on T over [T_low, T_high] (in log T) with the profile computed once (efforts scale exactly as
-    a / T^2 + g, speeds as 1 / T). Returns ``inf`` when even T_high violates a limit (e.g. the static load
-    alone exceeds the rated torque) and NaN when the cycle is not reachable.
-    """
-    r = with_drive(robot, motor, gear_ratio, payload_mass)
-    a, g, thd, ok = _unit_profile(r, cycle)
-    n = jnp.asarray(gear_ratio, a.dtype)
-    dw = jnp.asarray(dwell, a.dtype)
-
+def _bisect_time(a, g, thd, motor, n, dwell, T_low, T_high, n_iter):
     def feasible(T):
-        L = _loads_from_unit(a, g, thd, T, dw, motor, n, jnp.asarray(True))
+        L = _loads_from_unit(a, g, thd, T, dwell, motor, n, jnp.asarray(True))
         return (L.peak_utilisation <= 1.0) & (L.rms_utilisation <= 1.0)
 
     lo, hi = jnp.log(jnp.asarray(T_low, a.dtype)), jnp.log(jnp.asarray(T_high, a.dtype))
@@ -397,16 +385,49 @@ def min_cycle_time(robot: Delta, cycle, motor: Motor, gear_ratio, *, dwell=0.0, 
 
     l, h = jax.lax.fori_loop(0, n_iter, body, (lo, hi))
     T = jnp.where(feasible(jnp.exp(lo)), jnp.exp(lo), jnp.exp(h))
-    T = jnp.where(feasible(jnp.exp(hi)), T, jnp.inf)
-    return jnp.where(ok, T, jnp.nan)
+    return jnp.where(feasible(jnp.exp(hi)), T, jnp.inf)
+
+
+class CycleRate(NamedTuple):
+    """Fastest cycle of one design within its motors: ``cycle_time`` T_min (s; inf: no T meets the limits,
+    NaN: unreachable), ``picks_per_min`` (1/min; 0 / NaN likewise) and the motor ``loads`` at T_min
+    (at the nominal duration when T_min is not finite)."""
+
+    cycle_time: Float[Array, ""]
+    picks_per_min: Float[Array, ""]
+    loads: DriveLoads
+
+
+def cycle_rate(robot: Delta, cycle, motor: Motor, gear_ratio, *, dwell=0.0, payload_mass=None,
+               T_low: float = 1e-3, T_high: float = 60.0, n_iter: int = 60) -> CycleRate:
+    """Shortest motion time of ``cycle`` inside the torque-speed envelope and the thermal (RMS) limit, the
+    resulting picks per minute (one pick per go-and-back cycle: 60 / (T_min + 2 dwell)) and the loads there.
+
+    Bisection on T over [T_low, T_high] (in log T) with the profile computed once (efforts scale exactly as
+    a / T^2 + g, speeds as 1 / T). Feasibility is checked at the returned T (tested at the edge).
+    """
+    r = with_drive(robot, motor, gear_ratio, payload_mass)
+    a, g, thd, ok = _unit_profile(r, cycle)
+    n = jnp.asarray(gear_ratio, a.dtype)
+    dw = jnp.asarray(dwell, a.dtype)
+    T = jnp.where(ok, _bisect_time(a, g, thd, motor, n, dw, T_low, T_high, n_iter), jnp.nan)
+    ppm = jnp.where(jnp.isfinite(T), 60.0 / (T + 2.0 * dw), jnp.where(jnp.isnan(T), jnp.nan, 0.0))
+    Tl = jnp.where(jnp.isfinite(T), T, cycle.duration)
+    return CycleRate(cycle_time=T, picks_per_min=ppm, loads=_loads_from_unit(a, g, thd, Tl, dw, motor, n, ok))
+
+
+def min_cycle_time(robot: Delta, cycle, motor: Motor, gear_ratio, *, dwell=0.0, payload_mass=None,
+                   **kw) -> Float[Array, ""]:
+    """T_min of :func:`cycle_rate` (s): inf when even the longest time violates a limit (e.g. the static load
+    alone exceeds the rated torque), NaN when the cycle is not reachable."""
+    return cycle_rate(robot, cycle, motor, gear_ratio, dwell=dwell, payload_mass=payload_mass, **kw).cycle_time
 
 
 def picks_per_minute(robot: Delta, cycle, motor: Motor, gear_ratio, *, dwell=0.0, payload_mass=None,
                      **kw) -> Float[Array, ""]:
-    """Cycle rate (picks/min) on a go-and-back cycle, one pick per cycle: 60 / (T_min + 2 dwell);
-    0 when no motion time meets the limits, NaN when the cycle is unreachable."""
-    T = min_cycle_time(robot, cycle, motor, gear_ratio, dwell=dwell, payload_mass=payload_mass, **kw)
-    return jnp.where(jnp.isfinite(T), 60.0 / (T + 2.0 * dwell), jnp.where(jnp.isnan(T), jnp.nan, 0.0))
+    """Cycle rate (picks/min) of :func:`cycle_rate`: 0 when no motion time meets the limits, NaN when the
+    cycle is unreachable."""
+    return cycle_rate(robot, cycle, motor, gear_ratio, dwell=dwell, payload_mass=payload_mass, **kw).picks_per_min
 
 
 # -- good and regular workspace --------------------------------------------------------------------------------
