@@ -146,17 +146,20 @@ def test_drive_loads_against_an_independent_computation(n, T, dwell, payload):
 
 def test_min_cycle_time_is_the_feasibility_edge():
     cyc = dj.adept_cycle((0, 0, 0.4), n_samples=61)
+    rate = jax.jit(lambda n, dwell, payload: C.cycle_rate(ROBOT, cyc, MOTOR, n, dwell=dwell, payload_mass=payload))
+    loads = jax.jit(lambda T, n, dwell, payload: C.drive_loads(ROBOT, cyc, MOTOR, n, duration=T, dwell=dwell,
+                                                               payload_mass=payload))
     for n, dwell, payload in [(20.0, 0.0, 0.5), (8.0, 0.2, 2.0)]:
-        T = float(C.min_cycle_time(ROBOT, cyc, MOTOR, n, dwell=dwell, payload_mass=payload))
+        r = rate(n, dwell, payload)
+        T = float(r.cycle_time)
         assert 0.05 < T < 5
 
         def util(TT):
-            L = C.drive_loads(ROBOT, cyc, MOTOR, n, duration=TT, dwell=dwell, payload_mass=payload)
+            L = loads(TT, n, dwell, payload)
             return max(float(L.peak_utilisation), float(L.rms_utilisation))
 
         assert util(T) <= 1.0 + 1e-9 < util(0.995 * T)  # exp(log T) rounding
-        ppm = float(C.picks_per_minute(ROBOT, cyc, MOTOR, n, dwell=dwell, payload_mass=payload))
-        np.testing.assert_allclose(ppm, 60.0 / (T + 2 * dwell), rtol=1e-12)
+        np.testing.assert_allclose(float(r.picks_per_minute), 60.0 / (T + 2 * dwell), rtol=1e-12)
     weak = C.Motor(peak_torque=0.05, rated_torque=0.01, max_speed=600.0, corner_speed=600.0)
     assert float(C.picks_per_minute(ROBOT, cyc, weak, 5.0)) == 0.0  # cannot even hold the arm
     far = dj.adept_cycle((0, 0, 0.9), n_samples=11)

@@ -126,6 +126,7 @@ def test_pareto_disabled_runs_end_to_end(tmp_path):
     assert data["summary"]["attrs"]["recommended"] in ("ga_best", "none")
 
 
+@pytest.mark.slow
 def test_a_different_config_into_a_finished_dir_is_refused(full_run):
     before = full_run.read_bytes()
     with pytest.raises(ConfigError, match="different settings"):
