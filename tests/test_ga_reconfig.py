@@ -71,6 +71,10 @@ def test_toy_run_front_feasible_summary_and_units(full_run, capsys):
     # the summary pairs the recommended design's numbers with its own parameters
     np.testing.assert_array_equal(S["recommended_params"], V["params"][rec])
     np.testing.assert_allclose(S["recommended"][0], V["picks_per_min"][rec])
+    # fixed-R variant: same task at the same R, only the regular workspace differs
+    np.testing.assert_allclose(S["recommended_fixed_R"][0], V["picks_per_min"][rec])
+    np.testing.assert_allclose(S["recommended_fixed_R"][1], V["regular_volume_fixed"][rec])
+    assert S["recommended_fixed_R"][1] <= S["recommended"][1] + 1e-15   # R per point can only add
     assert V["units"]["picks_per_min"] == "1/min" and V["units"]["regular_volume"] == "m^3"
     assert "ga/checkpoint" in {k for k in _datasets(full_run)[1]}
     assert data["attrs"]["ga_reconfig_stages"] == "ga,pareto,verify,results,plots"
@@ -123,7 +127,7 @@ def test_pareto_disabled_runs_end_to_end(tmp_path):
     assert "pareto" not in data
     names = list(data["verify"]["design_name"])
     assert names == ["baseline", "ga_best"]
-    assert data["summary"]["attrs"]["recommended"] in ("ga_best", "none")
+    assert data["summary"]["attrs"]["recommended"] in ("ga_best", "baseline", "none")
 
 
 @pytest.mark.slow

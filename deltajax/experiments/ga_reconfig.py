@@ -18,8 +18,8 @@ Stages (each checkpointed in ``results.h5`` or recomputed deterministically; a r
 1. **baseline**: the franco2026 design with the configured motor and gear ratio.
 2. **ga**: evosax GA on the primary objective (feasibility first), checkpointed every ``checkpoint_every``
    generations (``ga/checkpoint``, kept after every resume) and resumed bit-identically after a kill.
-3. **pareto**: NSGA-II (pymoo) over the objectives, every point feasible, seeded with the baseline and the
-   GA's best; hypervolume against a stated reference.
+3. **pareto**: NSGA-II (pymoo) over the objectives, every point feasible, seeded with the baseline, the
+   GA's best and the GA's last population; hypervolume against a stated reference.
 4. **verify**: every front point, the baseline and the GA best re-evaluated on the fine grids (task, cycle,
    regular workspace, R samples); the recommendation is the knee of the verified-feasible front (or the best
    on the primary objective), reported with its fixed-R variant (R frozen at its operating R).
@@ -614,10 +614,11 @@ def run(ctx) -> None:
 
     # (3) Pareto front (NSGA-II) --------------------------------------------------------------------------------
     ref = np.where(sense < 0, 0.0, s.pareto["ref_min_factor"])         # in normalised objective space
-    front_X = None
+    front_X, extra_X = None, np.zeros((0, space.dim))
     if s.pareto["enabled"]:
         if "pareto" in done:
             front_X = np.asarray(load(path)["pareto"]["genes"])
+            extra_X = np.asarray(load(path)["pareto"]["population_feasible_genes"]).reshape(-1, space.dim)
             ctx.log(f"Pareto stage already finished: {len(front_X)} points")
         else:
             def pareto_eval(X):
@@ -628,9 +629,17 @@ def run(ctx) -> None:
             pbar = ctx.progress(total=s.pareto["generations"], desc="NSGA-II")
             front = nsga2(pareto_eval, space.dim, len(objs), n_constr=len(CONSTRAINT_NAMES),
                           pop_size=s.pareto["population_size"], n_gen=s.pareto["generations"], seed=int(ctx.cfg.seed),
-                          initial=np.stack([base_genes, best]), ref=ref, progress=pbar.update)
+                          initial=np.concatenate([base_genes[None], best[None], gres.final_population]),
+                          ref=ref, progress=pbar.update)
             pbar.close()
             front_X = front.X
+            # feasible members of the final population that are not on the search front: more candidates for
+            # the fine-grid verification (a point on a constraint's edge on the coarse grids may fail there)
+            pfeas = np.all(front.pop_G <= 0, axis=1)
+            extra_X = np.asarray([x for x in front.pop_X[pfeas] if not np.any(np.all(front.X == x, axis=1))])
+            res.put("pareto", "population_feasible_genes", extra_X.reshape(-1, space.dim), units="1",
+                    dims=("population_point", "gene"),
+                    attrs={"meaning": "feasible final-population designs off the search front (verified too)"})
             res.put_axis("pareto", "point", np.arange(len(front.X)), units="1")
             res.put_axis("pareto", "gene", np.arange(space.dim), units="1")
             res.put_axis("pareto", "objective", np.arange(len(objs)), units="1")
@@ -650,7 +659,7 @@ def run(ctx) -> None:
         space_v = dataclasses.replace(space, n_R=s.verify["n_R"]) if space.reconfigurable else space
         pv = _problem(s, fine=True)
         ev = jax.jit(jax.vmap(lambda g: evaluate_designer(pv, space_v.decode(g))))
-        cand = [base_genes, best] + ([] if front_X is None else list(front_X))
+        cand = [base_genes, best] + ([] if front_X is None else list(front_X)) + list(extra_X)
         mv = {k: np.asarray(v) for k, v in padded_batch(ev, 8)(np.stack(cand)).items()}
         # objectives normalised by the *verified* baseline (so the baseline alone has hypervolume 1 when all
         # objectives are maximised); the search's coarse baseline where the fine one cannot normalise
@@ -675,7 +684,8 @@ def run(ctx) -> None:
             rec = int(nd[np.argmin(Fv[nd, j_primary])])
         hv = hypervolume(Fv[nd], ref) if len(nd) else 0.0
         hv_base = hypervolume(Fv[:1], ref)
-        names = ["baseline", "ga_best"] + [f"pareto_{i}" for i in range(n_front)]
+        names = (["baseline", "ga_best"] + [f"pareto_{i}" for i in range(n_front)]
+                 + [f"population_{i}" for i in range(len(extra_X))])
         res.put_axis("verify", "design", np.arange(len(cand)), units="1")
         res.put_axis("verify", "gene", np.arange(space.dim), units="1")
         res.put_axis("verify", "constraint", np.arange(len(CONSTRAINT_NAMES)), units="1")
@@ -712,7 +722,8 @@ def run(ctx) -> None:
                             f"{s.verify['rw_n_r']}x{s.verify['rw_n_phi']}, n_R {s.verify['n_R']}, operating-R "
                             f"candidates {s.verify['n_R_operating']}")
         n_bad = n_front - len(ok_front)
-        ctx.log(f"verified on the fine grids: {len(ok_front)} of {n_front} search-front points feasible"
+        ctx.log(f"verified on the fine grids: {len(ok_front)} of {n_front} search-front points and "
+                f"{int(feas[2 + n_front:].sum())} of {len(extra_X)} other feasible population members feasible"
                 + (f" ({n_bad} failed the fine check and were dropped)" if n_bad else "")
                 + f"; verified front (with the GA best and the baseline as candidates): {len(nd)} points, "
                   f"hypervolume {hv:.4g} (baseline alone {hv_base:.4g})")
@@ -730,10 +741,11 @@ def run(ctx) -> None:
     mark("plots")
 
 
-SUMMARY_METRICS = ("picks_per_min", "regular_volume", "regular_diameter", "regular_volume_fixed",
-                   "regular_diameter_fixed", "peak_utilisation", "rms_utilisation", "speed_utilisation",
-                   "task_good_fraction", "task_index_min", "joint_margin_deg", "interference_margin", "cycle_time",
-                   "R_operating", "gear_ratio", "arm_sum")
+SUMMARY_METRICS = ("picks_per_min", "regular_volume", "regular_diameter", "peak_utilisation", "rms_utilisation",
+                   "speed_utilisation", "task_good_fraction", "task_index_min", "joint_margin_deg",
+                   "interference_margin", "cycle_time", "R_operating", "gear_ratio", "arm_sum")
+#: The fixed-R variant (R frozen at the operating R) differs from the reconfigurable design only here.
+FIXED_R_METRIC = {"regular_volume": "regular_volume_fixed", "regular_diameter": "regular_diameter_fixed"}
 
 
 def _summary(ctx, res, data, space, objs, s) -> None:
@@ -758,7 +770,12 @@ def _summary(ctx, res, data, space, objs, s) -> None:
     res.put("summary", "direction", np.asarray(direction, dtype=object), units="1", dims=("metric",))
     for col, i in (("baseline", 0), ("recommended", rec)):
         res.put("summary", col, np.asarray([float(V[m][i]) for m in SUMMARY_METRICS]), units="mixed",
-                dims=("metric",), attrs={"design": names[i], "units_see": "metric_units"})
+                dims=("metric",), attrs={"design": names[i], "units_see": "metric_units",
+                                         "variant": "reconfigurable (R chosen per point for the workspace)"})
+        res.put("summary", f"{col}_fixed_R", np.asarray([float(V[FIXED_R_METRIC.get(m, m)][i])
+                                                         for m in SUMMARY_METRICS]), units="mixed",
+                dims=("metric",), attrs={"design": names[i], "units_see": "metric_units",
+                                         "variant": "fixed R = the operating R chosen for the task"})
     res.put_axis("summary", "parameter", np.arange(space.dim), units="1")
     res.put("summary", "parameter_name", np.asarray(space.names, dtype=object), units="1", dims=("parameter",))
     res.put("summary", "parameter_units", np.asarray([space.units(n) for n in space.names], dtype=object),
@@ -768,7 +785,7 @@ def _summary(ctx, res, data, space, objs, s) -> None:
     res.set_attrs("summary", recommended=names[rec], rule=s.recommend, objectives=",".join(objs),
                   fixed_R_variant="R frozen at the operating R chosen for the task (same constraints); its picks/min "
                                   "and margins equal the reconfigurable design's at that R, its regular workspace is "
-                                  "regular_volume_fixed",
+                                  "the good set at that R alone (base plate as the reconfigurable design's)",
                   evaluation="fine verification grids (group verify)")
 
 
@@ -780,17 +797,20 @@ def _print_summary(ctx, data) -> None:
     units = list(S["metric_units"])
     dirs = list(S["direction"])
     b, r = S["baseline"], S["recommended"]
+    bf, rf = S["baseline_fixed_R"], S["recommended_fixed_R"]
     rec = S["attrs"]["recommended"]
-    ctx.log(f"baseline (franco2026 + motor) vs recommended design ({rec}; fine verification grids):")
-    ctx.log(f"  {'metric':24s} {'units':6s} {'baseline':>10s} {'recommended':>12s} {'change':>8s}  direction")
-    for n, u, d, x, y in zip(names, units, dirs, b, r):
+    ctx.log(f"baseline (franco2026 + motor) vs recommended design ({rec}), fine verification grids; "
+            "reconfigurable (R per point) | fixed R (R frozen at the operating R):")
+    ctx.log(f"  {'metric':20s} {'units':6s} {'baseline':>9s} {'recommended':>11s} {'change':>8s} | "
+            f"{'base fixR':>9s} {'rec fixR':>9s}  direction")
+    for n, u, d, x, y, xf, yf in zip(names, units, dirs, b, r, bf, rf):
         ch = f"{100 * (y - x) / x:+7.1f}%" if np.isfinite(x) and x > 0 and np.isfinite(y) and y > 0 else "     -  "
-        ctx.log(f"  {n:24s} {u:6s} {x:10.4g} {y:12.4g} {ch:>8s}  {d}")
+        ctx.log(f"  {n:20s} {u:6s} {x:9.4g} {y:11.4g} {ch:>8s} | {xf:9.4g} {yf:9.4g}  {d}")
     pn, pu = list(S["parameter_name"]), list(S["parameter_units"])
     ctx.log("  parameters: " + "; ".join(f"{n} [{u}] {x:.4g} -> {y:.4g}" for n, u, x, y in
                                           zip(pn, pu, S["baseline_params"], S["recommended_params"])))
-    ctx.log("  fixed-R variants (R frozen at the operating R): regular_volume_fixed / regular_diameter_fixed rows; "
-            "reconfigurable: regular_volume / regular_diameter (R chosen per point)")
+    ctx.log("  the fixed-R variants run the task at the same R, so only the regular workspace differs: that "
+            "difference is what the R actuator buys")
 
 
 def _plots(ctx, data, objs, s) -> None:
@@ -833,9 +853,12 @@ def _plots(ctx, data, objs, s) -> None:
     uy = "dm^3 (L)" if sy == 1e3 else DESIGN_UNITS[o1]
     fig, ax = plt.subplots(figsize=(6.4, 4.8))
     others = np.setdiff1d(np.arange(2, len(x)), front)
-    if len(others):
-        ax.plot(x[others] * sx, y[others] * sy, "o", mfc="none", color="0.6", ms=5,
-                label="search front, dominated or infeasible on the fine grids")
+    dom, bad = others[feas[others]], others[~feas[others]]
+    if len(dom):
+        ax.plot(x[dom] * sx, y[dom] * sy, "o", mfc="none", color="0.55", ms=5, label="candidates, feasible, dominated")
+    if len(bad):
+        ax.plot(x[bad] * sx, y[bad] * sy, "x", color="0.55", ms=5,
+                label="candidates feasible on the search grids, infeasible on the fine grids")
     if len(front):
         o = front[np.argsort(x[front])]
         ax.step(x[o] * sx, y[o] * sy, "-", where="pre", color="C0", lw=1, alpha=0.6)
