@@ -159,7 +159,7 @@ def test_min_cycle_time_is_the_feasibility_edge():
             return max(float(L.peak_utilisation), float(L.rms_utilisation))
 
         assert util(T) <= 1.0 + 1e-9 < util(0.995 * T)  # exp(log T) rounding
-        np.testing.assert_allclose(float(r.picks_per_minute), 60.0 / (T + 2 * dwell), rtol=1e-12)
+        np.testing.assert_allclose(float(r.picks_per_min), 60.0 / (T + 2 * dwell), rtol=1e-12)
     weak = C.Motor(peak_torque=0.05, rated_torque=0.01, max_speed=600.0, corner_speed=600.0)
     assert float(C.picks_per_minute(ROBOT, cyc, weak, 5.0)) == 0.0  # cannot even hold the arm
     far = dj.adept_cycle((0, 0, 0.9), n_samples=11)
