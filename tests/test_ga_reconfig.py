@@ -169,3 +169,11 @@ def test_knee_point_of_a_convex_front():
     k = knee_point(F)
     assert math.isclose(F[k, 0], 0.25, abs_tol=0.05) and math.isclose(F[k, 1], 0.25, abs_tol=0.05)
     assert knee_point(F[:1]) == 0
+
+
+@pytest.mark.slow
+def test_weighted_mode_runs_and_says_so(tmp_path, capsys):
+    p = run_experiment("ga_reconfig", TOY + ["experiment.objectives.mode=weighted", "experiment.pareto.enabled=false"],
+                       run_dir=tmp_path)
+    assert "weighted sum 1 x picks_per_min + 1 x regular_volume" in capsys.readouterr().out
+    assert "weighted sum" in load(p)["ga"]["attrs"]["objective"]
