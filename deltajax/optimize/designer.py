@@ -33,7 +33,6 @@ reachable and runnable: a NaN or zero rate counts as a full violation), size bud
 from __future__ import annotations
 
 import dataclasses
-import math
 from typing import Any, Mapping, Optional, Sequence
 
 import jax
