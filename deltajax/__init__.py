@@ -18,6 +18,9 @@ from . import dynamics, trajectory
 from .dynamics import CycleMetrics, Limits, Torques, cycle_metrics, cycle_profile, inverse_dynamics
 from .mass import MassModel
 from .trajectory import Cycle, adept_cycle, ga_paper_motion
+from . import constraints
+from .constraints import (GoodSpec, JointModel, LinkModel, Motor, drive_loads, good_point, interference,
+                          joint_angles, picks_per_minute, regular_workspace)
 from . import optimize
 from . import workspace
 from .optimize import DesignSpace, GAConfig, Problem, nsga2, refine, run_ga

@@ -8,7 +8,8 @@ Measures, in one process (compile time reported separately from warm time):
 1. *Kernel throughput*: one population of reconfigurable designs evaluated on the workspace quadrature:
    designs x workspace points x R samples (IK within joint limits, R chosen per point) per second, and the
    same for the fixed-R volume (designs x points) as the in-process baseline (ratio printed).
-2. *Design throughput* of the GA fitness used by ``experiment=ga_reconfig`` (workspace volume with R per
+2. *Design throughput* of the weighted-sum fitness of :class:`deltajax.optimize.Problem` (the main job's
+   objective before it became the designer's problem of ``deltajax.optimize.designer``; workspace volume with R per
    point + peak torque on the pick-and-place cycle + end-effector speed + task-cylinder constraint):
    designs per second.
 3. *A full GA run*: population x generations with that fitness (``run_ga``; checkpoints off), wall time

@@ -14,6 +14,8 @@ from .design import PARAMETERS, DesignSpace, DesignSpaceError, reflect_unit
 from .ga import ALGORITHMS, GAConfig, GAError, GAResult, make_strategy, run_ga
 from .objectives import (INFEASIBLE_OFFSET, METRIC_UNITS, METRICS, SENSE, ObjectiveError, Problem, evaluate_design,
                          evaluate_population, fitness_from_metrics, make_fitness, soft_margin, soft_membership)
+from .designer import (CONSTRAINT_NAMES, DESIGN_METRICS, DESIGN_SENSE, DESIGN_UNITS, OBJECTIVES, DesignerProblem,
+                       evaluate_designer, knee_point)
 from .pareto import ParetoResult, hypervolume, non_dominated, nsga2, zdt, zdt_front
 from .refine import RefineResult, refine
 
@@ -24,4 +26,6 @@ __all__ = [
     "evaluate_population", "fitness_from_metrics", "make_fitness", "soft_margin", "soft_membership",
     "ParetoResult", "hypervolume", "non_dominated", "nsga2", "zdt", "zdt_front",
     "RefineResult", "refine",
+    "CONSTRAINT_NAMES", "DESIGN_METRICS", "DESIGN_SENSE", "DESIGN_UNITS", "OBJECTIVES", "DesignerProblem",
+    "evaluate_designer", "knee_point",
 ]

@@ -18,6 +18,7 @@ name                    meaning                                             unit
 ``forearm``             L2                                                   m
 ``theta_min_deg``       lower joint limit                                    deg
 ``theta_max_deg``       upper joint limit                                    deg
+``gear_ratio``          gearbox ratio n (motor speed / arm speed)            1
 ======================  ==================================================  ======
 
 Bounds are validated when the space is built (outside jit): lo < hi, positive lengths, and ranges that
@@ -53,6 +54,7 @@ PARAMETERS = {
     "forearm": "m",
     "theta_min_deg": "deg",
     "theta_max_deg": "deg",
+    "gear_ratio": "1",
 }
 _LENGTHS = ("base_radius", "R_min", "R_max", "upper_arm", "forearm")
 
@@ -136,6 +138,10 @@ class DesignSpace:
                 raise DesignSpaceError(f"{prefix}.{name} must be finite with lo < hi, got [{a!r}, {c!r}]")
             if name in _LENGTHS and a <= 0:
                 raise DesignSpaceError(f"{prefix}.{name}: lengths must be > 0 m, got lower bound {a!r}")
+            if name == "gear_ratio" and a <= 0:
+                raise DesignSpaceError(f"{prefix}.{name}: must be > 0, got lower bound {a!r}")
+            if name == "gear_ratio" and getattr(baseline.robot if recon else baseline, "mass", None) is None:
+                raise DesignSpaceError(f"{prefix}.gear_ratio: the baseline robot has no mass model (robot.mass)")
             if name == "platform_radius" and a < 0:
                 raise DesignSpaceError(f"{prefix}.{name}: must be >= 0 m, got lower bound {a!r}")
             names.append(name)
@@ -185,6 +191,8 @@ class DesignSpace:
             return float(self.baseline.R_min)
         if name == "R_max":
             return float(self.baseline.R_max)
+        if name == "gear_ratio":
+            return float(b.mass.gear_ratio)
         if name.endswith("_deg"):
             return math.degrees(float(getattr(b, name[:-4])))
         return float(getattr(b, name))
@@ -237,6 +245,10 @@ class DesignSpace:
                   theta_min=jnp.deg2rad(get("theta_min_deg")) if "theta_min_deg" in v else b.theta_min.astype(dt),
                   theta_max=jnp.deg2rad(get("theta_max_deg")) if "theta_max_deg" in v else b.theta_max.astype(dt))
         mass = _scale_mass(b.mass, kw["upper_arm"] / b.upper_arm, kw["forearm"] / b.forearm)
+        if "gear_ratio" in v:
+            import equinox as eqx
+
+            mass = eqx.tree_at(lambda m: m.gear_ratio, mass, v["gear_ratio"])
         if not self.reconfigurable:
             R = get("base_radius")
             return Delta(base_radius=R, mass=mass, **kw)

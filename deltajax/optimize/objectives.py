@@ -161,7 +161,8 @@ class Problem:
         """Build from the experiment config (``workspace``, ``task``, ``cycle``, ``objectives``, ``constraints``).
 
         Args:
-            cfg: mapping with those sub-mappings (see ``configs/experiment/ga_reconfig.yaml``).
+            cfg: mapping with those sub-mappings (the weighted-sum problem of ``experiments/bench_ga.py``; the
+                main job's designer problem is :mod:`deltajax.optimize.designer`).
             r_max, z_max: extent of the workspace quadrature (m), from the design bounds.
         """
         def sub(name):

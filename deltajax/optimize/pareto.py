@@ -30,6 +30,8 @@ class ParetoResult:
         G: their constraint values (n, c) (<= 0: feasible), or an empty (n, 0) array.
         history_hv: hypervolume of the current front after each generation (``ref`` given) else empty.
         n_evals: number of evaluations.
+        pop_X, pop_F, pop_G: the final population (feasible or not, dominated or not), e.g. to re-verify more
+            candidates than the front on a finer model.
     """
 
     X: np.ndarray
@@ -37,6 +39,9 @@ class ParetoResult:
     G: np.ndarray
     history_hv: np.ndarray
     n_evals: int
+    pop_X: Optional[np.ndarray] = None
+    pop_F: Optional[np.ndarray] = None
+    pop_G: Optional[np.ndarray] = None
 
 
 def hypervolume(F: np.ndarray, ref: np.ndarray) -> float:
@@ -147,7 +152,10 @@ def nsga2(eval_fn: Callable[[np.ndarray], tuple[np.ndarray, Optional[np.ndarray]
         feas = np.all(G <= 0, axis=1)
         X, F, G = X[feas], F[feas], G[feas]
     order = np.lexsort(F.T[::-1]) if len(F) else np.zeros((0,), int)
-    return ParetoResult(X=X[order], F=F[order], G=G[order], history_hv=np.asarray(hv_hist), n_evals=n_evals)
+    pop = algorithm.pop
+    pG = pop.get("G") if n_constr else np.zeros((len(pop), 0))
+    return ParetoResult(X=X[order], F=F[order], G=G[order], history_hv=np.asarray(hv_hist), n_evals=n_evals,
+                        pop_X=np.asarray(pop.get("X")), pop_F=np.asarray(pop.get("F")), pop_G=np.asarray(pG))
 
 
 # -- ZDT test problems (Zitzler, Deb, Thiele 2000), in JAX, for validation -----------------------------------

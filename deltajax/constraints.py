@@ -1,0 +1,530 @@
+"""Constraints a Delta designer checks, as pure functions of one design and one configuration (vmap to batch).
+
+Every function here is built on the public core (:func:`deltajax.ik`, :func:`deltajax.elbows`,
+:func:`deltajax.forearm_units`, :func:`deltajax.point_indices`, :func:`deltajax.cycle_profile`) and returns
+*margins*: a signed number that is >= 0 when the constraint holds, in the units of the quantity (rad, m, or
+a utilisation ratio). A margin can be used as a constraint (``margin >= 0``) or as an objective (maximise it).
+Unreachable configurations give NaN margins (failure as data; a NaN margin never counts as satisfied).
+
+Models (explicit, documented; all frames: base frame, z down, chain i at angle 2 pi i / 3, SPEC §1):
+
+* **Passive joints** (:class:`JointModel`). ``kind="ball"``: a spherical joint at each end of every forearm
+  (the parallelogram as one rod) whose socket allows a *cone* of half-angle ``limit`` around a neutral axis
+  fixed in the body that carries it. Elbow: the neutral axis lies in the chain's vertical plane at angle
+  ``elbow_neutral`` from the upper arm's direction (rotating with the arm), so the elbow cone angle is
+  ``acos(u . n_e)`` with ``n_e = (cos(th1 + phi_e), 0, sin(th1 + phi_e))`` in the chain frame.
+  Platform: the neutral axis (from C_i toward B_i) lies in the chain's plane, tilted ``platform_neutral`` from
+  the upward vertical toward the base joint (the platform translates, so the axis is fixed), and the cone
+  angle is ``acos(-u . n_p)``. ``kind="universal"``: a universal joint at each end with its first axis
+  parallel to the motor axis (the chain frame's y) and the second perpendicular to it and to the rod; each
+  rotation is limited to +-``limit`` around its neutral: about the first axis the in-plane angle of the rod
+  relative to the neutral direction above, about the second the out-of-plane tilt ``theta_i3 - pi/2``.
+* **Link interference** (:class:`LinkModel`): forearms (the parallelogram's envelope) and upper arms are
+  capsules (segments B_i C_i and A_i B_i with radii ``forearm_radius`` / ``upper_arm_radius``); the base plate
+  is the disc ``z = 0, |xy| <= plate_radius``. Clearances (surface-to-surface, m): forearm-forearm (3 pairs),
+  forearm i - upper arm j (j != i, 6 pairs), base plate - forearms and platform centre. Margin = min
+  clearance - ``clearance``.
+* **Motors and gearing** (:class:`Motor`): per actuator a servo motor (motor side: peak torque, rated
+  (continuous) torque, maximum speed, the speed where the peak torque starts to fall linearly to zero at the
+  maximum speed, rotor inertia) behind a gearbox of ratio n (motor speed = n x arm speed) and efficiency
+  eta. The arm-side torques come from :func:`deltajax.cycle_profile` on the robot whose mass model carries
+  ``gear_ratio = n`` and ``rotor_inertia`` (the reflected rotor inertia n^2 J_rotor is part of the arm
+  inertia there); motor torque = arm torque / (n eta). Utilisations: peak (max over the cycle of
+  |tau_m| / envelope(omega_m)), thermal (RMS of tau_m over the cycle, dwell included, / rated), speed
+  (max |omega_m| / max speed).
+* **Cycle rate**: picks per minute on the standard 25/305/25 mm go-and-back cycle (one pick per cycle)
+  with a given payload, = 60 / (T_min + 2 dwell) where T_min is the shortest motion time (bisection on the
+  time scaling, efforts a / T^2 + g) for which every sample is inside the torque-speed envelope and the RMS
+  torque (with the dwells at pick and place, holding the static load) is within the rated torque.
+* **Regular workspace**: the largest cylinder centred on the z axis with height/diameter ratio
+  ``hd_ratio`` inside the *good* workspace (:func:`good_point`: reachable, index >= threshold, passive
+  joints within limits, no interference), on a polar sample grid (:func:`regular_workspace`).
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, NamedTuple, Optional
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Bool, Float
+
+from .dynamics import cycle_profile
+from .geometry import CHAIN_ANGLES, Delta
+from .indices import point_indices
+from .kinematics import elbows, forearm_units, ik
+
+__all__ = ["JointModel", "LinkModel", "Motor", "GoodSpec", "JointAngles", "Interference", "DriveLoads",
+           "joint_angles", "joint_margin", "segment_distance", "interference", "with_drive", "drive_loads",
+           "min_cycle_time", "picks_per_minute", "cycle_rate", "CycleRate", "PointCheck", "good_point", "largest_cylinder", "regular_workspace",
+           "RegularWorkspace", "polar_grid", "ConstraintError"]
+
+
+class ConstraintError(ValueError):
+    """Invalid constraint model (names the field and the value)."""
+
+
+def _leaf(x):
+    return jnp.asarray(x, dtype=jnp.result_type(float))
+
+
+def _check(cls: str, name: str, v, lo: float = 0.0, strict: bool = True, hi: float = math.inf):
+    if isinstance(v, jax.core.Tracer):
+        return
+    a = np.asarray(v, dtype=float)
+    bad = np.any(~np.isfinite(a)) if hi < math.inf or not math.isinf(lo) else np.any(np.isnan(a))
+    if bad or np.any(a < lo) or (strict and np.any(a == lo)) or np.any(a > hi):
+        rel = ">" if strict else ">="
+        raise ConstraintError(f"{cls}.{name} must be {rel} {lo}{'' if hi == math.inf else f' and <= {hi}'}, "
+                              f"got {a!r}")
+
+
+# -- passive joints --------------------------------------------------------------------------------------------
+
+class JointModel(eqx.Module):
+    """Passive joints at both ends of each forearm (see the module docstring).
+
+    Attributes:
+        kind: ``"ball"`` (cone limit) or ``"universal"`` (limit about each of its two axes); static.
+        limit: cone half-angle (ball) or the +- range about each axis (universal), rad.
+        elbow_neutral: neutral axis at the elbow, angle from the upper arm's direction in the chain plane, rad.
+        platform_neutral: neutral axis at the platform (C_i toward B_i), tilt from the upward vertical toward
+            the base joint in the chain plane, rad.
+    """
+
+    limit: jax.Array = eqx.field(converter=_leaf)
+    elbow_neutral: jax.Array = eqx.field(converter=_leaf, default=math.pi / 2)
+    platform_neutral: jax.Array = eqx.field(converter=_leaf, default=0.0)
+    kind: str = eqx.field(static=True, default="ball")
+
+    def __check_init__(self):
+        if self.kind not in ("ball", "universal"):
+            raise ConstraintError(f"JointModel.kind must be 'ball' or 'universal', got {self.kind!r}")
+        _check("JointModel", "limit", self.limit, 0.0, True, math.pi)
+        for n in ("elbow_neutral", "platform_neutral"):
+            _check("JointModel", n, getattr(self, n), -math.pi, False, math.pi)
+
+
+class JointAngles(NamedTuple):
+    """Deflection of each passive joint from its neutral axis (rad), chain i in row i.
+
+    ``elbow``/``platform``: the cone angle (ball) or the larger of the two axis rotations (universal).
+    """
+
+    elbow: Float[Array, "3"]
+    platform: Float[Array, "3"]
+
+
+def _angle_between(a, b):
+    """Angle between unit vectors (rows), robust near 0 and pi (atan2 of |a x b| and a . b)."""
+    c = jnp.sum(a * b, axis=-1)
+    s = jnp.linalg.norm(jnp.cross(a, b), axis=-1)
+    return jnp.arctan2(s, c)
+
+
+def joint_angles(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], joints: JointModel) -> JointAngles:
+    """Passive-joint deflections at the elbows and the platform for one configuration.
+
+    Args:
+        robot: the robot (R frozen).
+        p: platform centre (m, base frame).
+        theta: actuated angles (rad), e.g. ``dj.ik(robot, p).theta``.
+        joints: the joint model.
+    """
+    u = forearm_units(robot, p, theta)                       # (3, 3) chain frames, B -> C
+    th = jnp.asarray(theta)
+    z = jnp.zeros_like(th)
+    n_e = jnp.stack([jnp.cos(th + joints.elbow_neutral), z, jnp.sin(th + joints.elbow_neutral)], axis=-1)
+    sp, cp = jnp.sin(joints.platform_neutral), jnp.cos(joints.platform_neutral)
+    n_p = jnp.stack([sp + z, z, -cp + z], axis=-1)           # from C toward B at neutral
+    if joints.kind == "ball":
+        return JointAngles(elbow=_angle_between(u, n_e), platform=_angle_between(-u, n_p))
+    # universal: in-plane angle of the rod about the first axis (chain y), out-of-plane tilt about the second
+    tilt = jnp.abs(jnp.arccos(jnp.clip(u[:, 1], -1.0, 1.0)) - jnp.pi / 2)
+    in_plane_e = jnp.arctan2(u[:, 2], u[:, 0]) - (th + joints.elbow_neutral)
+    in_plane_p = jnp.arctan2(-u[:, 2], -u[:, 0]) - jnp.arctan2(n_p[:, 2], n_p[:, 0])
+    wrap = lambda a: jnp.abs(jnp.mod(a + jnp.pi, 2 * jnp.pi) - jnp.pi)  # noqa: E731
+    return JointAngles(elbow=jnp.maximum(wrap(in_plane_e), tilt), platform=jnp.maximum(wrap(in_plane_p), tilt))
+
+
+def joint_margin(robot: Delta, p, theta, joints: JointModel) -> Float[Array, ""]:
+    """limit - largest deflection over the six joints (rad); >= 0 when every joint is within its limit."""
+    a = joint_angles(robot, p, theta, joints)
+    return joints.limit - jnp.maximum(jnp.max(a.elbow), jnp.max(a.platform))
+
+
+# -- link interference -----------------------------------------------------------------------------------------
+
+class LinkModel(eqx.Module):
+    """Link envelopes for interference checks (m).
+
+    Attributes:
+        forearm_radius: capsule radius around the forearm axis B_i C_i (half the parallelogram's width plus
+            the rod radius).
+        upper_arm_radius: capsule radius around the upper arm A_i B_i.
+        clearance: required surface-to-surface clearance.
+        plate_overhang: base plate radius = base radius R + this (may be < 0); for a reconfigurable design
+            pass ``plate_radius`` explicitly (it must hold the motors at R_max).
+    """
+
+    forearm_radius: jax.Array = eqx.field(converter=_leaf, default=0.02)
+    upper_arm_radius: jax.Array = eqx.field(converter=_leaf, default=0.02)
+    clearance: jax.Array = eqx.field(converter=_leaf, default=0.005)
+    plate_overhang: jax.Array = eqx.field(converter=_leaf, default=0.0)
+
+    def __check_init__(self):
+        for n in ("forearm_radius", "upper_arm_radius", "clearance"):
+            _check("LinkModel", n, getattr(self, n), 0.0, False, 10.0)
+        _check("LinkModel", "plate_overhang", self.plate_overhang, -10.0, False, 10.0)
+
+
+def segment_distance(p0, p1, q0, q1) -> Float[Array, ""]:
+    """Minimum distance between segments [p0, p1] and [q0, q1] (3-vectors), exact (Ericson's clamped
+    closest points, branch-free; degenerate segments handled)."""
+    d1, d2, r = p1 - p0, q1 - q0, p0 - q0
+    a, e, f = jnp.dot(d1, d1), jnp.dot(d2, d2), jnp.dot(d2, r)
+    c, b = jnp.dot(d1, r), jnp.dot(d1, d2)
+    tiny = 1e-30
+    denom = a * e - b * b
+    s = jnp.where(denom > tiny * jnp.maximum(a * e, tiny), jnp.clip((b * f - c * e) / jnp.where(denom > 0, denom, 1.0),
+                                                                   0.0, 1.0), 0.0)
+    s = jnp.where(a > tiny, s, 0.0)
+    t = jnp.where(e > tiny, (b * s + f) / jnp.where(e > tiny, e, 1.0), 0.0)
+    # t outside [0, 1]: clamp it and recompute s for the clamped t
+    t_c = jnp.clip(t, 0.0, 1.0)
+    s = jnp.where((t != t_c) & (a > tiny), jnp.clip((t_c * b - c) / jnp.where(a > tiny, a, 1.0), 0.0, 1.0), s)
+    d = (p0 + s * d1) - (q0 + t_c * d2)
+    return jnp.sqrt(jnp.dot(d, d))
+
+
+class Interference(NamedTuple):
+    """Surface clearances of one configuration (m) and the margin (min clearance - required clearance)."""
+
+    forearm_forearm: Float[Array, ""]
+    forearm_upper_arm: Float[Array, ""]
+    base_plate: Float[Array, ""]
+    margin: Float[Array, ""]
+
+
+def _point_disc_distance(q, radius):
+    """Signed distance from points q (n, 3) to the disc z = 0, |xy| <= radius; < 0 for points above the
+    plate (z < 0) over it, i.e. through the base."""
+    rho = jnp.sqrt(q[:, 0] ** 2 + q[:, 1] ** 2)
+    out = jnp.maximum(rho - radius, 0.0)
+    return jnp.where(out > 0, jnp.sqrt(out * out + q[:, 2] ** 2), q[:, 2])
+
+
+def interference(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], links: LinkModel, *,
+                 plate_radius: Optional[Float[Array, ""]] = None, n_plate: int = 9) -> Interference:
+    """Link clearances of one configuration (see :class:`LinkModel`).
+
+    The base-plate clearance samples each forearm axis at ``n_plate`` points (exact point-disc distances);
+    the link-link clearances are exact segment distances.
+    """
+    B = elbows(robot, theta)                                          # (3, 3) base frame
+    dirs = jnp.asarray([[math.cos(a), math.sin(a), 0.0] for a in CHAIN_ANGLES], B.dtype)  # chain x axes
+    C = jnp.asarray(p)[None, :] + robot.platform_radius * dirs        # forearm ends at the platform
+    A = robot.base_radius * dirs
+    pairs = ((0, 1), (1, 2), (2, 0))
+    ff = jnp.min(jnp.stack([segment_distance(B[i], C[i], B[j], C[j]) for i, j in pairs])) - 2 * links.forearm_radius
+    fu = jnp.min(jnp.stack([segment_distance(B[i], C[i], A[j], B[j]) for i in range(3) for j in range(3) if j != i]))
+    fu = fu - links.forearm_radius - links.upper_arm_radius
+    Rp = robot.base_radius + links.plate_overhang if plate_radius is None else plate_radius
+    s = jnp.linspace(0.0, 1.0, n_plate, dtype=B.dtype)
+    pts = (B[:, None, :] + s[None, :, None] * (C - B)[:, None, :]).reshape(-1, 3)
+    bp = jnp.minimum(jnp.min(_point_disc_distance(pts, Rp)) - links.forearm_radius, p[2])
+    margin = jnp.minimum(jnp.minimum(ff, fu), bp) - links.clearance
+    return Interference(forearm_forearm=ff, forearm_upper_arm=fu, base_plate=bp, margin=margin)
+
+
+# -- motors and gearing ----------------------------------------------------------------------------------------
+
+class Motor(eqx.Module):
+    """A servo motor + gearbox per actuator (motor-side values; see the module docstring).
+
+    Attributes:
+        peak_torque: N m, available up to ``corner_speed``.
+        rated_torque: N m, continuous (thermal) torque.
+        max_speed: rad/s.
+        corner_speed: rad/s where the peak torque starts to fall linearly to 0 at ``max_speed``.
+        rotor_inertia: kg m^2 (rotor + gearbox input).
+        efficiency: gearbox efficiency eta in (0, 1].
+    """
+
+    peak_torque: jax.Array = eqx.field(converter=_leaf)
+    rated_torque: jax.Array = eqx.field(converter=_leaf)
+    max_speed: jax.Array = eqx.field(converter=_leaf)
+    corner_speed: jax.Array = eqx.field(converter=_leaf)
+    rotor_inertia: jax.Array = eqx.field(converter=_leaf, default=0.0)
+    efficiency: jax.Array = eqx.field(converter=_leaf, default=1.0)
+
+    def __check_init__(self):
+        for n in ("peak_torque", "rated_torque", "max_speed", "corner_speed"):
+            _check("Motor", n, getattr(self, n), 0.0, True, 1e9)
+        _check("Motor", "rotor_inertia", self.rotor_inertia, 0.0, False, 1e3)
+        _check("Motor", "efficiency", self.efficiency, 0.0, True, 1.0)
+        conc = [v for v in (self.peak_torque, self.rated_torque, self.max_speed, self.corner_speed)
+                if not isinstance(v, jax.core.Tracer)]
+        if len(conc) == 4:
+            if float(self.rated_torque) > float(self.peak_torque):
+                raise ConstraintError(f"Motor.rated_torque={float(self.rated_torque)!r} N m must be <= "
+                                      f"peak_torque={float(self.peak_torque)!r} N m")
+            if float(self.corner_speed) > float(self.max_speed):
+                raise ConstraintError(f"Motor.corner_speed={float(self.corner_speed)!r} rad/s must be <= "
+                                      f"max_speed={float(self.max_speed)!r} rad/s")
+
+    def envelope(self, omega: Array) -> Array:
+        """Available motor torque at motor speed |omega| (N m); 0 at and beyond max_speed."""
+        w = jnp.abs(omega)
+        span = jnp.maximum(self.max_speed - self.corner_speed, 1e-12 * self.max_speed)
+        frac = jnp.clip((self.max_speed - w) / span, 0.0, 1.0)
+        return self.peak_torque * jnp.where(w >= self.max_speed, 0.0, frac)
+
+
+def with_drive(robot: Delta, motor: Motor, gear_ratio, payload_mass=None) -> Delta:
+    """The robot whose mass model carries this gearbox (ratio n) and the motor's rotor inertia (reflected as
+    n^2 J_rotor by :class:`deltajax.MassModel`), optionally with a payload (kg)."""
+    m = robot.mass
+    if m is None:
+        raise ConstraintError("with_drive: the robot has no mass model (robot.mass); dynamics need one")
+    m = eqx.tree_at(lambda q: (q.gear_ratio, q.rotor_inertia), m, (_leaf(gear_ratio) + 0 * m.gear_ratio,
+                                                                   motor.rotor_inertia + 0 * m.rotor_inertia))
+    if payload_mass is not None:
+        m = m.with_payload(payload_mass)
+    return eqx.tree_at(lambda d: d.mass, robot, m)
+
+
+class DriveLoads(NamedTuple):
+    """Motor loads of one design on one cycle at one duration (motor side).
+
+    Attributes:
+        peak_torque: max_t |tau_m| per actuator (N m).
+        rms_torque: RMS of tau_m over the period (motion + dwells) per actuator (N m).
+        max_speed: max_t |omega_m| per actuator (rad/s).
+        peak_utilisation: max over actuators and time of |tau_m| / envelope(omega_m) (inf past max speed).
+        rms_utilisation: max over actuators of rms_torque / rated_torque.
+        speed_utilisation: max over actuators of max_speed / motor max speed.
+        ok: every cycle sample reachable.
+    """
+
+    peak_torque: Float[Array, "3"]
+    rms_torque: Float[Array, "3"]
+    max_speed: Float[Array, "3"]
+    peak_utilisation: Float[Array, ""]
+    rms_utilisation: Float[Array, ""]
+    speed_utilisation: Float[Array, ""]
+    ok: Bool[Array, ""]
+
+
+def _trap_weights(K, dtype):
+    return jnp.ones((K,), dtype).at[0].set(0.5).at[-1].set(0.5) / (K - 1)
+
+
+def _loads_from_unit(a, g, thd_unit, T, dwell, motor: Motor, n, ok):
+    """Motor loads at duration T from the T = 1 profile split (a / T^2 + g arm torque, thd_unit / T speed)."""
+    scale = 1.0 / (n * motor.efficiency)
+    tau_m = (a / (T * T) + g) * scale                         # (K, 3)
+    om = thd_unit / T * n
+    env = motor.envelope(om)
+    ratio = jnp.abs(tau_m) / jnp.where(env > 0, env, 1.0)
+    ratio = jnp.where(env > 0, ratio, jnp.where(jnp.abs(tau_m) > 0, jnp.inf, 0.0))
+    K = a.shape[0]
+    move = jnp.tensordot(_trap_weights(K, a.dtype), tau_m * tau_m, axes=1) * T   # int tau^2 dt over the motion
+    hold = (g[0] * scale) ** 2 + (g[K // 2] * scale) ** 2                       # pick and place dwells
+    rms = jnp.sqrt((move + dwell * hold) / (T + 2 * dwell))
+    nan = jnp.asarray(jnp.nan, a.dtype)
+    f = lambda x: jnp.where(ok, x, nan)  # noqa: E731
+    return DriveLoads(peak_torque=f(jnp.max(jnp.abs(tau_m), axis=0)), rms_torque=f(rms),
+                      max_speed=f(jnp.max(jnp.abs(om), axis=0)), peak_utilisation=f(jnp.max(ratio)),
+                      rms_utilisation=f(jnp.max(rms) / motor.rated_torque),
+                      speed_utilisation=f(jnp.max(jnp.abs(om)) / motor.max_speed), ok=ok)
+
+
+def _unit_profile(robot: Delta, cycle):
+    prof = cycle_profile(robot, cycle, 1.0)
+    ok = jnp.all(prof.ok)
+    z = lambda x: jnp.where(prof.ok[:, None], x, 0.0)  # noqa: E731
+    return z(prof.tau_inertial_unit), z(prof.tau_gravity), z(prof.theta_dot), ok
+
+
+def drive_loads(robot: Delta, cycle, motor: Motor, gear_ratio, *, duration=None, dwell=0.0,
+                payload_mass=None) -> DriveLoads:
+    """Motor loads on ``cycle`` at ``duration`` (default: its nominal one) with gearbox ratio ``gear_ratio``.
+
+    Args:
+        robot: robot with a mass model (its gear ratio and rotor inertia are replaced, see :func:`with_drive`).
+        cycle: a Cartesian go-and-back :class:`deltajax.Cycle` (e.g. :func:`deltajax.adept_cycle`; odd sample
+            counts put a sample exactly at the place point, where the place dwell holds the static load).
+        motor: the motor.
+        gear_ratio: n (motor speed / arm speed).
+        duration: motion time T (s).
+        dwell: s, stop at pick and at place (each).
+        payload_mass: kg, replaces the robot's payload if given.
+    """
+    r = with_drive(robot, motor, gear_ratio, payload_mass)
+    a, g, thd, ok = _unit_profile(r, cycle)
+    T = cycle.duration if duration is None else jnp.asarray(duration, a.dtype)
+    return _loads_from_unit(a, g, thd, T, jnp.asarray(dwell, a.dtype), motor, jnp.asarray(gear_ratio, a.dtype), ok)
+
+
+def _bisect_time(a, g, thd, motor, n, dwell, T_low, T_high, n_iter):
+    def feasible(T):
+        L = _loads_from_unit(a, g, thd, T, dwell, motor, n, jnp.asarray(True))
+        return (L.peak_utilisation <= 1.0) & (L.rms_utilisation <= 1.0)
+
+    lo, hi = jnp.log(jnp.asarray(T_low, a.dtype)), jnp.log(jnp.asarray(T_high, a.dtype))
+
+    def body(_, lh):
+        l, h = lh
+        m = 0.5 * (l + h)
+        f = feasible(jnp.exp(m))
+        return jnp.where(f, l, m), jnp.where(f, m, h)
+
+    l, h = jax.lax.fori_loop(0, n_iter, body, (lo, hi))
+    T = jnp.where(feasible(jnp.exp(lo)), jnp.exp(lo), jnp.exp(h))
+    return jnp.where(feasible(jnp.exp(hi)), T, jnp.inf)
+
+
+class CycleRate(NamedTuple):
+    """Fastest cycle of one design within its motors: ``cycle_time`` T_min (s; inf: no T meets the limits,
+    NaN: unreachable), ``picks_per_min`` (1/min; 0 / NaN likewise) and the motor ``loads`` at T_min
+    (at the nominal duration when T_min is not finite)."""
+
+    cycle_time: Float[Array, ""]
+    picks_per_min: Float[Array, ""]
+    loads: DriveLoads
+
+
+def cycle_rate(robot: Delta, cycle, motor: Motor, gear_ratio, *, dwell=0.0, payload_mass=None,
+               T_low: float = 1e-3, T_high: float = 60.0, n_iter: int = 60) -> CycleRate:
+    """Shortest motion time of ``cycle`` inside the torque-speed envelope and the thermal (RMS) limit, the
+    resulting picks per minute (one pick per go-and-back cycle: 60 / (T_min + 2 dwell)) and the loads there.
+
+    Bisection on T over [T_low, T_high] (in log T) with the profile computed once (efforts scale exactly as
+    a / T^2 + g, speeds as 1 / T). Feasibility is checked at the returned T (tested at the edge).
+    """
+    r = with_drive(robot, motor, gear_ratio, payload_mass)
+    a, g, thd, ok = _unit_profile(r, cycle)
+    n = jnp.asarray(gear_ratio, a.dtype)
+    dw = jnp.asarray(dwell, a.dtype)
+    T = jnp.where(ok, _bisect_time(a, g, thd, motor, n, dw, T_low, T_high, n_iter), jnp.nan)
+    ppm = jnp.where(jnp.isfinite(T), 60.0 / (T + 2.0 * dw), jnp.where(jnp.isnan(T), jnp.nan, 0.0))
+    Tl = jnp.where(jnp.isfinite(T), T, cycle.duration)
+    return CycleRate(cycle_time=T, picks_per_min=ppm, loads=_loads_from_unit(a, g, thd, Tl, dw, motor, n, ok))
+
+
+def min_cycle_time(robot: Delta, cycle, motor: Motor, gear_ratio, *, dwell=0.0, payload_mass=None,
+                   **kw) -> Float[Array, ""]:
+    """T_min of :func:`cycle_rate` (s): inf when even the longest time violates a limit (e.g. the static load
+    alone exceeds the rated torque), NaN when the cycle is not reachable."""
+    return cycle_rate(robot, cycle, motor, gear_ratio, dwell=dwell, payload_mass=payload_mass, **kw).cycle_time
+
+
+def picks_per_minute(robot: Delta, cycle, motor: Motor, gear_ratio, *, dwell=0.0, payload_mass=None,
+                     **kw) -> Float[Array, ""]:
+    """Cycle rate (picks/min) of :func:`cycle_rate`: 0 when no motion time meets the limits, NaN when the
+    cycle is unreachable."""
+    return cycle_rate(robot, cycle, motor, gear_ratio, dwell=dwell, payload_mass=payload_mass, **kw).picks_per_min
+
+
+# -- good and regular workspace --------------------------------------------------------------------------------
+
+class GoodSpec(eqx.Module):
+    """What makes a point of the workspace *good*: reachable, ``index >= threshold``, passive joints within
+    limits, links clear. ``index`` is a field of :class:`deltajax.Indices` (static)."""
+
+    joints: JointModel
+    links: LinkModel
+    threshold: jax.Array = eqx.field(converter=_leaf, default=0.3)
+    index: str = eqx.field(static=True, default="k_tilde")
+    beta: jax.Array = eqx.field(converter=_leaf, default=0.5)
+
+
+class PointCheck(NamedTuple):
+    good: Bool[Array, ""]
+    reachable: Bool[Array, ""]
+    index: Float[Array, ""]
+    joint_margin: Float[Array, ""]
+    interference_margin: Float[Array, ""]
+
+
+def good_point(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, plate_radius=None) -> PointCheck:
+    """Is ``p`` (m, base frame) in the good workspace of ``robot`` (R frozen)? Margins NaN if unreachable."""
+    sol = ik(robot, p)
+    ok = sol.ok
+    theta = jnp.where(ok, sol.theta, 0.5)           # a harmless configuration where IK failed
+    _, ind = point_indices(robot, p, beta=spec.beta)
+    v = getattr(ind, spec.index)
+    jm = joint_margin(robot, p, theta, spec.joints)
+    im = interference(robot, p, theta, spec.links, plate_radius=plate_radius).margin
+    nan = jnp.asarray(jnp.nan, jm.dtype)
+    v, jm, im = (jnp.where(ok, x, nan) for x in (v, jm, im))
+    good = ok & (v >= spec.threshold) & (jm >= 0) & (im >= 0)
+    return PointCheck(good=good, reachable=ok, index=v, joint_margin=jm, interference_margin=im)
+
+
+def polar_grid(r_max: float, z_min: float, z_max: float, n_r: int, n_phi: int, n_z: int):
+    """Samples for :func:`regular_workspace`: rings r_j = r_max j / (n_r - 1) (j = 0: the axis) x angles
+    phi in [0, 60 deg] (both ends; the three-fold + mirror symmetry makes this wedge enough) x levels
+    z_k = z_min .. z_max. Returns (points (n_z, n_r, n_phi, 3), r (n_r,), z (n_z,))."""
+    r = np.linspace(0.0, r_max, n_r)
+    phi = np.linspace(0.0, math.pi / 3, n_phi)
+    z = np.linspace(z_min, z_max, n_z)
+    Z, Rr, P = np.meshgrid(z, r, phi, indexing="ij")
+    pts = np.stack([Rr * np.cos(P), Rr * np.sin(P), Z], axis=-1)
+    return pts, r, z
+
+
+class RegularWorkspace(NamedTuple):
+    """Largest axis-centred cylinder with the given H/D inside the good set: volume (m^3), diameter (m),
+    height (m), z_top (m, z down; the cylinder spans [z_top, z_top + height])."""
+
+    volume: Float[Array, ""]
+    diameter: Float[Array, ""]
+    height: Float[Array, ""]
+    z_top: Float[Array, ""]
+
+
+def largest_cylinder(good: Bool[Array, "nz nr"], r: Float[Array, "nr"], z: Float[Array, "nz"],
+                     hd_ratio: float) -> RegularWorkspace:
+    """Largest cylinder on the z axis, height = hd_ratio x diameter, whose sampled levels and rings are all good.
+
+    ``good[k, j]``: every sample of ring j at level z_k is good (ring 0 is the axis point). A disc of radius
+    r_j at level k is good if rings 0..j are; a cylinder over levels a..b (uniform spacing) has height
+    z_b - z_a and radius <= the smallest good disc radius over those levels; with D <= 2 r and
+    hd_ratio D <= z_b - z_a the largest volume is pi D^2 / 4 x hd_ratio D. Zero when nothing fits.
+    """
+    good = jnp.asarray(good)
+    r = jnp.asarray(r)
+    z = jnp.asarray(z)
+    nz, nr = good.shape
+    prefix = jnp.cumprod(good.astype(jnp.int32), axis=1).astype(bool)    # rings 0..j all good
+    r_disc = jnp.max(jnp.where(prefix, r[None, :], -1.0), axis=1)          # (nz,) -1: axis not good
+    ia = jnp.arange(nz)
+    inside = (ia[None, None, :] >= ia[:, None, None]) & (ia[None, None, :] <= ia[None, :, None])  # [a, b, k]
+    r_win = jnp.min(jnp.where(inside, r_disc[None, None, :], jnp.inf), axis=2)                    # (nz, nz)
+    H = z[None, :] - z[:, None]
+    valid = (ia[None, :] >= ia[:, None]) & (r_win >= 0)
+    D = jnp.minimum(2.0 * jnp.maximum(r_win, 0.0), H / hd_ratio)
+    D = jnp.where(valid, D, 0.0)
+    vol = math.pi / 4.0 * D * D * hd_ratio * D
+    k = jnp.argmax(vol.reshape(-1))
+    a, b = k // nz, k % nz
+    Db = D.reshape(-1)[k]
+    del b
+    return RegularWorkspace(volume=vol.reshape(-1)[k], diameter=Db, height=hd_ratio * Db, z_top=z[a])
+
+
+def regular_workspace(good_fn: Callable[[Array], Array], points, r, z, hd_ratio: float) -> RegularWorkspace:
+    """Regular workspace from a per-point good test ``good_fn(p) -> bool`` on a :func:`polar_grid`.
+
+    ``good_fn`` is e.g. ``lambda p: good_point(robot, p, spec).good`` (R frozen) or, for a reconfigurable
+    design with R chosen per point, the ``any`` over its R samples.
+    """
+    pts = jnp.asarray(points)
+    nz, nr, nphi, _ = pts.shape
+    g = jax.vmap(good_fn)(pts.reshape(-1, 3)).reshape(nz, nr, nphi)
+    return largest_cylinder(jnp.all(g, axis=2), r, z, hd_ratio)

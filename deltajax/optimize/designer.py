@@ -1,0 +1,247 @@
+"""The designer's problem: objectives and constraints as a Delta designer states them.
+
+A design (fixed or reconfigurable, plus a gear ratio) is judged on a *task*: a cylinder on the z axis that
+the robot must serve inside its good workspace, and the standard 25/305/25 mm pick-and-place cycle at the
+task's centre with a payload (and optional dwells), driven by given servo motors through the design's
+gearbox. Everything is computed by :mod:`deltajax.constraints` on the public core.
+
+**Operating R** (reconfigurable designs): the robot reconfigures once per task and then runs at one R. The
+operating R is chosen among ``n_R_operating`` evenly spaced candidates in [R_min, R_max] by the *same*
+constraints as the design: among the candidates where the task cylinder lies in the good workspace, the
+joints and links are clear over the task and along the cycle, and the motors can run the cycle, the one with
+the most picks per minute (ties: the smaller R). A fixed design has one candidate, its R.
+
+Metrics (:data:`DESIGN_METRICS`, units :data:`DESIGN_UNITS`, sense :data:`DESIGN_SENSE`: +1 lower is better,
+-1 higher is better):
+
+* ``picks_per_min``: cycle rate at the operating R (1/min), :func:`deltajax.constraints.picks_per_minute`.
+* ``regular_volume`` / ``regular_diameter``: the largest cylinder with the configured H/D inside the good
+  workspace with R chosen per point (any R sample; for a fixed design its R) (m^3, m).
+* ``regular_volume_fixed``: the same with R frozen at the operating R (what the design gives without
+  reconfiguring during the task).
+* ``peak_utilisation`` / ``rms_utilisation`` / ``speed_utilisation``: motor loads at the picks/min cycle time.
+* ``task_good_fraction``, ``joint_margin_deg`` (deg), ``interference_margin`` (m): over the task samples and
+  the cycle samples at the operating R.
+* ``R_operating`` (m), ``gear_ratio`` (1), ``arm_sum`` (L1 + L2, m).
+
+Constraints (``g <= 0`` feasible, up to :data:`FEASIBILITY_TOL`, each normalised by a stated scale so that pymoo's summed violation is
+meaningful): task in the good workspace (1 - task_good_fraction), passive joints (-margin / limit),
+interference (-margin / 0.01 m), cycle rate (min_picks - picks) / max(min_picks, 1) (the cycle must be
+reachable and runnable: a NaN or zero rate counts as a full violation), size budget (L1 + L2) / max_arm_sum - 1.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Mapping, Optional, Sequence
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .. import constraints as C
+from ..geometry import ReconfigurableDelta
+from ..trajectory import adept_cycle
+from .objectives import cylinder_points
+
+__all__ = ["DesignerProblem", "DESIGN_METRICS", "DESIGN_UNITS", "DESIGN_SENSE", "CONSTRAINT_NAMES",
+           "evaluate_designer", "knee_point"]
+
+DESIGN_UNITS = {
+    "picks_per_min": "1/min", "regular_volume": "m^3", "regular_diameter": "m", "regular_height": "m",
+    "regular_z_top": "m", "regular_volume_fixed": "m^3", "regular_diameter_fixed": "m",
+    "peak_utilisation": "1", "rms_utilisation": "1", "speed_utilisation": "1", "task_good_fraction": "1",
+    "task_index_min": "1", "joint_margin_deg": "deg", "interference_margin": "m", "R_operating": "m",
+    "gear_ratio": "1", "arm_sum": "m", "cycle_time": "s",
+}
+DESIGN_METRICS = tuple(DESIGN_UNITS)
+DESIGN_SENSE = {"picks_per_min": -1, "regular_volume": -1, "regular_diameter": -1, "regular_volume_fixed": -1,
+                "regular_diameter_fixed": -1, "peak_utilisation": 1, "rms_utilisation": 1, "speed_utilisation": 1,
+                "task_good_fraction": -1, "task_index_min": -1, "joint_margin_deg": -1,
+                "interference_margin": -1, "cycle_time": 1, "arm_sum": 1, "regular_height": -1}
+#: Objectives a designer may choose (the others are reported, or describe the design).
+OBJECTIVES = ("picks_per_min", "regular_volume", "regular_diameter", "regular_volume_fixed", "peak_utilisation",
+              "rms_utilisation", "joint_margin_deg", "interference_margin", "task_index_min", "arm_sum")
+CONSTRAINT_NAMES = ("task_in_good_workspace", "passive_joints", "interference", "cycle_rate", "size_budget")
+INTERFERENCE_SCALE = 0.01  # m, normalises the interference violation
+#: Constraint values up to this are satisfied: a size budget met exactly (0.2 + 0.4 = 0.6000000000000001 m) or
+#: a coverage mean of 1.0 computed as 0.99999999999999994 must not make the baseline infeasible.
+FEASIBILITY_TOL = 1e-9
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class DesignerProblem:
+    """Static description of the designer's problem (host object; identity-hashed so jitted code caches).
+
+    Attributes:
+        task_points: (N, 3) samples of the task cylinder (m, base frame, z down).
+        cycle: the pick-and-place :class:`deltajax.Cycle` at the task centre.
+        motor, joints, links, good: the models of :mod:`deltajax.constraints`.
+        payload: kg; dwell: s at pick and at place.
+        rw_points, rw_r, rw_z: the regular-workspace grid (:func:`deltajax.constraints.polar_grid`).
+        hd_ratio: height / diameter of the regular-workspace cylinder.
+        n_R_operating: operating-R candidates of a reconfigurable design.
+        min_picks: required cycle rate (1/min; 0: only "the cycle runs").
+        max_arm_sum: size budget L1 + L2 (m) or None.
+        enabled: which of :data:`CONSTRAINT_NAMES` are active (the others are reported, not enforced).
+    """
+
+    task_points: np.ndarray
+    cycle: Any
+    motor: C.Motor
+    joints: C.JointModel
+    links: C.LinkModel
+    good: C.GoodSpec
+    payload: float
+    dwell: float
+    rw_points: np.ndarray
+    rw_r: np.ndarray
+    rw_z: np.ndarray
+    hd_ratio: float
+    n_R_operating: int
+    min_picks: float
+    max_arm_sum: Optional[float]
+    enabled: tuple
+    settings: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+
+    @staticmethod
+    def build(*, task: Mapping[str, float], cycle: Mapping[str, Any], motor: C.Motor, joints: C.JointModel,
+              links: C.LinkModel, good: C.GoodSpec, regular: Mapping[str, float], n_R_operating: int,
+              min_picks: float, max_arm_sum: Optional[float], enabled: Sequence[str]) -> "DesignerProblem":
+        """Build from validated plain values (see :mod:`deltajax.experiments.ga_reconfig` for the config)."""
+        tp = cylinder_points(task["diameter"], task["height"], task["z_top"], int(task["n_r"]), int(task["n_phi"]),
+                             int(task["n_z"]))
+        tp = np.concatenate([tp, [[0.0, 0.0, task["z_top"]], [0.0, 0.0, task["z_top"] + task["height"]]]])
+        centre = (0.0, 0.0, task["z_top"] + task["height"] / 2.0)
+        cyc = adept_cycle(centre, duration=float(cycle["duration"]), n_samples=int(cycle["n_samples"]),
+                          law=str(cycle["law"]))
+        pts, r, z = C.polar_grid(regular["r_max"], regular["z_min"], regular["z_max"], int(regular["n_r"]),
+                                 int(regular["n_phi"]), int(regular["n_z"]))
+        return DesignerProblem(task_points=tp, cycle=cyc, motor=motor, joints=joints, links=links, good=good,
+                               payload=float(cycle["payload"]), dwell=float(cycle["dwell"]), rw_points=pts,
+                               rw_r=r, rw_z=z, hd_ratio=float(regular["hd_ratio"]),
+                               n_R_operating=int(n_R_operating), min_picks=float(min_picks),
+                               max_arm_sum=None if max_arm_sum is None else float(max_arm_sum),
+                               enabled=tuple(enabled),
+                               settings={"task": dict(task), "cycle": dict(cycle), "regular": dict(regular),
+                                         "cycle_centre": centre})
+
+
+def _violations(pb: DesignerProblem, m: Mapping[str, jax.Array], arm_sum) -> jax.Array:
+    """Normalised constraint values g (>0: violated by that much), in :data:`CONSTRAINT_NAMES` order;
+    disabled constraints are 0. NaN margins (unreachable) count as a full violation (1)."""
+    def nz(x):
+        return jnp.where(jnp.isnan(x), 1.0, x)
+
+    lim = jnp.rad2deg(pb.joints.limit)
+    g = {
+        "task_in_good_workspace": 1.0 - m["task_good_fraction"],
+        "passive_joints": nz(-m["joint_margin_deg"] / lim),
+        "interference": nz(-m["interference_margin"] / INTERFERENCE_SCALE),
+        "cycle_rate": jnp.where(jnp.isfinite(m["picks_per_min"]) & (m["picks_per_min"] > 0),
+                                (pb.min_picks - m["picks_per_min"]) / max(pb.min_picks, 1.0), 1.0),
+        "size_budget": (arm_sum / pb.max_arm_sum - 1.0) if pb.max_arm_sum is not None else 0.0 * arm_sum,
+    }
+    return jnp.stack([jnp.where(n in pb.enabled, jnp.asarray(g[n], arm_sum.dtype), 0.0) for n in CONSTRAINT_NAMES])
+
+
+def _nanmin(a, axis=-1):
+    """min with NaN propagation: an unreachable sample makes the margin NaN (never silently satisfied)."""
+    return jnp.where(jnp.any(jnp.isnan(a), axis=axis), jnp.nan, jnp.min(a, axis=axis))
+
+
+def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> dict[str, jax.Array]:
+    """Every metric of one design plus ``g`` (constraint values, (5,)), ``violation`` (sum of positive parts)
+    and ``feasible``; pure and vmappable. ``regular=False`` skips the regular workspace (NaN).
+
+    One good-point evaluation (:func:`deltajax.constraints.good_point`) covers every R (the design's R samples
+    and the operating-R candidates) at every sample (regular-workspace grid, task cylinder, cycle path): a
+    single compiled kernel instead of one per use.
+    """
+    recon = isinstance(design, ReconfigurableDelta)
+    robot0 = design.robot if recon else design
+    dt = robot0.upper_arm.dtype
+    gear = robot0.mass.gear_ratio
+    if recon:
+        j = jnp.arange(pb.n_R_operating, dtype=dt) / max(pb.n_R_operating - 1, 1)
+        Rc = design.R_min + j * (design.R_max - design.R_min)
+        Rs = design.R_samples() if regular else jnp.zeros((0,), dt)
+        plate = design.R_max + pb.links.plate_overhang
+        at = design.at
+    else:
+        Rc = robot0.base_radius[None]
+        Rs = jnp.zeros((0,), dt)
+        plate = robot0.base_radius + pb.links.plate_overhang
+        at = robot0.with_base_radius
+    nc, ns = Rc.shape[0], Rs.shape[0]
+    arm_sum = robot0.upper_arm + robot0.forearm
+    rw = jnp.asarray(pb.rw_points, dt).reshape(-1, 3) if regular else jnp.zeros((0, 3), dt)
+    tp = jnp.asarray(pb.task_points, dt)
+    cp = pb.cycle.x.astype(dt)
+    n_rw, n_t = rw.shape[0], tp.shape[0]
+    pts = jnp.concatenate([rw, tp, cp])
+    R_all = jnp.concatenate([Rs, Rc])
+    chk = jax.vmap(lambda R: jax.vmap(lambda p: C.good_point(at(R), p, pb.good, plate_radius=plate))(pts))(R_all)
+    cand = jax.tree_util.tree_map(lambda x: x[ns:], chk)                       # (nc, P)
+    t_sl, c_sl = slice(n_rw, n_rw + n_t), slice(n_rw + n_t, None)
+    rate = jax.vmap(lambda R: C.cycle_rate(at(R), pb.cycle, pb.motor, gear, dwell=pb.dwell,
+                                           payload_mass=pb.payload))(Rc)
+    cands = {
+        "task_good_fraction": jnp.mean(cand.good[:, t_sl].astype(dt), axis=1),
+        "task_index_min": _nanmin(cand.index[:, t_sl]),
+        "joint_margin_deg": jnp.rad2deg(jnp.minimum(_nanmin(cand.joint_margin[:, t_sl]),
+                                                    _nanmin(cand.joint_margin[:, c_sl]))),
+        "interference_margin": jnp.minimum(_nanmin(cand.interference_margin[:, t_sl]),
+                                           _nanmin(cand.interference_margin[:, c_sl])),
+        "picks_per_min": rate.picks_per_min,
+        "cycle_time": rate.cycle_time,
+        "peak_utilisation": rate.loads.peak_utilisation,
+        "rms_utilisation": rate.loads.rms_utilisation,
+        "speed_utilisation": rate.loads.speed_utilisation,
+    }
+    viol_c = jax.vmap(lambda i: jnp.sum(jnp.maximum(_violations(pb, {k: v[i] for k, v in cands.items()}, arm_sum)
+                                                   - FEASIBILITY_TOL, 0.0)))(jnp.arange(nc))
+    # feasible candidates first, then the most picks per minute, then the smaller R (argmax takes the first)
+    score = jnp.where(viol_c <= 0, jnp.nan_to_num(cands["picks_per_min"], nan=-1.0), -1e9 - viol_c)
+    k = jnp.argmax(score)
+    out = {n: v[k] for n, v in cands.items()}
+    out["R_operating"] = Rc[k]
+    out["gear_ratio"] = gear * jnp.ones((), dt)
+    out["arm_sum"] = arm_sum
+    nan = jnp.asarray(jnp.nan, dt)
+    if regular:
+        r, z = jnp.asarray(pb.rw_r, dt), jnp.asarray(pb.rw_z, dt)
+        grid = pb.rw_points.shape[:3]
+        g_rw = chk.good[:, :n_rw].reshape((R_all.shape[0],) + grid)
+        g_any = jnp.any(g_rw[:ns], axis=0) if recon else g_rw[ns + k]
+        reg = C.largest_cylinder(jnp.all(g_any, axis=2), r, z, pb.hd_ratio)
+        regf = C.largest_cylinder(jnp.all(g_rw[ns + k], axis=2), r, z, pb.hd_ratio)
+        out.update(regular_volume=reg.volume, regular_diameter=reg.diameter, regular_height=reg.height,
+                   regular_z_top=reg.z_top, regular_volume_fixed=regf.volume, regular_diameter_fixed=regf.diameter)
+    else:
+        out.update({n: nan for n in ("regular_volume", "regular_diameter", "regular_height", "regular_z_top",
+                                     "regular_volume_fixed", "regular_diameter_fixed")})
+    g = _violations(pb, out, arm_sum)
+    out["g"] = g
+    out["violation"] = jnp.sum(jnp.maximum(g - FEASIBILITY_TOL, 0.0))
+    out["feasible"] = out["violation"] <= 0.0
+    return out
+
+
+def knee_point(F: np.ndarray) -> int:
+    """Knee of a front (minimised objectives, rows = points): the point farthest from the hyperplane through
+    the extreme points, in objectives normalised to [0, 1] over the front (Das 1999; Deb & Gupta 2011).
+    With one point, 0; when the extremes are degenerate, the point with the smallest normalised sum."""
+    F = np.asarray(F, float)
+    n, m = F.shape
+    if n <= 2:
+        return int(np.argmin(F.sum(axis=1))) if n else -1
+    lo, hi = F.min(axis=0), F.max(axis=0)
+    Fn = (F - lo) / np.where(hi > lo, hi - lo, 1.0)
+    ext = np.stack([Fn[np.argmin(Fn[:, j])] for j in range(m)])   # best point of each objective
+    try:
+        w = np.linalg.solve(ext, np.ones(m))                         # hyperplane w . f = 1 through them
+    except np.linalg.LinAlgError:
+        return int(np.argmin(Fn.sum(axis=1)))
+    d = (1.0 - Fn @ w) / np.linalg.norm(w)                           # > 0: below the plane (toward the ideal)
+    return int(np.argmax(d))

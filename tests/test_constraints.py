@@ -1,0 +1,229 @@
+"""Designer constraints (deltajax.constraints), each against an independent computation."""
+
+import itertools
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import deltajax as dj
+from deltajax import constraints as C
+
+ROBOT = dj.presets.franco2026(fixed_R=0.2, with_mass=True)
+POINTS = np.array([[0.0, 0.0, 0.45], [0.15, 0.0, 0.4], [0.0, 0.15, 0.5], [-0.12, 0.07, 0.42], [0.05, -0.1, 0.3]])
+MOTOR = C.Motor(peak_torque=3.8, rated_torque=1.27, max_speed=628.0, corner_speed=400.0, rotor_inertia=3.4e-5,
+                efficiency=0.9)
+
+
+def _thetas():
+    return np.stack([np.asarray(dj.ik(ROBOT, jnp.asarray(p)).theta) for p in POINTS])
+
+
+def test_ball_joint_cones_match_the_passive_angles():
+    jm = C.JointModel(limit=math.radians(50), elbow_neutral=math.radians(80), platform_neutral=math.radians(35))
+    f = jax.jit(jax.vmap(lambda p, t: C.joint_angles(ROBOT, p, t, jm)))
+    th = _thetas()
+    a = f(jnp.asarray(POINTS), jnp.asarray(th))
+    for i, p in enumerate(POINTS):
+        t2, t3 = (np.asarray(x) for x in dj.passive_angles(ROBOT, jnp.asarray(p), jnp.asarray(th[i])))
+        t12 = th[i] + t2
+        # u = (sin t3 cos t12, cos t3, sin t3 sin t12) in the chain frame (paper §2.1)
+        np.testing.assert_allclose(np.cos(a.elbow[i]), np.sin(t3) * np.cos(t2 - math.radians(80)), atol=1e-12)
+        np.testing.assert_allclose(np.cos(a.platform[i]), np.sin(t3) * np.sin(t12 - math.radians(35)), atol=1e-12)
+    m = C.joint_margin(ROBOT, jnp.asarray(POINTS[2]), jnp.asarray(th[2]), jm)
+    np.testing.assert_allclose(float(m), math.radians(50) - max(np.max(a.elbow[2]), np.max(a.platform[2])))
+
+
+def test_universal_joint_angles():
+    jm = C.JointModel(limit=math.pi / 2, elbow_neutral=math.radians(90), platform_neutral=0.0, kind="universal")
+    th = _thetas()
+    for i, p in enumerate(POINTS):
+        a = C.joint_angles(ROBOT, jnp.asarray(p), jnp.asarray(th[i]), jm)
+        t2, t3 = (np.asarray(x) for x in dj.passive_angles(ROBOT, jnp.asarray(p), jnp.asarray(th[i])))
+        tilt = np.abs(t3 - np.pi / 2)
+        inplane = np.abs((t2 - np.pi / 2 + np.pi) % (2 * np.pi) - np.pi)
+        np.testing.assert_allclose(np.asarray(a.elbow), np.maximum(inplane, tilt), atol=1e-12)
+    with pytest.raises(C.ConstraintError, match="JointModel.kind"):
+        C.JointModel(limit=1.0, kind="hinge")
+    with pytest.raises(C.ConstraintError, match="JointModel.limit"):
+        C.JointModel(limit=float("nan"))
+
+
+def _brute_seg(p0, p1, q0, q1, n=801):
+    s = np.linspace(0, 1, n)
+    P = p0[None] + s[:, None] * (p1 - p0)[None]
+    Q = q0[None] + s[:, None] * (q1 - q0)[None]
+    return np.min(np.linalg.norm(P[:, None] - Q[None], axis=-1))
+
+
+SEG = jax.jit(C.segment_distance)
+
+
+@settings(deadline=None, max_examples=25)
+@given(st.lists(st.floats(-1, 1), min_size=12, max_size=12), st.booleans())
+def test_segment_distance_against_dense_sampling(v, parallel):
+    p0, p1, q0, q1 = (np.asarray(v[3 * i:3 * i + 3]) for i in range(4))
+    if parallel:
+        q1 = q0 + 0.7 * (p1 - p0)
+    d = float(SEG(*(jnp.asarray(x) for x in (p0, p1, q0, q1))))
+    b = _brute_seg(p0, p1, q0, q1)
+    seg_len = max(np.linalg.norm(p1 - p0), np.linalg.norm(q1 - q0))
+    assert d <= b + 1e-12
+    assert b <= d + 2 * seg_len / 800 + 1e-12
+
+
+def test_interference_against_brute_force_capsules():
+    links = C.LinkModel(forearm_radius=0.02, upper_arm_radius=0.025, clearance=0.005, plate_overhang=0.03)
+    th = _thetas()
+    f = jax.jit(jax.vmap(lambda p, t: C.interference(ROBOT, p, t, links)))
+    out = f(jnp.asarray(POINTS), jnp.asarray(th))
+    for i, p in enumerate(POINTS):
+        B = np.asarray(dj.elbows(ROBOT, jnp.asarray(th[i])))
+        ang = np.array([0, 2 * np.pi / 3, 4 * np.pi / 3])
+        e = np.stack([np.cos(ang), np.sin(ang), np.zeros(3)], 1)
+        Cp = p[None] + 0.065 * e
+        A = 0.2 * e
+        ff = min(_brute_seg(B[a], Cp[a], B[b], Cp[b]) for a, b in itertools.combinations(range(3), 2)) - 0.04
+        fu = min(_brute_seg(B[a], Cp[a], A[b], B[b]) for a in range(3) for b in range(3) if a != b) - 0.045
+        np.testing.assert_allclose(float(out.forearm_forearm[i]), ff, atol=2e-3)
+        np.testing.assert_allclose(float(out.forearm_upper_arm[i]), fu, atol=2e-3)
+        # base plate (disc z = 0, radius 0.23): signed distance of the forearm axes, sampled finely
+        s = np.linspace(0, 1, 2001)
+        pts = (B[:, None] + s[None, :, None] * (Cp - B)[:, None]).reshape(-1, 3)
+        rho = np.hypot(pts[:, 0], pts[:, 1])
+        dist = np.where(rho > 0.23, np.hypot(np.maximum(rho - 0.23, 0), pts[:, 2]), pts[:, 2])
+        bp = min(dist.min() - 0.02, p[2])
+        assert float(out.base_plate[i]) >= bp - 1e-12
+        assert float(out.base_plate[i]) <= bp + 0.02  # 9 samples per axis vs 2001
+        np.testing.assert_allclose(float(out.margin[i]), min(float(out.forearm_forearm[i]),
+                                                             float(out.forearm_upper_arm[i]),
+                                                             float(out.base_plate[i])) - 0.005, atol=1e-15)
+    # an arm raised through the base plate is caught
+    high = C.interference(ROBOT, jnp.asarray([0.0, 0.0, 0.05]), jnp.asarray([-0.6, -0.6, -0.6]),
+                          C.LinkModel(plate_overhang=0.3))
+    assert float(high.base_plate) < 0
+
+
+def _numpy_loads(n, T, dwell, payload):
+    """Independent: arm torques from cycle_profile of a robot whose MassModel was rebuilt by hand."""
+    import equinox as eqx
+
+    m = ROBOT.mass
+    m2 = dj.MassModel(upper_arm_mass=m.upper_arm_mass, forearm_mass=m.forearm_mass, platform_mass=m.platform_mass,
+                      payload_mass=payload, gear_ratio=n, rotor_inertia=3.4e-5)
+    rob = eqx.tree_at(lambda d: d.mass, ROBOT, m2)
+    cyc = dj.adept_cycle((0, 0, 0.4), n_samples=61, duration=T)
+    pr = dj.cycle_profile(rob, cyc)
+    tau = np.asarray(pr.tau) / (n * 0.9)
+    om = np.asarray(pr.theta_dot) * n
+    t = np.asarray(pr.t)
+    w = np.abs(om)
+    env = np.where(w >= 628, 0.0, 3.8 * np.clip((628 - w) / (628 - 400), 0, 1))
+    peak = np.max(np.abs(tau) / env)
+    g = np.asarray(pr.tau_gravity) / (n * 0.9)
+    integ = np.trapezoid(tau ** 2, t, axis=0) + dwell * (g[0] ** 2 + g[30] ** 2)
+    rms = np.sqrt(integ / (T + 2 * dwell))
+    # reflected rotor inertia: the torque difference to a rotor-less model is n^2 J thetaddot exactly
+    m0 = eqx.tree_at(lambda q: q.rotor_inertia, m2, jnp.asarray(0.0))
+    pr0 = dj.cycle_profile(eqx.tree_at(lambda d: d.mass, ROBOT, m0), cyc)
+    np.testing.assert_allclose(np.asarray(pr.tau) - np.asarray(pr0.tau), n * n * 3.4e-5 * np.asarray(pr.theta_ddot),
+                               atol=1e-10)
+    return peak, rms.max() / 1.27, w.max() / 628, cyc
+
+
+@pytest.mark.parametrize("n, T, dwell, payload", [(20.0, 0.4, 0.0, 0.0), (12.0, 0.6, 0.1, 1.0)])
+def test_drive_loads_against_an_independent_computation(n, T, dwell, payload):
+    peak, rms, spd, cyc = _numpy_loads(n, T, dwell, payload)
+    L = C.drive_loads(ROBOT, cyc, MOTOR, n, dwell=dwell, payload_mass=payload)
+    np.testing.assert_allclose(float(L.peak_utilisation), peak, rtol=1e-10)
+    np.testing.assert_allclose(float(L.rms_utilisation), rms, rtol=1e-10)
+    np.testing.assert_allclose(float(L.speed_utilisation), spd, rtol=1e-10)
+
+
+def test_min_cycle_time_is_the_feasibility_edge():
+    cyc = dj.adept_cycle((0, 0, 0.4), n_samples=61)
+    rate = jax.jit(lambda n, dwell, payload: C.cycle_rate(ROBOT, cyc, MOTOR, n, dwell=dwell, payload_mass=payload))
+    loads = jax.jit(lambda T, n, dwell, payload: C.drive_loads(ROBOT, cyc, MOTOR, n, duration=T, dwell=dwell,
+                                                               payload_mass=payload))
+    for n, dwell, payload in [(20.0, 0.0, 0.5), (8.0, 0.2, 2.0)]:
+        r = rate(n, dwell, payload)
+        T = float(r.cycle_time)
+        assert 0.05 < T < 5
+
+        def util(TT):
+            L = loads(TT, n, dwell, payload)
+            return max(float(L.peak_utilisation), float(L.rms_utilisation))
+
+        assert util(T) <= 1.0 + 1e-9 < util(0.995 * T)  # exp(log T) rounding
+        np.testing.assert_allclose(float(r.picks_per_min), 60.0 / (T + 2 * dwell), rtol=1e-12)
+    weak = C.Motor(peak_torque=0.05, rated_torque=0.01, max_speed=600.0, corner_speed=600.0)
+    assert float(C.picks_per_minute(ROBOT, cyc, weak, 5.0)) == 0.0  # cannot even hold the arm
+    far = dj.adept_cycle((0, 0, 0.9), n_samples=11)
+    assert math.isnan(float(C.picks_per_minute(ROBOT, far, MOTOR, 10.0)))  # unreachable: NaN, not a number
+
+
+def _brute_cylinder(good, r, z, lam):
+    best = (0.0, 0.0, 0.0)
+    nz, nr = good.shape
+    for a in range(nz):
+        for b in range(a, nz):
+            rr = None
+            for k in range(a, b + 1):
+                j = 0
+                while j < nr and good[k, j]:
+                    j += 1
+                rk = r[j - 1] if j > 0 else -1
+                rr = rk if rr is None else min(rr, rk)
+            if rr < 0:
+                continue
+            D = min(2 * rr, (z[b] - z[a]) / lam)
+            v = math.pi / 4 * D * D * lam * D
+            if v > best[0] + 1e-15:
+                best = (v, D, z[a])
+    return best
+
+
+@settings(deadline=None, max_examples=15)
+@given(st.integers(0, 2 ** 31 - 1), st.floats(0.2, 2.0))
+def test_largest_cylinder_against_brute_force(seed, lam):
+    rng = np.random.default_rng(seed)
+    nz, nr = 7, 5
+    good = rng.random((nz, nr)) < 0.8
+    r = np.linspace(0, 0.2, nr)
+    z = np.linspace(0.2, 0.5, nz)
+    out = C.largest_cylinder(jnp.asarray(good), jnp.asarray(r), jnp.asarray(z), lam)
+    v, D, zt = _brute_cylinder(good, r, z, lam)
+    np.testing.assert_allclose(float(out.volume), v, rtol=1e-12, atol=1e-15)
+    np.testing.assert_allclose(float(out.diameter), D, rtol=1e-12, atol=1e-15)
+
+
+def test_regular_workspace_of_a_known_good_set():
+    # good set: the cylinder r <= 0.15, 0.3 <= z <= 0.45: with H/D = 0.5 the answer is D = 0.3, H = 0.15
+    pts, r, z = C.polar_grid(0.3, 0.2, 0.6, 31, 4, 41)
+    good = lambda p: (jnp.hypot(p[0], p[1]) <= 0.15 + 1e-9) & (p[2] >= 0.3 - 1e-9) & (p[2] <= 0.45 + 1e-9)  # noqa
+    out = C.regular_workspace(good, pts, r, z, 0.5)
+    np.testing.assert_allclose([float(out.diameter), float(out.height), float(out.z_top)], [0.3, 0.15, 0.3],
+                               atol=1e-12)
+    np.testing.assert_allclose(float(out.volume), math.pi * 0.15 ** 2 * 0.15, rtol=1e-12)
+
+
+def test_good_point_combines_the_margins():
+    spec = C.GoodSpec(joints=C.JointModel(limit=math.radians(50), platform_neutral=math.radians(40)),
+                      links=C.LinkModel(), threshold=0.3)
+    f = jax.jit(jax.vmap(lambda p: C.good_point(ROBOT, p, spec)))
+    pts = np.concatenate([POINTS, [[0.0, 0.0, 0.95]]])
+    out = f(jnp.asarray(pts))
+    for i, p in enumerate(pts):
+        sol = dj.ik(ROBOT, jnp.asarray(p))
+        if not bool(sol.ok):
+            assert not bool(out.good[i]) and math.isnan(float(out.joint_margin[i]))
+            continue
+        k = float(dj.indices(ROBOT, jnp.asarray(p), sol.theta).k_tilde)
+        np.testing.assert_allclose(float(out.index[i]), k, rtol=1e-8)
+        jm = float(C.joint_margin(ROBOT, jnp.asarray(p), sol.theta, spec.joints))
+        im = float(C.interference(ROBOT, jnp.asarray(p), sol.theta, spec.links).margin)
+        assert bool(out.good[i]) == (k >= 0.3 and jm >= 0 and im >= 0)

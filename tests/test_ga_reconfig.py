@@ -1,0 +1,179 @@
+"""The main job end to end at toy size: reruns into one directory (complete, resumed, no-op), kill-and-resume
+bit-identical at every stage, Pareto on/off, feasibility of every front point, config validation."""
+
+import math
+
+import h5py
+import numpy as np
+import pytest
+
+from deltajax.config import ConfigError
+from deltajax.io import load
+from deltajax.run import run_experiment
+
+TOY = [
+    "experiment.design.n_R=3", "experiment.task.n_r=1", "experiment.task.n_phi=3", "experiment.task.n_z=2",
+    "experiment.cycle.n_samples=11", "experiment.cycle.n_R_operating=2", "experiment.regular_workspace.n_r=6",
+    "experiment.regular_workspace.n_phi=2", "experiment.regular_workspace.n_z=6", "experiment.ga.population_size=8",
+    "experiment.ga.generations=4", "experiment.ga.checkpoint_every=2", "experiment.pareto.population_size=8",
+    "experiment.pareto.generations=3", "experiment.verify.n_R=3", "experiment.verify.n_R_operating=2",
+    "experiment.verify.task_n_r=1", "experiment.verify.task_n_phi=3", "experiment.verify.task_n_z=2",
+    "experiment.verify.cycle_samples=13", "experiment.verify.rw_n_r=7", "experiment.verify.rw_n_phi=2",
+    "experiment.verify.rw_n_z=7", "progress=false",
+]
+VOLATILE = {"start_time", "end_time", "wall_time_s", "git_commit"}
+
+
+def _datasets(path):
+    """{group/name: array} of every dataset, and {group: attrs} without timings."""
+    out, attrs = {}, {}
+    with h5py.File(path, "r") as f:
+        def visit(name, obj):
+            if isinstance(obj, h5py.Dataset):
+                out[name] = obj[()]
+            else:
+                attrs[name] = {k: v for k, v in obj.attrs.items() if not k.startswith("time_")}
+        f.visititems(visit)
+        attrs["/"] = {k: v for k, v in f.attrs.items() if k not in VOLATILE}
+    return out, attrs
+
+
+def _assert_same(a, b):
+    da, aa = _datasets(a)
+    db, ab = _datasets(b)
+    assert sorted(da) == sorted(db)
+    for k in da:
+        np.testing.assert_array_equal(da[k], db[k], err_msg=k)
+    for g in aa:
+        assert sorted(aa[g]) == sorted(ab[g]), g
+        for k in aa[g]:
+            if k not in ("stopped_after", "resumed_from"):
+                np.testing.assert_array_equal(aa[g][k], ab[g][k], err_msg=f"{g}@{k}")
+
+
+@pytest.fixture(scope="module")
+def full_run(tmp_path_factory):
+    d = tmp_path_factory.mktemp("full")
+    return run_experiment("ga_reconfig", TOY, run_dir=d)
+
+
+@pytest.mark.slow
+def test_toy_run_front_feasible_summary_and_units(full_run, capsys):
+    data = load(full_run)
+    V = data["verify"]
+    front = np.asarray(V["front"]).reshape(-1)
+    assert np.all(V["feasible"][front] == 1)                       # every reported front point is feasible
+    assert np.all(V["constraint_values"][front] <= 1e-9)
+    S = data["summary"]
+    assert list(S["metric_name"])[:2] == ["picks_per_min", "regular_volume"]
+    assert S["attrs"]["recommended"] in list(V["design_name"])
+    rec = list(V["design_name"]).index(S["attrs"]["recommended"])
+    # the summary pairs the recommended design's numbers with its own parameters
+    np.testing.assert_array_equal(S["recommended_params"], V["params"][rec])
+    np.testing.assert_allclose(S["recommended"][0], V["picks_per_min"][rec])
+    # fixed-R variant: same task at the same R, only the regular workspace differs
+    np.testing.assert_allclose(S["recommended_fixed_R"][0], V["picks_per_min"][rec])
+    np.testing.assert_allclose(S["recommended_fixed_R"][1], V["regular_volume_fixed"][rec])
+    assert S["recommended_fixed_R"][1] <= S["recommended"][1] + 1e-15   # R per point can only add
+    assert V["units"]["picks_per_min"] == "1/min" and V["units"]["regular_volume"] == "m^3"
+    assert "ga/checkpoint" in {k for k in _datasets(full_run)[1]}
+    assert data["attrs"]["ga_reconfig_stages"] == "ga,pareto,verify,results,plots"
+
+
+@pytest.mark.slow
+def test_rerun_three_times_into_one_dir(tmp_path, capsys):
+    # 1: killed after 2 generations; 2: resumed and completed; 3: a no-op that says so
+    run_experiment("ga_reconfig", TOY + ["experiment.stop_after=2"], run_dir=tmp_path)
+    assert "stopped after 2 generations" in capsys.readouterr().out
+    p = run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
+    out = capsys.readouterr().out
+    assert "resuming the GA from generation 2" in out
+    snap = tmp_path / "after_resume.h5"
+    snap.write_bytes(p.read_bytes())
+    run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
+    out = capsys.readouterr().out
+    assert "complete ga_reconfig run" in out and "starting the GA" not in out
+    _assert_same(snap, p)
+    assert load(p)["ga"]["checkpoint"]["attrs"]["generations_done"] == 4   # the checkpoint survives
+
+
+@pytest.mark.slow
+def test_kill_and_resume_is_bit_identical(full_run, tmp_path, monkeypatch):
+    import deltajax.experiments.ga_reconfig as job
+
+    # killed inside the GA ...
+    run_experiment("ga_reconfig", TOY + ["experiment.stop_after=2"], run_dir=tmp_path / "a")
+    a = run_experiment("ga_reconfig", TOY, run_dir=tmp_path / "a")
+    _assert_same(full_run, a)
+    # ... and after the verify stage (before the summary is written)
+    real = job._summary
+
+    def killed(*args, **kw):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(job, "_summary", killed)
+    with pytest.raises(KeyboardInterrupt):
+        run_experiment("ga_reconfig", TOY, run_dir=tmp_path / "b")
+    assert load(tmp_path / "b" / "results.h5")["attrs"]["ga_reconfig_stages"] == "ga,pareto,verify"
+    monkeypatch.setattr(job, "_summary", real)
+    b = run_experiment("ga_reconfig", TOY, run_dir=tmp_path / "b")
+    _assert_same(full_run, b)
+
+
+@pytest.mark.slow
+def test_pareto_disabled_runs_end_to_end(tmp_path):
+    p = run_experiment("ga_reconfig", TOY + ["experiment.pareto.enabled=false"], run_dir=tmp_path)
+    data = load(p)
+    assert "pareto" not in data
+    names = list(data["verify"]["design_name"])
+    assert names == ["baseline", "ga_best"]
+    assert data["summary"]["attrs"]["recommended"] in ("ga_best", "baseline", "none")
+
+
+@pytest.mark.slow
+def test_a_different_config_into_a_finished_dir_is_refused(full_run):
+    before = full_run.read_bytes()
+    with pytest.raises(ConfigError, match="different settings"):
+        run_experiment("ga_reconfig", TOY + ["experiment.cycle.payload=1.0"], run_dir=full_run.parent)
+    assert full_run.read_bytes() == before
+
+
+@pytest.mark.parametrize("override, match", [
+    ("experiment.pareto.population_size=0", "experiment.pareto.population_size must be >= 4, got 0"),
+    ("experiment.joints.limit_deg=nan", "experiment.joints.limit_deg must be finite"),
+    ("experiment.motor.rated_torque=10", "experiment.motor.rated_torque=10.0 N m must be <="),
+    ("experiment.objectives.primary=volume", "experiment.objectives.primary must be one of"),
+    ("experiment.objectives.names=[picks_per_min,volume]", "unknown objective 'volume'"),
+    ("+experiment.task.radius=0.1", "experiment.task: unknown keys"),
+    ("experiment.cycle.n_samples=48", "must be odd"),
+    ("experiment.verify.rw_n_r=0", "experiment.verify.rw_n_r must be >= 1"),
+    ("experiment.regular_workspace.z_min=0.9", "z_min=0.9 m must be < z_max"),
+    ("experiment.task.z_top=0.9", "experiment.task"),
+    ("experiment.design.bounds.gear_ratio=[0,10]", "gear_ratio: must be > 0"),
+    ("experiment.ga.generations=-1", "experiment.ga.generations"),
+    ("experiment.constraints.max_arm_sum=-1", "experiment.constraints.max_arm_sum must be > 0"),
+    ("experiment.cycle.law=linear", "experiment.cycle.law must be one of"),
+])
+def test_bad_config_is_one_line_naming_the_field(override, match, tmp_path):
+    with pytest.raises(ConfigError, match=match.replace("[", r"\[").replace("(", r"\(")) as ei:
+        run_experiment("ga_reconfig", TOY + [override], run_dir=tmp_path)
+    assert "\n" not in str(ei.value)
+    assert not (tmp_path / "results.h5").exists()
+
+
+def test_knee_point_of_a_convex_front():
+    from deltajax.optimize.designer import knee_point
+
+    t = np.linspace(0, 1, 21)
+    F = np.stack([t, (1 - np.sqrt(t)) ** 2], axis=1)     # symmetric front: knee at f1 = f2 = 1/4
+    k = knee_point(F)
+    assert math.isclose(F[k, 0], 0.25, abs_tol=0.05) and math.isclose(F[k, 1], 0.25, abs_tol=0.05)
+    assert knee_point(F[:1]) == 0
+
+
+@pytest.mark.slow
+def test_weighted_mode_runs_and_says_so(tmp_path, capsys):
+    p = run_experiment("ga_reconfig", TOY + ["experiment.objectives.mode=weighted", "experiment.pareto.enabled=false"],
+                       run_dir=tmp_path)
+    assert "weighted sum 1 x picks_per_min + 1 x regular_volume" in capsys.readouterr().out
+    assert "weighted sum" in load(p)["ga"]["attrs"]["objective"]
