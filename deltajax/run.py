@@ -197,13 +197,16 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
     from .io import ResultsFile, git_commit
     from .rundir import claim
 
-    with claim(run_dir, name, OmegaConf.to_container(cfg, resolve=True), fresh=bool(cfg.get("fresh", False))) as owner:
+    with contextlib.ExitStack() as stack:
+        owner = stack.enter_context(claim(run_dir, name, OmegaConf.to_container(cfg, resolve=True),
+                                          fresh=bool(cfg.get("fresh", False))))
         if on_claimed is not None:
             on_claimed()
-        if owner.state == "complete":
+        if owner.state == "complete":  # a no-op: not even a line in that run's run.log
             log.info(f"{run_dir} already holds the complete results of this {name} run; nothing to do "
                      f"(fresh=true recomputes them)")
             return run_dir / "results.h5"
+        stack.enter_context(_run_log_open())
         dev = jax.devices()[0]
         attrs = {
             "deltajax_version": __version__,
@@ -279,6 +282,33 @@ def _console_through_tqdm():
         root.handlers = saved
 
 
+class RunLogHandler(logging.FileHandler):
+    """``<run_dir>/run.log``: written only while this process owns the run directory (between the claim in
+    :func:`execute` and the end of the run), so a refused rerun or a rejected config leaves another run's log,
+    and a directory it never claimed, untouched. Lines before the claim still reach the console."""
+
+    _active = False  # class-wide: one run at a time per process
+
+    def __init__(self, filename, mode: str = "a", encoding=None, delay: bool = True, errors=None):
+        super().__init__(filename, mode, encoding, delay=True, errors=errors)
+
+    def emit(self, record: logging.LogRecord) -> None:
+        if RunLogHandler._active:
+            super().emit(record)
+
+
+@contextlib.contextmanager
+def _run_log_open():
+    RunLogHandler._active = True
+    try:
+        yield
+    finally:
+        RunLogHandler._active = False
+        for h in logging.getLogger().handlers:
+            if isinstance(h, RunLogHandler):
+                h.close()  # reopened (delay) by the next run's first line
+
+
 class BelowWarning(logging.Filter):
     """Logging filter (used by ``configs/hydra/job_logging/deltajax.yaml``): records below WARNING only, so
     the run's lines go to stdout and warnings/errors to stderr."""
@@ -332,8 +362,8 @@ def _api_logging(run_dir: Path):
     """Logging for :func:`run_experiment`: the run's lines always go to ``<run_dir>/run.log`` (as under the
     CLI) and, when the caller has configured no logging, to stdout (warnings and errors to stderr)."""
     root = logging.getLogger()
-    # delay: opened at the first line, so a config rejected before the run starts leaves no directory behind
-    file = logging.FileHandler(run_dir / "run.log", delay=True)
+    # opened only once the run directory is claimed: a config rejected before that leaves no directory behind
+    file = RunLogHandler(run_dir / "run.log")
     file.setFormatter(logging.Formatter("[%(asctime)s][%(name)s][%(levelname)s] - %(message)s"))
     file.setLevel(logging.INFO)
     added = [file]
