@@ -288,9 +288,9 @@ def _v_ga_reconfig(e, cfg, robot, recon) -> None:
     # The job's reader is the one parser of this block (deltajax/experiments/ga_reconfig.py); calling it here
     # rejects a bad value before the run directory is claimed. Moving the reader below config.py is part of the
     # layout issue (#10).
-    from .experiments.ga_reconfig import settings_from_config
+    from .experiments.ga_reconfig import build
 
-    settings_from_config(e)
+    build(e, robot, recon)  # every field, the design space, the GA settings and the problem; nothing compiles
 # ---- end of ga_reconfig block ----
 
 
