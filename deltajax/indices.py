@@ -121,14 +121,17 @@ def _cubic_root01(c):
     return t - jnp.where(den > 0.0, 2.0 * g * g1 / jnp.where(den > 0.0, den, 1.0), 0.0)
 
 
-def _eig_top2_fast(x00, x11, x22, x01, x02, x12):
-    """Two largest eigenvalues of a symmetric 3x3 by the closed-form cubic, without inverse trig.
+def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det):
+    """Two largest eigenvalues of a symmetric PSD 3x3 by the closed-form cubic, without inverse trig.
 
     With q = tr/3, p^2 = ||X - q I||_F^2 / 6 and r = det((X - q I)/p) / 2 in [-1, 1], the eigenvalues are
-    q + p x with x^3 - 3x = 2r. The largest x = 1 + t, t^2 (t + 3) = 2 (1 + r); the smallest x = -(1 + t'),
-    t'^2 (t' + 3) = 2 (1 - r); the middle one is t' - t (the three sum to 0). Each root: polynomial start and
-    one Halley step (:func:`_cubic_root01`). Near a repeated eigenvalue r carries an absolute error ~eps, so
-    the *split* of the pair is ~sqrt(eps) p (their product and sum stay accurate, which is what s3 uses).
+    q + p x with x^3 - 3x = 2r. The largest x = 1 + t, t^2 (t + 3) = 2 (1 + r) (polynomial start and one
+    Halley step, :func:`_cubic_root01`): lambda_1 = q + p (1 + t), all terms positive, relative accuracy ~eps.
+    lambda_2 does not come from the cubic's middle root (it cancels to ~sqrt(eps) lambda_1 when lambda_2,
+    lambda_3 << lambda_1) but from the invariants the caller knows accurately: the sum of principal 2x2 minors
+    ``c2`` and ``det``: lambda_2 lambda_3 = det / lambda_1 = pi, lambda_2 + lambda_3 = (c2 - pi) / lambda_1 =
+    sigma, lambda_2 = sigma / 2 + sqrt(sigma^2 / 4 - pi) (no cancellation). A split below the cubic's
+    ~sqrt(eps) noise (a repeated eigenvalue, e.g. on the robot's axis) is reported as the pair's mean.
     """
     q = (x00 + x11 + x22) * (1.0 / 3.0)
     b00, b11, b22 = x00 - q, x11 - q, x22 - q
@@ -139,17 +142,19 @@ def _eig_top2_fast(x00, x11, x22, x01, x02, x12):
     r = jnp.clip(0.5 * det_b / jnp.where(pos, p2 * p, 1.0), -1.0, 1.0)
     t = _cubic_root01(2.0 * (1.0 + r))
     t2 = _cubic_root01(2.0 * (1.0 - r))
-    l1, l2 = q + p * (1.0 + t), q + p * (t2 - t)
-    # A split below the cubic's sqrt(eps) noise is noise (e.g. exactly on the robot's axis): report the mean,
-    # which is accurate to eps (the sum of the pair is), instead of two values sqrt(eps) apart.
+    l1, l2c = q + p * (1.0 + t), q + p * (t2 - t)
     eps = jnp.finfo(jnp.result_type(x00)).eps
-    # r carries an absolute error ~eps (1 + |q| / p) (cancellation in X - q I), t moves by sqrt of that
-    noise2 = 64.0 * eps * p * (p + jnp.abs(q))
-    l3 = 3.0 * q - l1 - l2
-    tie12 = (l1 - l2) ** 2 <= noise2
-    tie23 = (l2 - l3) ** 2 <= noise2
-    mean12 = 0.5 * (l1 + l2)
-    return jnp.where(tie12, mean12, l1), jnp.where(tie12, mean12, jnp.where(tie23, 0.5 * (l2 + l3), l2))
+    # r carries an absolute error ~eps (1 + |q| / p) (cancellation in X - q I); t moves by its square root
+    tie12 = (l1 - l2c) ** 2 <= 64.0 * eps * p * (p + jnp.abs(q))
+    l1 = jnp.where(tie12, 0.5 * (l1 + l2c), l1)
+    l1_pos = l1 > 0.0
+    inv1 = 1.0 / jnp.where(l1_pos, l1, 1.0)
+    prod23 = det * inv1
+    sum23 = (c2 - prod23) * inv1
+    disc = 0.25 * sum23 * sum23 - prod23
+    root = jnp.where(disc > 64.0 * eps * sum23 * sum23, jnp.sqrt(jnp.where(disc > 0.0, disc, 1.0)), 0.0)
+    l2 = jnp.where(tie12, l1, jnp.where(l1_pos, 0.5 * sum23 + root, 0.0))
+    return l1, l2
 
 
 def _jacobi_rotate(A, p: int, q: int):
@@ -191,18 +196,21 @@ def _eig_top2_jacobi(x00, x11, x22, x01, x02, x12, sweeps: int = 4):
 SV_METHODS = ("fast", "jacobi", "svd")
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(6,))
-def sym3_top2(x00, x11, x22, x01, x02, x12, method: str = "fast"):
-    """(lambda_1, lambda_2), the two largest eigenvalues of the symmetric 3x3 [[x00, x01, x02], [., x11, x12],
-    [., ., x22]]; scalars. ``method``: ``"fast"`` (closed-form cubic) or ``"jacobi"`` (exact sweeps).
+@functools.partial(jax.custom_jvp, nondiff_argnums=(8,))
+def sym3_top2(x00, x11, x22, x01, x02, x12, c2, det, method: str = "fast"):
+    """(lambda_1, lambda_2), the two largest eigenvalues of the symmetric PSD 3x3 [[x00, x01, x02],
+    [., x11, x12], [., ., x22]]; scalars. ``c2`` (sum of the principal 2x2 minors) and ``det`` are the
+    matrix's invariants, passed in because the caller knows them without cancellation (``"fast"`` uses them
+    for lambda_2; ``"jacobi"`` ignores them). ``method``: ``"fast"`` (closed-form cubic) or ``"jacobi"``.
 
     Custom JVP (finite everywhere): d lambda = tr(adj(X - lambda I) dX) / tr(adj(X - lambda I)) (the
     eigen-projector) for an eigenvalue separated from the others by more than eps^0.4 max|lambda|; a pair
     closer than that gets the derivative of its mean (tr(dX) minus the isolated one's, halved), a triple
-    tr(dX) / 3. The projector eigenvalues come from Jacobi in both methods.
+    tr(dX) / 3. The projector eigenvalues come from Jacobi in both methods; c2 and det must be consistent
+    with X (their tangents are not used).
     """
     if method == "fast":
-        return _eig_top2_fast(x00, x11, x22, x01, x02, x12)
+        return _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det)
     if method == "jacobi":
         return _eig_top2_jacobi(x00, x11, x22, x01, x02, x12)
     raise ValueError(f"method must be 'fast' or 'jacobi', got {method!r}")
@@ -210,10 +218,10 @@ def sym3_top2(x00, x11, x22, x01, x02, x12, method: str = "fast"):
 
 @sym3_top2.defjvp
 def _sym3_top2_jvp(method, primals, tangents):
-    x00, x11, x22, x01, x02, x12 = primals
-    d00, d11, d22, d01, d02, d12 = tangents
+    x00, x11, x22, x01, x02, x12 = primals[:6]
+    d00, d11, d22, d01, d02, d12 = tangents[:6]
     lam1, lam2 = sym3_top2(*primals, method)
-    l1, l2 = (lam1, lam2) if method == "jacobi" else _eig_top2_jacobi(*primals)
+    l1, l2 = (lam1, lam2) if method == "jacobi" else _eig_top2_jacobi(*primals[:6])
     l3 = x00 + x11 + x22 - l1 - l2
     dtr = d00 + d11 + d22
 
@@ -283,7 +291,16 @@ def singular_values(jx, d=None, *, method: str = "fast"):
              (0, 1): g02 * g12 - g01 * g22, (0, 2): g01 * g12 - g02 * g11, (1, 2): g01 * g02 - g00 * g12}
     X = [jnp.where(jx_side, adj_d[i] * G[(i, j)] * adj_d[j], d[i] * adj_g[(i, j)] * d[j])
          for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))]
-    e1, e2 = sym3_top2(*X, method)
+    # invariants of X without cancellation (principal 2x2 minors of adj(G) are det(G) G_kk):
+    # S = D adj(G) D: c2 = det G sum_k G_kk adj_d_k^2, det = prod^2 det(G)^2;
+    # T = adj(D) G adj(D): c2 = prod^2 sum_k d_k^2 adjG_kk, det = prod^4 det(G)
+    det_g = det_jx * det_jx
+    p2d = prod_d * prod_d
+    c2 = jnp.where(jx_side,
+                   p2d * (d[0] * d[0] * adj_g[(0, 0)] + d[1] * d[1] * adj_g[(1, 1)] + d[2] * d[2] * adj_g[(2, 2)]),
+                   det_g * (g00 * adj_d[0] * adj_d[0] + g11 * adj_d[1] * adj_d[1] + g22 * adj_d[2] * adj_d[2]))
+    det_x = jnp.where(jx_side, p2d * p2d * det_g, p2d * det_g * det_g)
+    e1, e2 = sym3_top2(*X, c2, det_x, method)
     r1, r2 = _sqrt0(e1), _sqrt0(e2)
     # Jq side (det_jx >= prod_d); det_jx = 0 there means both factors singular: s1 = inf
     det_pos = det_jx > 0.0
