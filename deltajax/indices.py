@@ -27,7 +27,7 @@ from jaxtyping import Array, Bool, Float, Int
 from .geometry import Delta
 from .jacobian import _resolve_length, homogenise, jq_diagonal, jq_theta, jx_det, jx_row
 from .kinematics import (_branch_sign, _from_chain_frames, chain_local, design_ok, forearm_units, limit_terms,
-                         loop_closure, loop_vectors, passive_angles)
+                         loop_closure, loop_vectors, passive_angles, safe_point)
 
 __all__ = [
     "Indices",
@@ -117,8 +117,8 @@ def _cubic_root01(c):
     g = t * t * (t + 3.0) - c
     g1 = 3.0 * t * (t + 2.0)
     g2 = 6.0 * (t + 1.0)
-    den = 2.0 * g1 * g1 - g * g2
-    return t - jnp.where(den > 0.0, 2.0 * g * g1 / jnp.where(den > 0.0, den, 1.0), 0.0)
+    den = 2.0 * g1 * g1 - g * g2  # >= 0 near the root; 0 only at c = t = 0 where g = 0 too
+    return t - 2.0 * g * g1 / (den + jnp.finfo(jnp.result_type(c)).tiny)
 
 
 def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det):
@@ -136,10 +136,11 @@ def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det):
     q = (x00 + x11 + x22) * (1.0 / 3.0)
     b00, b11, b22 = x00 - q, x11 - q, x22 - q
     p2 = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (x01 * x01 + x02 * x02 + x12 * x12)) * (1.0 / 6.0)
-    pos = p2 > 0.0
-    p = jnp.where(pos, jnp.sqrt(jnp.where(pos, p2, 1.0)), 0.0)
+    # forward values only: derivatives come from sym3_top2's custom JVP, so no double-where guards here (each
+    # extra select of a multi-use value costs XLA:CPU a separate loop)
+    p = jnp.sqrt(p2)
     det_b = b00 * (b11 * b22 - x12 * x12) - x01 * (x01 * b22 - x12 * x02) + x02 * (x01 * x12 - b11 * x02)
-    r = jnp.clip(0.5 * det_b / jnp.where(pos, p2 * p, 1.0), -1.0, 1.0)
+    r = jnp.clip(0.5 * det_b / (p2 * p + jnp.finfo(jnp.result_type(x00)).tiny), -1.0, 1.0)
     t = _cubic_root01(2.0 * (1.0 + r))
     t2 = _cubic_root01(2.0 * (1.0 - r))
     l1, l2c = q + p * (1.0 + t), q + p * (t2 - t)
@@ -147,13 +148,12 @@ def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det):
     # r carries an absolute error ~eps (1 + |q| / p) (cancellation in X - q I); t moves by its square root
     tie12 = (l1 - l2c) ** 2 <= 64.0 * eps * p * (p + jnp.abs(q))
     l1 = jnp.where(tie12, 0.5 * (l1 + l2c), l1)
-    l1_pos = l1 > 0.0
-    inv1 = 1.0 / jnp.where(l1_pos, l1, 1.0)
+    inv1 = 1.0 / (l1 + jnp.finfo(jnp.result_type(x00)).tiny)  # X is PSD: l1 >= 0
     prod23 = det * inv1
     sum23 = (c2 - prod23) * inv1
     disc = 0.25 * sum23 * sum23 - prod23
-    root = jnp.where(disc > 64.0 * eps * sum23 * sum23, jnp.sqrt(jnp.where(disc > 0.0, disc, 1.0)), 0.0)
-    l2 = jnp.where(tie12, l1, jnp.where(l1_pos, 0.5 * sum23 + root, 0.0))
+    root = jnp.sqrt(jnp.where(disc > 64.0 * eps * sum23 * sum23, disc, 0.0))
+    l2 = jnp.where(tie12, l1, 0.5 * sum23 + root)
     return l1, l2
 
 
@@ -251,8 +251,8 @@ def _sym3_top2_jvp(method, primals, tangents):
 
 def _sqrt0(x):
     """sqrt(max(x, 0)) with a finite (zero) derivative at and below 0."""
-    pos = x > 0.0
-    return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
+    # one where: at x = 0 the chain rule sends sqrt's infinite slope into the unselected branch -> 0
+    return jnp.sqrt(jnp.where(x > 0.0, x, 0.0))
 
 
 def singular_values(jx, d=None, *, method: str = "fast"):
@@ -305,18 +305,20 @@ def singular_values(jx, d=None, *, method: str = "fast"):
     # Jq side (det_jx >= prod_d); det_jx = 0 there means both factors singular: s1 = inf
     det_pos = det_jx > 0.0
     det_safe = jnp.where(det_pos, det_jx, 1.0)
-    a1 = jnp.where(det_pos, r1 / det_safe, jnp.inf)
-    a2 = jnp.where(det_pos, r2 / det_safe, jnp.inf)
+    a1 = r1 / det_safe
+    a2 = r2 / det_safe
     a12 = a1 * a2
-    a12_pos = det_pos & (a12 > 0)
-    a3 = jnp.where(a12_pos, prod_d / (det_safe * jnp.where(a12_pos, a12, 1.0)), 0.0)
+    a3 = prod_d / (det_safe * jnp.where(a12 > 0, a12, 1.0))
     # Jx side (prod_d > det_jx >= 0, so prod_d > 0)
     b3 = prod_d / jnp.where(r1 > 0, r1, 1.0)
     b2 = prod_d / jnp.where(r2 > 0, r2, 1.0)
     b23 = b2 * b3
     db = det_jx * b23
-    b1 = jnp.where(db > 0, prod_d / jnp.where(db > 0, db, 1.0), jnp.inf)
-    return jnp.where(jx_side, b1, a1), jnp.where(jx_side, b2, a2), jnp.where(jx_side, b3, a3)
+    b1 = prod_d / jnp.where(db > 0, db, 1.0)
+    # det Jx = 0 exactly (Jx singular): s1 = inf on either side (one select, on the output)
+    s1 = jnp.where(det_pos, jnp.where(jx_side, b1, a1), jnp.inf)
+    s2 = jnp.where(jx_side, b2, jnp.where(det_pos, a2, jnp.inf))
+    return s1, s2, jnp.where(jx_side, b3, a3)
 
 
 def singular_values_closed_form(Jx: Float[Array, "3 3"], dhat: Float[Array, "3"], *,
@@ -398,6 +400,7 @@ def point_kernel(robot: Delta, p: Float[Array, "3"], *, sign: float = 1.0, sv_me
     p = jnp.asarray(p)
     dtype = jnp.result_type(p.dtype, robot.upper_arm.dtype)
     p = p.astype(dtype)
+    p, usable = safe_point(robot, p)
     valid = design_ok(robot)
     one = jnp.asarray(1.0, dtype)
     L1 = jnp.where(valid, robot.upper_arm, one)
@@ -408,12 +411,17 @@ def point_kernel(robot: Delta, p: Float[Array, "3"], *, sign: float = 1.0, sv_me
     for i in range(3):
         x, y, z = chain_local(p[0], p[1], p[2], i)
         lc = loop_closure(x + robot.platform_radius - robot.base_radius, y, z, L1, L2, lim, sign)  # (x + r) - R
-        ux, uy, uz = loop_vectors(lc.dx, lc.py, lc.pz, lc.cos, lc.sin, L1, L2)
+        ux, uy, uz = loop_vectors(x + robot.platform_radius - robot.base_radius, y, z, lc.cos, lc.sin, L1, L2)
         rows.extend(jx_row(ux, uy, uz, i))
         di = jq_theta(ux, uz, lc.cos, lc.sin)
         d.append(di if length is None else di * (L1 / L))
         chains.append(lc)
-    ok = valid & chains[0].ok & chains[1].ok & chains[2].ok
+    ok = valid & usable & chains[0].ok & chains[1].ok & chains[2].ok
+    # double where: a failed point's Jacobian is garbage (finite); the singular values run on a fixed regular
+    # stand-in (Jx = I, d = (0.3, 0.5, 0.7): distinct, well separated) so that no inf/NaN meets a zero cotangent
+    eye = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+    rows = [jnp.where(ok, v, e) for v, e in zip(rows, eye)]
+    d = [jnp.where(ok, v, e) for v, e in zip(d, (0.3, 0.5, 0.7))]
     s1, s2, s3 = singular_values(tuple(rows), tuple(d), method=sv_method)
     ind = indices_from_sv(s1, s2, s3, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L ** 3)
     return PointKernel(ok=ok, chains=tuple(chains), det_jx=jx_det(*rows), indices=_nan_where_not(ok, ind))
