@@ -224,7 +224,9 @@ def test_refine_fails_loudly_on_non_finite_gradients(monkeypatch):
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from test_optimize import SPACE, _problem
 
-    pb = _problem({"volume": 1.0}, coverage_min=0.0)
+    from deltajax.optimize.objectives import METRICS
+
+    pb = _problem({"volume": 1.0}, coverage_min=0.0).with_baseline({k: 1.0 for k in METRICS})
     # a surrogate whose gradient is NaN in one gene (sqrt at a negative argument)
     monkeypatch.setattr(refine_mod, "surrogate_loss",
                         lambda pb, space, g, w, **kw: jnp.sum(g) + jnp.sqrt(g[2] - 2.0))
