@@ -7,12 +7,14 @@ choice: ``jax.config.update("jax_enable_x64", True)``; the CLI does it from ``pr
 from . import presets
 from ._precision import Float32Warning
 from .geometry import CHAIN_ANGLES, Delta, GeometryError, ReconfigurableDelta, from_z_up, to_z_up
-from .indices import (INDEX_NAMES, Indices, Singularity, classify_singularity, indices,
-                      indices_from_singular_values, k_tilde, point_indices, sigma_tilde,
-                      singular_values)
-from .jacobian import Jacobians, homogenise, jacobian, jacobians
-from .kinematics import (FKResult, IKCosSin, IKResult, elbows, fk, forearm_units, ik, ik_cos_sin,
-                         passive_angles)
+from .indices import (INDEX_NAMES, Indices, PointKernel, Singularity, classify_singularity, indices,
+                      indices_from_singular_values, indices_from_sv, k_tilde, point_indices, point_kernel,
+                      sigma_tilde, singular_values, sym3_top2)
+from .jacobian import Jacobians, homogenise, jacobian, jacobians, jq_theta, jx_det, jx_row
+from .kinematics import (FKResult, IKCosSin, IKResult, LimitTerms, LoopClosure, chain_local, design_ok, elbows,
+                         fk, forearm_units, ik, ik_cos_sin, limit_terms, loop_closure, loop_vectors,
+                         passive_angles, safe_point)
+from . import reference
 
 from . import dynamics, trajectory
 from .dynamics import CycleMetrics, Limits, Torques, cycle_metrics, cycle_profile, inverse_dynamics

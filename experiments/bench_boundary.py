@@ -30,20 +30,18 @@ PAPER_S = {"conti": 589.1236, "continuation": 246.647}
 
 # -- NumPy baseline (one point at a time, like the paper's MATLAB loops) ----------------------------------------
 def make_test_pose_numpy(robot, half_space=True):
-    """Test-Pose for one point with NumPy: the three chains' loop-closure discriminants (SPEC §1 IK)."""
+    """Test-Pose for one point with NumPy: the three chains' loop closure of the independent NumPy reference
+    (:func:`deltajax.reference.loop_closure`, SPEC §1 IK)."""
+    from deltajax import reference
+
     R, r = float(robot.base_radius), float(robot.platform_radius)
     L1, L2 = float(robot.upper_arm), float(robot.forearm)
-    ang = np.array([0.0, 2 * np.pi / 3, 4 * np.pi / 3])
-    ca, sa = np.cos(ang), np.sin(ang)
     assert not np.isfinite(float(robot.theta_min)), "the baseline covers robots without joint limits only"
 
     def test(p):
-        px = ca * p[0] + sa * p[1]
-        py = -sa * p[0] + ca * p[1]
-        dx = px + r - R
-        rho2 = dx * dx + p[2] * p[2]
-        m = (rho2 + py * py + L1 * L1 - L2 * L2) / (2.0 * L1)
-        ok = bool(np.all((rho2 - m * m >= 0.0) & (rho2 > 0.0)))
+        x, y, z = reference.chain_local(np.asarray(p)[None, :])
+        reach = reference.loop_closure(x + r - R, y, z, L1, L2)[3]
+        ok = bool(np.all(reach))
         return ok and (p[2] > 0.0) if half_space else ok
 
     return test

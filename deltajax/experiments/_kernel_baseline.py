@@ -188,3 +188,64 @@ def point_indices(robot, p, *, b_v=2.0, b_f=4.2, beta=0.5):
     ind = indices_from_singular_values(sv, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L ** 3)
     nan = jnp.asarray(jnp.nan, sv.dtype)
     return ok, Indices(*(jnp.where(ok, v, nan) for v in ind))
+
+
+def redundancy_kernel(recon, p, k, b_v, b_f, beta):
+    """The old ``workspace.redundancy._kernel`` (feasible, Indices) at sample k of canonical point p."""
+    robot = recon.at(recon.R_min + jnp.asarray(k, recon.R_min.dtype) * recon.R_step)
+    cos, sin, oks = ik_cos_sin(robot, p)
+    ok = jnp.all(oks)
+    c = jnp.where(ok, cos, 1.0)
+    s = jnp.where(ok, sin, 0.0)
+    loc = to_chain_frames(p)
+    L1, L2 = robot.upper_arm, robot.forearm
+    u = jnp.stack([loc[:, 0] + robot.platform_radius - robot.base_radius - L1 * c, loc[:, 1],
+                   loc[:, 2] - L1 * s], axis=-1) / L2
+    Jx = _from_chain_frames(u)
+    det_jx = (Jx[0, 0] * (Jx[1, 1] * Jx[2, 2] - Jx[1, 2] * Jx[2, 1])
+              - Jx[0, 1] * (Jx[1, 0] * Jx[2, 2] - Jx[1, 2] * Jx[2, 0])
+              + Jx[0, 2] * (Jx[1, 0] * Jx[2, 1] - Jx[1, 1] * Jx[2, 0]))
+    dhat = u[:, 2] * c - u[:, 0] * s
+    sv = singular_values_closed_form(Jx, dhat)
+    ind = indices_from_singular_values(sv, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L1 ** 3)
+    return ok & (det_jx != 0.0), ind
+
+
+def mirrored_point_indices(robot, p, *, b_v=2.0, b_f=4.2, beta=0.5, sv_method=None):
+    """The old ``workspace.point_indices`` (ok, Indices) at the mirror image (x, |y|, z)."""
+    q = jnp.stack([p[0], jnp.abs(p[1]), p[2]])
+    return point_indices(robot, q, b_v=b_v, b_f=b_f, beta=beta)
+
+
+def ik_cos_sin_result(robot, p, branch="outer"):
+    """The old algebraic IK in the public IKCosSin shape (reason codes zero: the fitness never reads them)."""
+    from ..kinematics import IKCosSin
+
+    cos, sin, ok = ik_cos_sin(robot, p)
+    return IKCosSin(cos=cos, sin=sin, ok=ok, reason=jnp.zeros(3, jnp.int32))
+
+
+def patch_old_kernel():
+    """Context manager: inside it, the workspace/objective/dynamics consumers call the frozen old kernel
+    (the fitness baseline of ``experiments/bench_fitness.py``). Must wrap tracing (``jax.jit(...)`` calls)."""
+    import contextlib
+
+    from .. import dynamics
+    from ..optimize import objectives
+    from ..workspace import grid, redundancy
+
+    patches = [(redundancy, "_kernel", redundancy_kernel), (grid, "mirrored_point_indices", mirrored_point_indices),
+               (objectives, "mirrored_point_indices", mirrored_point_indices), (grid, "ik_cos_sin", ik_cos_sin_result),
+               (redundancy, "ik_cos_sin", ik_cos_sin_result), (dynamics, "ik_cos_sin", ik_cos_sin_result)]
+
+    @contextlib.contextmanager
+    def ctx():
+        saved = [(m, n, getattr(m, n)) for m, n, _ in patches]
+        try:
+            for m, n, f in patches:
+                setattr(m, n, f)
+            yield
+        finally:
+            for m, n, f in saved:
+                setattr(m, n, f)
+    return ctx()

@@ -300,7 +300,7 @@ def soft_margin(robot: Delta, p, t: float = 0.01):
     for i in range(3):
         x, y, z = chain_local(p[0], jnp.abs(p[1]), p[2], i)
         lc = loop_closure(x + robot.platform_radius - robot.base_radius, y, z, L1, robot.forearm, lim)
-        ai = lc.disc / (L1 * L1)  # -(1 + L2/L1)^2 outside the chain's reach box
+        ai = lc.disc / (L1 * L1)
         a.append(ai)
         b.append(jnp.where(lc.reach, jnp.where(lim.cos_half < -1.0, 1.0, lc.margin), ai))  # unlimited: 1
     a, b = jnp.stack(a), jnp.stack(b)
