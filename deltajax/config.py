@@ -10,8 +10,10 @@ import math
 from typing import Any, Dict, Mapping, Optional, Tuple
 
 from .geometry import Delta, GeometryError, ReconfigurableDelta
+from .mass import FOREARM_MODELS, MASS_FIELDS, MassError, MassModel, check_field
 
-__all__ = ["ConfigError", "robot_from_config", "validate_config", "check_keys", "valid_keys", "register_schemas", "TOP_LEVEL_KEYS",
+__all__ = ["ConfigError", "robot_from_config", "mass_from_config", "validate_config", "check_keys", "valid_keys",
+           "register_schemas", "TOP_LEVEL_KEYS",
            "EXPERIMENT_VALIDATORS", "EXPERIMENT_SCHEMAS"]
 
 
@@ -61,12 +63,7 @@ def robot_from_config(cfg: Mapping[str, Any], prefix: str = "robot") -> Tuple[De
     mass_cfg = cfg.get("mass") if hasattr(cfg, "get") else None
     mass = None
     if mass_cfg is not None:
-        try:
-            from .mass import mass_from_config  # provided by the dynamics module
-        except ImportError:  # pragma: no cover - dynamics not installed
-            mass = None
-        else:
-            mass = mass_from_config(mass_cfg, kw, prefix=f"{prefix}.mass")
+        mass = mass_from_config(mass_cfg, kw, prefix=f"{prefix}.mass")
     try:
         robot = Delta.from_degrees(theta_min_deg=lo, theta_max_deg=hi, mass=mass, **kw)
     except GeometryError as e:
@@ -411,3 +408,69 @@ def valid_keys(full_key: str, experiment: Optional[str] = None) -> Optional[list
             return None
         schema = sub
     return sorted(_schema_fields(schema))
+
+
+def mass_from_config(mass_cfg: Mapping[str, Any], geometry_kwargs: Optional[Mapping[str, Any]] = None,
+                     prefix: str = "robot.mass") -> MassModel:
+    """Build a :class:`MassModel` from a ``mass:`` config block, validating every field first.
+
+    Fields: those of :class:`MassModel` (``upper_arm_mass`` required, the others default as documented;
+    ``forearm_model`` is ``rigid_rod`` or ``point_split``) plus,
+    instead of ``upper_arm_inertia_factor``, an absolute ``upper_arm_inertia`` (kg m^2 about the upper arm's
+    centre of mass), converted with the config's ``upper_arm`` length L1 (taken from ``geometry_kwargs``).
+
+    Args:
+        mass_cfg: mapping (OmegaConf or dict).
+        geometry_kwargs: the robot's geometry (``upper_arm`` in m) for the inertia conversion.
+        prefix: dotted path used in error messages.
+
+    Raises:
+        ConfigError: unknown, missing, non-numeric or out-of-range field; the message names
+            ``<prefix>.<field>`` and the value.
+    """
+    known = {name for name, _u, _k in MASS_FIELDS} | {"upper_arm_inertia", "forearm_model"}
+    keys = list(mass_cfg.keys())
+    for k in keys:
+        if k not in known:
+            raise ConfigError(f"{prefix}.{k} is not a mass-model field (known: {sorted(known)})")
+    kinds = {name: kind for name, _u, kind in MASS_FIELDS}
+    values: dict[str, Any] = {}
+    for k in keys:
+        v = mass_cfg[k]
+        if v is None:
+            continue
+        if k == "forearm_model":
+            if v not in FOREARM_MODELS:
+                raise ConfigError(f"{prefix}.forearm_model must be one of {list(FOREARM_MODELS)}, got {v!r}")
+            values[k] = str(v)
+            continue
+        if isinstance(v, bool):
+            raise ConfigError(f"{prefix}.{k} must be a number, got {v!r}")
+        try:
+            f = float(v)
+        except (TypeError, ValueError):
+            raise ConfigError(f"{prefix}.{k} must be a number, got {v!r}") from None
+        msg = check_field(k, kinds.get(k, "nonneg"), f)
+        if msg is not None:
+            raise ConfigError(f"{prefix}.{msg}")
+        values[k] = f
+    if values.get("forearm_model") == "point_split" and "forearm_inertia_factor" in values:
+        raise ConfigError(f"{prefix}.forearm_inertia_factor={values['forearm_inertia_factor']!r} applies to "
+                          "forearm_model: rigid_rod only (point_split's inertia is that of its two end masses)")
+    if "upper_arm_mass" not in values:
+        raise ConfigError(f"{prefix}.upper_arm_mass is required")
+    if "upper_arm_inertia" in values:
+        if "upper_arm_inertia_factor" in values:
+            raise ConfigError(f"{prefix}: give upper_arm_inertia or upper_arm_inertia_factor, not both")
+        inertia = values.pop("upper_arm_inertia")
+        L1 = None if geometry_kwargs is None else geometry_kwargs.get("upper_arm")
+        m = values["upper_arm_mass"]
+        if L1 is None or not float(L1) > 0:
+            raise ConfigError(f"{prefix}.upper_arm_inertia needs the robot's upper_arm length, got {L1!r}")
+        if inertia > 0 and m == 0:
+            raise ConfigError(f"{prefix}.upper_arm_inertia={inertia!r} kg m^2 needs upper_arm_mass > 0")
+        values["upper_arm_inertia_factor"] = 0.0 if m == 0 else inertia / (m * float(L1) ** 2)
+    try:
+        return MassModel(**values)
+    except MassError as e:  # the rigid-rod inertia bound couples two fields; the message names them
+        raise ConfigError(f"{prefix}.{e}") from None

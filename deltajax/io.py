@@ -370,7 +370,7 @@ def _attr_value(v: Any) -> Any:
 
 
 def _read_group(g: h5py.Group) -> dict[str, Any]:
-    out: dict[str, Any] = {"attrs": {k: _py(v) for k, v in g.attrs.items()}, "units": {}}
+    out: dict[str, Any] = {"attrs": {k: to_python(v) for k, v in g.attrs.items()}, "units": {}}
     for k, item in g.items():
         if isinstance(item, h5py.Group):
             out[k] = _read_group(item)
@@ -380,11 +380,12 @@ def _read_group(g: h5py.Group) -> dict[str, Any]:
                 data = item.asstr()[()]
             out[k] = data
             if "units" in item.attrs:
-                out["units"][k] = _py(item.attrs["units"])
+                out["units"][k] = to_python(item.attrs["units"])
     return out
 
 
-def _py(v: Any) -> Any:
+def to_python(v: Any) -> Any:
+    """An HDF5 attribute or scalar as plain Python (bytes -> str, NumPy scalars -> int/float/bool)."""
     if isinstance(v, bytes):
         return v.decode()
     if isinstance(v, np.generic):
@@ -444,7 +445,6 @@ def load(path: os.PathLike, group: Optional[str] = None) -> dict[str, Any]:
         return _read_group(g)
 
 
-# -- sweeps and analysis (additive; the merge and summary logic lives in deltajax.sweep) ----------------------
 def open_xarray(path: os.PathLike, group: str):
     """Open one group of a results file as an in-memory :class:`xarray.Dataset` (SPEC §5).
 
@@ -470,21 +470,4 @@ def open_xarray(path: os.PathLike, group: str):
         return ds.load()
 
 
-def merge_shards(paths: Sequence[os.PathLike], out: Optional[os.PathLike] = None) -> Path:
-    """Merge the results files of the N shards of one job into one file identical to a single run.
-
-    See :func:`deltajax.sweep.merge_shards` (``python -m deltajax.merge <sweep dir>`` merges a whole sweep).
-    """
-    from .sweep import merge_shards as _merge
-
-    return _merge(paths, out)
-
-
-def summarize_sweep(sweep_dir: os.PathLike) -> dict:
-    """Write ``summary.csv`` and ``summary.json`` indexing a sweep's runs; see :func:`deltajax.sweep.summarize_sweep`."""
-    from .sweep import summarize_sweep as _summarize
-
-    return _summarize(sweep_dir)
-
-
-__all__ += ["open_xarray", "merge_shards", "summarize_sweep"]
+__all__ += ["open_xarray", "to_python"]

@@ -54,7 +54,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 
-__all__ = ["MassModel", "mass_from_config", "MASS_FIELDS", "STANDARD_GRAVITY", "FOREARM_MODELS",
+__all__ = ["MassModel", "MassError", "check_field", "MASS_FIELDS", "STANDARD_GRAVITY", "FOREARM_MODELS",
            "DEFAULT_FOREARM_MODEL"]
 
 STANDARD_GRAVITY = 9.80665
@@ -64,7 +64,7 @@ FOREARM_MODELS = ("rigid_rod", "point_split")
 DEFAULT_FOREARM_MODEL = "rigid_rod"
 
 #: (field, unit, lower bound kind) for validation and config parsing. "pos" > 0, "nonneg" >= 0, "frac" in [0,1],
-#: "ratio" >= 1 ... see _check.
+#: "ratio" >= 1 ... see check_field.
 MASS_FIELDS = (
     ("upper_arm_mass", "kg", "nonneg"),
     ("upper_arm_com_fraction", "1", "frac"),
@@ -86,7 +86,7 @@ def _leaf(x: Any) -> jax.Array:
     return jnp.asarray(x, dtype=jnp.result_type(float))
 
 
-def _check(name: str, kind: str, value: Any) -> Optional[str]:
+def check_field(name: str, kind: str, value: Any) -> Optional[str]:
     """Return an error message if a concrete scalar ``value`` is invalid for ``kind``, else None."""
     if isinstance(value, jax.core.Tracer):
         return None
@@ -151,7 +151,7 @@ class MassModel(eqx.Module):
         if self.forearm_model not in FOREARM_MODELS:
             raise MassError(f"forearm_model must be one of {FOREARM_MODELS}, got {self.forearm_model!r}")
         for name, _unit, kind in MASS_FIELDS:
-            msg = _check(name, kind, getattr(self, name))
+            msg = check_field(name, kind, getattr(self, name))
             if msg is not None:
                 raise MassError(msg)
         if self.forearm_model == "rigid_rod":
@@ -215,71 +215,3 @@ class MassModel(eqx.Module):
     def with_payload(self, payload_mass: Any) -> "MassModel":
         """The same model carrying ``payload_mass`` (kg)."""
         return eqx.tree_at(lambda m: m.payload_mass, self, _leaf(payload_mass))
-
-
-def mass_from_config(mass_cfg: Mapping[str, Any], geometry_kwargs: Optional[Mapping[str, Any]] = None,
-                     prefix: str = "robot.mass") -> MassModel:
-    """Build a :class:`MassModel` from a ``mass:`` config block, validating every field first.
-
-    Fields: those of :class:`MassModel` (``upper_arm_mass`` required, the others default as documented;
-    ``forearm_model`` is ``rigid_rod`` or ``point_split``) plus,
-    instead of ``upper_arm_inertia_factor``, an absolute ``upper_arm_inertia`` (kg m^2 about the upper arm's
-    centre of mass), converted with the config's ``upper_arm`` length L1 (taken from ``geometry_kwargs``).
-
-    Args:
-        mass_cfg: mapping (OmegaConf or dict).
-        geometry_kwargs: the robot's geometry (``upper_arm`` in m) for the inertia conversion.
-        prefix: dotted path used in error messages.
-
-    Raises:
-        deltajax.config.ConfigError: unknown, missing, non-numeric or out-of-range field; the message names
-            ``<prefix>.<field>`` and the value.
-    """
-    from .config import ConfigError
-
-    known = {name for name, _u, _k in MASS_FIELDS} | {"upper_arm_inertia", "forearm_model"}
-    keys = list(mass_cfg.keys())
-    for k in keys:
-        if k not in known:
-            raise ConfigError(f"{prefix}.{k} is not a mass-model field (known: {sorted(known)})")
-    kinds = {name: kind for name, _u, kind in MASS_FIELDS}
-    values: dict[str, Any] = {}
-    for k in keys:
-        v = mass_cfg[k]
-        if v is None:
-            continue
-        if k == "forearm_model":
-            if v not in FOREARM_MODELS:
-                raise ConfigError(f"{prefix}.forearm_model must be one of {list(FOREARM_MODELS)}, got {v!r}")
-            values[k] = str(v)
-            continue
-        if isinstance(v, bool):
-            raise ConfigError(f"{prefix}.{k} must be a number, got {v!r}")
-        try:
-            f = float(v)
-        except (TypeError, ValueError):
-            raise ConfigError(f"{prefix}.{k} must be a number, got {v!r}") from None
-        msg = _check(k, kinds.get(k, "nonneg"), f)
-        if msg is not None:
-            raise ConfigError(f"{prefix}.{msg}")
-        values[k] = f
-    if values.get("forearm_model") == "point_split" and "forearm_inertia_factor" in values:
-        raise ConfigError(f"{prefix}.forearm_inertia_factor={values['forearm_inertia_factor']!r} applies to "
-                          "forearm_model: rigid_rod only (point_split's inertia is that of its two end masses)")
-    if "upper_arm_mass" not in values:
-        raise ConfigError(f"{prefix}.upper_arm_mass is required")
-    if "upper_arm_inertia" in values:
-        if "upper_arm_inertia_factor" in values:
-            raise ConfigError(f"{prefix}: give upper_arm_inertia or upper_arm_inertia_factor, not both")
-        inertia = values.pop("upper_arm_inertia")
-        L1 = None if geometry_kwargs is None else geometry_kwargs.get("upper_arm")
-        m = values["upper_arm_mass"]
-        if L1 is None or not float(L1) > 0:
-            raise ConfigError(f"{prefix}.upper_arm_inertia needs the robot's upper_arm length, got {L1!r}")
-        if inertia > 0 and m == 0:
-            raise ConfigError(f"{prefix}.upper_arm_inertia={inertia!r} kg m^2 needs upper_arm_mass > 0")
-        values["upper_arm_inertia_factor"] = 0.0 if m == 0 else inertia / (m * float(L1) ** 2)
-    try:
-        return MassModel(**values)
-    except MassError as e:  # the rigid-rod inertia bound couples two fields; the message names them
-        raise ConfigError(f"{prefix}.{e}") from None

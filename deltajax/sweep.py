@@ -33,7 +33,7 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
-from .io import _py
+from .io import to_python
 
 try:  # Hydra is a hard dependency of the CLI; keep this module importable without it for analysis
     from hydra.experimental.callback import Callback
@@ -323,11 +323,11 @@ def _read_tree(path: os.PathLike) -> tuple[dict, dict[str, dict], dict[str, dict
     gattrs: dict[str, dict] = {}
     groups: dict[str, dict[str, _Dataset]] = {}
     with h5py.File(path, "r") as f:
-        root_attrs = {k: _py(v) for k, v in f.attrs.items()}
+        root_attrs = {k: to_python(v) for k, v in f.attrs.items()}
 
         def visit(name: str, obj) -> None:
             if isinstance(obj, h5py.Group):
-                gattrs[name] = {k: _py(v) for k, v in obj.attrs.items()}
+                gattrs[name] = {k: to_python(v) for k, v in obj.attrs.items()}
                 groups.setdefault(name, {})
                 return
             gname, _, dname = name.rpartition("/")
@@ -343,8 +343,8 @@ def _read_tree(path: os.PathLike) -> tuple[dict, dict[str, dict], dict[str, dict
                         raise ShardError(f"{path}: {name} has no dimension scale on axis {i}")
                     dims.append(scales[0])
                 dims = tuple(dims)
-            attrs = {k: _py(v) for k, v in obj.attrs.items() if k not in _SCALE_ATTRS}
-            groups.setdefault(gname, {})[dname] = _Dataset(data, _py(obj.attrs.get("units", "")), dims, attrs,
+            attrs = {k: to_python(v) for k, v in obj.attrs.items() if k not in _SCALE_ATTRS}
+            groups.setdefault(gname, {})[dname] = _Dataset(data, to_python(obj.attrs.get("units", "")), dims, attrs,
                                                            is_axis)
 
         f.visititems(visit)
@@ -618,8 +618,8 @@ def merge_sweep(sweep_dir: os.PathLike) -> list[Path]:
         if not f.exists():
             continue
         with h5py.File(f, "r") as h:
-            cfg_yaml = _py(h.attrs.get("config", ""))
-            name = str(_py(h.attrs.get("experiment", "run")))
+            cfg_yaml = to_python(h.attrs.get("config", ""))
+            name = str(to_python(h.attrs.get("experiment", "run")))
             is_sharded = any("shard_axis" in h[k].attrs and int(h[k].attrs.get("n_shards", 1)) > 1
                              for k in h if isinstance(h[k], h5py.Group))
         if not is_sharded:
@@ -649,19 +649,19 @@ def _scalars(path: Path) -> tuple[dict[str, float], dict[str, str], dict[str, An
     vals: dict[str, float] = {}
     units: dict[str, str] = {}
     with h5py.File(path, "r") as f:
-        root = {k: _py(v) for k, v in f.attrs.items() if k != "config"}
+        root = {k: to_python(v) for k, v in f.attrs.items() if k != "config"}
 
         def visit(name, obj):
             if not isinstance(obj, h5py.Dataset) or obj.dtype.kind not in "biuf":
                 return
             if obj.shape == ():
-                vals[name] = _py(obj[()])
-                units[name] = str(_py(obj.attrs.get("units", "")))
+                vals[name] = to_python(obj[()])
+                units[name] = str(to_python(obj.attrs.get("units", "")))
             elif len(obj.shape) == 1 and 1 <= obj.shape[0] <= SMALL_VECTOR and not obj.attrs.get("CLASS"):
                 # a per-chain figure (peak torque of each actuator ...): its largest entry
                 v = np.asarray(obj[()], dtype=float)
                 vals[f"{name}[max]"] = float(np.nanmax(v)) if np.isfinite(v).any() else float("nan")
-                units[f"{name}[max]"] = str(_py(obj.attrs.get("units", "")))
+                units[f"{name}[max]"] = str(to_python(obj.attrs.get("units", "")))
 
         f.visititems(visit)
     return vals, units, root

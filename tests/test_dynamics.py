@@ -16,7 +16,8 @@ import deltajax as dj
 from deltajax import dynamics as dyn
 from deltajax import trajectory as tr
 from deltajax.config import ConfigError, robot_from_config
-from deltajax.mass import MassModel, mass_from_config
+from deltajax.config import mass_from_config
+from deltajax.mass import MassModel
 
 # Every mass-model term switched on (rotor, gear, elbow hardware, carriage, payload, off-centre arm).
 FULL_MASS = MassModel(upper_arm_mass=1.2, upper_arm_com_fraction=0.37, upper_arm_inertia_factor=0.05,

@@ -238,7 +238,8 @@ def test_jax_backend_shards_merge_to_single_run(sweeps, tmp_path):
 def test_summary_indexes_runs_scalars_and_per_chain_maxima(tmp_path):
     """summarize_sweep on a hand-made sweep: overrides as columns, 0-d scalars, [max] of per-chain vectors,
     missing runs marked, axes not summarised."""
-    from deltajax.io import ResultsFile, summarize_sweep
+    from deltajax.io import ResultsFile
+    from deltajax.sweep import summarize_sweep
 
     for i, forearm in enumerate(("0.3", "0.5")):
         run = tmp_path / str(i)
