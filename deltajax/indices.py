@@ -121,14 +121,17 @@ def _cubic_root01(c):
     return t - jnp.where(den > 0.0, 2.0 * g * g1 / jnp.where(den > 0.0, den, 1.0), 0.0)
 
 
-def _eig_top2_fast(x00, x11, x22, x01, x02, x12):
-    """Two largest eigenvalues of a symmetric 3x3 by the closed-form cubic, without inverse trig.
+def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det):
+    """Two largest eigenvalues of a symmetric PSD 3x3 by the closed-form cubic, without inverse trig.
 
     With q = tr/3, p^2 = ||X - q I||_F^2 / 6 and r = det((X - q I)/p) / 2 in [-1, 1], the eigenvalues are
-    q + p x with x^3 - 3x = 2r. The largest x = 1 + t, t^2 (t + 3) = 2 (1 + r); the smallest x = -(1 + t'),
-    t'^2 (t' + 3) = 2 (1 - r); the middle one is t' - t (the three sum to 0). Each root: polynomial start and
-    one Halley step (:func:`_cubic_root01`). Near a repeated eigenvalue r carries an absolute error ~eps, so
-    the *split* of the pair is ~sqrt(eps) p (their product and sum stay accurate, which is what s3 uses).
+    q + p x with x^3 - 3x = 2r. The largest x = 1 + t, t^2 (t + 3) = 2 (1 + r) (polynomial start and one
+    Halley step, :func:`_cubic_root01`): lambda_1 = q + p (1 + t), all terms positive, relative accuracy ~eps.
+    lambda_2 does not come from the cubic's middle root (it cancels to ~sqrt(eps) lambda_1 when lambda_2,
+    lambda_3 << lambda_1) but from the invariants the caller knows accurately: the sum of principal 2x2 minors
+    ``c2`` and ``det``: lambda_2 lambda_3 = det / lambda_1 = pi, lambda_2 + lambda_3 = (c2 - pi) / lambda_1 =
+    sigma, lambda_2 = sigma / 2 + sqrt(sigma^2 / 4 - pi) (no cancellation). A split below the cubic's
+    ~sqrt(eps) noise (a repeated eigenvalue, e.g. on the robot's axis) is reported as the pair's mean.
     """
     q = (x00 + x11 + x22) * (1.0 / 3.0)
     b00, b11, b22 = x00 - q, x11 - q, x22 - q
@@ -139,17 +142,19 @@ def _eig_top2_fast(x00, x11, x22, x01, x02, x12):
     r = jnp.clip(0.5 * det_b / jnp.where(pos, p2 * p, 1.0), -1.0, 1.0)
     t = _cubic_root01(2.0 * (1.0 + r))
     t2 = _cubic_root01(2.0 * (1.0 - r))
-    l1, l2 = q + p * (1.0 + t), q + p * (t2 - t)
-    # A split below the cubic's sqrt(eps) noise is noise (e.g. exactly on the robot's axis): report the mean,
-    # which is accurate to eps (the sum of the pair is), instead of two values sqrt(eps) apart.
+    l1, l2c = q + p * (1.0 + t), q + p * (t2 - t)
     eps = jnp.finfo(jnp.result_type(x00)).eps
-    # r carries an absolute error ~eps (1 + |q| / p) (cancellation in X - q I), t moves by sqrt of that
-    noise2 = 64.0 * eps * p * (p + jnp.abs(q))
-    l3 = 3.0 * q - l1 - l2
-    tie12 = (l1 - l2) ** 2 <= noise2
-    tie23 = (l2 - l3) ** 2 <= noise2
-    mean12 = 0.5 * (l1 + l2)
-    return jnp.where(tie12, mean12, l1), jnp.where(tie12, mean12, jnp.where(tie23, 0.5 * (l2 + l3), l2))
+    # r carries an absolute error ~eps (1 + |q| / p) (cancellation in X - q I); t moves by its square root
+    tie12 = (l1 - l2c) ** 2 <= 64.0 * eps * p * (p + jnp.abs(q))
+    l1 = jnp.where(tie12, 0.5 * (l1 + l2c), l1)
+    l1_pos = l1 > 0.0
+    inv1 = 1.0 / jnp.where(l1_pos, l1, 1.0)
+    prod23 = det * inv1
+    sum23 = (c2 - prod23) * inv1
+    disc = 0.25 * sum23 * sum23 - prod23
+    root = jnp.where(disc > 64.0 * eps * sum23 * sum23, jnp.sqrt(jnp.where(disc > 0.0, disc, 1.0)), 0.0)
+    l2 = jnp.where(tie12, l1, jnp.where(l1_pos, 0.5 * sum23 + root, 0.0))
+    return l1, l2
 
 
 def _jacobi_rotate(A, p: int, q: int):
@@ -191,18 +196,21 @@ def _eig_top2_jacobi(x00, x11, x22, x01, x02, x12, sweeps: int = 4):
 SV_METHODS = ("fast", "jacobi", "svd")
 
 
-@functools.partial(jax.custom_jvp, nondiff_argnums=(6,))
-def sym3_top2(x00, x11, x22, x01, x02, x12, method: str = "fast"):
-    """(lambda_1, lambda_2), the two largest eigenvalues of the symmetric 3x3 [[x00, x01, x02], [., x11, x12],
-    [., ., x22]]; scalars. ``method``: ``"fast"`` (closed-form cubic) or ``"jacobi"`` (exact sweeps).
+@functools.partial(jax.custom_jvp, nondiff_argnums=(8,))
+def sym3_top2(x00, x11, x22, x01, x02, x12, c2, det, method: str = "fast"):
+    """(lambda_1, lambda_2), the two largest eigenvalues of the symmetric PSD 3x3 [[x00, x01, x02],
+    [., x11, x12], [., ., x22]]; scalars. ``c2`` (sum of the principal 2x2 minors) and ``det`` are the
+    matrix's invariants, passed in because the caller knows them without cancellation (``"fast"`` uses them
+    for lambda_2; ``"jacobi"`` ignores them). ``method``: ``"fast"`` (closed-form cubic) or ``"jacobi"``.
 
     Custom JVP (finite everywhere): d lambda = tr(adj(X - lambda I) dX) / tr(adj(X - lambda I)) (the
     eigen-projector) for an eigenvalue separated from the others by more than eps^0.4 max|lambda|; a pair
     closer than that gets the derivative of its mean (tr(dX) minus the isolated one's, halved), a triple
-    tr(dX) / 3. The projector eigenvalues come from Jacobi in both methods.
+    tr(dX) / 3. The projector eigenvalues come from Jacobi in both methods; c2 and det must be consistent
+    with X (their tangents are not used).
     """
     if method == "fast":
-        return _eig_top2_fast(x00, x11, x22, x01, x02, x12)
+        return _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det)
     if method == "jacobi":
         return _eig_top2_jacobi(x00, x11, x22, x01, x02, x12)
     raise ValueError(f"method must be 'fast' or 'jacobi', got {method!r}")
@@ -210,10 +218,10 @@ def sym3_top2(x00, x11, x22, x01, x02, x12, method: str = "fast"):
 
 @sym3_top2.defjvp
 def _sym3_top2_jvp(method, primals, tangents):
-    x00, x11, x22, x01, x02, x12 = primals
-    d00, d11, d22, d01, d02, d12 = tangents
+    x00, x11, x22, x01, x02, x12 = primals[:6]
+    d00, d11, d22, d01, d02, d12 = tangents[:6]
     lam1, lam2 = sym3_top2(*primals, method)
-    l1, l2 = (lam1, lam2) if method == "jacobi" else _eig_top2_jacobi(*primals)
+    l1, l2 = (lam1, lam2) if method == "jacobi" else _eig_top2_jacobi(*primals[:6])
     l3 = x00 + x11 + x22 - l1 - l2
     dtr = d00 + d11 + d22
 
@@ -283,7 +291,16 @@ def singular_values(jx, d=None, *, method: str = "fast"):
              (0, 1): g02 * g12 - g01 * g22, (0, 2): g01 * g12 - g02 * g11, (1, 2): g01 * g02 - g00 * g12}
     X = [jnp.where(jx_side, adj_d[i] * G[(i, j)] * adj_d[j], d[i] * adj_g[(i, j)] * d[j])
          for i, j in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))]
-    e1, e2 = sym3_top2(*X, method)
+    # invariants of X without cancellation (principal 2x2 minors of adj(G) are det(G) G_kk):
+    # S = D adj(G) D: c2 = det G sum_k G_kk adj_d_k^2, det = prod^2 det(G)^2;
+    # T = adj(D) G adj(D): c2 = prod^2 sum_k d_k^2 adjG_kk, det = prod^4 det(G)
+    det_g = det_jx * det_jx
+    p2d = prod_d * prod_d
+    c2 = jnp.where(jx_side,
+                   p2d * (d[0] * d[0] * adj_g[(0, 0)] + d[1] * d[1] * adj_g[(1, 1)] + d[2] * d[2] * adj_g[(2, 2)]),
+                   det_g * (g00 * adj_d[0] * adj_d[0] + g11 * adj_d[1] * adj_d[1] + g22 * adj_d[2] * adj_d[2]))
+    det_x = jnp.where(jx_side, p2d * p2d * det_g, p2d * det_g * det_g)
+    e1, e2 = sym3_top2(*X, c2, det_x, method)
     r1, r2 = _sqrt0(e1), _sqrt0(e2)
     # Jq side (det_jx >= prod_d); det_jx = 0 there means both factors singular: s1 = inf
     det_pos = det_jx > 0.0
@@ -387,11 +404,10 @@ def point_kernel(robot: Delta, p: Float[Array, "3"], *, sign: float = 1.0, sv_me
     L2 = jnp.where(valid, robot.forearm, 2.0 * one)
     L = L1 if length is None else jnp.where(valid, jnp.asarray(length, dtype), one)
     lim = limit_terms(robot.theta_min, robot.theta_max)
-    shift = robot.platform_radius - robot.base_radius
     chains, rows, d = [], [], []
     for i in range(3):
         x, y, z = chain_local(p[0], p[1], p[2], i)
-        lc = loop_closure(x + shift, y, z, L1, L2, lim, sign)
+        lc = loop_closure(x + robot.platform_radius - robot.base_radius, y, z, L1, L2, lim, sign)  # (x + r) - R
         ux, uy, uz = loop_vectors(lc.dx, lc.py, lc.pz, lc.cos, lc.sin, L1, L2)
         rows.extend(jx_row(ux, uy, uz, i))
         di = jq_theta(ux, uz, lc.cos, lc.sin)
@@ -508,12 +524,17 @@ class Singularity(NamedTuple):
         type2: all chains theta3 = pi/2 and theta1 + theta2 = pi/2 (forearms vertical).
         type3: number of chains (0..3) with theta2 = 0 and theta1 = pi/2 (vertical, stretched).
         type4: theta2 = 0 for two or more chains that are not of type 3.
-        jx_rank: numerical rank of Jx (3 = regular).
-        jq_rank: numerical rank of the theta-block of Jq (fixed robot).
-        jq_full_rank: numerical rank of the 3x4 Jq (reconfigurable robot, R column included).
+        jx_rank: numerical rank of Jx (3 = regular; -1 where not ``ok``).
+        jq_rank: numerical rank of the theta-block of Jq (fixed robot; -1 where not ``ok``).
+        jq_full_rank: numerical rank of the 3x4 Jq (reconfigurable robot, R column included; -1 where not ``ok``).
         near_singular: any of 1/k, sigma_min_v, sigma_min_f below ``near_tol`` or omega_v, omega_f below
             ``omega_tol`` (paper §5.1: 0.1 and 1e-3).
         singular: any exact (within tolerance) singularity above.
+        ok: the input is a valid configuration: design valid, p and theta finite and every loop closes
+            (| |C_i - B_i| - L2 | <= 1e-6 L2). Where False every flag is False and the ranks are -1.
+        stretched_or_folded: number of chains with sin(theta2) sin(theta3) = 0 within ``rank_tol``
+            (theta2 = 0 stretched, pi folded, or the forearm perpendicular to the chain plane):
+            exactly the chains whose Jq diagonal entry vanishes.
     """
 
     type1: Bool[Array, ""]
@@ -525,6 +546,8 @@ class Singularity(NamedTuple):
     jq_full_rank: Int[Array, ""]
     near_singular: Bool[Array, ""]
     singular: Bool[Array, ""]
+    ok: Bool[Array, ""]
+    stretched_or_folded: Int[Array, ""]
 
 
 def _angle_close(a, b, tol):
@@ -532,37 +555,57 @@ def _angle_close(a, b, tol):
     return jnp.abs(d) <= tol
 
 
+#: Default relative tolerance of :func:`classify_singularity`'s ranks and stretched/folded test. The IK
+#: recovers theta at a stretched/folded chain only to ~sqrt(eps) (its discriminant vanishes there and enters
+#: through a square root: ~1e-8 rad in float64), so an exact singularity reached through ``ik`` shows up as
+#: |sin th2 sin th3| ~ 1e-8; 1e-6 catches it with margin and is still far below any pose a user would call
+#: regular (1/k ~ 1e-6).
+SINGULAR_TOL = 1e-6
+
+
 def classify_singularity(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], *,
-                         angle_tol: float = 1e-6, rank_tol: float = 1e-9, near_tol: float = 0.1,
+                         angle_tol: float = 1e-6, rank_tol: float = SINGULAR_TOL, near_tol: float = 0.1,
                          omega_tol: float = 1e-3) -> Singularity:
     """Classify the singularities of a configuration.
 
     Args:
-        robot, p, theta: the configuration (m, rad).
-        angle_tol: tolerance on the analytic angle conditions (rad).
-        rank_tol: relative singular-value tolerance for the numerical ranks of Jx and Jq.
+        robot, p, theta: the configuration (m, rad), e.g. theta from :func:`deltajax.ik`.
+        angle_tol: tolerance on the analytic angle conditions (rad); the stretched test (theta2 = 0) of
+            types 3/4 uses ``max(angle_tol, rank_tol)`` (theta2 from IK carries ~1e-8 rad round-off).
+        rank_tol: relative tolerance (dimensionless) for the numerical ranks of Jx (singular values of Jx,
+            whose rows are unit vectors, below ``rank_tol``) and of Jq (|sin th2 sin th3| below ``rank_tol``);
+            default :data:`SINGULAR_TOL` = 1e-6, robust to IK round-off.
         near_tol: threshold on 1/k, sigma_min_v and sigma_min_f for "near singular".
         omega_tol: threshold on omega_v and omega_f for "near singular".
     """
     theta = jnp.asarray(theta)
+    p = jnp.asarray(p)
+    dtype = jnp.result_type(p.dtype, theta.dtype, robot.upper_arm.dtype)
+    finite = design_ok(robot) & jnp.all(jnp.isfinite(p)) & jnp.all(jnp.isfinite(theta))
+    theta = jnp.where(finite, theta, jnp.asarray([0.3, 0.5, 0.7], dtype)).astype(dtype)
+    p = jnp.where(finite, p, jnp.asarray([0.01, 0.02, 0.3], dtype)).astype(dtype)
+    robot = _harmless_design(robot, finite)
+    u_local = forearm_units(robot, p, theta)
+    closes = jnp.all(jnp.abs(jnp.sqrt(jnp.sum(u_local * u_local, axis=-1)) - 1.0) <= 1e-6)
+    ok = finite & closes
     th2, th3 = passive_angles(robot, p, theta)
     half_pi = 0.5 * jnp.pi
     th12 = theta + th2
     t3_plane = _angle_close(th3, half_pi, angle_tol)
     type1 = jnp.all(t3_plane & _angle_close(th12, jnp.pi, angle_tol))
     type2 = jnp.all(t3_plane & _angle_close(th12, half_pi, angle_tol))
-    stretched = _angle_close(th2, 0.0, angle_tol)
-    vertical = stretched & _angle_close(theta, half_pi, angle_tol)
+    stretched = _angle_close(th2, 0.0, max(angle_tol, rank_tol))
+    vertical = stretched & _angle_close(theta, half_pi, max(angle_tol, rank_tol))
     type3 = jnp.sum(vertical).astype(jnp.int32)
     type4 = jnp.sum(stretched & ~vertical) >= 2
 
-    u_local = forearm_units(robot, p, theta)
     Jx = _from_chain_frames(u_local)
     diag = jq_diagonal(robot, u_local, theta)
     Jq = jnp.concatenate([u_local[:, :1], jnp.diag(diag)], axis=1)
     sx = jnp.linalg.svd(Jx, compute_uv=False)
     jx_rank = jnp.sum(sx > rank_tol * jnp.maximum(sx[0], 1e-300)).astype(jnp.int32)
-    jq_rank = jnp.sum(jnp.abs(diag) > rank_tol * robot.upper_arm).astype(jnp.int32)
+    flat = jnp.abs(diag) <= rank_tol * robot.upper_arm
+    jq_rank = jnp.sum(~flat).astype(jnp.int32)
     sq = jnp.linalg.svd(homogenise(Jq, robot.upper_arm), compute_uv=False)
     jq_full_rank = jnp.sum(sq > rank_tol * jnp.maximum(sq[0], 1e-300)).astype(jnp.int32)
 
@@ -570,5 +613,10 @@ def classify_singularity(robot: Delta, p: Float[Array, "3"], theta: Float[Array,
     near = ((ind.inv_cond < near_tol) | (ind.sigma_min_v < near_tol) | (ind.sigma_min_f < near_tol)
             | (ind.omega_v < omega_tol) | (ind.omega_f < omega_tol))
     singular = type1 | type2 | (type3 > 0) | type4 | (jx_rank < 3) | (jq_rank < 3)
-    return Singularity(type1=type1, type2=type2, type3=type3, type4=type4, jx_rank=jx_rank, jq_rank=jq_rank,
-                       jq_full_rank=jq_full_rank, near_singular=near | singular, singular=singular)
+    no = jnp.asarray(False)
+    m1 = jnp.asarray(-1, jnp.int32)
+    return Singularity(type1=type1 & ok, type2=type2 & ok, type3=jnp.where(ok, type3, 0), type4=type4 & ok,
+                       jx_rank=jnp.where(ok, jx_rank, m1), jq_rank=jnp.where(ok, jq_rank, m1),
+                       jq_full_rank=jnp.where(ok, jq_full_rank, m1), near_singular=(near | singular) & ok,
+                       singular=singular & ok, ok=ok | no,
+                       stretched_or_folded=jnp.where(ok, jnp.sum(flat), 0).astype(jnp.int32))

@@ -171,8 +171,8 @@ class LoopClosure(NamedTuple):
     Attributes:
         cos, sin: cos/sin of the actuated angle theta_i; (1, 0) where the loop does not close (a harmless
             finite stand-in so that downstream algebra and its gradients stay finite: mask with ``reach``).
-        disc: IK discriminant rho^2 - m^2 (m^2); >= 0 iff the loop closes (``-inf`` for inputs outside the
-            chain's reach box or non-finite).
+        disc: IK discriminant rho^2 - m^2 (m^2); >= 0 iff the loop closes; ``-(L1 + L2)^2`` (finite, smooth
+            in L1, L2) for inputs outside the chain's reach box or non-finite.
         reach: the loop closes (disc >= 0, rho > 0, input finite and inside the reach box).
         margin: joint-limit margin cos(theta - mid) - cos(half) (>= 0 inside the limits; >= 1 unlimited);
             computed from the stand-in (1, 0) where not ``reach``.
@@ -230,7 +230,7 @@ def loop_closure(dx, py, pz, L1, L2, lim: LimitTerms, sign: float = 1.0) -> Loop
     c = jnp.where(reach, (dx * m + sign * pz * w) * inv_rho2, 1.0)
     s = jnp.where(reach, (pz * m - sign * dx * w) * inv_rho2, 0.0)
     margin = c * lim.cos_mid + s * lim.sin_mid - lim.cos_half
-    return LoopClosure(cos=c, sin=s, disc=jnp.where(inside, disc, -jnp.inf), reach=reach, margin=margin,
+    return LoopClosure(cos=c, sin=s, disc=jnp.where(inside, disc, -(reach_box * reach_box)), reach=reach, margin=margin,
                        ok=reach & (margin >= 0.0), dx=dx, py=py, pz=pz)
 
 
@@ -273,11 +273,11 @@ def ik_cos_sin(robot: Delta, p: Float[Array, "3"], *, branch: str = "outer") -> 
     finite_p = jnp.all(jnp.isfinite(p))
     valid = design_ok(robot)
     lim = limit_terms(robot.theta_min, robot.theta_max)
-    shift = robot.platform_radius - robot.base_radius
     out = []
     for i in range(3):
         x, y, z = chain_local(p[0], p[1], p[2], i)
-        out.append(loop_closure(x + shift, y, z, robot.upper_arm, robot.forearm, lim, sign))
+        dx = x + robot.platform_radius - robot.base_radius  # (x + r) - R, as every kernel evaluates it
+        out.append(loop_closure(dx, y, z, robot.upper_arm, robot.forearm, lim, sign))
     reach = jnp.stack([o.reach for o in out]) & valid
     inside = jnp.stack([o.margin >= 0.0 for o in out])
     ok = reach & inside & finite_p
@@ -411,11 +411,11 @@ def forearm_units(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]) 
     p = jnp.asarray(p)
     theta = jnp.asarray(theta)
     c, s = jnp.cos(theta), jnp.sin(theta)
-    shift = robot.platform_radius - robot.base_radius
     rows = []
     for i in range(3):
         x, y, z = chain_local(p[0], p[1], p[2], i)
-        rows.append(jnp.stack(loop_vectors(x + shift, y, z, c[i], s[i], robot.upper_arm, robot.forearm)))
+        dx = x + robot.platform_radius - robot.base_radius
+        rows.append(jnp.stack(loop_vectors(dx, y, z, c[i], s[i], robot.upper_arm, robot.forearm)))
     return jnp.stack(rows)
 
 

@@ -1,23 +1,27 @@
-"""Kernel benchmark: IK + Jacobian + all indices, evaluations per second (warm), compile time separately.
+"""Kernel benchmark: IK + Jacobian + all indices, evaluations per CPU-second and per wall-second (warm).
 
-Compared in the same process against (a) a vectorised NumPy implementation of the same algebra and (b) the
-naive JAX kernel (atan2/acos IK, indices from ``jnp.linalg.svd``). Ratios are what we report: absolute rates
-depend on the machine and its load. The fast kernel is checked against the SVD reference before timing.
+Measured in the same process (ratios are what we report; absolute rates depend on the machine and its load):
+(a) the new core kernel ``jit(vmap(point_indices))`` (fast closed form; and the exact Jacobi form), f64 and
+f32; (b) the frozen pre-issue-9 kernel (:mod:`._kernel_baseline`, main 9f54c88) as the baseline; (c) the
+independent NumPy reference (:mod:`deltajax.reference`); (d) Numba (exact kernel + minimal loop ceiling)
+when :mod:`deltajax.workspace` provides the hook ``bench_kernel_rates`` (the numba colleague's module).
+Every JAX result is checked against the NumPy reference before timing; XLA fusion counts are printed.
 """
 
 from __future__ import annotations
 
 import math
+import re
 import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .. import reference
 from ..config import ConfigError
-from ..geometry import CHAIN_ANGLES
-from ..indices import indices, point_indices
-from ..kinematics import ik
+from ..indices import point_indices
+from . import _kernel_baseline
 
 
 def _sample_points(n: int, seed: int) -> np.ndarray:
@@ -26,60 +30,31 @@ def _sample_points(n: int, seed: int) -> np.ndarray:
     return lo + (hi - lo) * rng.random((n, 3))
 
 
-def numpy_kernel(R, r, L1, L2, lo, hi, p: np.ndarray) -> dict:
-    """The fast kernel's maths in vectorised NumPy (algebraic IK, Jacobi eigenvalues, determinant)."""
-    ca = np.cos(np.asarray(CHAIN_ANGLES))
-    sa = np.sin(np.asarray(CHAIN_ANGLES))
-    px = p[:, :1] * ca + p[:, 1:2] * sa
-    py = -p[:, :1] * sa + p[:, 1:2] * ca
-    pz = np.broadcast_to(p[:, 2:3], px.shape)
-    dx = px + r - R
-    rho2 = dx * dx + pz * pz
-    m = (rho2 + py * py + L1 * L1 - L2 * L2) / (2 * L1)
-    disc = rho2 - m * m
-    reach = disc >= 0
-    w = np.sqrt(np.where(reach, disc, 1.0))
-    c = (dx * m + pz * w) / rho2
-    s = (pz * m - dx * w) / rho2
-    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
-    ok = (reach & (c * math.cos(mid) + s * math.sin(mid) >= math.cos(half))).all(axis=1)
-    ux = (dx - L1 * c) / L2
-    uy = py / L2
-    uz = (pz - L1 * s) / L2
-    Jx = np.stack([ux * ca - uy * sa, ux * sa + uy * ca, uz], axis=-1)  # (n, 3 chains, 3)
-    d = uz * c - ux * s
-    G = np.einsum("nik,njk->nij", Jx, Jx)
-    det_jx = np.abs(np.linalg.det(Jx))
-    prod_d = np.abs(d.prod(axis=1))
-    adjG = np.empty_like(G)
-    for i in range(3):
-        for j in range(3):
-            a, b = [k for k in range(3) if k != i], [k for k in range(3) if k != j]
-            adjG[:, j, i] = (-1) ** (i + j) * (G[:, a[0], b[0]] * G[:, a[1], b[1]] - G[:, a[0], b[1]] * G[:, a[1], b[0]])
-    adj_d = np.stack([d[:, 1] * d[:, 2], d[:, 0] * d[:, 2], d[:, 0] * d[:, 1]], axis=1)
-    jx_side = det_jx < prod_d
-    S = np.where(jx_side[:, None, None], adj_d[:, :, None] * G * adj_d[:, None, :], d[:, :, None] * adjG * d[:, None, :])
-    ev = np.linalg.eigvalsh(S)  # ascending; LAPACK's symmetric solver stands in for the Jacobi sweeps
-    r1, r2 = np.sqrt(np.maximum(ev[:, 2], 0)), np.sqrt(np.maximum(ev[:, 1], 0))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        a1, a2 = r1 / det_jx, r2 / det_jx
-        a3 = prod_d / (det_jx * a1 * a2)
-        b3, b2 = prod_d / r1, prod_d / r2
-        b1 = prod_d / (det_jx * b2 * b3)
-        s1 = np.where(jx_side, b1, a1)
-        s3 = np.where(jx_side, b3, a3)
-        s2 = np.where(jx_side, b2, a2)
-        s1, s2, s3 = (np.where(ok, v, np.nan) for v in (s1, s2, s3))
-        return {"ok": ok, "inv_cond": s3 / s1, "sigma_min_v": s3, "sigma_min_f": 1 / s1, "omega_v": s1 * s2 * s3}
-
-
-def _best(fn, repeats: int) -> float:
-    best = math.inf
+def _timed(fn, repeats: int) -> tuple[float, float]:
+    """(best wall s, CPU s of that run) over ``repeats`` calls."""
+    best = (math.inf, math.inf)
     for _ in range(repeats):
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         fn()
-        best = min(best, time.perf_counter() - t0)
+        w, c = time.perf_counter() - t0, time.process_time() - c0
+        if w < best[0]:
+            best = (w, c)
     return best
+
+
+def fusion_count(compiled) -> int:
+    """Number of XLA fusions in a compiled executable's HLO text."""
+    return len(re.findall(r"^\s*(?:ROOT )?\S+ = \S+ fusion\(", compiled.as_text(), flags=re.M))
+
+
+def _numba_rates(points: np.ndarray, geo: list, repeats: int):
+    """Numba figures from the hook ``deltajax.workspace.bench_kernel_rates(points, geo, repeats)`` -> {label: (
+    n, wall s, CPU s)}, or None when the Numba mirror does not provide it yet."""
+    try:
+        from ..workspace import bench_kernel_rates  # provided by the Numba mirror (issue 9 item 3)
+    except ImportError:
+        return None
+    return bench_kernel_rates(points, geo, repeats)
 
 
 def run(ctx) -> None:
@@ -98,71 +73,58 @@ def run(ctx) -> None:
     res = ctx.results
     lines = []
 
-    block = int(e.get("block", 1000))
-    if n % block:
-        raise ConfigError(f"experiment.n_points={n} must be a multiple of experiment.block={block}")
-
-    devices = jax.local_devices()
-    mesh = jax.sharding.Mesh(np.asarray(devices), ("d",))
-    spec = jax.sharding.PartitionSpec("d")
-    if n % (block * len(devices)):
-        raise ConfigError(f"experiment.n_points={n} must be a multiple of block x devices = {block * len(devices)}")
-
-    def fast(robot, p):
-        # cache blocking: XLA:CPU splits the kernel into ~85 fusions with intermediates in memory between them;
-        # lax.map over blocks of ~1000 points keeps those intermediates in L1/L2 (measured ~1.5-2x). The
-        # blocks are split over all local devices (one per CPU under the CLI's worker settings).
-        def local(robot, p):
-            def blk(c):
-                return jax.vmap(lambda q: point_indices(robot, q)[1])(c)
-            out = jax.lax.map(blk, p.reshape(-1, block, 3))
-            return jax.tree_util.tree_map(lambda x: x.reshape((-1,) + x.shape[2:]), out)
-        return jax.shard_map(local, mesh=mesh, in_specs=(jax.sharding.PartitionSpec(), spec), out_specs=spec)(robot, p)
-
-    def naive(robot, p):
-        def one(q):
-            sol = ik(robot, q)
-            return indices(robot, q, sol.theta, sv_method="svd")
-        return jax.vmap(one)(p)
-
-    # NumPy baseline (float64), same maths
     geo = [float(x) for x in (robot64.base_radius, robot64.platform_radius, robot64.upper_arm, robot64.forearm,
                               robot64.theta_min, robot64.theta_max)]
-    t_np = _best(lambda: numpy_kernel(*geo, pts[:nb]), reps)
-    rate_np = nb / t_np
-    res.put("bench", "numpy_rate", rate_np, units="1/s")
-    lines.append(f"numpy (same algebra, f64)      : {rate_np / 1e6:8.2f} M eval/s")
 
-    ref_np = numpy_kernel(*geo, pts[:nb])
+    def row(label, n_eval, wall, cpu, base=None):
+        rate_c, rate_w = n_eval / max(cpu, 1e-9), n_eval / wall
+        extra = f"  x{rate_c / base:.2f} vs old kernel" if base else ""
+        lines.append(f"{label:34s}: {rate_c / 1e6:8.2f} M eval/CPU-s {rate_w / 1e6:8.2f} M eval/s wall{extra}")
+        return rate_c
+
+    wall, cpu = _timed(lambda: reference.point_indices(*geo, pts[:nb]), reps)
+    res.put("bench", "numpy_rate_cpu", nb / max(cpu, 1e-9), units="1/s")
+    row("numpy reference (f64, LAPACK svd)", nb, wall, cpu)
+    ref_np = reference.point_indices(*geo, pts[:nb])
+
     for dt_name in e.dtypes:
         dt = jnp.float32 if dt_name == "float32" else jnp.float64
         robot = jax.tree_util.tree_map(lambda x: x.astype(dt), robot64)
         p = jnp.asarray(pts, dt)
-        t0 = time.perf_counter()
-        compiled = jax.jit(fast).lower(robot, p).compile()
-        t_compile = time.perf_counter() - t0
-        out = jax.block_until_ready(compiled(robot, p))
-        t_warm = _best(lambda: jax.block_until_ready(compiled(robot, p)), reps)
-        rate = n / t_warm
-        # correctness against the NumPy reference (float64 only: f32 loses digits near singular poses)
-        got = np.asarray(out.sigma_min_v[:nb], np.float64)
-        okm = ref_np["ok"] & np.isfinite(ref_np["sigma_min_v"]) & (ref_np["inv_cond"] > 1e-3)
-        err = float(np.max(np.abs(got[okm] - ref_np["sigma_min_v"][okm]) / ref_np["sigma_min_v"][okm]))
-        p_b = p[:nb]
-        naive_c = jax.jit(naive).lower(robot, p_b).compile()
-        jax.block_until_ready(naive_c(robot, p_b))
-        t_naive = _best(lambda: jax.block_until_ready(naive_c(robot, p_b)), reps)
-        rate_naive = nb / t_naive
-        g = f"bench/{dt_name}"
-        res.put(g, "rate", rate, units="1/s")
-        res.put(g, "compile_time", t_compile, units="s")
-        res.put(g, "naive_rate", rate_naive, units="1/s")
-        res.put(g, "max_rel_err_sigma_min_v_vs_numpy", err, units="1")
-        lines.append(f"jax fast kernel {dt_name}        : {rate / 1e6:8.2f} M eval/s (N={n}, {len(devices)} device(s), "
-                     f"compile {t_compile:.2f} s)"
-                     f"  x{rate / rate_np:.1f} vs numpy, x{rate / rate_naive:.1f} vs naive jax; "
-                     f"max rel err sigma_min_v vs numpy {err:.1e}")
-        lines.append(f"jax naive kernel {dt_name}       : {rate_naive / 1e6:8.2f} M eval/s (trig IK + linalg.svd)")
+        variants = {
+            "old kernel (main 9f54c88)": lambda rb, q: jax.vmap(lambda x: _kernel_baseline.point_indices(rb, x)[1])(q),
+            "new kernel fast": lambda rb, q: jax.vmap(lambda x: point_indices(rb, x)[1])(q),
+            "new kernel exact (jacobi)": lambda rb, q: jax.vmap(
+                lambda x: point_indices(rb, x, sv_method="jacobi")[1])(q),
+        }
+        base = None
+        for label, fn in variants.items():
+            t0 = time.perf_counter()
+            compiled = jax.jit(fn).lower(robot, p).compile()
+            t_compile = time.perf_counter() - t0
+            out = jax.block_until_ready(compiled(robot, p))
+            wall, cpu = _timed(lambda: jax.block_until_ready(compiled(robot, p)), reps)
+            got = np.asarray(out.sigma_min_v[:nb], np.float64)
+            okm = ref_np["ok"] & (ref_np["inv_cond"] > 1e-3)
+            err = float(np.max(np.abs(got[okm] - ref_np["sigma_min_v"][okm]) / ref_np["sigma_min_v"][okm]))
+            same_mask = bool(np.array_equal(np.isfinite(got), ref_np["ok"]))
+            rate = row(f"{label} {dt_name}", n, wall, cpu, base)
+            base = base or rate
+            nf = fusion_count(compiled)
+            lines.append(f"{'':34s}  compile {t_compile:.2f} s, {nf} fusions, max rel err sigma_min_v vs numpy "
+                         f"{err:.1e}, ok mask {'identical' if same_mask else 'DIFFERENT'}")
+            g = f"bench/{dt_name}/{label.split(' (')[0].replace(' ', '_')}"
+            res.put(g, "rate_cpu", rate, units="1/s")
+            res.put(g, "rate_wall", n / wall, units="1/s")
+            res.put(g, "compile_time", t_compile, units="s")
+            res.put(g, "fusions", nf, units="1")
+            res.put(g, "max_rel_err_sigma_min_v_vs_numpy", err, units="1")
+    nbr = _numba_rates(pts, geo, reps)
+    if nbr is None:
+        lines.append("numba                             : hook deltajax.workspace.bench_kernel_rates not provided yet")
+    else:
+        for label, (n_eval, wall, cpu) in nbr.items():
+            row(f"numba {label}", n_eval, wall, cpu)
     res.put("bench", "n_points", n, units="1")
     res.set_attrs("bench", device=str(jax.devices()[0]), report="\n".join(lines))
     for line in lines:

@@ -63,7 +63,7 @@ from ..geometry import Delta, ReconfigurableDelta
 from ..jacobian import jacobian
 from ..kinematics import ik
 from ..trajectory import adept_cycle
-from ..workspace import (index_fields, point_indices, reachable_mask, reconfigurable_reachable,
+from ..workspace import (index_fields, mirrored_point_indices, reachable_mask, reconfigurable_reachable,
                          resolve_redundancy)
 
 __all__ = ["METRICS", "METRIC_UNITS", "SENSE", "Problem", "ObjectiveError", "evaluate_design",
@@ -252,7 +252,8 @@ def _index_at_points(pb: Problem, design, pts, differentiable: bool = False):
             return red.ok, jnp.where(red.ok, red.value, 0.0)
         k = jax.lax.stop_gradient(jnp.where(red.ok, red.k, 0))
         Rk = design.R_min + k.astype(design.R_min.dtype) * design.R_step
-        ok, ind = jax.vmap(lambda q, R: point_indices(design.at(R), q, b_v=pb.b_v, b_f=pb.b_f, beta=pb.beta))(
+        ok, ind = jax.vmap(lambda q, R: mirrored_point_indices(design.at(R), q, b_v=pb.b_v, b_f=pb.b_f,
+                                                               beta=pb.beta, sv_method="jacobi"))(
             pts, Rk)
         v = getattr(ind, pb.index)
         ok = ok & red.ok & jnp.isfinite(v)
@@ -290,28 +291,18 @@ def soft_margin(robot: Delta, p, t: float = 0.01):
     combined by a smooth minimum over the two and over the chains. Same algebra as the core's IK test, so
     ``soft_margin > 0`` agrees with :func:`deltajax.workspace.reachable_mask` (up to the smooth-min slack).
     """
-    from ..kinematics import to_chain_frames
+    from ..kinematics import chain_local, limit_terms, loop_closure
 
-    p = jnp.stack([p[0], jnp.abs(p[1]), p[2]])
-    loc = to_chain_frames(p)
-    L1, L2 = robot.upper_arm, robot.forearm
-    dx = loc[:, 0] + robot.platform_radius - robot.base_radius
-    py, pz = loc[:, 1], loc[:, 2]
-    rho2 = dx * dx + pz * pz
-    m = (rho2 + py * py + L1 * L1 - L2 * L2) / (2.0 * L1)
-    disc = rho2 - m * m
-    reach = (disc > 0.0) & (rho2 > 0.0)
-    w = jnp.sqrt(jnp.where(reach, disc, 1.0))
-    inv = 1.0 / jnp.where(reach, rho2, 1.0)
-    c = (dx * m + pz * w) * inv
-    sn = (pz * m - dx * w) * inv
-    lo, hi = robot.theta_min, robot.theta_max
-    finite = jnp.isfinite(lo) & jnp.isfinite(hi)
-    mid = jnp.where(finite, 0.5 * (lo + hi), 0.0)
-    half = jnp.where(finite, 0.5 * (hi - lo), 0.0)
-    a = disc / (L1 * L1)
-    b = jnp.where(finite, c * jnp.cos(mid) + sn * jnp.sin(mid) - jnp.cos(half), 1.0)
-    b = jnp.where(reach, b, a)
+    lim = limit_terms(robot.theta_min, robot.theta_max)
+    L1 = robot.upper_arm
+    a, b = [], []
+    for i in range(3):
+        x, y, z = chain_local(p[0], jnp.abs(p[1]), p[2], i)
+        lc = loop_closure(x + robot.platform_radius - robot.base_radius, y, z, L1, robot.forearm, lim)
+        ai = lc.disc / (L1 * L1)  # -(1 + L2/L1)^2 outside the chain's reach box
+        a.append(ai)
+        b.append(jnp.where(lc.reach, jnp.where(lim.cos_half < -1.0, 1.0, lc.margin), ai))  # unlimited: 1
+    a, b = jnp.stack(a), jnp.stack(b)
     per_chain = _smin(jnp.stack([a, b], axis=-1), t)
     return _smin(per_chain, t)
 

@@ -124,15 +124,21 @@ def refine(pb: Problem, space, genes: np.ndarray, *, steps: int = 30, learning_r
             def body(carry, _):
                 g, st = carry
                 val, grad = vg(g, w)
-                grad = jnp.where(jnp.isfinite(grad), grad, 0.0)
                 upd, st = opt.update(grad, st, g)
                 g = projections.projection_box(optax.apply_updates(g, upd), 0.0, 1.0)
-                return (g, st), (val, g)
-            (g, _), (hist, path) = jax.lax.scan(body, (g0, opt.init(g0)), None, length=steps)
-            return path, hist, hist[0], loss(g, w)
+                return (g, st), (val, g, jnp.isfinite(grad))
+            (g, _), (hist, path, fin) = jax.lax.scan(body, (g0, opt.init(g0)), None, length=steps)
+            return path, hist, hist[0], loss(g, w), fin
         return jax.vmap(one)(G0, W)
 
-    path, hist, s_before, s_after = descend(genes, W)  # path: (n, steps, d) iterates after each step
+    path, hist, s_before, s_after, finite = descend(genes, W)  # path: (n, steps, d) iterates after each step
+    finite = np.asarray(finite)  # (n, steps, d)
+    if not finite.all():
+        # Never hide a broken gradient (a NaN entry zeroed would silently freeze that gene): fail loudly.
+        i, k, j = (int(v[0]) for v in np.nonzero(~finite))
+        raise FloatingPointError(
+            f"refine: non-finite surrogate gradient for design {i} (gene {j}, step {k}) at genes "
+            f"{np.asarray(genes)[i].tolist()}; the relaxation must be differentiable everywhere (tau={tau!r})")
     if true_fn is None:
         true_fn = jax.jit(lambda G: jax.vmap(lambda g: evaluate_design(pb, space.decode(g)))(G))
     Wn = np.asarray(W)

@@ -15,8 +15,8 @@ Host drivers (NumPy in/out, chunked, progress, checkpoint/resume)::
     evaluate_fixed(robot, grid, ...), evaluate_reconfigurable(recon, grid, ...), index_stats(...)
 """
 
-from .grid import (FIELD_NAMES, Grid, franco2026_grid, index_fields, make_grid, point_indices, reachable_fraction,
-                   reachable_mask)
+from .grid import (FIELD_NAMES, Grid, franco2026_grid, index_fields, make_grid, mirrored_point_indices, point_indices,
+                   reachable_fraction, reachable_mask)
 from .redundancy import (Redundancy, feasible_window, indices_at_host, reach_interval, reach_k_range_host,
                          reconfigurable_reachable, resolve_redundancy, resolve_redundancy_host, sample_value)
 from .driver import CheckpointMismatch, GridJob, fixed_workspace, reconfigurable_workspace, redundancy_grid, run_chunks

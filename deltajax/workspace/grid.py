@@ -12,12 +12,13 @@ Public functions (single robot; vmap over a population of designs with ``in_axes
     pts  = grid.points(start, stop)                 # float64[n, 3], flat C order (x slowest, z fastest)
     reachable_mask(robot, points)      -> bool[N]   # IK ok for all chains, theta within limits
     reachable_fraction(robot, points)  -> float[]   # mean of the mask
-    point_indices(robot, p, ...)       -> (ok, Indices)    # one point: the fast algebraic kernel
+    mirrored_point_indices(robot, p)   -> (ok, Indices)    # one point at (x, |y|, z): the core point_kernel
     index_fields(robot, points, ...)   -> (ok[N], {name: float[N]})  # NaN outside the workspace
 
-The kernel ``point_indices`` is the algebraic one of SPEC §7: cos/sin of the actuated angles straight from
+The kernel (:func:`mirrored_point_indices`) is the core :func:`deltajax.indices.point_kernel`, the algebraic
+one of SPEC §7: cos/sin of the actuated angles straight from
 :func:`deltajax.ik_cos_sin` (no inverse trig), the homogenised theta-block M = Jx^-1 diag(sin th2 sin th3)
-and its singular values by :func:`deltajax.indices.singular_values_closed_form` (no SVD). It agrees with
+and its singular values by :func:`deltajax.indices.singular_values` (no SVD). It agrees with
 ``dj.indices(robot, p, dj.ik(robot, p).theta)`` to rounding (tested), and it evaluates every point at its
 mirror image (x, |y|, z): the robot is symmetric under y -> -y (chain 0 on the x axis, chains 1 and 2 swap),
 so this is exact in real arithmetic and makes every field bit-for-bit mirror-symmetric.
@@ -35,8 +36,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from ..geometry import Delta
-from ..indices import INDEX_NAMES, Indices
-from ..indices import point_indices as core_point_indices
+from ..indices import INDEX_NAMES, Indices, point_indices, point_kernel
 from ..kinematics import ik_cos_sin
 
 __all__ = [
@@ -46,6 +46,7 @@ __all__ = [
     "reachable_mask",
     "reachable_fraction",
     "point_indices",
+    "mirrored_point_indices",
     "index_fields",
     "FIELD_NAMES",
 ]
@@ -200,28 +201,38 @@ def reachable_fraction(robot: Delta, points: Float[Array, "n 3"]) -> Float[Array
     return jnp.mean(m.astype(jnp.result_type(float)))
 
 
-def point_indices(robot: Delta, p: Float[Array, "3"], *, b_v: float = 2.0, b_f: float = 4.2,
-                  beta: float = 0.5) -> tuple[Bool[Array, ""], Indices]:
-    """Reachability and all indices (theta3x3, homogenised by L1) at one point, algebraic kernel.
+def mirrored_point_indices(robot: Delta, p: Float[Array, "3"], *, b_v: float = 2.0, b_f: float = 4.2,
+                           beta: float = 0.5, sv_method: str = "fast") -> tuple[Bool[Array, ""], Indices]:
+    """Reachability and all indices (theta3x3, homogenised by L1) at one point, evaluated at its mirror
+    image (x, |y|, z) so that fields are bit-for-bit mirror-symmetric; the core
+    :func:`deltajax.indices.point_kernel`.
+
+    (Until 2026-12-01 this was ``deltajax.workspace.point_indices``; that name is now the core
+    :func:`deltajax.point_indices` itself, one meaning per name.)
 
     Args:
         robot: the robot (R = ``robot.base_radius``).
         p: platform centre (m, base frame).
         b_v, b_f, beta: parameters of k~.
+        sv_method: ``"fast"`` (closed-form cubic, default for fields) or ``"jacobi"`` (exact).
 
     Returns:
         (ok, indices): ``ok`` is reachability within joint limits; the indices are NaN where not ok.
     """
-    cs, ind = core_point_indices(robot, _canonical(jnp.asarray(p)), b_v=b_v, b_f=b_f, beta=beta)
-    return jnp.all(cs.ok), ind
+    out = point_kernel(robot, _canonical(jnp.asarray(p)), sv_method=sv_method, b_v=b_v, b_f=b_f, beta=beta)
+    return out.ok, out.indices
 
 
 def index_fields(robot: Delta, points: Float[Array, "n 3"], *, b_v: float = 2.0, b_f: float = 4.2,
-                 beta: float = 0.5) -> tuple[Bool[Array, "n"], dict]:
+                 beta: float = 0.5, sv_method: str = "fast") -> tuple[Bool[Array, "n"], dict]:
     """Reachable mask and every scalar index at ``points`` (NaN outside the workspace); pure.
+
+    ``sv_method="fast"`` (default: the closed-form cubic, <= 1e-9 relative to the exact form away from the
+    robot's axis, see :func:`deltajax.indices.singular_values`) or ``"jacobi"``.
 
     Returns:
         (ok[n], {name: float[n]} for name in :data:`FIELD_NAMES`).
     """
-    ok, ind = jax.vmap(lambda q: point_indices(robot, q, b_v=b_v, b_f=b_f, beta=beta))(jnp.asarray(points))
+    ok, ind = jax.vmap(lambda q: mirrored_point_indices(robot, q, b_v=b_v, b_f=b_f, beta=beta, sv_method=sv_method)
+                       )(jnp.asarray(points))
     return ok, {name: getattr(ind, name) for name in FIELD_NAMES}

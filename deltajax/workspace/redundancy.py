@@ -69,8 +69,8 @@ import numpy as np
 from jaxtyping import Array, Bool, Float, Int
 
 from ..geometry import ReconfigurableDelta
-from ..indices import INDEX_NAMES, Indices, indices_from_singular_values, singular_values_closed_form
-from ..kinematics import _from_chain_frames, ik_cos_sin, to_chain_frames
+from ..indices import INDEX_NAMES, Indices, point_kernel
+from ..kinematics import ik_cos_sin, to_chain_frames
 from .grid import _canonical
 
 #: default extra absolute margin of the fast mode's screen (on top of its per-sample error bound)
@@ -116,24 +116,13 @@ def _sample_R(recon: ReconfigurableDelta, k):
 
 
 def _kernel(recon: ReconfigurableDelta, p, k, b_v, b_f, beta):
-    """(feasible, indices) of canonical point ``p`` at sample ``k``: the algebraic kernel (see .grid)."""
-    robot = recon.at(_sample_R(recon, k))
-    cs = ik_cos_sin(robot, p)
-    ok = jnp.all(cs.ok)
-    c = jnp.where(ok, cs.cos, 1.0)
-    s = jnp.where(ok, cs.sin, 0.0)
-    loc = to_chain_frames(p)
-    L1, L2 = robot.upper_arm, robot.forearm
-    u = jnp.stack([loc[:, 0] + robot.platform_radius - robot.base_radius - L1 * c, loc[:, 1],
-                   loc[:, 2] - L1 * s], axis=-1) / L2
-    Jx = _from_chain_frames(u)
-    det_jx = (Jx[0, 0] * (Jx[1, 1] * Jx[2, 2] - Jx[1, 2] * Jx[2, 1])
-              - Jx[0, 1] * (Jx[1, 0] * Jx[2, 2] - Jx[1, 2] * Jx[2, 0])
-              + Jx[0, 2] * (Jx[1, 0] * Jx[2, 1] - Jx[1, 1] * Jx[2, 0]))
-    dhat = u[:, 2] * c - u[:, 0] * s
-    sv = singular_values_closed_form(Jx, dhat)
-    ind = indices_from_singular_values(sv, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L1 ** 3)
-    return ok & (det_jx != 0.0), ind
+    """(feasible, indices) of canonical point ``p`` at sample ``k``: the core :func:`deltajax.indices.point_kernel`.
+
+    The exact (Jacobi) singular values: this is the selection the host driver certifies against, so it uses
+    the same exact form as the Numba kernel. Feasible = IK ok within limits and det Jx != 0 exactly.
+    """
+    out = point_kernel(recon.at(_sample_R(recon, k)), p, sv_method="jacobi", b_v=b_v, b_f=b_f, beta=beta)
+    return out.ok & (out.det_jx != 0.0), out.indices
 
 
 def sample_value(recon: ReconfigurableDelta, p: Float[Array, "3"], k: Int[Array, ""], *,
