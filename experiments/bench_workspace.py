@@ -82,7 +82,8 @@ def compare_backends(hs) -> None:
             d = max(abs(float(a[f"workspace/{k}_mean"][()]) / float(b[f"workspace/{k}_mean"][()]) - 1.0)
                     for k in ("inv_cond", "sigma_min_v", "k_tilde", "omega_v"))
         print(f"h = {h} m  RATIO jax/numba: {res['jax'][1] / res['numba'][1]:.2f}x CPU s, "
-              f"{res['jax'][0] / res['numba'][0]:.2f}x wall (cold jax {res['jax (cold)'][1] / res['numba'][1]:.2f}x CPU); "
+              f"{res['jax'][0] / res['numba'][0]:.2f}x wall "
+              f"(cold jax {res['jax (cold)'][1] / res['numba'][1]:.2f}x CPU); "
               f"reachable sets identical: {same} ({n} points), index means agree to {d:.1e}")
 
 
@@ -186,7 +187,7 @@ def main() -> None:
         k_lo, k_stop = ws.reach_k_range_host(rec, uniq)
         out = np.empty((len(uniq), 4))
         _nb.screen_audit(uniq, k_lo, k_stop, q["R_min"], q["R_step"], q["r"], q["L1"], q["L2"], q["lim"],
-                         _nb.kt_tuple(2.0, 4.2, args.beta), 5, out)
+                         _nb.kt_tuple(2.0, 4.2, args.beta), _nb.CRITERION["k_tilde"], out)
         print(f"AUDIT {int(out[:, 3].sum())} feasible samples: max |k~ screen - exact| {out[:, 0].max():.3g}, "
               f"max error / bound {out[:, 1].max():.3g}, violations {int(out[:, 2].sum())}")
     print(f"Table 6 check (beta {args.beta}): RDR omega_v mean {s_rdr['omega_v']['mean']:.4f}, "

@@ -116,8 +116,10 @@ def test_sym3_top2(method, code):
         mats.append(Q @ np.diag(lam) @ Q.T)
     for A in mats:
         x = (A[0, 0], A[1, 1], A[2, 2], A[0, 1], A[0, 2], A[1, 2])
-        got = nbk.sym3_top2(*x, code)
-        want = [float(v) for v in sym3_top2(*x, method)]
+        c2 = A[1, 1] * A[2, 2] - A[1, 2] ** 2 + A[0, 0] * A[2, 2] - A[0, 2] ** 2 + A[0, 0] * A[1, 1] - A[0, 1] ** 2
+        det = float(np.linalg.det(A))
+        got = nbk.sym3_top2(*x, c2, det, code)
+        want = [float(v) for v in sym3_top2(*x, c2, det, method)]
         np.testing.assert_allclose(got, want, rtol=1e-12)
         ev = np.linalg.eigvalsh(A)[::-1]
         tol = 1e-12 if method == "jacobi" else 1e-7  # the cubic splits a repeated pair by ~sqrt(eps)

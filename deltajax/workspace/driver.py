@@ -236,8 +236,8 @@ class _ChunkStats:
             return None
         missing = np.flatnonzero(np.isnan(self.parts[:, 0, 3]))
         if missing.size:
-            raise CheckpointMismatch(f"index statistics of chunks {missing[:5].tolist()} are missing from the checkpoint "
-                                     f"(written by an older version?); rerun into a fresh directory")
+            raise CheckpointMismatch(f"index statistics of chunks {missing[:5].tolist()} are missing from the "
+                                     f"checkpoint (written by an older version?); rerun into a fresh directory")
         return stats_from_partials(self.parts, self.names)
 
 
