@@ -45,8 +45,8 @@ def _nb_fields(pts, method):
     out = np.empty((_nb.N_IDX, len(pts)))
     ok = np.empty(len(pts), np.bool_)
     # the drivers pass mirror-canonical points (|y|); y >= 0 here so nothing is changed
-    _nb.fixed_fields(x, y, z, R, r, L1, L2, np.array(nbk.limits_tuple(TH_MIN, TH_MAX)), np.array(KT), out, ok,
-                     method)
+    _nb.fixed_fields(x, y, z, R, r, L1, L2, np.array(nbk.limits_tuple(TH_MIN, TH_MAX)), np.array(KT), _nb.rows(out),
+                     ok, method)
     return ok, out
 
 

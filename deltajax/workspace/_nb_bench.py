@@ -155,7 +155,7 @@ def bench_kernel_rates(points: np.ndarray, geo, repeats: int = 3) -> dict:
     out, ok = np.empty((N_IDX, n)), np.empty(n, np.bool_)
     res = {}
     for label, m in (("exact (jacobi)", JACOBI), ("fast (cubic)", FAST)):
-        w, c = _best(lambda: _nb.fixed_fields(x, y, z, R, r, L1, L2, lim, kt, out, ok, m), repeats)
+        w, c = _best(lambda: _nb.fixed_fields(x, y, z, R, r, L1, L2, lim, kt, _nb.rows(out), ok, m), repeats)
         res[label] = (n, w, c)
     sel = ok.copy()
     xr, yr, zr = (np.ascontiguousarray(a[sel]) for a in (x, y, z))
@@ -163,7 +163,7 @@ def bench_kernel_rates(points: np.ndarray, geo, repeats: int = 3) -> dict:
     if nr:
         o2, k2 = np.empty((N_IDX, nr)), np.empty(nr, np.bool_)
         for label, m in (("exact on reachable", JACOBI), ("fast on reachable", FAST)):
-            w, c = _best(lambda: _nb.fixed_fields(xr, yr, zr, R, r, L1, L2, lim, kt, o2, k2, m), repeats)
+            w, c = _best(lambda: _nb.fixed_fields(xr, yr, zr, R, r, L1, L2, lim, kt, _nb.rows(o2), k2, m), repeats)
             res[label] = (nr, w, c)
         w, c = _best(lambda: minimal_loop(xr, yr, zr, R, r, L1, L2, lim, kt, o2, k2), repeats)
         res["minimal loop ceiling (reachable)"] = (nr, w, c)
