@@ -3,6 +3,7 @@
     python experiments/bench_workspace.py --h 0.01 --exact-fraction 0.2   # 10 mm grid, exact on 20 % of points
     python experiments/bench_workspace.py                 # 2 mm paper grid, fast mode; baselines on a subset
     python experiments/bench_workspace.py --audit         # also check the screen's error bound on the subset
+    python experiments/bench_workspace.py --backends 0.004 0.002   # workspace_grid job: JAX path vs Numba path
 
 The job: (1) fixed robot R = 0.200 over the whole grid (mask + every index), (2) the reconfigurable robot's
 k~-optimal R* at every ODR workspace point (358 samples), (3) min/max/mean of every index for both.
@@ -28,6 +29,9 @@ import time
 
 import numpy as np
 
+# like the CLI's worker setup on this machine: one JAX host device per CPU (set before JAX starts)
+os.environ.setdefault("XLA_FLAGS", f"--xla_force_host_platform_device_count={len(os.sched_getaffinity(0))}")
+
 
 class _Clock:
     def __init__(self):
@@ -41,6 +45,48 @@ class _Clock:
         return out
 
 
+def compare_backends(hs) -> None:
+    """The ``workspace_grid`` job (reachability + every index + statistics, results.h5) through the JAX path and
+    the Numba path, in this process, on the same grid: CPU s (all threads), wall s, their ratio, and the load.
+
+    JAX runs twice (the first run includes compilation; the second is the warm figure); Numba's machine code
+    is cached on disk (warmed on a tiny grid first). The two results must agree: the same reachable set and
+    index statistics to rounding."""
+    import tempfile
+    from pathlib import Path
+
+    import h5py
+
+    from deltajax.run import run_experiment
+
+    tmp = Path(tempfile.mkdtemp(prefix="bench_ws_"))
+    common = ["plots=false", "progress=false", "experiment.resume=false"]
+
+    def grid(h):  # the paper's grid at spacing h: z = 0, h, ..., below 0.6 m (h = 0.002: 300 planes)
+        return [f"experiment.grid.h={h}", f"experiment.grid.z=[0.0,{round(round(0.6 / h - 1) * h, 9)}]"]
+
+    run_experiment("workspace_grid", [*common, *grid(0.05), "experiment.backend=numba"], tmp / "warm")
+    for h in hs:
+        over = [*common, *grid(h)]
+        res = {}
+        for label, backend in (("jax (cold)", "jax"), ("jax", "jax"), ("numba", "numba")):
+            load = os.getloadavg()[0]
+            clk = _Clock()
+            path = run_experiment("workspace_grid", [*over, f"experiment.backend={backend}"], tmp / f"{h}_{label}")
+            wall, cpu = clk.lap()
+            res[label] = (wall, cpu, path, load)
+            print(f"h = {h} m  {label:10s}: {cpu:8.2f} CPU s  {wall:8.2f} s wall  (load {load:.1f})", flush=True)
+        with h5py.File(res["jax"][2], "r") as a, h5py.File(res["numba"][2], "r") as b:
+            same = bool(np.array_equal(a["workspace/reachable"][()], b["workspace/reachable"][()]))
+            n = int(b["workspace/count"][()])
+            d = max(abs(float(a[f"workspace/{k}_mean"][()]) / float(b[f"workspace/{k}_mean"][()]) - 1.0)
+                    for k in ("inv_cond", "sigma_min_v", "k_tilde", "omega_v"))
+        print(f"h = {h} m  RATIO jax/numba: {res['jax'][1] / res['numba'][1]:.2f}x CPU s, "
+              f"{res['jax'][0] / res['numba'][0]:.2f}x wall "
+              f"(cold jax {res['jax (cold)'][1] / res['numba'][1]:.2f}x CPU); "
+              f"reachable sets identical: {same} ({n} points), index means agree to {d:.1e}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--h", type=float, default=0.002)
@@ -48,7 +94,12 @@ def main() -> None:
     ap.add_argument("--exact-fraction", type=float, default=0.01)
     ap.add_argument("--extrapolate-h", type=float, default=0.002)
     ap.add_argument("--audit", action="store_true", help="check the screen's bound on every subset sample")
+    ap.add_argument("--backends", type=float, nargs="+", metavar="H",
+                    help="only compare the workspace_grid job's JAX and Numba paths on grids of these spacings (m)")
     args = ap.parse_args()
+    if args.backends:
+        compare_backends(args.backends)
+        return
     import deltajax as dj
     from deltajax import workspace as ws
     from deltajax.workspace import _nb
@@ -136,7 +187,7 @@ def main() -> None:
         k_lo, k_stop = ws.reach_k_range_host(rec, uniq)
         out = np.empty((len(uniq), 4))
         _nb.screen_audit(uniq, k_lo, k_stop, q["R_min"], q["R_step"], q["r"], q["L1"], q["L2"], q["lim"],
-                         _nb.kt_tuple(2.0, 4.2, args.beta), 5, out)
+                         _nb.kt_tuple(2.0, 4.2, args.beta), _nb.CRITERION["k_tilde"], out)
         print(f"AUDIT {int(out[:, 3].sum())} feasible samples: max |k~ screen - exact| {out[:, 0].max():.3g}, "
               f"max error / bound {out[:, 1].max():.3g}, violations {int(out[:, 2].sum())}")
     print(f"Table 6 check (beta {args.beta}): RDR omega_v mean {s_rdr['omega_v']['mean']:.4f}, "

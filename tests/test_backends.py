@@ -45,8 +45,8 @@ def _nb_fields(pts, method):
     out = np.empty((_nb.N_IDX, len(pts)))
     ok = np.empty(len(pts), np.bool_)
     # the drivers pass mirror-canonical points (|y|); y >= 0 here so nothing is changed
-    _nb.fixed_fields(x, y, z, R, r, L1, L2, np.array(nbk.limits_tuple(TH_MIN, TH_MAX)), np.array(KT), out, ok,
-                     method)
+    _nb.fixed_fields(x, y, z, R, r, L1, L2, np.array(nbk.limits_tuple(TH_MIN, TH_MAX)), np.array(KT), _nb.rows(out),
+                     ok, method)
     return ok, out
 
 
@@ -116,8 +116,10 @@ def test_sym3_top2(method, code):
         mats.append(Q @ np.diag(lam) @ Q.T)
     for A in mats:
         x = (A[0, 0], A[1, 1], A[2, 2], A[0, 1], A[0, 2], A[1, 2])
-        got = nbk.sym3_top2(*x, code)
-        want = [float(v) for v in sym3_top2(*x, method)]
+        c2 = A[1, 1] * A[2, 2] - A[1, 2] ** 2 + A[0, 0] * A[2, 2] - A[0, 2] ** 2 + A[0, 0] * A[1, 1] - A[0, 1] ** 2
+        det = float(np.linalg.det(A))
+        got = nbk.sym3_top2(*x, c2, det, code)
+        want = [float(v) for v in sym3_top2(*x, c2, det, method)]
         np.testing.assert_allclose(got, want, rtol=1e-12)
         ev = np.linalg.eigvalsh(A)[::-1]
         tol = 1e-12 if method == "jacobi" else 1e-7  # the cubic splits a repeated pair by ~sqrt(eps)
@@ -190,3 +192,21 @@ def test_workspace_fields_fast_method_matches_exact():
         np.testing.assert_allclose(b.fields[n], a.fields[n], rtol=1e-7)
     with pytest.raises(ValueError, match="sv_method"):
         dj.workspace.fixed_workspace(ROBOT, g, sv_method="cardano")
+
+
+def test_benchmark_hook_and_minimal_loop():
+    from deltajax.workspace import bench_kernel_rates, bench_numba
+    from deltajax.workspace._nb_bench import minimal_loop
+
+    pts = _points(3000)
+    pts[:, 1] = np.abs(pts[:, 1])
+    ok, out = _nb_fields(pts, nbk.FAST)
+    x, y, z = (np.ascontiguousarray(pts[ok, i]) for i in range(3))
+    o2, k2 = np.empty((8, len(x))), np.empty(len(x), np.bool_)
+    minimal_loop(x, y, z, R, r, L1, L2, np.array(LIM_NB), np.array(KT), o2, k2)
+    assert k2.all()  # the ceiling computes the same thing (to the cubic's accuracy)
+    np.testing.assert_allclose(o2, out[:, ok], rtol=1e-6)
+    rates = bench_kernel_rates(pts, [R, r, L1, L2, TH_MIN, TH_MAX], 1)
+    assert {"exact (jacobi)", "fast (cubic)", "exact on reachable", "minimal loop ceiling (reachable)"} <= set(rates)
+    assert rates["exact on reachable"][0] == ok.sum() and all(v[2] >= 0 for v in rates.values())
+    assert bench_numba(pts[:100], ROBOT)["fast (cubic)"]["n"] == 100

@@ -20,13 +20,15 @@ from deltajax.workspace.redundancy import _nb_params
 REC = dj.presets.franco2026()
 Q = _nb_params(REC)
 G40 = ws.franco2026_grid(0.04)  # 21 x 21 x 15
+C = _nb.CRITERION  # criterion codes by index name
+KT = C["k_tilde"]
 
 
 def _args():
     return Q["R_min"], Q["R_step"], Q["r"], Q["L1"], Q["L2"], Q["lim"]
 
 
-def _audit(pts, crit=5, beta=0.5):
+def _audit(pts, crit=KT, beta=0.5):
     pts = np.ascontiguousarray(pts, dtype=np.float64)
     k_lo, k_stop = ws.reach_k_range_host(REC, pts)
     out = np.empty((len(pts), 4))
@@ -75,7 +77,7 @@ def test_failed_bound_falls_back_to_the_exact_sweep(grid_points):
     k_lo, k_stop = ws.reach_k_range_host(REC, pts)
     n = len(pts)
     bk, bv, nf, fb = (np.empty(n, np.int64), np.empty(n), np.empty(n, np.int64), np.empty(n, np.int64))
-    _nb.resolve_screened(pts, k_lo, k_stop, *_args(), _nb.kt_tuple(2.0, 4.2, 0.5), 5, -1.0, bk, bv, nf, fb)
+    _nb.resolve_screened(pts, k_lo, k_stop, *_args(), _nb.kt_tuple(2.0, 4.2, 0.5), KT, -1.0, bk, bv, nf, fb)
     exact, _ = ws.resolve_redundancy_host(REC, pts, mode="exact", return_indices=False)
     np.testing.assert_array_equal(bk, exact.k)
     np.testing.assert_array_equal(bv[bk >= 0], exact.value[exact.ok])
@@ -112,13 +114,14 @@ def test_tcubic_solves_the_cardano_cubic():
     np.testing.assert_allclose((1 + t[mid]) / 2, np.cos(np.arccos(w[mid] / 2 - 1) / 3), rtol=0, atol=1e-9)
 
 
-@pytest.mark.parametrize("crit,beta", [(5, 0.25), (5, 0.5), (5, 0.75), (0, 0.5), (2, 0.5), (3, 0.5), (4, 0.5)])
+@pytest.mark.parametrize("crit,beta", [(KT, 0.25), (KT, 0.5), (KT, 0.75), (C["inv_cond"], 0.5), (C["sigma_min_f"], 0.5),
+                                       (C["omega_v"], 0.5), (C["omega_f"], 0.5)])
 def test_screen_bound_contains_exact_values_on_grid(grid_points, crit, beta):
     out = _audit(grid_points, crit, beta)
     assert out[:, 2].sum() == 0  # same feasibility decisions, every exact value inside its interval
     assert out[:, 3].sum() > 200_000  # feasible samples checked
     assert out[:, 1].max() < 0.1  # the bound is at least 10x larger than the observed error
-    if crit == 5:
+    if crit == KT:
         assert out[:, 0].max() < 1e-7 < _nb_margin()  # max |k~ error| << the default margin
 
 
@@ -132,7 +135,7 @@ def test_screen_bound_on_the_axis():
     zs = np.linspace(0.06, 0.58, 40)
     pts = np.concatenate([np.stack([0 * zs, 0 * zs, zs], -1), np.stack([0 * zs + 1e-9, 0 * zs + 1e-9, zs], -1),
                           np.stack([0 * zs + 1e-4, 0 * zs, zs], -1)])
-    for crit in (5, 0, 2):
+    for crit in (KT, C["inv_cond"], C["sigma_min_f"]):
         out = _audit(pts, crit)
         assert out[:, 2].sum() == 0 and out[:, 3].sum() > 5000
         assert out[:, 1].max() < 0.1
@@ -142,7 +145,7 @@ def test_screen_bound_on_the_axis():
 @settings(max_examples=25, deadline=None)
 @given(st.floats(-0.35, 0.35), st.floats(-0.35, 0.35), st.floats(0.02, 0.6), st.sampled_from([0.25, 0.5, 0.75]))
 def test_screen_bound_random_points(x, y, z, beta):
-    out = _audit(np.array([[x, y, z]]), 5, beta)
+    out = _audit(np.array([[x, y, z]]), KT, beta)
     assert out[0, 2] == 0
     assert out[0, 1] < 0.1 and out[0, 0] < 5e-7  # ~1e-7 on the axis (x = y = 0), ~1e-8 elsewhere
     # and the selection through the screen is the exact one

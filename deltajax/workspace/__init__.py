@@ -25,6 +25,7 @@ from .redundancy import (Redundancy, feasible_window, indices_at_host, reach_int
                          reconfigurable_reachable, resolve_redundancy, resolve_redundancy_host, sample_value)
 from .driver import CheckpointMismatch, GridJob, fixed_workspace, reconfigurable_workspace, redundancy_grid, run_chunks
 from .stats import PAPER_TABLES, TABLE_INDICES, index_stats
+from ._nb_bench import bench_kernel_rates, bench_numba
 from . import boundary
 
 from .measure import WorkspaceVolume, reach_box, volume  # one-call volume of any robot

@@ -22,7 +22,7 @@ from ._nb_kernel import (CA0, CA1, CA2, CRITERION, CUBIC, FAST, JACOBI, N_IDX, O
 from ._nb_screen import resolve_screened, screen_audit, screen_window, tcubic, tcubic2
 
 __all__ = ["N_IDX", "CRITERION", "SV_METHODS", "JACOBI", "FAST", "limits_tuple", "kt_tuple", "fixed_fields",
-           "fields_at", "fixed_mask", "resolve", "resolve_screened", "screen_window", "screen_audit", "any_reach",
+           "fields_at", "rows", "fixed_mask", "resolve", "resolve_screened", "screen_window", "screen_audit", "any_reach",
            "reach_k_range", "parallel"]
 
 # names the tests and benchmarks have used since the first round
@@ -33,45 +33,55 @@ _tcubic2 = tcubic2
 
 @nb.njit(**OPTS)
 def fixed_fields(x, y, z, R, r, L1, L2, lim, kt, out, ok, method=JACOBI):
-    """Indices ``out`` (8, n) and ``ok`` (n,) of a fixed robot at the points (x, y, z) (each (n,), contiguous;
-    mirror-canonical: y -> |y|), NaN where not feasible; ``method`` as in :data:`SV_METHODS`.
+    """Indices and ``ok`` (n,) of a fixed robot at the points (x, y, z) (each (n,), contiguous;
+    mirror-canonical: y -> |y|), NaN where not feasible; ``method`` as in :data:`SV_METHODS`. ``out`` is a
+    tuple of 8 contiguous (n,) arrays, one per index (:func:`rows`).
 
     Structure of arrays and one branch-free loop body: LLVM vectorises it (interleaved (n, 3) / (n, 8)
-    layouts do not vectorise, measured 4x slower).
+    layouts, or a strided 2-D block, do not vectorise: measured 4x slower).
     """
     lim, kt = as_tuple4(lim), as_tuple4(kt)
+    o0, o1, o2, o3, o4, o5, o6, o7 = out
     for j in range(x.shape[0]):
         f, i0, i1, i2, i3, i4, i5, i6, i7 = point_indices(x[j], abs(y[j]), z[j], R, r, L1, L2, lim, kt, method)
         nan = math.nan
-        out[0, j] = i0 if f else nan
-        out[1, j] = i1 if f else nan
-        out[2, j] = i2 if f else nan
-        out[3, j] = i3 if f else nan
-        out[4, j] = i4 if f else nan
-        out[5, j] = i5 if f else nan
-        out[6, j] = i6 if f else nan
-        out[7, j] = i7 if f else nan
+        o0[j] = i0 if f else nan
+        o1[j] = i1 if f else nan
+        o2[j] = i2 if f else nan
+        o3[j] = i3 if f else nan
+        o4[j] = i4 if f else nan
+        o5[j] = i5 if f else nan
+        o6[j] = i6 if f else nan
+        o7[j] = i7 if f else nan
         ok[j] = f
 
 
 @nb.njit(**OPTS)
 def fields_at(x, y, z, ks, R_min, R_step, r, L1, L2, lim, kt, out):
-    """Indices ``out`` (8, n) at sample ks[j] per point (NaN where ks < 0 or not feasible); exact (Jacobi)."""
+    """Indices at sample ks[j] per point (NaN where ks < 0 or not feasible); exact (Jacobi); ``out`` as in
+    :func:`fixed_fields`."""
     lim, kt = as_tuple4(lim), as_tuple4(kt)
+    o0, o1, o2, o3, o4, o5, o6, o7 = out
     for j in range(x.shape[0]):
         k = ks[j]
         f, i0, i1, i2, i3, i4, i5, i6, i7 = point_indices(x[j], abs(y[j]), z[j], R_min + max(k, 0) * R_step, r, L1,
                                                           L2, lim, kt, JACOBI)
         f = f & (k >= 0)
         nan = math.nan
-        out[0, j] = i0 if f else nan
-        out[1, j] = i1 if f else nan
-        out[2, j] = i2 if f else nan
-        out[3, j] = i3 if f else nan
-        out[4, j] = i4 if f else nan
-        out[5, j] = i5 if f else nan
-        out[6, j] = i6 if f else nan
-        out[7, j] = i7 if f else nan
+        o0[j] = i0 if f else nan
+        o1[j] = i1 if f else nan
+        o2[j] = i2 if f else nan
+        o3[j] = i3 if f else nan
+        o4[j] = i4 if f else nan
+        o5[j] = i5 if f else nan
+        o6[j] = i6 if f else nan
+        o7[j] = i7 if f else nan
+
+
+def rows(out: np.ndarray, a: int = 0, b: int | None = None) -> tuple:
+    """The 8 rows of an (8, n) array restricted to columns a:b, as the contiguous (n,) arrays the field loops
+    take (each row of a C-ordered block is contiguous even when the block is a column slice)."""
+    return tuple(out[i, a:b] for i in range(out.shape[0]))
 
 
 @nb.njit(**OPTS)

@@ -114,8 +114,8 @@ def loop_closure(dx, py, pz, L1, L2, lim):
     ``dx = (p_x,i + r) - R``, ``py = p_y,i``, ``pz = p_z`` (chain frame); ``lim`` = (cos mid, sin mid, cos half,
     _) of :func:`limits_tuple`. Returns (cos, sin, disc, reach, margin, ok, dx, py, pz) with the inputs
     sanitised outside the box |dx|, |pz| <= L1 + L2, |py| <= L2 (nothing there closes; catches NaN, inf and
-    huge values) and cos, sin = 1, 0 where the loop does not close; theta is within the joint limits iff
-    margin >= 0.
+    huge values; disc = -(L1 + L2)^2 there) and cos, sin = 1, 0 where the loop does not close; theta is within
+    the joint limits iff margin >= 0.
     """
     box = L1 + L2
     inside = (abs(dx) <= box) & (abs(pz) <= box) & (abs(py) <= L2)
@@ -131,7 +131,7 @@ def loop_closure(dx, py, pz, L1, L2, lim):
     c = (dx * m + pz * w) * inv_rho2 if reach else 1.0
     s = (pz * m - dx * w) * inv_rho2 if reach else 0.0
     margin = c * lim[0] + s * lim[1] - lim[2]
-    return c, s, (disc if inside else -math.inf), reach, margin, reach & (margin >= 0.0), dx, py, pz
+    return c, s, (disc if inside else -(box * box)), reach, margin, reach & (margin >= 0.0), dx, py, pz
 
 
 @nb.njit(**_inline)
@@ -211,7 +211,8 @@ def jacobian_blocks(x, y, z, R, r, L1, L2, lim):
 def sv_matrix(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2):
     """The symmetric matrix X whose two largest eigenvalues give the singular values of M = Jx^-1 diag(d).
 
-    Returns (jx_side, prod_d = |d0 d1 d2|, det_jx = |det Jx|, x00, x11, x22, x01, x02, x12): on the Jx side
+    Returns (jx_side, prod_d = |d0 d1 d2|, det_jx = |det Jx|, c2, det X, x00, x11, x22, x01, x02, x12): c2 the
+    sum of X's principal 2x2 minors and det X from the factors (no cancellation); on the Jx side
     (|det Jx| < |prod d|) X = adj(D) G adj(D), else X = D adj(G) D, G = Jx Jx^T (the first half of
     :func:`deltajax.indices.singular_values`, same expressions).
     """
@@ -236,7 +237,13 @@ def sv_matrix(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2):
     x0 = e0 if jx_side else d0
     x1 = e1 if jx_side else d1
     x2 = e2 if jx_side else d2
-    return (jx_side, prod_d, det_jx,
+    # invariants of X without cancellation: sum of the principal 2x2 minors c2 and det X
+    det_g = det_jx * det_jx
+    p2d = prod_d * prod_d
+    c2 = (p2d * (d0 * d0 * c00 + d1 * d1 * c11 + d2 * d2 * c22) if jx_side
+          else det_g * (g00 * e0 * e0 + g11 * e1 * e1 + g22 * e2 * e2))
+    det_x = p2d * p2d * det_g if jx_side else p2d * det_g * det_g
+    return (jx_side, prod_d, det_jx, c2, det_x,
             x0 * (g00 if jx_side else c00) * x0,
             x1 * (g11 if jx_side else c11) * x1,
             x2 * (g22 if jx_side else c22) * x2,
@@ -299,9 +306,11 @@ def _cubic_root01(c):
 
 
 @nb.njit(**_inline)
-def _eig_top2_fast(x00, x11, x22, x01, x02, x12):
-    """The two largest eigenvalues by the closed-form cubic without inverse trig (q + p x, x^3 - 3x = 2r);
-    a split below the cubic's sqrt(eps) noise is reported as the pair's mean (the core's expressions)."""
+def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det):
+    """The two largest eigenvalues: lambda_1 by the closed-form cubic without inverse trig (q + p x,
+    x^3 - 3x = 2r); lambda_2 from the invariants (lambda_2 lambda_3 = det / lambda_1, lambda_2 + lambda_3 =
+    (c2 - det / lambda_1) / lambda_1, no cancellation); a split below the cubic's sqrt(eps) noise is the
+    pair's mean (the core's expressions)."""
     q = (x00 + x11 + x22) * (1.0 / 3.0)
     b00 = x00 - q
     b11 = x11 - q
@@ -314,22 +323,27 @@ def _eig_top2_fast(x00, x11, x22, x01, x02, x12):
     t = _cubic_root01(2.0 * (1.0 + r))
     t2 = _cubic_root01(2.0 * (1.0 - r))
     l1 = q + p * (1.0 + t)
-    l2 = q + p * (t2 - t)
-    noise2 = 64.0 * _EPS * p * (p + abs(q))
-    l3 = 3.0 * q - l1 - l2
-    tie12 = (l1 - l2) * (l1 - l2) <= noise2
-    tie23 = (l2 - l3) * (l2 - l3) <= noise2
-    mean12 = 0.5 * (l1 + l2)
-    return (mean12 if tie12 else l1), (mean12 if tie12 else (0.5 * (l2 + l3) if tie23 else l2))
+    l2c = q + p * (t2 - t)
+    tie12 = (l1 - l2c) * (l1 - l2c) <= 64.0 * _EPS * p * (p + abs(q))
+    l1 = 0.5 * (l1 + l2c) if tie12 else l1
+    l1_pos = l1 > 0.0
+    inv1 = 1.0 / (l1 if l1_pos else 1.0)
+    prod23 = det * inv1
+    sum23 = (c2 - prod23) * inv1
+    disc = 0.25 * sum23 * sum23 - prod23
+    root = math.sqrt(disc if disc > 0.0 else 1.0) if disc > 64.0 * _EPS * sum23 * sum23 else 0.0
+    l2 = l1 if tie12 else ((0.5 * sum23 + root) if l1_pos else 0.0)
+    return l1, l2
 
 
 @nb.njit(**_inline)
-def sym3_top2(x00, x11, x22, x01, x02, x12, method):
-    """(lambda_1, lambda_2), the two largest eigenvalues of a symmetric 3x3; ``method`` :data:`FAST` or
-    :data:`JACOBI` (a constant inside the kernels' loops: LLVM unswitches it)."""
+def sym3_top2(x00, x11, x22, x01, x02, x12, c2, det, method):
+    """(lambda_1, lambda_2), the two largest eigenvalues of a symmetric PSD 3x3 with principal-minor sum ``c2``
+    and determinant ``det``; ``method`` :data:`FAST` or :data:`JACOBI` (which ignores c2, det; a constant
+    inside the kernels' loops: LLVM unswitches it)."""
     if method == JACOBI:
         return _eig_top2_jacobi(x00, x11, x22, x01, x02, x12)
-    return _eig_top2_fast(x00, x11, x22, x01, x02, x12)
+    return _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det)
 
 
 @nb.njit(**_inline)
@@ -357,9 +371,9 @@ def singular_values_from_eig(e1, e2, jx_side, prod_d, det_jx):
 @nb.njit(**_inline)
 def singular_values(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2, method):
     """Singular values (s1 >= s2 >= s3) of M = Jx^-1 diag(d): twin of the core's ``singular_values(jx, d)``."""
-    jx_side, prod_d, det_jx, x00, x11, x22, x01, x02, x12 = sv_matrix(j00, j01, j02, j10, j11, j12, j20, j21, j22,
-                                                                       d0, d1, d2)
-    e1, e2 = sym3_top2(x00, x11, x22, x01, x02, x12, method)
+    jx_side, prod_d, det_jx, c2, det_x, x00, x11, x22, x01, x02, x12 = sv_matrix(j00, j01, j02, j10, j11, j12, j20,
+                                                                                 j21, j22, d0, d1, d2)
+    e1, e2 = sym3_top2(x00, x11, x22, x01, x02, x12, c2, det_x, method)
     return singular_values_from_eig(e1, e2, jx_side, prod_d, det_jx)
 
 

@@ -177,8 +177,8 @@ def screen_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, kt, crit, tol,
         ok, det_s, j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2 = jacobian_blocks(x, y, z, R, r, L1, L2,
                                                                                              lim)
         ok = ok & (det_s != 0.0)
-        jx_side, prod_d, det_jx, a00, a11, a22, a01, a02, a12 = sv_matrix(j00, j01, j02, j10, j11, j12, j20, j21,
-                                                                           j22, d0, d1, d2)
+        jx_side, prod_d, det_jx, _, _, a00, a11, a22, a01, a02, a12 = sv_matrix(j00, j01, j02, j10, j11, j12, j20,
+                                                                                 j21, j22, d0, d1, d2)
         q, p, tp, tm, ip = eig_cubic_parts(a00, a11, a22, a01, a02, a12)
         dw = 2.0 * _C_R * _EPS * (1.0 + abs(q) * ip) if p > 0.0 else 0.0  # error of wp, wm
         dt_a = math.sqrt(dw * (1.0 / 3.0))

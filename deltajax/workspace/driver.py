@@ -277,8 +277,8 @@ class _ChunkStats:
             return None
         missing = np.flatnonzero(np.isnan(self.parts[:, 0, 3]))
         if missing.size:
-            raise CheckpointMismatch(f"index statistics of chunks {missing[:5].tolist()} are missing from the checkpoint "
-                                     f"(written by an older version?); rerun into a fresh directory")
+            raise CheckpointMismatch(f"index statistics of chunks {missing[:5].tolist()} are missing from the "
+                                     f"checkpoint (written by an older version?); rerun into a fresh directory")
         return stats_from_partials(self.parts, self.names)
 
 
@@ -355,8 +355,8 @@ def fixed_workspace(robot: Delta, grid: Grid, *, fields: bool = True, b_v: float
             _nb.parallel(lambda a, b: _nb.fixed_mask(x[a:b], y[a:b], z[a:b], R, r, L1, L2, lim, ok[a:b]), n)
             return {"ok": ok}
         out = outb[:, :n]
-        _nb.parallel(lambda a, b: _nb.fixed_fields(x[a:b], y[a:b], z[a:b], R, r, L1, L2, lim, kt, out[:, a:b],
-                                                   ok[a:b], method), n)
+        _nb.parallel(lambda a, b: _nb.fixed_fields(x[a:b], y[a:b], z[a:b], R, r, L1, L2, lim, kt,
+                                                   _nb.rows(out, a, b), ok[a:b], method), n)
         vals = castb[:, :n]
         if vals is not out:
             vals[...] = out

@@ -358,5 +358,5 @@ def indices_at_host(recon: ReconfigurableDelta, points: np.ndarray, k: np.ndarra
     k = np.ascontiguousarray(k, np.int64)
     kt = _nb.kt_tuple(b_v, b_f, beta)
     _nb.parallel(lambda a, b: _nb.fields_at(x[a:b], y[a:b], z[a:b], k[a:b], q["R_min"], q["R_step"], q["r"], q["L1"],
-                                            q["L2"], q["lim"], kt, out[:, a:b]), pts.shape[0])
+                                            q["L2"], q["lim"], kt, _nb.rows(out, a, b)), pts.shape[0])
     return out.T
