@@ -46,7 +46,7 @@ from jaxtyping import Array, Bool, Float
 from .geometry import Delta
 from .jacobian import jq_theta, jx_det, jx_row
 from .kinematics import (_COS_A, _SIN_A, _branch_sign, _from_chain_frames, chain_local, design_ok, fk, limit_terms,
-                         loop_closure, loop_vectors, to_chain_frames)
+                         loop_closure, loop_vectors, safe_point, to_chain_frames)
 
 __all__ = [
     "Motion",
@@ -183,9 +183,10 @@ def _chain_motion(robot: Delta, i: int, p, v, a, R_dot, R_ddot, lim, sign) -> _C
     x, y, z = chain_local(*p, i)
     vx, vy, vz = chain_local(*v, i)
     ax, ay, az = chain_local(*a, i)
-    lc = loop_closure(x + (robot.platform_radius - robot.base_radius), y, z, L1, L2, lim, sign)
+    dx = x + (robot.platform_radius - robot.base_radius)
+    lc = loop_closure(dx, y, z, L1, L2, lim, sign)
     c, s = lc.cos, lc.sin
-    ux, uy, uz = loop_vectors(lc.dx, lc.py, lc.pz, c, s, L1, L2)
+    ux, uy, uz = loop_vectors(dx, y, z, c, s, L1, L2)
     d = L1 * jq_theta(ux, uz, c, s)
     d_safe = jnp.where(jnp.abs(d) > 0, d, 1.0)
     thd = (ux * vx + uy * vy + uz * vz - ux * R_dot) / d_safe
@@ -317,10 +318,12 @@ def _flat_motion(robot: Delta, p, v, a, R_dot, R_ddot, *, branch: str = "outer",
     """The three chains' joint motion (scalars), validity, Jx rows and det Jx for one platform motion."""
     lim = limit_terms(robot.theta_min, robot.theta_max)
     sign = _branch_sign(branch)
+    _, usable = safe_point(robot, jnp.stack(p))  # non-finite or huge p: a stand-in before any algebra
+    p = tuple(jnp.where(usable, pk, jnp.zeros_like(pk)) for pk in p)
     chains = tuple(_chain_motion(robot, i, p, v, a, R_dot, R_ddot, lim, sign) for i in range(3))
     rows = _jx_rows(chains)
     ok, det = _flat_validity(robot, chains, rows, singular_tol)
-    return chains, ok & design_ok(robot), rows, det
+    return chains, ok & usable & design_ok(robot), rows, det
 
 
 def platform_motion(robot: Delta, theta: Float[Array, "3"], theta_dot: Float[Array, "3"],
