@@ -65,8 +65,10 @@ def _cos_range(lo: float, hi: float) -> tuple[float, float]:
     return (-1.0 if contains(math.pi) else min(ends)), (1.0 if contains(0.0) else max(ends))
 
 
-#: a full revolution (rad), with room for the rounding of [-pi, pi] and of radians(+-180)
-_FULL_TURN = 2 * math.pi * (1 + 1e-12)
+#: a joint range of at least FULL_TURN_MIN (rad) is a full revolution (no limit; [-pi, pi] and radians(+-180)
+#: with their rounding); more than FULL_TURN_MAX is rejected as more than one turn
+FULL_TURN_MIN = 2 * math.pi * (1 - 1e-12)
+FULL_TURN_MAX = 2 * math.pi * (1 + 1e-12)
 
 
 def _leaf(x: Any) -> jax.Array:
@@ -116,7 +118,7 @@ class Delta(eqx.Module):
                     f"joint limits inverted or empty: theta_min={lo_f!r} rad must be < theta_max={hi_f!r} rad"
                 )
             # [-pi, pi] (a full revolution) is the common way to write "no limit"; more than one turn is an error
-            if math.isfinite(lo_f) and math.isfinite(hi_f) and hi_f - lo_f > _FULL_TURN:
+            if math.isfinite(lo_f) and math.isfinite(hi_f) and hi_f - lo_f > FULL_TURN_MAX:
                 raise GeometryError(
                     f"joint range theta_max - theta_min = {hi_f - lo_f:.6g} rad must be <= 2*pi "
                     "(a full revolution, e.g. [-pi, pi]; or theta_min=-inf, theta_max=inf)"

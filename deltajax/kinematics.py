@@ -18,7 +18,7 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from .geometry import CHAIN_ANGLES, Delta
+from .geometry import CHAIN_ANGLES, FULL_TURN_MAX, FULL_TURN_MIN, Delta
 
 __all__ = [
     "IKResult",
@@ -130,10 +130,10 @@ class LimitTerms(NamedTuple):
 
 
 def limit_terms(theta_min, theta_max) -> LimitTerms:
-    """:class:`LimitTerms` of the inclusive joint range [theta_min, theta_max] (rad); an infinite bound means
-    no limit (the margin then is c cos 0 + 2 >= 1)."""
+    """:class:`LimitTerms` of the inclusive joint range [theta_min, theta_max] (rad); an infinite bound or a
+    full turn ([-pi, pi]) means no limit (the margin then is c cos 0 + 2 >= 1)."""
     lo, hi = jnp.asarray(theta_min), jnp.asarray(theta_max)
-    limited = jnp.isfinite(lo) & jnp.isfinite(hi)
+    limited = jnp.isfinite(lo) & jnp.isfinite(hi) & (hi - lo < FULL_TURN_MIN)
     mid = jnp.where(limited, 0.5 * (lo + hi), 0.0)
     half = jnp.where(limited, 0.5 * (hi - lo), 0.0)
     return LimitTerms(cos_mid=jnp.cos(mid), sin_mid=jnp.sin(mid),
@@ -142,7 +142,7 @@ def limit_terms(theta_min, theta_max) -> LimitTerms:
 
 def design_ok(robot: Delta) -> Bool[Array, ""]:
     """Whether the (possibly traced) design is valid: R > 0, r >= 0, L1 > 0, L2 > 0, all finite, joint limits
-    not NaN with theta_min < theta_max and a finite range < 2 pi (or an infinite bound: unlimited).
+    not NaN with theta_min < theta_max and a finite range of at most one turn (or an infinite bound: unlimited).
 
     The traced twin of :meth:`Delta.__check_init__` (which raises for concrete input): inside a vmapped
     population an invalid design gets ``ok=False`` everywhere instead of numbers.
@@ -151,7 +151,7 @@ def design_ok(robot: Delta) -> Bool[Array, ""]:
     lo, hi = robot.theta_min, robot.theta_max
     lengths = (R > 0) & (r >= 0) & (L1 > 0) & (L2 > 0) & jnp.isfinite(R + r + L1 + L2)
     finite_range = jnp.isfinite(lo) & jnp.isfinite(hi)
-    limits = (lo < hi) & ~(finite_range & (hi - lo >= 2.0 * jnp.pi))  # NaN compares False
+    limits = (lo < hi) & ~(finite_range & (hi - lo > FULL_TURN_MAX))  # NaN compares False; a full turn is fine
     return lengths & limits
 
 

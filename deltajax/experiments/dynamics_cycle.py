@@ -238,10 +238,10 @@ def run(ctx) -> None:
                                           forearm_model=robot.mass.forearm_model))
             mg = f"dynamics/{name}/{case}_metrics"
             # stored as peak_joint_*: actuator (joint) rates, unlike the GA's end-effector peak_speed (m/s)
-            for key, name, unit in (("peak_torque", "peak_torque", "N m"), ("rms_torque", "rms_torque", "N m"),
-                                    ("peak_speed", "peak_joint_speed", "rad/s"),
-                                    ("peak_acceleration", "peak_joint_acceleration", "rad/s^2")):
-                res.put(mg, name, np.asarray(getattr(m, key)), units=unit, dims=("chain",))
+            for key, stored, unit in (("peak_torque", "peak_torque", "N m"), ("rms_torque", "rms_torque", "N m"),
+                                      ("peak_speed", "peak_joint_speed", "rad/s"),
+                                      ("peak_acceleration", "peak_joint_acceleration", "rad/s^2")):
+                res.put(mg, stored, np.asarray(getattr(m, key)), units=unit, dims=("chain",))
             for key, unit in (("cycle_time", "s"), ("cycles_per_minute", "1/min"), ("peak_force_R", "N"),
                               ("ok", "1"), ("reachable", "1"), ("n_bad", "1")):
                 res.put(mg, key, np.asarray(getattr(m, key)), units=unit)

@@ -23,7 +23,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ..geometry import CHAIN_ANGLES
+from ..geometry import CHAIN_ANGLES, FULL_TURN_MIN
 from ..indices import INDEX_NAMES, _T_POLY as _CORE_T_POLY
 
 def _drop_stale_cache() -> None:
@@ -76,8 +76,8 @@ SV_METHODS = {"jacobi": JACOBI, "fast": FAST}
 
 def limits_tuple(theta_min: float, theta_max: float) -> np.ndarray:
     """(cos mid, sin mid, cos half, has_limits) of the joint range [theta_min, theta_max] (rad): the core's
-    :func:`deltajax.kinematics.limit_terms` (cos half = -2 when a bound is infinite: every theta passes)."""
-    if math.isfinite(theta_min) and math.isfinite(theta_max):
+    :func:`deltajax.kinematics.limit_terms` (cos half = -2 when a bound is infinite or the range a full turn: every theta passes)."""
+    if math.isfinite(theta_min) and math.isfinite(theta_max) and theta_max - theta_min < FULL_TURN_MIN:
         mid = 0.5 * (theta_min + theta_max)
         half = 0.5 * (theta_max - theta_min)
         return np.array([math.cos(mid), math.sin(mid), math.cos(half), 1.0])
