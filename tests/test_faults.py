@@ -276,10 +276,11 @@ def test_checksums_round_trip_and_catch_a_flip(tmp_path):
 
 @pytest.mark.slow
 def test_real_full_disk_exits_cleanly_without_segfault(tmp_path):
-    """A 1 MiB tmpfs (needs root): the run fails with the one-line message, exit 1, no exit 139, no temp file."""
+    """A 256 KiB tmpfs (needs root; the compressed results are ~0.4 MB): the run fails with the one-line message,
+    exit 1, no exit 139, no temp file."""
     mnt = tmp_path / "tiny"
     mnt.mkdir()
-    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=1m", "tmpfs", str(mnt)],
+    if os.geteuid() != 0 or subprocess.run(["mount", "-t", "tmpfs", "-o", "size=256k", "tmpfs", str(mnt)],
                                            capture_output=True).returncode != 0:
         pytest.skip("cannot mount a tmpfs here")
     try:
@@ -308,7 +309,9 @@ def _progress(run_dir):
         return tuple(json.loads(p.read_text())["done_chunks"] for p in states)
     if (run_dir / "results.h5").exists():
         with h5py.File(run_dir / "results.h5", "r") as f:
-            return (int(f["workspace"].attrs["planes_done"]),)
+            done = f["workspace"].attrs.get("planes_done") if "workspace" in f else None
+        # a finished reconfig_indices run has no checkpoint left (removed once complete) and no planes_done
+        return () if done is None else (int(done),)
     return ()
 
 
@@ -358,17 +361,18 @@ def test_workspace_grid_killed_at_random_moments_resumes_bit_identically(tmp_pat
     _assert_same_results(tmp_path / "killed" / "results.h5", tmp_path / "ref" / "results.h5")
 
 
-RI_KILL = ["experiment=reconfig_indices", "plots=false", "progress=false", "experiment.h=0.04",
-           "experiment.chunk_points=128", "experiment.slices_z=[0.4]"]
+RI_KILL = ["experiment=reconfig_indices", "plots=false", "progress=false", "experiment.h=0.025",
+           "experiment.chunk_points=16", "experiment.slices_z=[0.4]"]
 
 
 @pytest.mark.slow
 def test_reconfig_indices_killed_at_random_moments_resumes_bit_identically(tmp_path):
     ref = _cli(*RI_KILL, f"hydra.run.dir={tmp_path / 'ref'}")
     assert ref.returncode == 0, ref.stderr[-3000:]
-    rng = random.Random(5)  # progress = ODR chunks (1) + RDR chunks (28 of 128 points)
-    seen = _kill_then_finish(RI_KILL, tmp_path / "killed", seed=5, targets=sorted(rng.sample(range(2, 26), 3)))
-    assert sum(len(s) == 2 and 0 < s[1] < 28 for s in seen) >= 2, seen  # kills inside the RDR stage (28 chunks)
+    rng = random.Random(5)  # progress = ODR chunks + RDR chunks (~500 of 16 points): small chunks, so that the
+    # kills land inside the RDR stage even on a quiet machine (its checkpoint exists only until the run completes)
+    seen = _kill_then_finish(RI_KILL, tmp_path / "killed", seed=5, targets=sorted(rng.sample(range(20, 300), 3)))
+    assert sum(len(s) == 2 and 0 < s[1] for s in seen) >= 2, seen  # kills inside the RDR stage
     _assert_same_results(tmp_path / "killed" / "results.h5", tmp_path / "ref" / "results.h5")
 
 
