@@ -1,4 +1,5 @@
-"""GA-fitness benchmark (issue 9): population 256 of today's default ``ga_reconfig`` problem, split by term,
+"""GA-fitness benchmark (issue 9): population 256 of the weighted-sum ``ga_reconfig`` problem of 2026-12-01
+(``experiments/bench_fitness_problem.yaml``, :class:`deltajax.optimize.Problem`), split by term,
 new core kernel vs the frozen pre-issue-9 kernel (:mod:`deltajax.experiments._kernel_baseline`) in the same
 process; fitness values must agree to 1e-12.
 
@@ -25,10 +26,10 @@ from omegaconf import OmegaConf  # noqa: E402
 
 import deltajax as dj  # noqa: E402
 from deltajax.experiments import _kernel_baseline  # noqa: E402
-from deltajax.experiments.ga_reconfig import build  # noqa: E402
-from deltajax.optimize import evaluate_design, make_fitness  # noqa: E402
+from deltajax.optimize import DesignSpace, Problem, evaluate_design, make_fitness  # noqa: E402
 
-CONFIG = Path(__file__).resolve().parents[1] / "configs" / "experiment" / "ga_reconfig.yaml"
+#: the main job's problem before it became the designer's problem (issue 12): the kernel's baseline workload
+CONFIG = Path(__file__).resolve().parent / "bench_fitness_problem.yaml"
 
 
 def _timed(fn, arg, repeats):
@@ -43,10 +44,16 @@ def _timed(fn, arg, repeats):
 
 
 def problem():
-    """(space, problem with baseline) of the default ga_reconfig config on franco2026 (with masses)."""
+    """(space, problem with baseline) of the benchmark's weighted-sum problem on franco2026 (with masses)."""
     e = OmegaConf.to_container(OmegaConf.load(CONFIG)["experiment"], resolve=True)
     recon = dj.presets.franco2026(with_mass=True)
-    space, pb, _ = build(e, None, recon)
+    space = DesignSpace.from_bounds(recon, e["design"]["bounds"], n_R=e["design"]["n_R"],
+                                    prefix="experiment.design.bounds")
+    ws = dict(e["workspace"])
+    hi = {n: space._range(n)[1] for n in ("R_max", "upper_arm", "forearm")}
+    r_max = ws.pop("r_max", None) or hi["R_max"] - space._range("platform_radius")[0] + hi["upper_arm"] + hi["forearm"]
+    z_max = ws.pop("z_max", None) or hi["upper_arm"] + hi["forearm"]
+    pb = Problem.from_config({**e, "workspace": ws}, r_max=float(r_max), z_max=float(z_max))
     base = jax.jit(lambda g: evaluate_design(pb, space.decode(g)))(jnp.asarray(space.baseline_genes()))
     return space, pb.with_baseline({k: float(v) for k, v in base.items()})
 

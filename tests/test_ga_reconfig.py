@@ -1,6 +1,7 @@
 """The main job end to end at toy size: reruns into one directory (complete, resumed, no-op), kill-and-resume
 bit-identical at every stage, Pareto on/off, feasibility of every front point, config validation."""
 
+import logging
 import math
 
 import h5py
@@ -10,6 +11,7 @@ import pytest
 from deltajax.config import ConfigError
 from deltajax.io import load
 from deltajax.run import run_experiment
+from deltajax.rundir import RunDirError
 
 TOY = [
     "experiment.design.n_R=3", "experiment.task.n_r=1", "experiment.task.n_phi=3", "experiment.task.n_z=2",
@@ -58,7 +60,7 @@ def full_run(tmp_path_factory):
 
 
 @pytest.mark.slow
-def test_toy_run_front_feasible_summary_and_units(full_run, capsys):
+def test_toy_run_front_feasible_summary_and_units(full_run):
     data = load(full_run)
     V = data["verify"]
     front = np.asarray(V["front"]).reshape(-1)
@@ -81,18 +83,25 @@ def test_toy_run_front_feasible_summary_and_units(full_run, capsys):
 
 
 @pytest.mark.slow
-def test_rerun_three_times_into_one_dir(tmp_path, capsys):
-    # 1: killed after 2 generations; 2: resumed and completed; 3: a no-op that says so
+def _logged(caplog):
+    text = caplog.text
+    caplog.clear()
+    return text
+
+
+def test_rerun_three_times_into_one_dir(tmp_path, caplog):
+    # 1: killed after 2 generations; 2: resumed and completed; 3: a no-op that says so (the run's lines go
+    # through the "deltajax" logger: console and run.log)
+    caplog.set_level(logging.INFO, logger="deltajax")
     run_experiment("ga_reconfig", TOY + ["experiment.stop_after=2"], run_dir=tmp_path)
-    assert "stopped after 2 generations" in capsys.readouterr().out
+    assert "stopped after 2 generations" in _logged(caplog)
     p = run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
-    out = capsys.readouterr().out
-    assert "resuming the GA from generation 2" in out
+    assert "resuming the GA from generation 2" in _logged(caplog)
     snap = tmp_path / "after_resume.h5"
     snap.write_bytes(p.read_bytes())
     run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
-    out = capsys.readouterr().out
-    assert "complete ga_reconfig run" in out and "starting the GA" not in out
+    out = _logged(caplog)
+    assert "complete results of this ga_reconfig run; nothing to do" in out and "starting the GA" not in out
     _assert_same(snap, p)
     assert load(p)["ga"]["checkpoint"]["attrs"]["generations_done"] == 4   # the checkpoint survives
 
@@ -133,7 +142,7 @@ def test_pareto_disabled_runs_end_to_end(tmp_path):
 @pytest.mark.slow
 def test_a_different_config_into_a_finished_dir_is_refused(full_run):
     before = full_run.read_bytes()
-    with pytest.raises(ConfigError, match="different settings"):
+    with pytest.raises(RunDirError, match=r"other settings: experiment.cycle.payload=0.5 there, 1.0 now"):
         run_experiment("ga_reconfig", TOY + ["experiment.cycle.payload=1.0"], run_dir=full_run.parent)
     assert full_run.read_bytes() == before
 
@@ -172,8 +181,9 @@ def test_knee_point_of_a_convex_front():
 
 
 @pytest.mark.slow
-def test_weighted_mode_runs_and_says_so(tmp_path, capsys):
+def test_weighted_mode_runs_and_says_so(tmp_path, caplog):
+    caplog.set_level(logging.INFO, logger="deltajax")
     p = run_experiment("ga_reconfig", TOY + ["experiment.objectives.mode=weighted", "experiment.pareto.enabled=false"],
                        run_dir=tmp_path)
-    assert "weighted sum 1 x picks_per_min + 1 x regular_volume" in capsys.readouterr().out
+    assert "weighted sum 1 x picks_per_min + 1 x regular_volume" in caplog.text
     assert "weighted sum" in load(p)["ga"]["attrs"]["objective"]

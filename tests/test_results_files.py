@@ -25,11 +25,15 @@ TOY = {
     "reconfig_motion": ["experiment.R_step=0.007", "experiment.cases.adept.n_samples=11",
                         "experiment.cases.task.samples_per_segment=5", "experiment.refine.enabled=false",
                         "experiment.cases.task.points=[[0.0,0.0,0.30],[0.15,0.08,0.42],[-0.12,0.12,0.45]]"],
-    "ga_reconfig": ["experiment.ga.population_size=8", "experiment.ga.generations=2", "experiment.ga.checkpoint_every=2",
-                    "experiment.pareto.population_size=8", "experiment.pareto.generations=2",
-                    "experiment.refine.steps=2", "experiment.refine.pareto_points=1",
-                    "experiment.workspace.n_r=4", "experiment.workspace.n_z=4", "experiment.verify.n_r=4",
-                    "experiment.verify.n_phi=2", "experiment.verify.n_z=4", "experiment.verify.cycle_samples=21"],
+    "ga_reconfig": [  # the main job's own toy size (tests/test_ga_reconfig.py)
+        "experiment.design.n_R=3", "experiment.task.n_r=1", "experiment.task.n_phi=3", "experiment.task.n_z=2",
+        "experiment.cycle.n_samples=11", "experiment.cycle.n_R_operating=2", "experiment.regular_workspace.n_r=6",
+        "experiment.regular_workspace.n_phi=2", "experiment.regular_workspace.n_z=6",
+        "experiment.ga.population_size=8", "experiment.ga.generations=2", "experiment.ga.checkpoint_every=2",
+        "experiment.pareto.population_size=8", "experiment.pareto.generations=2", "experiment.verify.n_R=3",
+        "experiment.verify.n_R_operating=2", "experiment.verify.task_n_r=1", "experiment.verify.task_n_phi=3",
+        "experiment.verify.task_n_z=2", "experiment.verify.cycle_samples=13", "experiment.verify.rw_n_r=7",
+        "experiment.verify.rw_n_phi=2", "experiment.verify.rw_n_z=7"],
 }
 
 
