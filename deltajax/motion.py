@@ -454,7 +454,7 @@ def path_constraints_ok(res: PathResult, limits: RDriveLimits, dt: float, R_step
 
 
 def resolve_path(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_tilde", *,
-                 limits: RDriveLimits = RDriveLimits(), aggregate: str = "integral", boundary: str = "free",
+                 limits: Optional[RDriveLimits] = None, aggregate: str = "integral", boundary: str = "free",
                  b_v: float = 2.0, b_f: float = 4.2, beta: float = 0.5, tables: Optional[PathTables] = None,
                  start_batch: int = 16) -> PathResult:
     """Exact path-optimal R(t) on the R samples (dynamic programming; see the module docstring).
@@ -473,6 +473,7 @@ def resolve_path(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_t
     Returns:
         :class:`PathResult` (``ok=False`` and NaN arrays when no sample path satisfies every constraint).
     """
+    limits = RDriveLimits() if limits is None else limits  # built at call time: the caller's precision
     _check_names(criterion, aggregate, boundary)
     _check_cycle(cycle)
     if tables is None:

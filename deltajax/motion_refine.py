@@ -12,7 +12,7 @@ B-spline Delta^2 c / h^2, both inside the convex hull of their coefficients, so 
 from __future__ import annotations
 
 import math
-from typing import NamedTuple
+from typing import NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
@@ -77,7 +77,7 @@ class RefineResult(NamedTuple):
 
 
 def refine_path(recon: ReconfigurableDelta, cycle: Cycle, dp: PathResult, criterion: str = "k_tilde", *,
-                limits: RDriveLimits = RDriveLimits(), aggregate: str = "integral", boundary: str = "free",
+                limits: Optional[RDriveLimits] = None, aggregate: str = "integral", boundary: str = "free",
                 n_ctrl: int = 12, steps: int = 200, learning_rate: float = 2e-4, softmin_scale: float = 0.01,
                 penalty: float = 1e4, margin: float = 0.02, b_v: float = 2.0, b_f: float = 4.2,
                 beta: float = 0.5) -> RefineResult:
@@ -97,6 +97,7 @@ def refine_path(recon: ReconfigurableDelta, cycle: Cycle, dp: PathResult, criter
     """
     import optax
 
+    limits = RDriveLimits() if limits is None else limits  # built at call time: the caller's precision
     _check_names(criterion, aggregate, boundary)
     if not dp.ok:
         raise ValueError("refine_path needs a feasible DP solution (dp.ok is False)")

@@ -156,3 +156,13 @@ def test_console_logging_goes_through_tqdm_and_keeps_routing():
         assert root.handlers == [out, err, f]  # restored
     finally:
         root.handlers = saved
+
+
+def test_import_creates_no_arrays():
+    """Importing deltajax must not start a JAX backend (sweep workers set XLA threads and host devices after the
+    import, and a default built at import would freeze the float precision before the caller chooses it)."""
+    code = ("import deltajax\nfrom jax._src import xla_bridge\n"
+            "assert not xla_bridge.backends_are_initialized(), 'import deltajax initialised a JAX backend'")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                         env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])})
+    assert out.returncode == 0, out.stderr[-2000:]
