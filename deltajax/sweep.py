@@ -196,8 +196,10 @@ JOB_STATUS = "job_status.json"
 
 
 def _job_status_path(config) -> Path:
-    sub = config.hydra.get("output_subdir", None)
-    return Path(str(config.hydra.runtime.output_dir)) / (str(sub) if sub else ".") / JOB_STATUS
+    # <run>/.hydra even though hydra.output_subdir is null (deltajax.run writes .hydra/ itself once the run
+    # directory is claimed): the status exists from the job's start, also for a job rejected before its claim
+    sub = config.hydra.get("output_subdir", None) or ".hydra"
+    return Path(str(config.hydra.runtime.output_dir)) / str(sub) / JOB_STATUS
 
 
 def _write_json(path: Path, data: Mapping[str, Any]) -> None:
@@ -247,7 +249,9 @@ class SweepSummary(Callback):
 
     def on_job_start(self, config, **kwargs: Any) -> None:
         if self._in_multirun(config):
-            _write_json(_job_status_path(config), {"status": "running", "start_time": _now(), **_scheduler_ids()})
+            _write_json(_job_status_path(config), {"status": "running", "start_time": _now(),
+                                                   "overrides": [str(o) for o in config.hydra.overrides.task],
+                                                   **_scheduler_ids()})
 
     def on_job_end(self, config, job_return, **kwargs: Any) -> None:
         if not self._in_multirun(config):
@@ -577,9 +581,11 @@ def find_runs(sweep_dir: os.PathLike) -> list[Path]:
 
 
 def _overrides(run_dir: Path) -> list[str]:
+    """The job's overrides: .hydra/overrides.yaml (written once the run directory is claimed), else the job's
+    status record (written at job start, so a job rejected before its claim still names its overrides)."""
     f = run_dir / ".hydra" / "overrides.yaml"
     if not f.exists():
-        return []
+        return [str(o) for o in _job_status(run_dir).get("overrides", [])]
     from omegaconf import OmegaConf
 
     return [str(o) for o in OmegaConf.load(f)]

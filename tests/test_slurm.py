@@ -259,10 +259,17 @@ def _ga_overrides():
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         cfg = compose(config_name="config", overrides=["experiment=ga_reconfig"])
     over = ["experiment=ga_reconfig", "plots=false", "progress=false", "seed=0",
-            "experiment.ga.population_size=8", "experiment.ga.generations=400"]
+            "experiment.ga.population_size=8", "experiment.ga.generations=3000"]  # ~5 ms each: time to cancel
     optional = {"experiment.ga.checkpoint_every": 1, "experiment.pareto.enabled": "false",
-                "experiment.refine.enabled": "false", "experiment.verify.n_r": 8, "experiment.verify.n_phi": 4,
-                "experiment.verify.n_z": 8, "experiment.verify.cycle_samples": 48}
+                # the main job's toy sizes (tests/test_ga_reconfig.py): search and verification grids
+                "experiment.design.n_R": 3, "experiment.task.n_r": 1, "experiment.task.n_phi": 3,
+                "experiment.task.n_z": 2, "experiment.cycle.n_samples": 11, "experiment.cycle.n_R_operating": 2,
+                "experiment.regular_workspace.n_r": 6, "experiment.regular_workspace.n_phi": 2,
+                "experiment.regular_workspace.n_z": 6, "experiment.verify.n_R": 3,
+                "experiment.verify.n_R_operating": 2, "experiment.verify.task_n_r": 1,
+                "experiment.verify.task_n_phi": 3, "experiment.verify.task_n_z": 2,
+                "experiment.verify.cycle_samples": 13, "experiment.verify.rw_n_r": 7, "experiment.verify.rw_n_phi": 2,
+                "experiment.verify.rw_n_z": 7}
     from omegaconf import OmegaConf
 
     for key, value in optional.items():
