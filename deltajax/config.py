@@ -282,10 +282,10 @@ def _v_boundary_search(e, cfg, robot, recon) -> None:
 
 # ---- ga_reconfig: the designer's problem reads and checks its own block (every field, unknown keys included) ----
 def _v_ga_reconfig(e, cfg, robot, recon) -> None:
-    # The job's reader is the one parser of this block (deltajax/experiments/ga_reconfig.py); calling it here
+    # The job's reader is the one parser of this block (deltajax/jobs/ga_reconfig.py); calling it here
     # rejects a bad value before the run directory is claimed. Moving the reader below config.py is part of the
     # layout issue (#10).
-    from .experiments.ga_reconfig import build
+    from .jobs.ga_reconfig import build
 
     build(e, robot, recon)  # every field, the design space, the GA settings and the problem; nothing compiles
 # ---- end of ga_reconfig block ----

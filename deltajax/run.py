@@ -1,17 +1,15 @@
 """Command-line entry point (Hydra): ``python -m deltajax.run experiment=NAME key=value ...``.
 
 This is the only module that reads configuration, switches precision and picks the output directory.
-Experiments live in ``deltajax/experiments/<name>.py`` and expose ``run(ctx: RunContext) -> None``; their
-settings live in ``configs/experiment/<name>.yaml`` (``# @package _global_``, with ``experiment.name``).
+Jobs are listed in :data:`deltajax.jobs.JOBS` (``deltajax/jobs/<name>.py``, ``run(ctx: RunContext) -> None``);
+their settings live in ``configs/experiment/<name>.yaml`` (``# @package _global_``, with ``experiment.name``).
 """
 
 from __future__ import annotations
 
-import ast
 import contextlib
 import dataclasses
 import datetime
-import importlib
 import logging
 import os
 import shutil
@@ -137,25 +135,11 @@ def _validate_top(cfg: DictConfig) -> None:
         raise ConfigError("experiment.name is missing: pick one with experiment=NAME")
 
 
-def list_experiments(config_dir: Optional[str] = None) -> dict[str, str]:
-    """Experiments selectable with ``experiment=NAME`` (their configs) -> one-line description."""
-    from .experiments import SUMMARIES
+def list_experiments() -> dict[str, str]:
+    """Experiments selectable with ``experiment=NAME`` (:data:`deltajax.jobs.JOBS`) -> one-line description."""
+    from .jobs import JOBS
 
-    exp_dir = Path(config_dir or CONFIG_DIR) / "experiment"
-    names = sorted(p.stem for p in exp_dir.glob("*.yaml"))
-    names.sort(key=lambda n: (n not in SUMMARIES, list(SUMMARIES).index(n) if n in SUMMARIES else 0, n))
-    return {n: SUMMARIES.get(n) or _docstring_line(n) for n in names}
-
-
-def _docstring_line(name: str) -> str:
-    """First sentence of ``deltajax/experiments/<name>.py``'s docstring, read without importing it."""
-    path = Path(__file__).resolve().parent / "experiments" / f"{name}.py"
-    try:
-        doc = ast.get_docstring(ast.parse(path.read_text())) or ""
-    except (OSError, SyntaxError):
-        return "(no description)"
-    first = " ".join(doc.split("\n\n")[0].split())
-    return first.split(". ")[0].rstrip(".") or "(no description)"
+    return {name: job.summary for name, job in JOBS.items()}
 
 
 def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
@@ -172,13 +156,11 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
 
     _validate_top(cfg)
     name = cfg.experiment.name
-    try:
-        module = importlib.import_module(f"deltajax.experiments.{name}")
-    except ModuleNotFoundError as e:
-        if e.name == f"deltajax.experiments.{name}":
-            raise ConfigError(f"experiment.name={name!r} has no module deltajax/experiments/{name}.py; "
-                              f"choose one of {', '.join(list_experiments())}") from None
-        raise
+    from .jobs import JOBS, load
+
+    if name not in JOBS:
+        raise ConfigError(f"experiment.name={name!r} is not a job; choose one of {', '.join(JOBS)}")
+    module = load(name)
     import jax
 
     # Precision first: the robot's array leaves take the default float dtype when they are built.

@@ -114,7 +114,7 @@ def main(argv=None):
 
     jax.config.update("jax_enable_x64", True)
     from deltajax.config import robot_from_config
-    from deltajax.experiments.ga_reconfig import build
+    from deltajax.jobs.ga_reconfig import build
     from deltajax.optimize.designer import evaluate_designer
     from deltajax.optimize.pareto import hypervolume, non_dominated, padded_batch
     from deltajax.run import CONFIG_DIR

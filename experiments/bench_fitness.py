@@ -1,6 +1,6 @@
 """GA-fitness benchmark (issue 9): population 256 of the weighted-sum ``ga_reconfig`` problem of 2026-12-01
 (``experiments/bench_fitness_problem.yaml``, :class:`deltajax.optimize.Problem`), split by term,
-new core kernel vs the frozen pre-issue-9 kernel (:mod:`deltajax.experiments._kernel_baseline`) in the same
+new core kernel vs the frozen pre-issue-9 kernel (:mod:`deltajax.baseline_kernel`) in the same
 process; fitness values must agree to 1e-12.
 
     python experiments/bench_fitness.py [--population 256] [--repeats 3]
@@ -25,7 +25,7 @@ import numpy as np  # noqa: E402
 from omegaconf import OmegaConf  # noqa: E402
 
 import deltajax as dj  # noqa: E402
-from deltajax.experiments import _kernel_baseline  # noqa: E402
+from deltajax import baseline_kernel as _kernel_baseline  # noqa: E402
 from deltajax.optimize import DesignSpace, Problem, evaluate_design, make_fitness  # noqa: E402
 
 #: the main job's problem before it became the designer's problem (issue 12): the kernel's baseline workload

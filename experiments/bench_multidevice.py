@@ -6,7 +6,7 @@
 The CPU backend's device count is fixed when JAX starts (``--xla_force_host_platform_device_count``), so the
 benchmark re-runs itself in a subprocess that sets it (to the largest count asked for) before importing JAX,
 with an XLA thread pool of ``--threads`` threads (``PJRT_NPROC``). There it builds the kernel of
-``experiment=workspace_grid`` (:func:`deltajax.experiments.workspace_grid.make_evaluator`: reachability + every
+``experiment=workspace_grid`` (:func:`deltajax.jobs.workspace_grid.make_evaluator`: reachability + every
 index) once per device count, sharded over a mesh of the first k devices, and evaluates the same chunk of
 the franco2026 paper grid (whole y-z planes from x = -0.2 m). Compile time is reported apart from warm time;
 the warm repetitions of all configurations are interleaved (1, n, 1, n, ...) so that load from other
@@ -48,7 +48,7 @@ def child(args) -> None:
     import numpy as np
 
     import deltajax as dj
-    from deltajax.experiments.workspace_grid import make_evaluator, make_numba_evaluator
+    from deltajax.jobs.workspace_grid import make_evaluator, make_numba_evaluator
     from deltajax.workspace import franco2026_grid
 
     assert jax.local_device_count() == max(counts), jax.devices()

@@ -108,7 +108,7 @@ def test_rerun_three_times_into_one_dir(tmp_path, caplog):
 
 @pytest.mark.slow
 def test_kill_and_resume_is_bit_identical(full_run, tmp_path, monkeypatch):
-    import deltajax.experiments.ga_reconfig as job
+    import deltajax.jobs.ga_reconfig as job
 
     # killed inside the GA ...
     run_experiment("ga_reconfig", TOY + ["experiment.stop_after=2"], run_dir=tmp_path / "a")

@@ -96,7 +96,7 @@ def test_ga_converges_stays_in_bounds_and_is_reproducible():
 
 
 def test_kill_and_resume_is_bit_identical(tmp_path):
-    from deltajax.experiments.ga_reconfig import _load_checkpoint, _put_checkpoint
+    from deltajax.jobs.ga_reconfig import _load_checkpoint, _put_checkpoint
     from deltajax.io import ResultsFile
 
     full = run_ga(sphere, 4, CFG)

@@ -20,7 +20,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 from deltajax.config import ConfigError
-from deltajax.experiments.workspace_grid import GridPlan
+from deltajax.jobs.workspace_grid import GridPlan
 from deltajax.sweep import ShardError, _read_tree, merge_shards, resolve_worker_cpus
 
 REPO = Path(__file__).resolve().parent.parent

@@ -108,7 +108,7 @@ class DesignerProblem:
     def build(*, task: Mapping[str, float], cycle: Mapping[str, Any], motor: C.Motor, joints: C.JointModel,
               links: C.LinkModel, good: C.GoodSpec, regular: Mapping[str, float], n_R_operating: int,
               min_picks: float, max_arm_sum: Optional[float], enabled: Sequence[str]) -> "DesignerProblem":
-        """Build from validated plain values (see :mod:`deltajax.experiments.ga_reconfig` for the config)."""
+        """Build from validated plain values (see :mod:`deltajax.jobs.ga_reconfig` for the config)."""
         tp = cylinder_points(task["diameter"], task["height"], task["z_top"], int(task["n_r"]), int(task["n_phi"]),
                              int(task["n_z"]))
         tp = np.concatenate([tp, [[0.0, 0.0, task["z_top"]], [0.0, 0.0, task["z_top"] + task["height"]]]])

@@ -6,8 +6,8 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from ..geometry import CHAIN_ANGLES
-from ..indices import Indices, k_tilde
+from .geometry import CHAIN_ANGLES
+from .indices import Indices, k_tilde
 
 import math
 
@@ -219,7 +219,7 @@ def mirrored_point_indices(robot, p, *, b_v=2.0, b_f=4.2, beta=0.5, sv_method=No
 
 def ik_cos_sin_result(robot, p, branch="outer"):
     """The old algebraic IK in the public IKCosSin shape (reason codes zero: the fitness never reads them)."""
-    from ..kinematics import IKCosSin
+    from .kinematics import IKCosSin
 
     cos, sin, ok = ik_cos_sin(robot, p)
     return IKCosSin(cos=cos, sin=sin, ok=ok, reason=jnp.zeros(3, jnp.int32))
@@ -230,9 +230,9 @@ def patch_old_kernel():
     (the fitness baseline of ``experiments/bench_fitness.py``). Must wrap tracing (``jax.jit(...)`` calls)."""
     import contextlib
 
-    from .. import dynamics
-    from ..optimize import objectives
-    from ..workspace import grid, redundancy
+    from . import dynamics
+    from .optimize import objectives
+    from .workspace import grid, redundancy
 
     patches = [(redundancy, "_kernel", redundancy_kernel), (grid, "mirrored_point_indices", mirrored_point_indices),
                (objectives, "mirrored_point_indices", mirrored_point_indices), (grid, "ik_cos_sin", ik_cos_sin_result),

@@ -37,7 +37,7 @@ from ..config import ConfigError
 from ..rundir import CheckpointError, RunDirError
 
 GROUP = "workspace"
-REDUCER = "deltajax.experiments.workspace_grid:reduce_shards"
+REDUCER = "deltajax.jobs.workspace_grid:reduce_shards"
 
 __all__ = ["run", "reduce_shards", "GridPlan", "plan_chunks", "make_evaluator", "make_numba_evaluator",
            "plane_statistics"]

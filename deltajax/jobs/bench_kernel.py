@@ -2,7 +2,7 @@
 
 Measured in the same process (ratios are what we report; absolute rates depend on the machine and its load):
 (a) the new core kernel ``jit(vmap(point_indices))`` (fast closed form; and the exact Jacobi form), f64 and
-f32; (b) the frozen pre-issue-9 kernel (:mod:`._kernel_baseline`, main 9f54c88) as the baseline; (c) the
+f32; (b) the frozen pre-issue-9 kernel (:mod:`deltajax.baseline_kernel`, main 9f54c88) as the baseline; (c) the
 independent NumPy reference (:mod:`deltajax.reference`); (d) Numba (exact kernel + minimal loop ceiling)
 when :mod:`deltajax.workspace` provides the hook ``bench_kernel_rates`` (the numba colleague's module).
 Every JAX result is checked against the NumPy reference before timing; XLA fusion counts are printed.
@@ -21,7 +21,7 @@ import numpy as np
 from .. import reference
 from ..config import ConfigError
 from ..indices import point_indices
-from . import _kernel_baseline
+from .. import baseline_kernel as _kernel_baseline
 
 
 def _sample_points(n: int, seed: int) -> np.ndarray:
