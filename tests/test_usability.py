@@ -166,3 +166,53 @@ def test_import_creates_no_arrays():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
                          env={**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])})
     assert out.returncode == 0, out.stderr[-2000:]
+
+
+# --- a mistyped key without '+': one line listing the valid keys, exit 2 (issue 13) --------------------------
+
+@pytest.mark.parametrize("args, expected", [
+    (["robot.forarm=0.4"], ["robot.forarm is not a setting of robot", "did you mean robot.forearm?",
+                            "valid keys: R_range, base_radius, forearm,"]),
+    (["experiment=workspace_grid", "experiment.grid.hh=0.1"],
+     ["experiment.grid.hh is not a setting of experiment.grid (experiment workspace_grid)", "valid keys: bounds, h,"]),
+    (["experiment.pareto.ref_mx=1"],  # ga_reconfig (no schema): the keys of the composed block
+     ["experiment.pareto.ref_mx is not a setting of experiment.pareto (experiment ga_reconfig)", "ref_min_factor"]),
+    (["sed=3"], ["sed is not a setting at the top level (did you mean seed?)", "precision"]),
+    (["robot.mass.upper=1"], ["robot.mass.upper is not a setting of robot.mass", "upper_arm_mass"]),
+    (["robot.forearm=abc"], ["robot.forearm: Value 'abc'", "Float"]),
+    (["robot=foo"], ["robot=foo is not a choice of robot; choose one of: boundary2d, franco2026, industrial"]),
+    (["robot.forearm=0.4,0.5"], ["robot.forearm=0.4,0.5 lists several values: add -m"]),
+    (["-m", "experiment=workspace_grid,reconfig_indices", "experiment.grid.h=0.1"],
+     ["experiment.grid is not a setting of experiment reconfig_indices", "store_fields"]),
+])
+def test_composition_errors_are_one_line_listing_valid_keys(args, expected):
+    from deltajax.run import check_overrides
+
+    line = check_overrides(args)
+    assert line is not None and "\n" not in line and "+" not in line.split("valid keys")[0], line
+    for part in expected:
+        assert part in line, (part, line)
+
+
+def test_composition_check_passes_good_command_lines():
+    from deltajax.run import check_overrides
+
+    for args in (["robot.forearm=0.45", "hydra.run.dir=/nonexistent/x"], ["--cfg", "job", "seed=3"],
+                 ["-m", "experiment=workspace_grid", "experiment.grid.h=0.1,0.2", "hydra/launcher=joblib"],
+                 ["+robot.forarm=1"]):  # '+' keys are refused later by config.check_keys (tested in test_faults)
+        assert check_overrides(args) is None, args
+
+
+@pytest.mark.slow
+def test_mistyped_key_cli_and_api(tmp_path):
+    out = _cli("robot.forarm=0.4", f"hydra.run.dir={tmp_path}")
+    assert out.returncode == 2, out.stderr
+    (line,) = _error_lines(out.stderr)
+    assert line.startswith("ERROR: robot.forarm is not a setting of robot") and "forearm" in line
+    assert "+robot" not in out.stderr and not any(tmp_path.iterdir())
+    from deltajax.config import ConfigError
+    from deltajax.run import run_experiment
+
+    with pytest.raises(ConfigError, match=r"experiment.grid.hh is not a setting .*valid keys: bounds, h"):
+        run_experiment("workspace_grid", ["experiment.grid.hh=0.1"], run_dir=tmp_path / "api")
+    assert not (tmp_path / "api").exists()
