@@ -184,13 +184,23 @@ ACTUATOR_STYLES = ({"color": "tab:blue", "ls": "-", "lw": 2.6, "alpha": 0.75},
                    {"color": "k", "ls": "-.", "lw": 1.4})
 
 
-def actuator_lines(ax, t, values, label: str = "actuator {i}"):
+def actuator_lines(ax, t, values, label: str = "actuator {i}", names: Optional[Sequence[str]] = None,
+                   legend: bool = True, **legend_kw):
     """Plot one line per actuator (columns of ``values``, shape (n, k)) with :data:`ACTUATOR_STYLES` and a
-    legend; overlapping actuators remain distinguishable (wide solid under dashed/dotted)."""
+    legend; overlapping actuators remain distinguishable (wide solid under dashed/dotted).
+
+    Args:
+        label: legend label, ``{i}`` = actuator number from 1 (ignored where ``names`` are given).
+        names: one label per column instead (e.g. ``"xyz"`` for the platform's coordinates).
+        legend: draw the legend on this axis (False: the caller draws one legend for several axes);
+            ``legend_kw`` go to ``ax.legend`` (default ``fontsize=8``).
+    """
     values = np.asarray(values)
     for j in range(values.shape[1]):
-        ax.plot(t, values[:, j], label=label.format(i=j + 1), **ACTUATOR_STYLES[j % len(ACTUATOR_STYLES)])
-    ax.legend(fontsize=8)
+        lab = names[j] if names is not None else label.format(i=j + 1)
+        ax.plot(t, values[:, j], label=lab, **ACTUATOR_STYLES[j % len(ACTUATOR_STYLES)])
+    if legend:
+        ax.legend(**{"fontsize": 8, **legend_kw})
     return ax
 
 

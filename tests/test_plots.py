@@ -70,3 +70,32 @@ def test_bench_rates_from_staged_results(tmp_path):
     fig = plots.bench_rates_from_results(res)
     labels = [t.get_text() for t in fig.axes[0].get_yticklabels()]
     assert labels == ["numpy", "float64 jax fast"]
+
+
+def test_dynamics_cycle_plots_draw_actuators_in_distinguishable_styles():
+    """dynamics_cycle's torque, Adept-profile and platform plots go through plots.actuator_lines: actuators 1
+    and 3 of the GA motion (symmetric in them) no longer hide one behind the other."""
+    import types
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from deltajax.jobs import dynamics_cycle as job
+
+    figs = []
+    ctx = types.SimpleNamespace(savefig=lambda fig, name: figs.append((name, fig)))
+    t = np.linspace(0.0, 1.0, 30)
+    three = np.stack([np.sin(t), np.cos(t), np.sin(t)], axis=1)  # 1 and 3 equal
+    prof = types.SimpleNamespace(t=t, tau=three, theta_dot=three, theta_ddot=three, p=three, p_dot=three,
+                                 p_ddot=three, R_dot=np.zeros_like(t), force_R=np.zeros_like(t))
+    job._plot_torques(ctx, "r", prof, "title", "torques")
+    job._plot_adept(ctx, "r", prof, prof, 0.5)
+    job._plot_platform(ctx, "r", prof, "title")
+    assert [n for n, _ in figs] == ["torques", "r_adept_profiles", "r_ga_motion_platform"]
+    for _name, fig in figs:
+        for ax in fig.axes:
+            lines = ax.get_lines()
+            styles = {(ln.get_color(), str(ln.get_linestyle()), ln.get_linewidth()) for ln in lines[:3]}
+            assert len(lines) >= 3 and len(styles) == 3, _name
+        assert fig.axes[0].get_legend() is not None
+        matplotlib.pyplot.close(fig)

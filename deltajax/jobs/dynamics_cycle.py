@@ -26,7 +26,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .. import presets
+from .. import plots, presets
 from .. import trajectory as tr
 from ..config import ConfigError
 from ..dynamics import Limits, cycle_metrics, cycle_profile
@@ -143,8 +143,7 @@ def _plot_platform(ctx, name, prof, title):
     t = np.asarray(prof.t)
     for ax, key, unit in zip(axes, ("p", "p_dot", "p_ddot"), ("m", "m/s", "m/s$^2$")):
         arr = np.asarray(getattr(prof, key))
-        for j, lab in enumerate("xyz"):
-            ax.plot(t, arr[:, j], label=lab)
+        plots.actuator_lines(ax, t, arr, names="xyz", legend=False)  # distinguishable where they overlap
         ax.set_ylabel(f"{key} ({unit})")
         ax.grid(alpha=0.3)
     axes[0].legend(ncol=3)
@@ -160,8 +159,7 @@ def _plot_torques(ctx, name, prof, title, fname):
     fig, axes = plt.subplots(2 if has_R else 1, 1, figsize=(7, 6 if has_R else 3.6), sharex=True, squeeze=False)
     t = np.asarray(prof.t)
     tau = np.asarray(prof.tau)
-    for j in range(3):
-        axes[0, 0].plot(t, tau[:, j], label=f"actuator {j + 1}")
+    plots.actuator_lines(axes[0, 0], t, tau[:, :3])  # distinguishable styles: equal torques stay visible
     axes[0, 0].set_ylabel("torque (N m)")
     axes[0, 0].legend()
     axes[0, 0].grid(alpha=0.3)
@@ -183,8 +181,7 @@ def _plot_adept(ctx, name, prof_nom, prof_min, T_min):
         t = np.asarray(prof.t)
         for row, (key, unit) in enumerate((("tau", "N m"), ("theta_dot", "rad/s"), ("theta_ddot", "rad/s$^2$"))):
             arr = np.asarray(getattr(prof, key))
-            for j in range(3):
-                axes[row, col].plot(t, arr[:, j], label=f"{j + 1}")
+            plots.actuator_lines(axes[row, col], t, arr[:, :3], label="{i}", legend=False)
             axes[row, col].set_ylabel(f"{key} ({unit})")
             axes[row, col].grid(alpha=0.3)
         axes[0, col].set_title(f"{name}, standard cycle, {label}")
