@@ -216,3 +216,32 @@ def test_mistyped_key_cli_and_api(tmp_path):
     with pytest.raises(ConfigError, match=r"experiment.grid.hh is not a setting .*valid keys: bounds, h"):
         run_experiment("workspace_grid", ["experiment.grid.hh=0.1"], run_dir=tmp_path / "api")
     assert not (tmp_path / "api").exists()
+
+
+@pytest.mark.slow
+def test_one_reach_bound_for_volume_and_grid_jobs():
+    """dj.workspace.volume sizes its box with the grid jobs' reach bound (driver.reach_box), over the whole R
+    range of a reconfigurable robot, also when the range crosses R = r (where the union of the boxes is widest)."""
+    import numpy as np
+
+    from deltajax.workspace import driver, make_grid, measure, reachable_mask
+
+    robot = dj.presets.franco2026(fixed_R=0.2)
+    assert measure.reach_box(robot) == driver.reach_box(robot)
+    recon = dj.presets.franco2026()
+    assert measure.reach_box(recon) == driver.reach_box(recon.robot.with_base_radius(recon.R_min),
+                                                        R_max=float(recon.R_max))
+    base = dj.Delta(base_radius=0.05, platform_radius=0.1, upper_arm=0.3, forearm=0.5)
+    crossing = dj.ReconfigurableDelta.from_range(base, 0.02, 0.2, 0.06)  # R - r from -0.08 to +0.1 m
+    box = measure.reach_box(crossing)
+    big = make_grid((-1.0, 1.0), (-1.0, 1.0), (-1.0, 1.0), 0.08)
+    pts = big.points()
+    for R in (0.02, 0.1, 0.2):
+        # the union holds the box of every R of the range (R = r = 0.1 m: the widest one)
+        one = driver.reach_box(base.with_base_radius(R))
+        assert all(box[i][0] <= one[i][0] and one[i][1] <= box[i][1] for i in range(3)), (R, one, box)
+        inside = pts[np.asarray(reachable_mask(base.with_base_radius(R), pts))]
+        assert len(inside) > 0
+        for i in range(3):
+            assert box[i][0] <= inside[:, i].min() and inside[:, i].max() <= box[i][1], (R, i, box[i])
+    assert not dj.workspace.volume(crossing, h=0.05).truncated

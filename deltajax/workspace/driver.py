@@ -563,6 +563,7 @@ def reach_box(robot: Delta, R_max: Optional[float] = None) -> tuple[tuple[float,
     ds = [q["base_radius"] - q["platform_radius"]]
     if R_max is not None:
         ds.append(float(R_max) - q["platform_radius"])
+        ds += [0.0] if ds[0] < 0.0 < ds[1] else []  # R = r inside the range: the boxes' union is widest there
     boxes = []
     for d in ds:
         cx = [d * math.cos(2 * math.pi * i / 3) for i in range(3)]

@@ -4,10 +4,10 @@
     res.volume, res.count, res.box, res.truncated      # m^3, points, ((x0, x1), (y0, y1), (z0, z1)) m, bool
     dj.workspace.volume(robot, h=0.005, stats=True).stats["k_tilde"]["mean"]
 
-The box needs no guess: chain i's distal joint C_i = P + r e_i is within L1 + L2 of its actuated joint
-A_i = R e_i, so the platform centre P lies in the three balls of radius L1 + L2 around (R - r) e_i; the box is
-the bounding box of their intersection (over the whole R range for a reconfigurable robot), padded by one grid
-step. ``truncated`` is the check that nothing was cut off anyway: a reachable point on a face of the box.
+The box needs no guess: it is the robot's closed-form reach bound (:func:`deltajax.workspace.driver.reach_box`,
+the same bound the grid jobs use for null axes; over the whole R range for a reconfigurable robot), widened
+to whole grid steps plus one. ``truncated`` is the check that nothing was cut off anyway: a reachable point on
+a face of the box.
 """
 
 from __future__ import annotations
@@ -18,7 +18,8 @@ from typing import Optional, Union
 
 import numpy as np
 
-from ..geometry import CHAIN_ANGLES, Delta, ReconfigurableDelta
+from ..geometry import Delta, ReconfigurableDelta
+from .driver import reach_box as driver_reach_box
 from .grid import Grid, make_grid
 
 __all__ = ["WorkspaceVolume", "volume", "reach_box", "MAX_POINTS"]
@@ -61,22 +62,12 @@ class WorkspaceVolume:
 
 
 def reach_box(robot: Union[Delta, ReconfigurableDelta]) -> tuple:
-    """Bounding box ((x0, x1), (y0, y1), (z0, z1)) (m) of every platform position the robot could reach,
-    ignoring joint limits (see the module docstring)."""
+    """Bounding box ((x0, x1), (y0, y1), (z0, z1)) (m, z down) of every platform position the robot can reach
+    within its joint limits (over its whole R range for a :class:`~deltajax.ReconfigurableDelta`): the one
+    reach bound, :func:`deltajax.workspace.driver.reach_box` (the grid jobs size null axes with it too)."""
     if isinstance(robot, ReconfigurableDelta):
-        base, R_lo, R_hi = robot.robot, float(robot.R_min), float(robot.R_max)
-    else:
-        base, R_lo, R_hi = robot, float(robot.base_radius), float(robot.base_radius)
-    r, L = float(base.platform_radius), float(base.upper_arm) + float(base.forearm)
-    ds = [R_lo - r, R_hi - r] + ([0.0] if R_lo - r < 0 < R_hi - r else [])
-    c, s = np.cos(np.asarray(CHAIN_ANGLES)), np.sin(np.asarray(CHAIN_ANGLES))
-    # P in ball(d e_i, L) for all i  =>  max_i(d c_i) - L <= x <= min_i(d c_i) + L (same for y);
-    # the union over the R range is reached at the ends of the d range (piecewise linear in d), or at d = 0
-    x0 = min(float(np.max(d * c)) for d in ds) - L
-    x1 = max(float(np.min(d * c)) for d in ds) + L
-    y0 = min(float(np.max(d * s)) for d in ds) - L
-    y1 = max(float(np.min(d * s)) for d in ds) + L
-    return ((x0, x1), (y0, y1), (-L, L))
+        return driver_reach_box(robot.robot.with_base_radius(robot.R_min), R_max=float(robot.R_max))
+    return driver_reach_box(robot)
 
 
 def volume(robot: Union[Delta, ReconfigurableDelta], h: float = 0.005, *, stats: bool = False,
