@@ -138,7 +138,11 @@ def index_slices(x, y, z_values: Sequence[float], columns: dict, label: str = "i
                 ax.set_ylabel(f"z = {zv:.3f} m\ny [m]")
             if r == nr - 1:
                 ax.set_xlabel("x [m]")
-                ax.xaxis.set_major_locator(MaxNLocator(5, prune="both"))  # no clash between neighbours
+    # ticks strictly inside the panels (shared by every panel): neighbours' end labels ("0.4-0.4") cannot clash
+    for axis, (lo, hi) in ((axes[0, 0].xaxis, axes[0, 0].get_xlim()), (axes[0, 0].yaxis, axes[0, 0].get_ylim())):
+        ticks = MaxNLocator(5).tick_values(lo, hi)
+        margin = 0.06 * (hi - lo)
+        axis.set_ticks([t for t in ticks if lo + margin < t < hi - margin])
     if im is not None:
         extend = {(False, False): "neither", (True, False): "min", (False, True): "max", (True, True): "both"}[
             (bool(finite.size and finite.min() < vmin), bool(finite.size and finite.max() > vmax))]

@@ -99,3 +99,14 @@ def test_dynamics_cycle_plots_draw_actuators_in_distinguishable_styles():
             assert len(lines) >= 3 and len(styles) == 3, _name
         assert fig.axes[0].get_legend() is not None
         matplotlib.pyplot.close(fig)
+
+
+def test_index_slices_ticks_stay_inside_the_panels():
+    """Neighbouring panels' end tick labels ('0.4' and '-0.4') must not run into each other."""
+    x = y = np.linspace(-0.4, 0.4, 41)
+    a = np.ones((1, 41, 41))
+    fig = plots.index_slices(x, y, [0.3], {"A": a, "B": a}, label="omega_v")
+    for ax in [ax for ax in fig.axes if ax.get_label() != "<colorbar>"]:
+        for ticks, (lo, hi) in ((ax.get_xticks(), ax.get_xlim()), (ax.get_yticks(), ax.get_ylim())):
+            assert len(ticks) >= 3 and all(lo < t < hi for t in ticks), (ticks, lo, hi)
+            assert min(ticks) - lo > 0.05 * (hi - lo) and hi - max(ticks) > 0.05 * (hi - lo)
