@@ -41,5 +41,20 @@ def warn_if_float32(dtype, where: str = "deltajax") -> bool:
         f"{where} runs in float32 because jax_enable_x64 is off: results are 0.5-1.6 % off near singular "
         "points. Call jax.config.update('jax_enable_x64', True) before building robots (the CLI does it for "
         "precision=float64), or silence this with warnings.simplefilter('ignore', deltajax.Float32Warning) "
-        "if float32 is what you want.", Float32Warning, stacklevel=3)
+        "if float32 is what you want.", Float32Warning, stacklevel=_user_stacklevel())
     return True
+
+
+def _user_stacklevel() -> int:
+    """The ``stacklevel`` of the first caller outside deltajax, equinox and jax, so the warning names the
+    user's line (where the robot was built), not equinox's ``__check_init__`` machinery."""
+    import os
+    import sys
+
+    inside = tuple(os.path.dirname(m.__file__) + os.sep for m in
+                   (sys.modules.get("deltajax"), sys.modules.get("equinox"), sys.modules.get("jax"))
+                   if m is not None and getattr(m, "__file__", None))
+    level, frame = 1, sys._getframe(1)  # 1: warn_if_float32's frame (warnings.warn counts from its caller)
+    while frame is not None and frame.f_code.co_filename.startswith(inside):
+        frame, level = frame.f_back, level + 1
+    return level

@@ -245,3 +245,19 @@ def test_one_reach_bound_for_volume_and_grid_jobs():
         for i in range(3):
             assert box[i][0] <= inside[:, i].min() and inside[:, i].max() <= box[i][1], (R, i, box[i])
     assert not dj.workspace.volume(crossing, h=0.05).truncated
+
+
+def test_float32_warning_points_at_the_users_line(tmp_path):
+    """The warning names the line that built the robot, not equinox's __check_init__ machinery."""
+    script = tmp_path / "user_script.py"
+    script.write_text("import warnings, deltajax as dj\n"
+                      "with warnings.catch_warnings(record=True) as w:\n"
+                      "    warnings.simplefilter('always')\n"
+                      "    dj.Delta(base_radius=0.2, platform_radius=0.065, upper_arm=0.2, forearm=0.4)\n"
+                      "(x,) = [x for x in w if issubclass(x.category, dj.Float32Warning)]\n"
+                      "print(x.filename, x.lineno)\n")
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    env.pop("JAX_ENABLE_X64", None)
+    out = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.split() == [str(script), "4"]
