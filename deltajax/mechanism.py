@@ -442,9 +442,9 @@ def reconfiguration_drive(robot, cycle, mech: Mechanism, duration=None) -> tuple
         duration: cycle time (s); default the cycle's nominal one.
 
     Returns:
-        (:class:`deltajax.dynamics.CycleProfile`, :class:`DriveProfile`).
+        (:class:`deltajax.cycle.CycleProfile`, :class:`DriveProfile`).
     """
-    from .dynamics import cycle_profile
+    from .cycle import cycle_profile
 
     if cycle.R is None:
         raise ValueError("reconfiguration_drive needs a cycle with an R profile (cycle.R is None)")

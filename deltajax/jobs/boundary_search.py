@@ -26,10 +26,8 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..config import ConfigError
+from ..papers import BOUNDARY_SEARCH as PAPER
 from ..workspace import boundary as B
-
-PAPER = dict(calls_conti_2deg=148239, calls_continuation_2deg=79500, time_conti_1deg_s=589.1236,
-             time_continuation_1deg_s=246.647, volume_m3=46.3936, eps=0.01)
 
 
 def _check(e) -> dict:

@@ -29,7 +29,7 @@ import numpy as np
 from .. import presets
 from .. import trajectory as tr
 from ..config import ConfigError
-from ..dynamics import Limits, cycle_metrics, cycle_profile
+from ..cycle import Limits, cycle_metrics, cycle_profile
 from ..mass import FOREARM_MODELS
 
 CASE_FIELDS = (("p", "m"), ("p_dot", "m/s"), ("p_ddot", "m/s^2"), ("theta", "rad"), ("theta_dot", "rad/s"),

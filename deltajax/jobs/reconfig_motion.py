@@ -35,7 +35,7 @@ import numpy as np
 from .. import motion as mo
 from .. import trajectory as tr
 from ..config import ConfigError
-from ..dynamics import Limits, cycle_metrics, cycle_profile
+from ..cycle import Limits, cycle_metrics, cycle_profile
 from ..geometry import GeometryError, ReconfigurableDelta
 from ..indices import INDEX_NAMES
 from ..mechanism import MECHANISMS, DirectRadial, drive_profile, example_screw_linkage

@@ -24,7 +24,7 @@ from .grid import (FIELD_NAMES, Grid, franco2026_grid, index_fields, make_grid, 
 from .redundancy import (Redundancy, feasible_window, indices_at_host, reach_interval, reach_k_range_host,
                          reconfigurable_reachable, resolve_redundancy, resolve_redundancy_host, sample_value)
 from .driver import CheckpointMismatch, GridJob, fixed_workspace, reconfigurable_workspace, redundancy_grid, run_chunks
-from .stats import PAPER_TABLES, TABLE_INDICES, index_stats
+from .stats import index_stats
 from ._nb_bench import bench_kernel_rates, bench_numba
 from . import boundary
 
