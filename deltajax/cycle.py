@@ -19,6 +19,7 @@ from jaxtyping import Array, Bool, Float
 
 from .dynamics import (Motion, flat_efforts, flat_motion, inverse_dynamics_motion, joint_motion, platform_motion,
                        require_mass, virtual_work_split)
+from .fields import check_range, float_leaf
 from .geometry import Delta
 
 __all__ = [
@@ -32,9 +33,6 @@ __all__ = [
 ]
 
 
-def _limit_leaf(x):
-    return jnp.asarray(x, dtype=jnp.result_type(float))
-
 
 class Limits(eqx.Module):
     """Actuator limits at the arm side (gearbox output): |tau_i| <= torque, |thetadot_i| <= speed.
@@ -46,19 +44,18 @@ class Limits(eqx.Module):
         speed_R: m/s, limit on |Rdot| (``inf``: none).
     """
 
-    torque: jax.Array = eqx.field(converter=_limit_leaf)
-    speed: jax.Array = eqx.field(converter=_limit_leaf, default=float("inf"))
-    force_R: jax.Array = eqx.field(converter=_limit_leaf, default=float("inf"))
-    speed_R: jax.Array = eqx.field(converter=_limit_leaf, default=float("inf"))
+    torque: jax.Array = eqx.field(converter=float_leaf)
+    speed: jax.Array = eqx.field(converter=float_leaf, default=float("inf"))
+    force_R: jax.Array = eqx.field(converter=float_leaf, default=float("inf"))
+    speed_R: jax.Array = eqx.field(converter=float_leaf, default=float("inf"))
 
     def __check_init__(self):
-        for name in ("torque", "speed", "force_R", "speed_R"):
+        for name, unit in (("torque", "N m"), ("speed", "rad/s"), ("force_R", "N"), ("speed_R", "m/s")):
             v = getattr(self, name)
-            if isinstance(v, jax.core.Tracer):
-                continue
-            a = np.asarray(v)
-            if a.ndim > 1 or (a.ndim == 1 and a.shape[0] != 3) or np.any(np.isnan(a)) or np.any(a <= 0):
-                raise ValueError(f"Limits.{name} must be > 0 (scalar or 3 values, inf allowed), got {a!r}")
+            shape = np.shape(v)
+            if not isinstance(v, jax.core.Tracer) and shape not in ((), (3,)):
+                raise ValueError(f"Limits.{name} must be a scalar or 3 values (one per actuator), got shape {shape}")
+            check_range("Limits", name, v, unit=unit, allow_inf=True)
 
 
 class CycleProfile(NamedTuple):

@@ -64,6 +64,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from .cycle import cycle_profile
+from .fields import check_range, float_leaf
 from .geometry import ReconfigurableDelta
 from .indices import INDEX_NAMES, point_indices
 from .trajectory import Cycle, task_path, with_R
@@ -92,9 +93,6 @@ AGGREGATES = ("integral", "min")
 BOUNDARIES = ("free", "rest", "closed")
 
 
-def _limit(x):
-    return jnp.asarray(x, dtype=jnp.result_type(float))
-
 
 class RDriveLimits(eqx.Module):
     """Limits of the reconfiguration (R) drive, at the R joint.
@@ -105,18 +103,16 @@ class RDriveLimits(eqx.Module):
         force: |F_R| limit, the total radial force of the R actuator (N); ``inf`` for none.
     """
 
-    speed: jax.Array = eqx.field(converter=_limit, default=float("inf"))
-    acceleration: jax.Array = eqx.field(converter=_limit, default=float("inf"))
-    force: jax.Array = eqx.field(converter=_limit, default=float("inf"))
+    speed: jax.Array = eqx.field(converter=float_leaf, default=float("inf"))
+    acceleration: jax.Array = eqx.field(converter=float_leaf, default=float("inf"))
+    force: jax.Array = eqx.field(converter=float_leaf, default=float("inf"))
 
     def __check_init__(self):
         for name, unit in (("speed", "m/s"), ("acceleration", "m/s^2"), ("force", "N")):
             v = getattr(self, name)
-            if isinstance(v, jax.core.Tracer):
-                continue
-            a = np.asarray(v)
-            if a.ndim != 0 or np.isnan(a) or not a > 0:
-                raise ValueError(f"RDriveLimits.{name} must be a scalar > 0 {unit} (inf allowed), got {a!r}")
+            if not isinstance(v, jax.core.Tracer) and np.ndim(v) != 0:
+                raise ValueError(f"RDriveLimits.{name} must be a scalar (one R drive), got shape {np.shape(v)}")
+            check_range("RDriveLimits", name, v, unit=unit, allow_inf=True)
 
 
 class PathTables(NamedTuple):

@@ -20,6 +20,8 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
+from .fields import float_leaf
+
 __all__ = [
     "MOTION_LAWS",
     "motion_law",
@@ -122,9 +124,6 @@ def motion_law(name: str) -> Callable:
         raise ValueError(f"unknown motion law {name!r}; known: {sorted(MOTION_LAWS)}") from None
 
 
-def _leaf(x):
-    return jnp.asarray(x, dtype=jnp.result_type(float))
-
 
 class Cycle(eqx.Module):
     """A trajectory sampled in normalised time u in [0, 1] (K samples, uniform, both ends included).
@@ -143,7 +142,7 @@ class Cycle(eqx.Module):
     x: jax.Array
     dx: jax.Array
     ddx: jax.Array
-    duration: jax.Array = eqx.field(converter=_leaf)
+    duration: jax.Array = eqx.field(converter=float_leaf)
     R: Optional[jax.Array] = None
     dR: Optional[jax.Array] = None
     ddR: Optional[jax.Array] = None
@@ -159,7 +158,7 @@ class Cycle(eqx.Module):
 
     def at_duration(self, duration: Any) -> "Cycle":
         """The same path with nominal duration ``duration`` (s)."""
-        return eqx.tree_at(lambda c: c.duration, self, _leaf(duration))
+        return eqx.tree_at(lambda c: c.duration, self, float_leaf(duration))
 
     def time(self) -> jax.Array:
         """Sample times u * T (s)."""
