@@ -211,7 +211,7 @@ def test_saturated_and_bad_inputs(robot):
 def test_experiment_config_errors():
     from omegaconf import OmegaConf
 
-    from deltajax.jobs.boundary_search import _check
+    from deltajax.config import boundary_search_spec as _check
 
     base = OmegaConf.load("configs/experiment/boundary_search.yaml").experiment
     ok = _check(base)

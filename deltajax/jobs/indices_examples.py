@@ -11,7 +11,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..config import ConfigError
+from ..config import indices_examples_spec
 from ..indices import INDEX_NAMES, indices
 from ..kinematics import ik
 from ..papers import FRANCO2026_EXAMPLE_INDICES, FRANCO2026_EXAMPLES, FRANCO2026_MISPRINTS
@@ -20,26 +20,11 @@ SCALAR_INDICES = tuple(n for n in INDEX_NAMES)
 UNITS = {"manipulability": "m^3/rad^3", "imi": "rad^3/m^3"}
 
 
-def _check(cfg) -> None:
-    e = cfg.experiment
-    if not float(e.R_step) > 0:
-        raise ConfigError(f"experiment.R_step must be > 0 m, got {e.R_step!r}")
-    if not 0.0 < float(e.beta) < 1.0:
-        raise ConfigError(f"experiment.beta must be in (0, 1), got {e.beta!r}")
-    for i, pt in enumerate(e.points):
-        if len(pt) != 3:
-            raise ConfigError(f"experiment.points[{i}] must have 3 coordinates, got {list(pt)!r}")
-
-
 def run(ctx) -> None:
-    cfg = ctx.cfg
-    _check(cfg)
-    e = cfg.experiment
-    if ctx.recon is None:
-        raise ConfigError("indices_examples needs a reconfigurable robot: robot.R_range must be set")
+    spec = indices_examples_spec(ctx.cfg.experiment, ctx.cfg, ctx.robot, ctx.recon)
     recon = ctx.recon
     dtype = ctx.dtype
-    kw = dict(b_v=float(e.b_v), b_f=float(e.b_f), beta=float(e.beta), matrix=str(e.matrix))
+    kw = dict(b_v=spec["b_v"], b_f=spec["b_f"], beta=spec["beta"], matrix=spec["matrix"])
 
     def at(R, p):
         rb = recon.at(R)
@@ -69,10 +54,10 @@ def run(ctx) -> None:
         ctx.log(f"{name:7s} {k:12s} paper {paper:.5g}  ours {ours:.6g}  rel {rel:.1e}  {flag}")
 
     # Index-vs-R curves at the example points: R = R_min + k * R_step (integer k)
-    step = float(e.R_step)
+    step = spec["R_step"]
     n = int(round((float(recon.R_max) - float(recon.R_min)) / step)) + 1
     R = float(recon.R_min) + step * np.arange(n)
-    pts = np.asarray([list(map(float, pt)) for pt in e.points])
+    pts = np.asarray(spec["points"])
     curve = jax.jit(jax.vmap(jax.vmap(at, in_axes=(0, None)), in_axes=(None, 0)))
     sol, ind = curve(jnp.asarray(R, dtype), jnp.asarray(pts, dtype))
     ok = np.asarray(sol.ok)
@@ -96,7 +81,7 @@ def run(ctx) -> None:
                                                                   "sigma_min_f", "inv_cond")))
     res.set_attrs("curves", note="argmax over finite values with ties to the smallest R; omega_v is "
                   "unbounded at Jx-singular R (e.g. R = 0.465 at z = 0.2, singularity type 1)")
-    if cfg.get("plots", True):
+    if ctx.cfg.get("plots", True):
         from ..plots_core import plot_index_curves
 
         ctx.savefig(plot_index_curves(R, pts, {k: np.asarray(getattr(ind, k)) for k in SCALAR_INDICES}, ok,
