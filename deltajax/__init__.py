@@ -4,7 +4,7 @@ Public surface only; see README for a tour. Float64 is not switched on at import
 choice: ``jax.config.update("jax_enable_x64", True)``; the CLI does it from ``precision=float64``).
 """
 
-from . import presets
+from . import papers, presets
 from ._precision import Float32Warning
 from .geometry import CHAIN_ANGLES, Delta, GeometryError, ReconfigurableDelta, from_z_up, to_z_up
 from .indices import (INDEX_NAMES, Indices, PointKernel, Singularity, classify_singularity, indices,
@@ -16,8 +16,9 @@ from .kinematics import (FKResult, IKCosSin, IKResult, LimitTerms, LoopClosure, 
                          passive_angles, safe_point)
 from . import reference
 
-from . import dynamics, trajectory
-from .dynamics import CycleMetrics, Limits, Torques, cycle_metrics, cycle_profile, inverse_dynamics
+from . import cycle, dynamics, trajectory
+from .cycle import CycleMetrics, Limits, cycle_metrics, cycle_profile
+from .dynamics import Torques, inverse_dynamics
 from .mass import MassModel
 from .trajectory import Cycle, adept_cycle, ga_paper_motion
 from . import constraints

@@ -5,12 +5,11 @@ Every error raised here names the config field and the value, before anything is
 
 from __future__ import annotations
 
-import dataclasses
 import math
-from typing import Any, Dict, Mapping, Optional, Tuple
+from typing import Any, Mapping, Optional, Tuple
 
 from .geometry import Delta, GeometryError, ReconfigurableDelta
-from .mass import FOREARM_MODELS, MASS_FIELDS, MassError, MassModel, check_field
+from .mass import FOREARM_MODELS, MASS_FIELDS, MassError, MassModel
 
 __all__ = ["ConfigError", "robot_from_config", "mass_from_config", "validate_config", "check_keys", "valid_keys",
            "register_schemas", "TOP_LEVEL_KEYS",
@@ -21,86 +20,7 @@ class ConfigError(ValueError):
     """Invalid configuration; the message names the field (dotted path) and the value."""
 
 
-def _get(cfg: Mapping[str, Any], key: str, prefix: str, default: Any = ...):
-    if key in cfg and cfg[key] is not None:
-        return cfg[key]
-    if default is ...:
-        raise ConfigError(f"{prefix}.{key} is required")
-    return default
-
-
-def _number(cfg: Mapping[str, Any], key: str, prefix: str, default: Any = ...) -> Optional[float]:
-    v = _get(cfg, key, prefix, default)
-    if v is None:
-        return None
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{prefix}.{key} must be a number, got {v!r}") from None
-    if math.isnan(f):
-        raise ConfigError(f"{prefix}.{key} must not be NaN")
-    return f
-
-
-def robot_from_config(cfg: Mapping[str, Any], prefix: str = "robot") -> Tuple[Delta, Optional[ReconfigurableDelta]]:
-    """Build the robot described by a ``configs/robot/*.yaml`` entry.
-
-    Fields: ``base_radius``, ``platform_radius``, ``upper_arm``, ``forearm`` (m), ``theta_min_deg``,
-    ``theta_max_deg`` (deg, ``null`` = unlimited), optional ``R_range: {min, max, step}`` (m) for a
-    reconfigurable robot and optional ``mass`` (used by the dynamics).
-
-    Returns:
-        (fixed robot, reconfigurable robot or ``None``). The fixed robot has R = ``base_radius``.
-
-    Raises:
-        ConfigError: a missing or invalid field; the message names ``robot.<field>`` and the value.
-    """
-    kw = {}
-    for key in ("base_radius", "platform_radius", "upper_arm", "forearm"):
-        kw[key] = _number(cfg, key, prefix)
-    lo = _number(cfg, "theta_min_deg", prefix, None)
-    hi = _number(cfg, "theta_max_deg", prefix, None)
-    mass_cfg = cfg.get("mass") if hasattr(cfg, "get") else None
-    mass = None
-    if mass_cfg is not None:
-        mass = mass_from_config(mass_cfg, kw, prefix=f"{prefix}.mass")
-    try:
-        robot = Delta.from_degrees(theta_min_deg=lo, theta_max_deg=hi, mass=mass, **kw)
-    except GeometryError as e:
-        raise ConfigError(f"{prefix}: {e}") from None
-    rng = cfg.get("R_range") if hasattr(cfg, "get") else None
-    if rng is None:
-        return robot, None
-    p = f"{prefix}.R_range"
-    r_min, r_max, r_step = _number(rng, "min", p), _number(rng, "max", p), _number(rng, "step", p)
-    try:
-        recon = ReconfigurableDelta.from_range(robot, r_min, r_max, r_step)
-    except GeometryError as e:
-        raise ConfigError(f"{p}: {e}") from None
-    return robot, recon
-
-
-def check_reach_over_range(cfg: Mapping[str, Any], recon: ReconfigurableDelta, prefix: str = "robot") -> None:
-    """Something must be reachable at every R of ``robot.R_range`` (for jobs that use the range).
-
-    The "can reach nothing" test of :class:`deltajax.Delta` is monotone in R, so both ends suffice.
-    """
-    rb, rng = recon.robot, cfg.get("R_range")
-    for end, R in (("min", float(recon.R_min)), ("max", float(recon.R_max))):
-        try:
-            Delta(base_radius=R, platform_radius=rb.platform_radius, upper_arm=rb.upper_arm, forearm=rb.forearm,
-                  theta_min=rb.theta_min, theta_max=rb.theta_max, mass=rb.mass)
-        except GeometryError as e:
-            raise ConfigError(f"{prefix}.R_range.{end}={rng.get(end)!r} m: at R = {R:g} m the {e}") from None
-
-
-# =============================================================================================================
-# Validation of every experiment field, before anything is computed (called by run.execute after the robot)
-# =============================================================================================================
-#: Top-level keys of the composed config (configs/config.yaml and the `# @package _global_` experiment files).
-TOP_LEVEL_KEYS = ("robot", "experiment", "seed", "precision", "plots", "progress", "compilation_cache", "fresh",
-                  "shard", "n_shards", "beta")
-
+# ---- the one set of field readers: every value of the configuration goes through these ----
 def _field(path: str, v: Any, *, kind: str = "float", lo: Optional[float] = None, hi: Optional[float] = None,
            lo_open: bool = False, hi_open: bool = False, none: bool = False) -> Any:
     """Check one value; ``kind`` is "float" (finite number), "int" or "bool". Returns it as a Python value."""
@@ -165,6 +85,64 @@ def _vector(path: str, v: Any, n: int) -> list:
         raise ConfigError(f"{path} must be a list of {n} finite numbers, got {v!r}")
     return items
 
+
+def robot_from_config(cfg: Mapping[str, Any], prefix: str = "robot") -> Tuple[Delta, Optional[ReconfigurableDelta]]:
+    """Build the robot described by a ``configs/robot/*.yaml`` entry.
+
+    Fields: ``base_radius``, ``platform_radius``, ``upper_arm``, ``forearm`` (m), ``theta_min_deg``,
+    ``theta_max_deg`` (deg, ``null`` = unlimited), optional ``R_range: {min, max, step}`` (m) for a
+    reconfigurable robot and optional ``mass`` (used by the dynamics).
+
+    Returns:
+        (fixed robot, reconfigurable robot or ``None``). The fixed robot has R = ``base_radius``.
+
+    Raises:
+        ConfigError: a missing or invalid field; the message names ``robot.<field>`` and the value.
+    """
+    kw = {key: _field(f"{prefix}.{key}", cfg.get(key)) for key in ("base_radius", "platform_radius", "upper_arm",
+                                                                   "forearm")}
+    lo = _field(f"{prefix}.theta_min_deg", cfg.get("theta_min_deg"), none=True)
+    hi = _field(f"{prefix}.theta_max_deg", cfg.get("theta_max_deg"), none=True)
+    mass_cfg = cfg.get("mass") if hasattr(cfg, "get") else None
+    mass = None
+    if mass_cfg is not None:
+        mass = mass_from_config(mass_cfg, kw, prefix=f"{prefix}.mass")
+    try:
+        robot = Delta.from_degrees(theta_min_deg=lo, theta_max_deg=hi, mass=mass, **kw)
+    except GeometryError as e:
+        raise ConfigError(f"{prefix}: {e}") from None
+    rng = cfg.get("R_range") if hasattr(cfg, "get") else None
+    if rng is None:
+        return robot, None
+    p = f"{prefix}.R_range"
+    r_min, r_max, r_step = (_field(f"{p}.{k}", rng.get(k)) for k in ("min", "max", "step"))
+    try:
+        recon = ReconfigurableDelta.from_range(robot, r_min, r_max, r_step)
+    except GeometryError as e:
+        raise ConfigError(f"{p}: {e}") from None
+    return robot, recon
+
+
+def check_reach_over_range(cfg: Mapping[str, Any], recon: ReconfigurableDelta, prefix: str = "robot") -> None:
+    """Something must be reachable at every R of ``robot.R_range`` (for jobs that use the range).
+
+    The "can reach nothing" test of :class:`deltajax.Delta` is monotone in R, so both ends suffice.
+    """
+    rb, rng = recon.robot, cfg.get("R_range")
+    for end, R in (("min", float(recon.R_min)), ("max", float(recon.R_max))):
+        try:
+            Delta(base_radius=R, platform_radius=rb.platform_radius, upper_arm=rb.upper_arm, forearm=rb.forearm,
+                  theta_min=rb.theta_min, theta_max=rb.theta_max, mass=rb.mass)
+        except GeometryError as e:
+            raise ConfigError(f"{prefix}.R_range.{end}={rng.get(end)!r} m: at R = {R:g} m the {e}") from None
+
+
+# =============================================================================================================
+# Validation of every experiment field, before anything is computed (called by run.execute after the robot)
+# =============================================================================================================
+#: Top-level keys of the composed config (configs/config.yaml and the `# @package _global_` experiment files).
+TOP_LEVEL_KEYS = ("robot", "experiment", "seed", "precision", "plots", "progress", "compilation_cache", "fresh",
+                  "shard", "n_shards", "beta")
 
 def _validate_top(cfg: Mapping[str, Any]) -> None:
     _field("seed", cfg.get("seed"), kind="int")
@@ -231,16 +209,6 @@ def _v_reconfig_indices(e, cfg, robot, recon) -> None:
         _field(f"experiment.slices_z[{i}]", z)
 
 
-def _v_indices_examples(e, cfg, robot, recon) -> None:
-    _field("experiment.R_step", e.get("R_step"), lo=0, lo_open=True)
-    for i, p in enumerate(e.get("points") or []):
-        _vector(f"experiment.points[{i}]", p, 3)
-    _field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
-    _field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True)
-    _field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
-    _choice("experiment.matrix", e.get("matrix"), ("theta3x3", "full3x4"))
-
-
 def _v_bench_kernel(e, cfg, robot, recon) -> None:
     for k in ("n_points", "n_baseline", "block", "repeats"):
         _field(f"experiment.{k}", e.get(k), kind="int", lo=1)
@@ -248,36 +216,182 @@ def _v_bench_kernel(e, cfg, robot, recon) -> None:
     _names("experiment.dtypes", e.get("dtypes"), ("float32", "float64"), min_len=1)
 
 
-def _v_dynamics_cycle(e, cfg, robot, recon) -> None:
+def indices_examples_spec(e, cfg=None, robot=None, recon=None) -> dict:
+    """``experiment.*`` of indices_examples as plain values (the paper's example points, the R curve step)."""
+    if recon is None:
+        raise ConfigError("experiment=indices_examples needs a reconfigurable robot: robot.R_range is null")
+    return dict(R_step=_field("experiment.R_step", e.get("R_step"), lo=0, lo_open=True),
+                points=[_vector(f"experiment.points[{i}]", p, 3) for i, p in enumerate(e.get("points") or [])],
+                b_v=_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True),
+                b_f=_field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True),
+                beta=_field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True),
+                matrix=_choice("experiment.matrix", e.get("matrix"), ("theta3x3", "full3x4")))
+
+
+def _cycle_setup(s, path: str) -> dict:
+    out = dict(centre=_vector(f"{path}.centre", s.get("centre"), 3),
+               heading_deg=_field(f"{path}.heading_deg", s.get("heading_deg")))
+    for k in ("duration", "torque_limit", "speed_limit"):
+        out[k] = _field(f"{path}.{k}", s.get(k), lo=0, lo_open=True)
+    return out
+
+
+def dynamics_cycle_spec(e, cfg=None, robot=None, recon=None) -> dict:
+    """``experiment.*`` of dynamics_cycle as plain values; ``setups`` holds one entry per analysed robot name
+    (its own block or ``default``), the config robot's under ``cfg_name``."""
+    from . import presets
     from .trajectory import MOTION_LAWS
 
-    _choice("experiment.method", e.get("method"), ("virtual_work", "lagrange"))
-    _field("experiment.n_samples", e.get("n_samples"), kind="int", lo=2)
-    _choice("experiment.law", e.get("law"), MOTION_LAWS)
-    _field("experiment.blend", e.get("blend"), lo=0, hi=1, hi_open=True)
-    for name, s in (e.get("setups") or {}).items():
-        p = f"experiment.setups.{name}"
-        _vector(f"{p}.centre", s.get("centre"), 3)
-        _field(f"{p}.heading_deg", s.get("heading_deg"))
-        for k in ("duration", "torque_limit", "speed_limit"):
-            _field(f"{p}.{k}", s.get(k), lo=0, lo_open=True)
+    if robot is not None and robot.mass is None:
+        raise ConfigError("experiment=dynamics_cycle needs a mass model: add a `mass:` block to the robot config "
+                          f"(robot.mass), robot {(cfg or {}).get('robot', {}).get('name')!r} has none")
+    robots = list(e.get("robots") or [])
+    for name in robots:
+        _choice("experiment.robots entry", name, presets.PRESETS)
+    cfg_name = "robot" if cfg is None else str(cfg.get("robot", {}).get("name", "robot"))
+    blocks = e.get("setups") or {}
+    setups = {}
+    for name in [cfg_name] + robots:
+        key = name if name in blocks else "default"
+        if key not in blocks:
+            raise ConfigError(f"experiment.setups.{name} (or experiment.setups.default) is required")
+        setups[name] = _cycle_setup(blocks.get(key), f"experiment.setups.{key}")
     gm = e.get("ga_motion") or {}
-    _field("experiment.ga_motion.amplitude", gm.get("amplitude"), lo=0, lo_open=True)
-    _field("experiment.ga_motion.duration", gm.get("duration"), lo=0, lo_open=True)
-    _field("experiment.recon_R_amplitude", e.get("recon_R_amplitude"), lo=0)
+    amp = _field("experiment.recon_R_amplitude", e.get("recon_R_amplitude"), lo=0)
+    if recon is not None and amp != 0.0:
+        R0, lo, hi = float(recon.robot.base_radius), float(recon.R_min), float(recon.R_max)
+        if not (lo <= R0 - amp and R0 + amp <= hi + 1e-12):
+            raise ConfigError(f"experiment.recon_R_amplitude={amp!r} m takes R = {R0} +- {amp} m outside "
+                              f"[{lo}, {hi}] m")
+    return dict(method=_choice("experiment.method", e.get("method"), ("virtual_work", "lagrange")),
+                n_samples=_field("experiment.n_samples", e.get("n_samples"), kind="int", lo=11),
+                law=_choice("experiment.law", e.get("law"), MOTION_LAWS),
+                blend=_field("experiment.blend", e.get("blend"), lo=0, hi=1, hi_open=True),
+                robots=robots, cfg_name=cfg_name, setups=setups,
+                ga_amplitude=_field("experiment.ga_motion.amplitude", gm.get("amplitude"), lo=0, lo_open=True),
+                ga_duration=_field("experiment.ga_motion.duration", gm.get("duration"), lo=0, lo_open=True),
+                recon_R_amplitude=amp)
 
 
-def _v_boundary_search(e, cfg, robot, recon) -> None:
-    _vector("experiment.centre", e.get("centre"), 3)
-    for k in ("eps", "rho_max", "grid_h", "sweep_step_deg"):
-        _field(f"experiment.{k}", e.get(k), lo=0, lo_open=True)
-    for i, s in enumerate(e.get("steps_deg") or []):
-        _field(f"experiment.steps_deg[{i}]", s, lo=0, lo_open=True)
-    for i, z in enumerate(e.get("centre_sweep_z") or []):
-        _field(f"experiment.centre_sweep_z[{i}]", z)
-    _field("experiment.profile_samples", e.get("profile_samples"), kind="int", lo=2)
-    _field("experiment.timing_repeats", e.get("timing_repeats"), kind="int", lo=1)
-    _field("experiment.half_space", e.get("half_space", True), kind="bool")
+def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
+    """``experiment.*`` of boundary_search as plain values (m, deg)."""
+    from .workspace import boundary as B
+
+    pos = lambda k: _field(f"experiment.{k}", e.get(k), lo=0, lo_open=True)  # noqa: E731
+    out = dict(eps=pos("eps"), rho_max=pos("rho_max"), grid_h=pos("grid_h"), sweep_step_deg=pos("sweep_step_deg"),
+               centre=_vector("experiment.centre", e.get("centre"), 3))
+    if out["rho_max"] <= out["eps"]:
+        raise ConfigError(f"experiment.rho_max must exceed experiment.eps, got {out['rho_max']} <= {out['eps']}")
+    steps = [_field(f"experiment.steps_deg[{i}]", s, lo=0, lo_open=True) for i, s in enumerate(e.get("steps_deg") or [])]
+    if not steps:
+        raise ConfigError("experiment.steps_deg must list at least one angular step (deg)")
+    for s in steps:
+        try:
+            B.angle_grid(s)
+        except (ValueError, TypeError) as err:
+            raise ConfigError(f"experiment.steps_deg: {err}") from None
+    out["steps_deg"] = steps
+    out["predictor"] = _choice("experiment.predictor", e.get("predictor"), B.PREDICTORS)
+    out["volume_rule"] = _choice("experiment.volume_rule", e.get("volume_rule"), B.VOLUME_RULES)
+    out["profile_samples"] = _field("experiment.profile_samples", e.get("profile_samples"), kind="int", lo=2)
+    box = e.get("grid_box")
+    if not hasattr(box, "__len__") or len(box) != 3:
+        raise ConfigError(f"experiment.grid_box must be [[x0, x1], [y0, y1], [z0, z1]] (m), got {box!r}")
+    box = [_vector(f"experiment.grid_box[{i}]", b, 2) for i, b in enumerate(box)]
+    for (a, b), name in zip(box, "xyz"):
+        if not b > a:
+            raise ConfigError(f"experiment.grid_box {name} side must have lo < hi (m), got {[a, b]!r}")
+        k = (b - a) / out["grid_h"]
+        if abs(k - round(k)) > 1e-6 * k:
+            raise ConfigError(f"experiment.grid_box {name} side ({a}, {b}) m is not a whole number of "
+                              f"experiment.grid_h = {out['grid_h']} m")
+    out["grid_box"] = box
+    out["centre_sweep_z"] = [_field(f"experiment.centre_sweep_z[{i}]", z)
+                             for i, z in enumerate(e.get("centre_sweep_z") or [])]
+    out["half_space"] = _field("experiment.half_space", e.get("half_space", True), kind="bool")
+    out["timing_repeats"] = _field("experiment.timing_repeats", e.get("timing_repeats", 3), kind="int", lo=1)
+    return out
+
+
+def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dict:
+    """``experiment.*`` of reconfig_motion as plain values and library objects: the R drive limits
+    (:class:`deltajax.RDriveLimits`), the reconfiguration mechanism, and each case's Cartesian cycle."""
+    import jax.numpy as jnp
+
+    from . import trajectory as tr
+    from .indices import INDEX_NAMES
+    from .mechanism import MECHANISMS, DirectRadial, example_screw_linkage
+    from .motion import AGGREGATES, BOUNDARIES, RDriveLimits
+
+    if recon is None:
+        raise ConfigError("experiment=reconfig_motion needs a reconfigurable robot: robot.R_range is null")
+    if recon.robot.mass is None:
+        raise ConfigError("experiment=reconfig_motion needs a mass model: robot.mass is null")
+    pos = lambda k: _field(f"experiment.{k}", e.get(k), lo=0, lo_open=True)  # noqa: E731
+    out = dict(criterion=_choice("experiment.criterion", e.get("criterion", "k_tilde"), INDEX_NAMES),
+               aggregate=_choice("experiment.aggregate", e.get("aggregate", "integral"), AGGREGATES),
+               b_v=pos("b_v"), b_f=pos("b_f"), R_step=pos("R_step"), torque_limit=pos("torque_limit"),
+               speed_limit=pos("speed_limit"),
+               beta=_field("experiment.beta", e.get("beta", 0.5), lo=0, hi=1, lo_open=True, hi_open=True))
+    d = e.get("drive")
+    if d is None:
+        raise ConfigError("experiment.drive is required (speed m/s, acceleration m/s^2, force N)")
+    lim = {k: _field(f"experiment.drive.{k}", d.get(k), lo=0, lo_open=True) for k in ("speed", "acceleration",
+                                                                                      "force")}
+    out["drive"] = RDriveLimits(**lim)
+    try:  # the DP's R samples: the robot's range at experiment.R_step
+        out["recon"] = ReconfigurableDelta.from_range(recon.robot, float(recon.R_min), float(recon.R_max),
+                                                      out["R_step"])
+    except GeometryError as err:
+        raise ConfigError(f"experiment.R_step={out['R_step']!r} m: {err}") from None
+    mech = dict(e.get("mechanism") or {})
+    kind = _choice("experiment.mechanism.kind", mech.pop("kind", "screw_linkage"), MECHANISMS)
+    try:
+        if kind == "direct":
+            out["mech"] = DirectRadial(**mech)
+        else:
+            R0, R1 = float(recon.R_min), float(recon.R_max)
+            out["mech"] = example_screw_linkage(R0, R1, **mech)
+            out["mech_info"] = out["mech"].check_range(R0, R1)
+    except (TypeError, ValueError) as err:
+        raise ConfigError(f"experiment.mechanism: {err}") from None
+    ref = e.get("refine") or {}
+    out["refine"] = dict(enabled=_field("experiment.refine.enabled", ref.get("enabled", True), kind="bool"),
+                         n_ctrl=_field("experiment.refine.n_ctrl", ref.get("n_ctrl", 16), kind="int", lo=6),
+                         steps=_field("experiment.refine.steps", ref.get("steps", 150), kind="int", lo=1),
+                         learning_rate=_field("experiment.refine.learning_rate", ref.get("learning_rate", 2e-4),
+                                              lo=0, lo_open=True))
+    cases = e.get("cases")
+    if not cases:
+        raise ConfigError("experiment.cases must list at least one case")
+    dtype = jnp.result_type(float) if dtype is None else dtype
+    out["cases"] = {}
+    for name, c in cases.items():
+        p = f"experiment.cases.{name}"
+        kind = _choice(f"{p}.kind", c.get("kind"), ("adept", "task"))
+        boundary = _choice(f"{p}.boundary", c.get("boundary", "free"), BOUNDARIES)
+        law = _choice(f"{p}.law", c.get("law", "poly5"), tr.MOTION_LAWS)
+        try:
+            if kind == "adept":
+                cyc = tr.adept_cycle(_vector(f"{p}.centre", c.get("centre"), 3),
+                                     heading=math.radians(_field(f"{p}.heading_deg", c.get("heading_deg"))),
+                                     duration=_field(f"{p}.duration", c.get("duration"), lo=0, lo_open=True),
+                                     law=law, blend=_field(f"{p}.blend", c.get("blend", 0.5), lo=0, hi=1, hi_open=True),
+                                     n_samples=_field(f"{p}.n_samples", c.get("n_samples"), kind="int", lo=3),
+                                     dtype=dtype)
+            else:
+                pts = [_vector(f"{p}.points[{i}]", q, 3) for i, q in enumerate(c.get("points") or [])]
+                cyc = tr.task_path(pts, segment_duration=_field(f"{p}.segment_duration", c.get("segment_duration"),
+                                                                lo=0, lo_open=True),
+                                   law=law, samples_per_segment=_field(f"{p}.samples_per_segment",
+                                                                       c.get("samples_per_segment"), kind="int", lo=2),
+                                   closed=_field(f"{p}.closed", c.get("closed", False), kind="bool"), dtype=dtype)
+        except ValueError as err:
+            if isinstance(err, ConfigError):
+                raise
+            raise ConfigError(f"{p}: {err}") from None
+        out["cases"][name] = (cyc, boundary)
+    return out
 
 
 # ---- ga_reconfig: the designer's problem reads and checks its own block (every field, unknown keys included) ----
@@ -300,10 +414,11 @@ EXPERIMENT_VALIDATORS = {
     "workspace_grid": _v_workspace_grid,
     "reconfig_workspace": _v_paper_grid,
     "reconfig_indices": _v_reconfig_indices,
-    "indices_examples": _v_indices_examples,
+    "indices_examples": indices_examples_spec,
     "bench_kernel": _v_bench_kernel,
-    "dynamics_cycle": _v_dynamics_cycle,
-    "boundary_search": _v_boundary_search,
+    "dynamics_cycle": dynamics_cycle_spec,
+    "boundary_search": boundary_search_spec,
+    "reconfig_motion": reconfig_motion_spec,
     "ga_reconfig": _v_ga_reconfig,
 }
 
@@ -327,48 +442,7 @@ def validate_config(cfg: Mapping[str, Any], robot=None, recon=None) -> None:
         check(e, cfg, robot, recon)
 
 
-from .schemas import EXPERIMENT_SCHEMAS, RobotSchema, register_schemas  # noqa: E402 - after ConfigError
-
-
-def _schema_fields(schema) -> dict:
-    import typing
-
-    hints = typing.get_type_hints(schema)
-    return {f.name: hints[f.name] for f in dataclasses.fields(schema)}
-
-
-def _unwrap(tp):
-    """The dataclass inside Optional[...] / Dict[str, ...] annotations: (dataclass or None, is_dict)."""
-    import typing
-
-    args = typing.get_args(tp)
-    origin = typing.get_origin(tp)
-    if origin is typing.Union:
-        inner = [a for a in args if a is not type(None)]
-        return _unwrap(inner[0]) if len(inner) == 1 else (None, False)
-    if origin in (dict, Dict) and len(args) == 2 and dataclasses.is_dataclass(args[1]):
-        return args[1], True
-    if dataclasses.is_dataclass(tp):
-        return tp, False
-    return None, False
-
-
-def _check_keys(node: Any, schema, path: str) -> None:
-    if not hasattr(node, "keys"):
-        return
-    fields = _schema_fields(schema)
-    for k in node.keys():
-        if k not in fields:
-            raise ConfigError(f"{path}.{k} is not a setting of {path}; valid keys: {sorted(fields)}")
-        sub, is_dict = _unwrap(fields[k])
-        v = node.get(k)
-        if sub is None or v is None:
-            continue
-        if is_dict:
-            for name in v.keys():
-                _check_keys(v.get(name), sub, f"{path}.{k}.{name}")
-        else:
-            _check_keys(v, sub, f"{path}.{k}")
+from .schemas import EXPERIMENT_SCHEMAS, RobotSchema, register_schemas, schema_keys, unknown_key  # noqa: E402
 
 
 def check_keys(cfg: Mapping[str, Any]) -> None:
@@ -381,12 +455,13 @@ def check_keys(cfg: Mapping[str, Any]) -> None:
     extra = [k for k in cfg.keys() if k not in TOP_LEVEL_KEYS]
     if extra:
         raise ConfigError(f"unknown top-level key(s) {extra}; valid keys: {list(TOP_LEVEL_KEYS)}")
-    if cfg.get("robot") is not None:
-        _check_keys(cfg.get("robot"), RobotSchema, "robot")
     e = cfg.get("experiment")
-    schema = EXPERIMENT_SCHEMAS.get(e.get("name")) if e is not None else None
-    if schema is not None:
-        _check_keys(e, schema, "experiment")
+    blocks = (("robot", cfg.get("robot"), RobotSchema),
+              ("experiment", e, EXPERIMENT_SCHEMAS.get(e.get("name")) if e is not None else None))
+    for path, node, schema in blocks:
+        msg = None if node is None or schema is None else unknown_key(node, schema, path)
+        if msg is not None:
+            raise ConfigError(msg)
 
 
 def valid_keys(full_key: str, experiment: Optional[str] = None) -> Optional[list]:
@@ -399,15 +474,7 @@ def valid_keys(full_key: str, experiment: Optional[str] = None) -> Optional[list
     schema = RobotSchema if parts[0] == "robot" else EXPERIMENT_SCHEMAS.get(experiment or "")
     if parts[0] not in ("robot", "experiment") or schema is None:
         return None
-    for name in parts[1:-1]:
-        fields = _schema_fields(schema)
-        if name not in fields:
-            return None
-        sub, is_dict = _unwrap(fields[name])
-        if sub is None or is_dict:
-            return None
-        schema = sub
-    return sorted(_schema_fields(schema))
+    return schema_keys(schema, parts[1:-1])
 
 
 def mass_from_config(mass_cfg: Mapping[str, Any], geometry_kwargs: Optional[Mapping[str, Any]] = None,
@@ -433,6 +500,7 @@ def mass_from_config(mass_cfg: Mapping[str, Any], geometry_kwargs: Optional[Mapp
     for k in keys:
         if k not in known:
             raise ConfigError(f"{prefix}.{k} is not a mass-model field (known: {sorted(known)})")
+    ranges = {"nonneg": dict(lo=0), "pos": dict(lo=0, lo_open=True), "frac": dict(lo=0, hi=1)}
     kinds = {name: kind for name, _u, kind in MASS_FIELDS}
     values: dict[str, Any] = {}
     for k in keys:
@@ -440,20 +508,9 @@ def mass_from_config(mass_cfg: Mapping[str, Any], geometry_kwargs: Optional[Mapp
         if v is None:
             continue
         if k == "forearm_model":
-            if v not in FOREARM_MODELS:
-                raise ConfigError(f"{prefix}.forearm_model must be one of {list(FOREARM_MODELS)}, got {v!r}")
-            values[k] = str(v)
-            continue
-        if isinstance(v, bool):
-            raise ConfigError(f"{prefix}.{k} must be a number, got {v!r}")
-        try:
-            f = float(v)
-        except (TypeError, ValueError):
-            raise ConfigError(f"{prefix}.{k} must be a number, got {v!r}") from None
-        msg = check_field(k, kinds.get(k, "nonneg"), f)
-        if msg is not None:
-            raise ConfigError(f"{prefix}.{msg}")
-        values[k] = f
+            values[k] = str(_choice(f"{prefix}.forearm_model", v, FOREARM_MODELS))
+        else:
+            values[k] = _field(f"{prefix}.{k}", v, **ranges[kinds.get(k, "nonneg")])
     if values.get("forearm_model") == "point_split" and "forearm_inertia_factor" in values:
         raise ConfigError(f"{prefix}.forearm_inertia_factor={values['forearm_inertia_factor']!r} applies to "
                           "forearm_model: rigid_rod only (point_split's inertia is that of its two end masses)")

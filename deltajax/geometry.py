@@ -19,6 +19,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ._precision import warn_if_float32
+from .fields import float_leaf
 
 __all__ = [
     "Delta",
@@ -71,9 +72,6 @@ FULL_TURN_MIN = 2 * math.pi * (1 - 1e-12)
 FULL_TURN_MAX = 2 * math.pi * (1 + 1e-12)
 
 
-def _leaf(x: Any) -> jax.Array:
-    return jnp.asarray(x, dtype=jnp.result_type(float))
-
 
 class Delta(eqx.Module):
     """A (fixed-geometry) Delta robot.
@@ -88,12 +86,12 @@ class Delta(eqx.Module):
         mass: optional mass model used by the dynamics (``None`` for kinematics only).
     """
 
-    base_radius: jax.Array = eqx.field(converter=_leaf)
-    platform_radius: jax.Array = eqx.field(converter=_leaf)
-    upper_arm: jax.Array = eqx.field(converter=_leaf)
-    forearm: jax.Array = eqx.field(converter=_leaf)
-    theta_min: jax.Array = eqx.field(converter=_leaf, default=-math.inf)
-    theta_max: jax.Array = eqx.field(converter=_leaf, default=math.inf)
+    base_radius: jax.Array = eqx.field(converter=float_leaf)
+    platform_radius: jax.Array = eqx.field(converter=float_leaf)
+    upper_arm: jax.Array = eqx.field(converter=float_leaf)
+    forearm: jax.Array = eqx.field(converter=float_leaf)
+    theta_min: jax.Array = eqx.field(converter=float_leaf, default=-math.inf)
+    theta_max: jax.Array = eqx.field(converter=float_leaf, default=math.inf)
     mass: Any = None
 
     def __check_init__(self):
@@ -144,7 +142,7 @@ class Delta(eqx.Module):
 
     def with_base_radius(self, R: Any) -> "Delta":
         """The same robot with base radius ``R`` (a traced value is fine)."""
-        return eqx.tree_at(lambda d: d.base_radius, self, _leaf(R))
+        return eqx.tree_at(lambda d: d.base_radius, self, float_leaf(R))
 
     @staticmethod
     def from_degrees(*, base_radius, platform_radius, upper_arm, forearm, theta_min_deg=None,
@@ -182,8 +180,8 @@ class ReconfigurableDelta(eqx.Module):
     """
 
     robot: Delta
-    R_min: jax.Array = eqx.field(converter=_leaf)
-    R_step: jax.Array = eqx.field(converter=_leaf)
+    R_min: jax.Array = eqx.field(converter=float_leaf)
+    R_step: jax.Array = eqx.field(converter=float_leaf)
     n_R: int = eqx.field(static=True)
 
     def __check_init__(self):

@@ -48,11 +48,13 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Mapping, Optional
+from typing import Any, Optional
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+
+from .fields import float_leaf
 
 __all__ = ["MassModel", "MassError", "check_field", "MASS_FIELDS", "STANDARD_GRAVITY", "FOREARM_MODELS",
            "DEFAULT_FOREARM_MODEL"]
@@ -81,9 +83,6 @@ MASS_FIELDS = (
     ("gravity", "m/s^2", "nonneg"),
 )
 
-
-def _leaf(x: Any) -> jax.Array:
-    return jnp.asarray(x, dtype=jnp.result_type(float))
 
 
 def check_field(name: str, kind: str, value: Any) -> Optional[str]:
@@ -132,19 +131,19 @@ class MassModel(eqx.Module):
             batch of designs shares it).
     """
 
-    upper_arm_mass: jax.Array = eqx.field(converter=_leaf)
-    upper_arm_com_fraction: jax.Array = eqx.field(converter=_leaf, default=0.5)
-    upper_arm_inertia_factor: jax.Array = eqx.field(converter=_leaf, default=1.0 / 12.0)
-    rotor_inertia: jax.Array = eqx.field(converter=_leaf, default=0.0)
-    gear_ratio: jax.Array = eqx.field(converter=_leaf, default=1.0)
-    elbow_mass: jax.Array = eqx.field(converter=_leaf, default=0.0)
-    forearm_mass: jax.Array = eqx.field(converter=_leaf, default=0.0)
-    forearm_elbow_fraction: jax.Array = eqx.field(converter=_leaf, default=0.5)
-    forearm_inertia_factor: jax.Array = eqx.field(converter=_leaf, default=1.0 / 12.0)
-    platform_mass: jax.Array = eqx.field(converter=_leaf, default=0.0)
-    payload_mass: jax.Array = eqx.field(converter=_leaf, default=0.0)
-    carriage_mass: jax.Array = eqx.field(converter=_leaf, default=0.0)
-    gravity: jax.Array = eqx.field(converter=_leaf, default=STANDARD_GRAVITY)
+    upper_arm_mass: jax.Array = eqx.field(converter=float_leaf)
+    upper_arm_com_fraction: jax.Array = eqx.field(converter=float_leaf, default=0.5)
+    upper_arm_inertia_factor: jax.Array = eqx.field(converter=float_leaf, default=1.0 / 12.0)
+    rotor_inertia: jax.Array = eqx.field(converter=float_leaf, default=0.0)
+    gear_ratio: jax.Array = eqx.field(converter=float_leaf, default=1.0)
+    elbow_mass: jax.Array = eqx.field(converter=float_leaf, default=0.0)
+    forearm_mass: jax.Array = eqx.field(converter=float_leaf, default=0.0)
+    forearm_elbow_fraction: jax.Array = eqx.field(converter=float_leaf, default=0.5)
+    forearm_inertia_factor: jax.Array = eqx.field(converter=float_leaf, default=1.0 / 12.0)
+    platform_mass: jax.Array = eqx.field(converter=float_leaf, default=0.0)
+    payload_mass: jax.Array = eqx.field(converter=float_leaf, default=0.0)
+    carriage_mass: jax.Array = eqx.field(converter=float_leaf, default=0.0)
+    gravity: jax.Array = eqx.field(converter=float_leaf, default=STANDARD_GRAVITY)
     forearm_model: str = eqx.field(static=True, default=DEFAULT_FOREARM_MODEL)
 
     def __check_init__(self):
@@ -214,4 +213,4 @@ class MassModel(eqx.Module):
 
     def with_payload(self, payload_mass: Any) -> "MassModel":
         """The same model carrying ``payload_mass`` (kg)."""
-        return eqx.tree_at(lambda m: m.payload_mass, self, _leaf(payload_mass))
+        return eqx.tree_at(lambda m: m.payload_mass, self, float_leaf(payload_mass))

@@ -63,6 +63,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from .fields import check_range, float_leaf
+
 __all__ = [
     "MechanismState",
     "Mechanism",
@@ -75,22 +77,6 @@ __all__ = [
     "reconfiguration_drive",
 ]
 
-
-def _leaf(x):
-    return jnp.asarray(x, dtype=jnp.result_type(float))
-
-
-def _check_pos(cls: str, name: str, v, unit: str, *, allow_zero: bool = False, upper=None):
-    if isinstance(v, jax.core.Tracer):
-        return
-    a = np.asarray(v)
-    if a.ndim != 0:
-        return  # a batch of mechanisms: checked per instance by whoever built it
-    f = float(a)
-    bad = not math.isfinite(f) or (f < 0 if allow_zero else f <= 0) or (upper is not None and f > upper)
-    if bad:
-        rng = f"in (0, {upper}]" if upper is not None else (">= 0" if allow_zero else "> 0")
-        raise ValueError(f"{cls}.{name} must be a finite number {rng} {unit}, got {f!r}")
 
 
 class MechanismState(NamedTuple):
@@ -172,14 +158,14 @@ class DirectRadial(Mechanism):
         efficiency, back_efficiency: in (0, 1]; gear_ratio: > 0 (1 for a direct linear motor).
     """
 
-    efficiency: jax.Array = eqx.field(converter=_leaf, default=1.0)
-    back_efficiency: jax.Array = eqx.field(converter=_leaf, default=1.0)
-    gear_ratio: jax.Array = eqx.field(converter=_leaf, default=1.0)
+    efficiency: jax.Array = eqx.field(converter=float_leaf, default=1.0)
+    back_efficiency: jax.Array = eqx.field(converter=float_leaf, default=1.0)
+    gear_ratio: jax.Array = eqx.field(converter=float_leaf, default=1.0)
 
     def __check_init__(self):
-        _check_pos("DirectRadial", "efficiency", self.efficiency, "", upper=1.0)
-        _check_pos("DirectRadial", "back_efficiency", self.back_efficiency, "", upper=1.0)
-        _check_pos("DirectRadial", "gear_ratio", self.gear_ratio, "")
+        check_range("DirectRadial", "efficiency", self.efficiency, hi=1.0, skip_batches=True)
+        check_range("DirectRadial", "back_efficiency", self.back_efficiency, hi=1.0, skip_batches=True)
+        check_range("DirectRadial", "gear_ratio", self.gear_ratio, skip_batches=True)
 
     input_unit = "m"
     effort_unit = "N"
@@ -212,15 +198,15 @@ class ScrewLinkage(Mechanism):
         tol: relative tolerance of the singular-position flags (static).
     """
 
-    R_f: jax.Array = eqx.field(converter=_leaf)
-    R_r: jax.Array = eqx.field(converter=_leaf)
-    d1: jax.Array = eqx.field(converter=_leaf)
-    d2: jax.Array = eqx.field(converter=_leaf)
-    d3: jax.Array = eqx.field(converter=_leaf)
-    pitch: jax.Array = eqx.field(converter=_leaf)
-    efficiency: jax.Array = eqx.field(converter=_leaf, default=0.9)
-    back_efficiency: jax.Array = eqx.field(converter=_leaf, default=0.8)
-    gear_ratio: jax.Array = eqx.field(converter=_leaf, default=1.0)
+    R_f: jax.Array = eqx.field(converter=float_leaf)
+    R_r: jax.Array = eqx.field(converter=float_leaf)
+    d1: jax.Array = eqx.field(converter=float_leaf)
+    d2: jax.Array = eqx.field(converter=float_leaf)
+    d3: jax.Array = eqx.field(converter=float_leaf)
+    pitch: jax.Array = eqx.field(converter=float_leaf)
+    efficiency: jax.Array = eqx.field(converter=float_leaf, default=0.9)
+    back_efficiency: jax.Array = eqx.field(converter=float_leaf, default=0.8)
+    gear_ratio: jax.Array = eqx.field(converter=float_leaf, default=1.0)
     assembly: int = eqx.field(static=True, default=1)
     nut_side: int = eqx.field(static=True, default=-1)
     tol: float = eqx.field(static=True, default=1e-6)
@@ -230,14 +216,15 @@ class ScrewLinkage(Mechanism):
 
     def __check_init__(self):
         for name in ("R_f", "R_r", "d2", "pitch"):
-            _check_pos("ScrewLinkage", name, getattr(self, name), "m/rad" if name == "pitch" else "m")
+            check_range("ScrewLinkage", name, getattr(self, name), unit="m/rad" if name == "pitch" else "m",
+                        skip_batches=True)
         for name in ("d1", "d3"):
             v = getattr(self, name)
             if not isinstance(v, jax.core.Tracer) and np.ndim(v) == 0 and not math.isfinite(float(v)):
                 raise ValueError(f"ScrewLinkage.{name} must be a finite number (m), got {float(v)!r}")
-        _check_pos("ScrewLinkage", "efficiency", self.efficiency, "", upper=1.0)
-        _check_pos("ScrewLinkage", "back_efficiency", self.back_efficiency, "", upper=1.0)
-        _check_pos("ScrewLinkage", "gear_ratio", self.gear_ratio, "")
+        check_range("ScrewLinkage", "efficiency", self.efficiency, hi=1.0, skip_batches=True)
+        check_range("ScrewLinkage", "back_efficiency", self.back_efficiency, hi=1.0, skip_batches=True)
+        check_range("ScrewLinkage", "gear_ratio", self.gear_ratio, skip_batches=True)
         for name in ("assembly", "nut_side"):
             if getattr(self, name) not in (1, -1):
                 raise ValueError(f"ScrewLinkage.{name} must be +1 or -1, got {getattr(self, name)!r}")
@@ -442,9 +429,9 @@ def reconfiguration_drive(robot, cycle, mech: Mechanism, duration=None) -> tuple
         duration: cycle time (s); default the cycle's nominal one.
 
     Returns:
-        (:class:`deltajax.dynamics.CycleProfile`, :class:`DriveProfile`).
+        (:class:`deltajax.cycle.CycleProfile`, :class:`DriveProfile`).
     """
-    from .dynamics import cycle_profile
+    from .cycle import cycle_profile
 
     if cycle.R is None:
         raise ValueError("reconfiguration_drive needs a cycle with an R profile (cycle.R is None)")

@@ -55,7 +55,7 @@ analytic rates. The best iterate that satisfies every constraint is accepted onl
 from __future__ import annotations
 
 import math
-from typing import Any, NamedTuple, Optional, Sequence
+from typing import Any, NamedTuple, Optional
 
 import equinox as eqx
 import jax
@@ -63,10 +63,11 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from .dynamics import cycle_profile
+from .cycle import cycle_profile
+from .fields import check_range, float_leaf
 from .geometry import ReconfigurableDelta
 from .indices import INDEX_NAMES, point_indices
-from .trajectory import Cycle, point_to_point
+from .trajectory import Cycle, task_path, with_R
 
 __all__ = [
     "AGGREGATES",
@@ -92,9 +93,6 @@ AGGREGATES = ("integral", "min")
 BOUNDARIES = ("free", "rest", "closed")
 
 
-def _limit(x):
-    return jnp.asarray(x, dtype=jnp.result_type(float))
-
 
 class RDriveLimits(eqx.Module):
     """Limits of the reconfiguration (R) drive, at the R joint.
@@ -105,18 +103,16 @@ class RDriveLimits(eqx.Module):
         force: |F_R| limit, the total radial force of the R actuator (N); ``inf`` for none.
     """
 
-    speed: jax.Array = eqx.field(converter=_limit, default=float("inf"))
-    acceleration: jax.Array = eqx.field(converter=_limit, default=float("inf"))
-    force: jax.Array = eqx.field(converter=_limit, default=float("inf"))
+    speed: jax.Array = eqx.field(converter=float_leaf, default=float("inf"))
+    acceleration: jax.Array = eqx.field(converter=float_leaf, default=float("inf"))
+    force: jax.Array = eqx.field(converter=float_leaf, default=float("inf"))
 
     def __check_init__(self):
         for name, unit in (("speed", "m/s"), ("acceleration", "m/s^2"), ("force", "N")):
             v = getattr(self, name)
-            if isinstance(v, jax.core.Tracer):
-                continue
-            a = np.asarray(v)
-            if a.ndim != 0 or np.isnan(a) or not a > 0:
-                raise ValueError(f"RDriveLimits.{name} must be a scalar > 0 {unit} (inf allowed), got {a!r}")
+            if not isinstance(v, jax.core.Tracer) and np.ndim(v) != 0:
+                raise ValueError(f"RDriveLimits.{name} must be a scalar (one R drive), got shape {np.shape(v)}")
+            check_range("RDriveLimits", name, v, unit=unit, allow_inf=True)
 
 
 class PathTables(NamedTuple):
@@ -183,14 +179,6 @@ def _check_cycle(cycle: Cycle) -> None:
         raise ValueError(f"path resolution needs a Cartesian cycle, got cycle.space={cycle.space!r}")
     if cycle.n_samples < 3:
         raise ValueError(f"the cycle needs >= 3 samples, got {cycle.n_samples}")
-
-
-def with_R(cycle: Cycle, R, R_dot, R_ddot) -> Cycle:
-    """The cycle carrying the base-radius profile R(t) (m) with physical rates Rdot (m/s), Rddot (m/s^2)."""
-    T = cycle.duration
-    return eqx.tree_at(lambda c: (c.R, c.dR, c.ddR), cycle,
-                       (jnp.asarray(R), jnp.asarray(R_dot) * T, jnp.asarray(R_ddot) * T * T),
-                       is_leaf=lambda x: x is None)
 
 
 def _criterion_at(robot, p, R, criterion, b_v, b_f, beta):
@@ -580,32 +568,3 @@ def fixed_path(tables: PathTables, limits: RDriveLimits, aggregate: str = "integ
     if best < 0:
         return _evaluate(tables, None, aggregate, dt, (0, 0), False)
     return _evaluate(tables, np.full(K, best), aggregate, dt, (0, 0), True)
-
-
-# -- tasks ---------------------------------------------------------------------------------------------------
-
-def task_path(points: Sequence[Sequence[float]], *, segment_duration: float = 0.5, law: str = "poly5",
-              samples_per_segment: int = 25, closed: bool = False, dtype=None) -> Cycle:
-    """A rest-to-rest path through task points (m, base frame): straight moves with the given law.
-
-    Consecutive moves share their end sample; with ``closed=True`` the path returns to the first point.
-
-    Returns:
-        A Cartesian :class:`Cycle` of n_seg (samples_per_segment - 1) + 1 samples and duration
-        n_seg * segment_duration.
-    """
-    pts = [list(map(float, p)) for p in points]
-    if len(pts) < 2 or any(len(p) != 3 for p in pts):
-        raise ValueError(f"task points must be >= 2 points of 3 coordinates (m), got {points!r}")
-    if closed:
-        pts = pts + [pts[0]]
-    segs = [point_to_point(a, b, duration=segment_duration, law=law, n_samples=samples_per_segment, dtype=dtype)
-            for a, b in zip(pts[:-1], pts[1:])]
-    n_seg = len(segs)
-    cat = lambda f: jnp.concatenate([f(s)[:-1] for s in segs] + [f(segs[-1])[-1:]], axis=0)  # noqa: E731
-    x = cat(lambda s: s.x)
-    dx = cat(lambda s: s.dx) * n_seg            # u-derivatives of the whole path: d/du = n_seg d/du_seg
-    ddx = cat(lambda s: s.ddx) * n_seg ** 2
-    K = x.shape[0]
-    u = jnp.arange(K, dtype=x.dtype) / (K - 1)
-    return Cycle(u=u, x=x, dx=dx, ddx=ddx, duration=segment_duration * n_seg, space="cartesian")

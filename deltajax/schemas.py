@@ -13,7 +13,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Dict, List, Optional
 
-__all__ = ["RobotSchema", "EXPERIMENT_SCHEMAS", "register_schemas"]
+__all__ = ["RobotSchema", "EXPERIMENT_SCHEMAS", "register_schemas", "unknown_key", "schema_keys"]
 
 _REQ = "???"  # omegaconf.MISSING: the YAML must give a value
 
@@ -200,3 +200,62 @@ def register_schemas() -> None:
     cs.store(group="schema/robot", name="delta", node=RobotSchema)
     for name, node in EXPERIMENT_SCHEMAS.items():
         cs.store(group="schema/experiment", name=name, node=node)
+
+
+# ---- walking the schemas (deltajax.config turns the answers into ConfigError lines) ----
+def _schema_fields(schema) -> dict:
+    import typing
+
+    hints = typing.get_type_hints(schema)
+    return {f.name: hints[f.name] for f in dataclasses.fields(schema)}
+
+
+def _unwrap(tp):
+    """The dataclass inside Optional[...] / Dict[str, ...] annotations: (dataclass or None, is_dict)."""
+    import typing
+
+    args = typing.get_args(tp)
+    origin = typing.get_origin(tp)
+    if origin is typing.Union:
+        inner = [a for a in args if a is not type(None)]
+        return _unwrap(inner[0]) if len(inner) == 1 else (None, False)
+    if origin in (dict, Dict) and len(args) == 2 and dataclasses.is_dataclass(args[1]):
+        return args[1], True
+    if dataclasses.is_dataclass(tp):
+        return tp, False
+    return None, False
+
+
+def unknown_key(node: Any, schema, path: str) -> Optional[str]:
+    """The first key of ``node`` (a mapping at dotted ``path``) that ``schema`` does not know, as a message that
+    lists the valid keys of that block; ``None`` when every key is known (nested blocks included)."""
+    if not hasattr(node, "keys"):
+        return None
+    fields = _schema_fields(schema)
+    for k in node.keys():
+        if k not in fields:
+            return f"{path}.{k} is not a setting of {path}; valid keys: {sorted(fields)}"
+        sub, is_dict = _unwrap(fields[k])
+        v = node.get(k)
+        if sub is None or v is None:
+            continue
+        for sub_path, sub_node in ([(f"{path}.{k}.{n}", v.get(n)) for n in v.keys()] if is_dict
+                                   else [(f"{path}.{k}", v)]):
+            msg = unknown_key(sub_node, sub, sub_path)
+            if msg is not None:
+                return msg
+    return None
+
+
+def schema_keys(schema, inner: List[str]) -> Optional[list]:
+    """The sorted keys of the block reached from ``schema`` through the field names ``inner``; ``None`` when
+    that is not a (non-dict) schema block."""
+    for name in inner:
+        fields = _schema_fields(schema)
+        if name not in fields:
+            return None
+        sub, is_dict = _unwrap(fields[name])
+        if sub is None or is_dict:
+            return None
+        schema = sub
+    return sorted(_schema_fields(schema))

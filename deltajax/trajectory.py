@@ -4,7 +4,7 @@ A :class:`Cycle` is a path sampled at K points of *normalised time* u in [0, 1] 
 derivatives with respect to u, plus a nominal duration T. For a duration T the physical rates are
 ``x_dot = x' / T`` and ``x_ddot = x'' / T^2``: the geometric path stays the same and only the time scale
 changes, which is what makes the minimum cycle time under torque and speed limits a 1-D problem
-(:func:`deltajax.dynamics.cycle_metrics`). Cycles are pytrees: stack them (``jax.tree.map(jnp.stack, ...)``)
+(:func:`deltajax.cycle.cycle_metrics`). Cycles are pytrees: stack them (``jax.tree.map(jnp.stack, ...)``)
 and ``jax.vmap`` over trajectories as over designs.
 
 Frame: base frame, z down (SPEC §1); "up" is -z.
@@ -13,12 +13,14 @@ Frame: base frame, z down (SPEC §1); "up" is -z.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, Optional
+from typing import Any, Callable, Optional, Sequence
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
+
+from .fields import float_leaf
 
 __all__ = [
     "MOTION_LAWS",
@@ -31,6 +33,8 @@ __all__ = [
     "point_to_point",
     "ga_paper_motion",
     "with_R_profile",
+    "with_R",
+    "task_path",
     "ADEPT_HEIGHT",
     "ADEPT_WIDTH",
 ]
@@ -120,9 +124,6 @@ def motion_law(name: str) -> Callable:
         raise ValueError(f"unknown motion law {name!r}; known: {sorted(MOTION_LAWS)}") from None
 
 
-def _leaf(x):
-    return jnp.asarray(x, dtype=jnp.result_type(float))
-
 
 class Cycle(eqx.Module):
     """A trajectory sampled in normalised time u in [0, 1] (K samples, uniform, both ends included).
@@ -141,7 +142,7 @@ class Cycle(eqx.Module):
     x: jax.Array
     dx: jax.Array
     ddx: jax.Array
-    duration: jax.Array = eqx.field(converter=_leaf)
+    duration: jax.Array = eqx.field(converter=float_leaf)
     R: Optional[jax.Array] = None
     dR: Optional[jax.Array] = None
     ddR: Optional[jax.Array] = None
@@ -157,7 +158,7 @@ class Cycle(eqx.Module):
 
     def at_duration(self, duration: Any) -> "Cycle":
         """The same path with nominal duration ``duration`` (s)."""
-        return eqx.tree_at(lambda c: c.duration, self, _leaf(duration))
+        return eqx.tree_at(lambda c: c.duration, self, float_leaf(duration))
 
     def time(self) -> jax.Array:
         """Sample times u * T (s)."""
@@ -305,3 +306,38 @@ def with_R_profile(cycle: Cycle, R_start: float, R_end: Optional[float] = None, 
     dR = dR_total * ds + amplitude * w * jnp.cos(w * u)
     ddR = dR_total * dds - amplitude * w * w * jnp.sin(w * u)
     return eqx.tree_at(lambda c: (c.R, c.dR, c.ddR), cycle, (R, dR, ddR), is_leaf=lambda x: x is None)
+
+
+def with_R(cycle: Cycle, R, R_dot, R_ddot) -> Cycle:
+    """The cycle carrying the base-radius profile R(t) (m) with physical rates Rdot (m/s), Rddot (m/s^2)."""
+    T = cycle.duration
+    return eqx.tree_at(lambda c: (c.R, c.dR, c.ddR), cycle,
+                       (jnp.asarray(R), jnp.asarray(R_dot) * T, jnp.asarray(R_ddot) * T * T),
+                       is_leaf=lambda x: x is None)
+
+
+def task_path(points: Sequence[Sequence[float]], *, segment_duration: float = 0.5, law: str = "poly5",
+              samples_per_segment: int = 25, closed: bool = False, dtype=None) -> Cycle:
+    """A rest-to-rest path through task points (m, base frame): straight moves with the given law.
+
+    Consecutive moves share their end sample; with ``closed=True`` the path returns to the first point.
+
+    Returns:
+        A Cartesian :class:`Cycle` of n_seg (samples_per_segment - 1) + 1 samples and duration
+        n_seg * segment_duration.
+    """
+    pts = [list(map(float, p)) for p in points]
+    if len(pts) < 2 or any(len(p) != 3 for p in pts):
+        raise ValueError(f"task points must be >= 2 points of 3 coordinates (m), got {points!r}")
+    if closed:
+        pts = pts + [pts[0]]
+    segs = [point_to_point(a, b, duration=segment_duration, law=law, n_samples=samples_per_segment, dtype=dtype)
+            for a, b in zip(pts[:-1], pts[1:])]
+    n_seg = len(segs)
+    cat = lambda f: jnp.concatenate([f(s)[:-1] for s in segs] + [f(segs[-1])[-1:]], axis=0)  # noqa: E731
+    x = cat(lambda s: s.x)
+    dx = cat(lambda s: s.dx) * n_seg            # u-derivatives of the whole path: d/du = n_seg d/du_seg
+    ddx = cat(lambda s: s.ddx) * n_seg ** 2
+    K = x.shape[0]
+    u = jnp.arange(K, dtype=x.dtype) / (K - 1)
+    return Cycle(u=u, x=x, dx=dx, ddx=ddx, duration=segment_duration * n_seg, space="cartesian")

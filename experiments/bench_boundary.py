@@ -25,7 +25,9 @@ import numpy as np  # noqa: E402
 import deltajax as dj  # noqa: E402
 from deltajax.workspace import boundary as B  # noqa: E402
 
-PAPER_S = {"conti": 589.1236, "continuation": 246.647}
+from deltajax.papers import BOUNDARY_SEARCH  # noqa: E402
+
+PAPER_S = {"conti": BOUNDARY_SEARCH["time_conti_1deg_s"], "continuation": BOUNDARY_SEARCH["time_continuation_1deg_s"]}
 
 
 # -- NumPy baseline (one point at a time, like the paper's MATLAB loops) ----------------------------------------
@@ -149,7 +151,8 @@ def main() -> None:
     print(f"continuation / conti: calls {n_calls['continuation'] / n_calls['conti']:.3f}, "
           f"JAX time {results['continuation'][1] / results['conti'][1]:.2f}, NumPy time {t_cont_np / t_conti_np:.2f} "
           f"(paper: time {PAPER_S['continuation'] / PAPER_S['conti']:.3f} at 1 deg, "
-          f"calls 79500/148239 = 0.536 at 2 deg)")
+          f"calls {BOUNDARY_SEARCH['calls_continuation_2deg']}/{BOUNDARY_SEARCH['calls_conti_2deg']} = "
+          f"{BOUNDARY_SEARCH['calls_continuation_2deg'] / BOUNDARY_SEARCH['calls_conti_2deg']:.3f} at 2 deg)")
 
 
 if __name__ == "__main__":

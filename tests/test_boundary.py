@@ -64,7 +64,7 @@ def test_conti_count_reproduces_paper_table3(robot):
     res = B.boundary_search(robot, CENTRE, step_deg=2.0, eps=EPS, rho_max=RHO_MAX, method="conti")
     calls = np.asarray(res.calls)
     assert calls.shape == (181, 91)
-    assert int(calls.sum()) == 148239
+    assert int(calls.sum()) == dj.papers.BOUNDARY_SEARCH["calls_conti_2deg"] == 9 * 91 * 181
     assert bool(np.all(np.asarray(res.ok)))
     width = np.asarray(res.radius_out - res.radius_in)
     np.testing.assert_allclose(width, RHO_MAX / 2 ** 9, rtol=1e-12)
@@ -211,7 +211,7 @@ def test_saturated_and_bad_inputs(robot):
 def test_experiment_config_errors():
     from omegaconf import OmegaConf
 
-    from deltajax.jobs.boundary_search import _check
+    from deltajax.config import boundary_search_spec as _check
 
     base = OmegaConf.load("configs/experiment/boundary_search.yaml").experiment
     ok = _check(base)
@@ -243,7 +243,7 @@ def test_experiment_writes_results(tmp_path, searches):
     assert conti["attrs"]["calls_total"] == 9 * 25 * 13
     np.testing.assert_allclose(conti["radius_in"], np.asarray(searches[0].radius_in), rtol=1e-12)
     np.testing.assert_array_equal(cont["calls"], np.asarray(searches[1].calls))
-    assert out["boundary"]["attrs"]["paper_volume_m3"] == 46.3936
+    assert out["boundary"]["attrs"]["paper_volume_m3"] == dj.papers.BOUNDARY_SEARCH["volume_m3"]
     assert 40 < out["boundary"]["attrs"]["grid_volume"] < 50
     assert out["boundary"]["centre_sweep"]["calls_conti"][0] == 9 * 25 * 13
     import xarray as xr

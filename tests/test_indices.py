@@ -15,20 +15,10 @@ import deltajax as dj
 REC = dj.presets.franco2026()
 RTOL = 2e-4  # the paper truncates to the digits it prints
 
-# (R, p, theta_deg printed, {index: printed value}) -- Franco-López 2026 Tables 2-5 (signs restored:
-# the extraction lost minus signs; theta < 0 above the horizontal and exponents of 1e-9 etc.)
-TABLES = {
-    "table2": (0.46499, (0, 0, 0.200), 90.000,
-               dict(omega_v=6.1584e8, omega_f=1.6237e-9, sigma_min_v=8.1648e-1, sigma_min_f=1.0825e-9,
-                    inv_cond=8.8388e-10)),
-    "table3": (0.22842, (0, 0, 0.1153), -35.0297355,
-               dict(omega_v=3.5566e-9, omega_f=2.8116e8, sigma_min_v=1.5236e-3, sigma_min_f=6.5274e2,
-                    inv_cond=0.9946)),
-    "table4": (0.20465, (0, 0, 0.200), -3.39378,
-               dict(omega_v=1.1063e-1, omega_f=9.0389e0, sigma_min_v=4.6054e-1, inv_cond=0.8829)),
-    "table5": (0.24901, (0, 0, 0.1153), 0.92940,
-               dict(omega_f=25.9473, sigma_min_v=2.5148e-1, sigma_min_f=1.6410e0, inv_cond=0.4127)),
-}
+# (R, p, theta_deg printed, {index: printed value}) -- Franco-López 2026 Tables 2-5 without the two known
+# misprints (checked separately below); the numbers live in deltajax.papers
+_PRINTED = dj.papers.example_indices()
+TABLES = {t: (row["R"], row["p"], row["theta_deg"], _PRINTED[t]) for t, row in dj.papers.FRANCO2026_EXAMPLES.items()}
 
 
 def _eval(R, p):
@@ -85,14 +75,7 @@ def _argmax_R(values):
     return float(_R_FINE[int(np.argmax(v))])
 
 
-@pytest.mark.parametrize("z, index, R_paper", [
-    (0.200, "k_tilde", 0.20465),       # Fig 5 / Table 4
-    (0.1153, "k_tilde", 0.24901),      # Fig 6 / Table 5
-    (0.1153, "omega_f", 0.22842),      # Fig 4 / Table 3 (the lower end of the feasible R range)
-    (0.1153, "sigma_min_f", 0.22842),
-    (0.1153, "inv_cond", 0.22842),
-    (0.200, "omega_v", 0.46499),       # Fig 3 / Table 2: next to the singular R = 0.465 (omega_v -> inf)
-])
+@pytest.mark.parametrize("z, index, R_paper", dj.papers.FRANCO2026_ARGMAX_R)
 def test_example_maximisers(z, index, R_paper):
     ind = _curve(jnp.array([0.0, 0.0, z]))
     assert _argmax_R(np.asarray(getattr(ind, index))) == pytest.approx(R_paper, abs=1.5e-5)

@@ -18,78 +18,15 @@ and ``boundary_surface.png`` (3-D boundary points, non-star rays highlighted).
 
 from __future__ import annotations
 
-import math
 import time
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..config import ConfigError
+from ..config import boundary_search_spec
+from ..papers import BOUNDARY_SEARCH as PAPER
 from ..workspace import boundary as B
-
-PAPER = dict(calls_conti_2deg=148239, calls_continuation_2deg=79500, time_conti_1deg_s=589.1236,
-             time_continuation_1deg_s=246.647, volume_m3=46.3936, eps=0.01)
-
-
-def _check(e) -> dict:
-    """Validate ``experiment.*`` before anything compiles; return plain Python values."""
-    def num(key, positive=True):
-        v = e.get(key)
-        try:
-            f = float(v)
-        except (TypeError, ValueError):
-            raise ConfigError(f"experiment.{key} must be a number, got {v!r}") from None
-        if not math.isfinite(f) or (positive and f <= 0):
-            raise ConfigError(f"experiment.{key} must be a finite{' positive' if positive else ''} number, got {v!r}")
-        return f
-
-    out = dict(eps=num("eps"), rho_max=num("rho_max"), grid_h=num("grid_h"))
-    if out["rho_max"] <= out["eps"]:
-        raise ConfigError(f"experiment.rho_max must exceed experiment.eps, got {out['rho_max']} <= {out['eps']}")
-    centre = list(e.get("centre") or [])
-    if len(centre) != 3:
-        raise ConfigError(f"experiment.centre must be [x, y, z] (m), got {centre!r}")
-    out["centre"] = [float(c) for c in centre]
-    steps = list(e.get("steps_deg") or [])
-    if not steps:
-        raise ConfigError("experiment.steps_deg must list at least one angular step (deg)")
-    for s in steps:
-        try:
-            B.angle_grid(float(s))
-        except (ValueError, TypeError) as err:
-            raise ConfigError(f"experiment.steps_deg: {err}") from None
-    out["steps_deg"] = [float(s) for s in steps]
-    if e.get("predictor") not in B.PREDICTORS:
-        raise ConfigError(f"experiment.predictor must be one of {B.PREDICTORS}, got {e.get('predictor')!r}")
-    out["predictor"] = str(e.predictor)
-    if e.get("volume_rule") not in B.VOLUME_RULES:
-        raise ConfigError(f"experiment.volume_rule must be one of {B.VOLUME_RULES}, got {e.get('volume_rule')!r}")
-    out["volume_rule"] = str(e.volume_rule)
-    n = e.get("profile_samples")
-    if not isinstance(n, int) or isinstance(n, bool) or n < 2:
-        raise ConfigError(f"experiment.profile_samples must be an integer >= 2, got {n!r}")
-    out["profile_samples"] = n
-    box = e.get("grid_box")
-    try:
-        box = [[float(a), float(b)] for a, b in box]
-        assert len(box) == 3 and all(b > a for a, b in box)
-    except Exception:  # noqa: BLE001 - any malformed box gets the same message
-        raise ConfigError(f"experiment.grid_box must be [[x0, x1], [y0, y1], [z0, z1]] (m), got {box!r}") from None
-    for (a, b), name in zip(box, "xyz"):
-        k = (b - a) / out["grid_h"]
-        if abs(k - round(k)) > 1e-6 * k:
-            raise ConfigError(f"experiment.grid_box {name} side ({a}, {b}) m is not a whole number of "
-                              f"experiment.grid_h = {out['grid_h']} m")
-    out["grid_box"] = box
-    out["centre_sweep_z"] = [float(z) for z in (e.get("centre_sweep_z") or [])]
-    out["sweep_step_deg"] = num("sweep_step_deg")
-    out["half_space"] = bool(e.get("half_space", True))
-    reps = e.get("timing_repeats", 3)
-    if not isinstance(reps, int) or reps < 1:
-        raise ConfigError(f"experiment.timing_repeats must be an integer >= 1, got {reps!r}")
-    out["timing_repeats"] = reps
-    return out
 
 
 def _timed_search(robot, p, step, method, reps):
@@ -125,7 +62,7 @@ def _volumes(res, prof, polar, azimuth, rule):
 
 
 def run(ctx) -> None:
-    p = _check(ctx.cfg.experiment)
+    p = boundary_search_spec(ctx.cfg.experiment)
     robot = ctx.robot
     res_file = ctx.results
     g0 = "boundary"

@@ -28,46 +28,12 @@ import numpy as np
 
 from .. import plots, presets
 from .. import trajectory as tr
-from ..config import ConfigError
-from ..dynamics import Limits, cycle_metrics, cycle_profile
+from ..config import ConfigError, dynamics_cycle_spec
+from ..cycle import Limits, cycle_metrics, cycle_profile
 from ..mass import FOREARM_MODELS
 
 CASE_FIELDS = (("p", "m"), ("p_dot", "m/s"), ("p_ddot", "m/s^2"), ("theta", "rad"), ("theta_dot", "rad/s"),
                ("theta_ddot", "rad/s^2"), ("tau", "N m"), ("force_R", "N"), ("R", "m"), ("R_dot", "m/s"))
-
-
-def _setup(e, name):
-    s = e.setups.get(name) if name in e.setups else e.setups.default
-    out = {}
-    for key in ("centre", "heading_deg", "duration", "torque_limit", "speed_limit"):
-        if key not in s:
-            raise ConfigError(f"experiment.setups.{name}.{key} is required")
-    c = list(s.centre)
-    if len(c) != 3:
-        raise ConfigError(f"experiment.setups.{name}.centre must have 3 coordinates (m), got {c!r}")
-    out["centre"] = [float(v) for v in c]
-    for key in ("heading_deg", "duration", "torque_limit", "speed_limit"):
-        out[key] = float(s[key])
-    for key in ("duration", "torque_limit", "speed_limit"):
-        if not out[key] > 0:
-            raise ConfigError(f"experiment.setups.{name}.{key} must be > 0, got {out[key]!r}")
-    return out
-
-
-def _check(e):
-    if e.method not in ("virtual_work", "lagrange"):
-        raise ConfigError(f"experiment.method must be 'virtual_work' or 'lagrange', got {e.method!r}")
-    if e.law not in tr.MOTION_LAWS:
-        raise ConfigError(f"experiment.law must be one of {sorted(tr.MOTION_LAWS)}, got {e.law!r}")
-    if not (isinstance(e.n_samples, int) and e.n_samples >= 11):
-        raise ConfigError(f"experiment.n_samples must be an integer >= 11, got {e.n_samples!r}")
-    if not 0.0 <= float(e.blend) < 1.0:
-        raise ConfigError(f"experiment.blend must be in [0, 1), got {e.blend!r}")
-    for name in e.robots:
-        if name not in presets.PRESETS:
-            raise ConfigError(f"experiment.robots: unknown preset {name!r}; known: {sorted(presets.PRESETS)}")
-    if not float(e.ga_motion.duration) > 0:
-        raise ConfigError(f"experiment.ga_motion.duration must be > 0 s, got {e.ga_motion.duration!r}")
 
 
 def _preset_robot(name):
@@ -191,37 +157,32 @@ def _plot_adept(ctx, name, prof_nom, prof_min, T_min):
 
 
 def run(ctx) -> None:
-    e = ctx.cfg.experiment
-    _check(e)
+    spec = dynamics_cycle_spec(ctx.cfg.experiment, ctx.cfg, ctx.robot, ctx.recon)
     dtype = ctx.dtype
-    if ctx.robot.mass is None:
-        raise ConfigError("experiment=dynamics_cycle needs a mass model: add a `mass:` block to the robot config "
-                          f"(robot.mass), robot {ctx.cfg.robot.get('name')!r} has none")
-    cfg_name = str(ctx.cfg.robot.get("name", "robot"))
+    cfg_name = spec["cfg_name"]
     robots = {cfg_name: ctx.robot}
-    for name in e.robots:
+    for name in spec["robots"]:
         if name not in robots:
             rob = _preset_robot(name)
             if rob is None:
                 raise ConfigError(f"experiment.robots: preset {name!r} has no mass model")
             robots[name] = rob
-    method = str(e.method)
+    method = spec["method"]
     other = "lagrange" if method == "virtual_work" else "virtual_work"
-    K = int(e.n_samples)
+    K = spec["n_samples"]
     res = ctx.results
     profile_jit = jax.jit(cycle_profile, static_argnames=("method",))
     metrics_jit = jax.jit(cycle_metrics, static_argnames=("method",))
-    ga = tr.ga_paper_motion(amplitude=float(e.ga_motion.amplitude), duration=float(e.ga_motion.duration),
-                            n_samples=K, dtype=dtype)
+    ga = tr.ga_paper_motion(amplitude=spec["ga_amplitude"], duration=spec["ga_duration"], n_samples=K, dtype=dtype)
     summary = []
     comparison = []   # (robot/case, {model: metrics})
     max_formulation_gap = 0.0
     for name, robot in ctx.progress(robots.items(), total=len(robots), desc="robots"):
         robot = jax.tree.map(lambda x: jnp.asarray(x, dtype) if eqx.is_inexact_array(x) else x, robot)
-        s = _setup(e, name)
+        s = spec["setups"][name]
         limits = Limits(torque=s["torque_limit"], speed=s["speed_limit"])
         cycle = tr.adept_cycle(s["centre"], heading=math.radians(s["heading_deg"]), duration=s["duration"],
-                               law=str(e.law), blend=float(e.blend), n_samples=K, dtype=dtype)
+                               law=spec["law"], blend=spec["blend"], n_samples=K, dtype=dtype)
         cases = {"adept": cycle, "ga_motion": ga}
         for case, cyc in cases.items():
             m = metrics_jit(robot, cyc, limits, method=method)
@@ -268,16 +229,12 @@ def run(ctx) -> None:
                 _plot_torques(ctx, name, prof, f"{name}: GA paper motion, actuator torques (cf. its Fig. 6)",
                               f"{name}_ga_motion_torques")
         res.flush()
-    if ctx.recon is not None and float(e.recon_R_amplitude) != 0.0:
+    if ctx.recon is not None and spec["recon_R_amplitude"] != 0.0:
         recon = ctx.recon
         robot = jax.tree.map(lambda x: jnp.asarray(x, dtype) if eqx.is_inexact_array(x) else x, recon.robot)
-        R0 = float(recon.robot.base_radius)
-        A = float(e.recon_R_amplitude)
-        if not (float(recon.R_min) <= R0 - abs(A) and R0 + abs(A) <= float(recon.R_max) + 1e-12):
-            raise ConfigError(f"experiment.recon_R_amplitude={A!r} m takes R = {R0} +- {abs(A)} m outside "
-                              f"[{float(recon.R_min)}, {float(recon.R_max)}] m")
+        R0, A = float(recon.robot.base_radius), spec["recon_R_amplitude"]
         cyc = tr.with_R_profile(ga, R0, amplitude=A)
-        s = _setup(e, cfg_name)
+        s = spec["setups"][cfg_name]
         limits = Limits(torque=s["torque_limit"], speed=s["speed_limit"])
         m = metrics_jit(robot, cyc, limits, method=method)
         prof = profile_jit(robot, cyc, method=method)
@@ -304,6 +261,6 @@ def run(ctx) -> None:
     res.put("dynamics/summary", "peak_joint_speed", np.asarray([np.asarray(m.peak_speed) for _, _, m, _ in summary]),
             units="rad/s", dims=("case", "chain"))
     _save_forearm_summary(res, comparison)
-    res.set_attrs("dynamics", method=method, law=str(e.law), blend=float(e.blend), n_samples=K,
+    res.set_attrs("dynamics", method=method, law=spec["law"], blend=spec["blend"], n_samples=K,
                   max_formulation_gap=max_formulation_gap)
     ctx.log(f"largest |virtual work - Lagrange| over all profiles: {max_formulation_gap:.2e}")

@@ -11,49 +11,20 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..config import ConfigError
+from ..config import indices_examples_spec
 from ..indices import INDEX_NAMES, indices
 from ..kinematics import ik
+from ..papers import FRANCO2026_EXAMPLE_INDICES, FRANCO2026_EXAMPLES, FRANCO2026_MISPRINTS
 
-# Paper Tables 2-5 (minus signs and exponents restored; Table 2's R "0.4649" is a truncation of 0.46499).
-PAPER_TABLES = {
-    "table2": dict(R=0.46499, p=(0.0, 0.0, 0.200), omega_v=6.1584e8, omega_f=1.6237e-9, sigma_min_v=8.1648e-1,
-                   sigma_min_f=1.0825e-9, inv_cond=8.8388e-10),
-    "table3": dict(R=0.22842, p=(0.0, 0.0, 0.1153), omega_v=3.5566e-9, omega_f=2.8116e8, sigma_min_v=1.5236e-3,
-                   sigma_min_f=6.5274e2, inv_cond=0.9946),
-    "table4": dict(R=0.20465, p=(0.0, 0.0, 0.200), omega_v=1.1063e-1, omega_f=9.0389e0, sigma_min_v=4.6054e-1,
-                   sigma_min_f=2.4592e0, inv_cond=0.8829),
-    "table5": dict(R=0.24901, p=(0.0, 0.0, 0.1153), omega_v=3.8553e-2, omega_f=25.9473, sigma_min_v=2.5148e-1,
-                   sigma_min_f=1.6410e0, inv_cond=0.4127),
-}
-# Printed values contradicted by the paper's own other numbers (SPEC §4; shown in docs/REPRODUCTION.md §1):
-# Table 4 sigma_min_f = (1/k) / sigma_min_v = 0.8829 / 0.46054 = 1.917; Table 5 omega_v = 1 / omega_f = 0.038540.
-KNOWN_MISPRINTS = {("table4", "sigma_min_f"), ("table5", "omega_v")}
-PAPER_INDEX_KEYS = ("omega_v", "omega_f", "sigma_min_v", "sigma_min_f", "inv_cond")
 SCALAR_INDICES = tuple(n for n in INDEX_NAMES)
 UNITS = {"manipulability": "m^3/rad^3", "imi": "rad^3/m^3"}
 
 
-def _check(cfg) -> None:
-    e = cfg.experiment
-    if not float(e.R_step) > 0:
-        raise ConfigError(f"experiment.R_step must be > 0 m, got {e.R_step!r}")
-    if not 0.0 < float(e.beta) < 1.0:
-        raise ConfigError(f"experiment.beta must be in (0, 1), got {e.beta!r}")
-    for i, pt in enumerate(e.points):
-        if len(pt) != 3:
-            raise ConfigError(f"experiment.points[{i}] must have 3 coordinates, got {list(pt)!r}")
-
-
 def run(ctx) -> None:
-    cfg = ctx.cfg
-    _check(cfg)
-    e = cfg.experiment
-    if ctx.recon is None:
-        raise ConfigError("indices_examples needs a reconfigurable robot: robot.R_range must be set")
+    spec = indices_examples_spec(ctx.cfg.experiment, ctx.cfg, ctx.robot, ctx.recon)
     recon = ctx.recon
     dtype = ctx.dtype
-    kw = dict(b_v=float(e.b_v), b_f=float(e.b_f), beta=float(e.beta), matrix=str(e.matrix))
+    kw = dict(b_v=spec["b_v"], b_f=spec["b_f"], beta=spec["beta"], matrix=spec["matrix"])
 
     def at(R, p):
         rb = recon.at(R)
@@ -63,7 +34,7 @@ def run(ctx) -> None:
     at_jit = jax.jit(at)
     res = ctx.results
     rows = []
-    for name, tab in PAPER_TABLES.items():
+    for name, tab in FRANCO2026_EXAMPLES.items():
         p = jnp.asarray(tab["p"], dtype)
         sol, ind = at_jit(jnp.asarray(tab["R"], dtype), p)
         g = f"examples/{name}"
@@ -72,21 +43,21 @@ def run(ctx) -> None:
         res.put(g, "theta", np.degrees(np.asarray(sol.theta)), units="deg", dims=("chain",))
         for k in SCALAR_INDICES:
             res.put(g, k, float(getattr(ind, k)), units=UNITS.get(k, "1"))
-        for k in PAPER_INDEX_KEYS:
-            ours, paper = float(getattr(ind, k)), tab[k]
+        for k in FRANCO2026_EXAMPLE_INDICES:
+            ours, paper = float(getattr(ind, k)), tab["indices"][k]
             res.put(g, f"paper_{k}", paper, units="1")
             rows.append((name, k, paper, ours, abs(ours - paper) / abs(paper)))
             res.put(g, f"match_{k}", rows[-1][-1] <= 2e-4, units="1",
-                    attrs={"misprint": int((name, k) in KNOWN_MISPRINTS)})
+                    attrs={"misprint": int((name, k) in FRANCO2026_MISPRINTS)})
     for name, k, paper, ours, rel in rows:
-        flag = "ok" if rel <= 2e-4 else ("paper misprint" if (name, k) in KNOWN_MISPRINTS else "MISMATCH")
+        flag = "ok" if rel <= 2e-4 else ("paper misprint" if (name, k) in FRANCO2026_MISPRINTS else "MISMATCH")
         ctx.log(f"{name:7s} {k:12s} paper {paper:.5g}  ours {ours:.6g}  rel {rel:.1e}  {flag}")
 
     # Index-vs-R curves at the example points: R = R_min + k * R_step (integer k)
-    step = float(e.R_step)
+    step = spec["R_step"]
     n = int(round((float(recon.R_max) - float(recon.R_min)) / step)) + 1
     R = float(recon.R_min) + step * np.arange(n)
-    pts = np.asarray([list(map(float, pt)) for pt in e.points])
+    pts = np.asarray(spec["points"])
     curve = jax.jit(jax.vmap(jax.vmap(at, in_axes=(0, None)), in_axes=(None, 0)))
     sol, ind = curve(jnp.asarray(R, dtype), jnp.asarray(pts, dtype))
     ok = np.asarray(sol.ok)
@@ -110,7 +81,7 @@ def run(ctx) -> None:
                                                                   "sigma_min_f", "inv_cond")))
     res.set_attrs("curves", note="argmax over finite values with ties to the smallest R; omega_v is "
                   "unbounded at Jx-singular R (e.g. R = 0.465 at z = 0.2, singularity type 1)")
-    if cfg.get("plots", True):
+    if ctx.cfg.get("plots", True):
         from ..plots_core import plot_index_curves
 
         ctx.savefig(plot_index_curves(R, pts, {k: np.asarray(getattr(ind, k)) for k in SCALAR_INDICES}, ok,

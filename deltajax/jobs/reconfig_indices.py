@@ -26,7 +26,8 @@ STATS = ("min", "max", "mean")
 
 def run(ctx) -> None:
     from .. import plots
-    from ..workspace import PAPER_TABLES, fixed_workspace, redundancy_grid
+    from ..papers import FRANCO2026_INDEX_STATS as PAPER_TABLES
+    from ..workspace import fixed_workspace, redundancy_grid
     from ..workspace.driver import face_count
     from ..workspace.redundancy import resolve_redundancy_host
 

@@ -29,16 +29,12 @@ import math
 import time
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 
 from .. import motion as mo
-from .. import trajectory as tr
-from ..config import ConfigError
-from ..dynamics import Limits, cycle_metrics, cycle_profile
-from ..geometry import GeometryError, ReconfigurableDelta
-from ..indices import INDEX_NAMES
-from ..mechanism import MECHANISMS, DirectRadial, drive_profile, example_screw_linkage
+from ..config import reconfig_motion_spec
+from ..cycle import Limits, cycle_metrics, cycle_profile
+from ..mechanism import drive_profile
 from ..motion_refine import refine_path
 
 METHODS = ("fixed", "pointwise", "path_dp", "path_refined")
@@ -46,95 +42,6 @@ SUMMARY = (("mean_value", "1"), ("min_value", "1"), ("max_abs_R_dot", "m/s"), ("
            ("max_abs_force_R", "N"), ("max_abs_screw_torque", "N m"), ("max_screw_speed", "rad/s"),
            ("peak_arm_torque", "N m"), ("n_jumps", "1"), ("max_jump", "m"), ("cycle_time_arms", "s"),
            ("cycle_time_with_drive", "s"), ("within_drive_limits", "1"))
-
-
-def _pos(e, key, unit, *, allow_inf=False):
-    try:
-        v = float(e[key])
-    except (KeyError, TypeError, ValueError):
-        raise ConfigError(f"experiment.{key} must be a number ({unit}), got {e.get(key)!r}") from None
-    if math.isnan(v) or not v > 0 or (not allow_inf and math.isinf(v)):
-        raise ConfigError(f"experiment.{key} must be > 0 {unit}{' (inf allowed)' if allow_inf else ''}, got {v!r}")
-    return v
-
-
-def _check(ctx):
-    e = ctx.cfg.experiment
-    if ctx.recon is None:
-        raise ConfigError("reconfig_motion needs a reconfigurable robot: robot.R_range is null")
-    if ctx.recon.robot.mass is None:
-        raise ConfigError("reconfig_motion needs a mass model: robot.mass is null")
-    out = {}
-    crit = str(e.get("criterion", "k_tilde"))
-    if crit not in INDEX_NAMES:
-        raise ConfigError(f"experiment.criterion must be one of {INDEX_NAMES}, got {crit!r}")
-    agg = str(e.get("aggregate", "integral"))
-    if agg not in mo.AGGREGATES:
-        raise ConfigError(f"experiment.aggregate must be one of {mo.AGGREGATES}, got {agg!r}")
-    out.update(criterion=crit, aggregate=agg)
-    for k in ("b_v", "b_f"):
-        out[k] = _pos(e, k, "")
-    out["beta"] = float(e.get("beta", 0.5))
-    if not 0.0 < out["beta"] < 1.0:
-        raise ConfigError(f"experiment.beta must be in (0, 1), got {out['beta']!r}")
-    out["R_step"] = _pos(e, "R_step", "m")
-    d = e.get("drive")
-    if d is None:
-        raise ConfigError("experiment.drive is required (speed m/s, acceleration m/s^2, force N)")
-    try:
-        out["drive"] = mo.RDriveLimits(speed=float(d.speed), acceleration=float(d.acceleration), force=float(d.force))
-    except (ValueError, AttributeError) as err:
-        raise ConfigError(f"experiment.drive: {err}") from None
-    out["torque_limit"] = _pos(e, "torque_limit", "N m")
-    out["speed_limit"] = _pos(e, "speed_limit", "rad/s")
-    mech = e.get("mechanism", {})
-    kind = str(mech.get("kind", "screw_linkage"))
-    if kind not in MECHANISMS:
-        raise ConfigError(f"experiment.mechanism.kind must be one of {sorted(MECHANISMS)}, got {kind!r}")
-    kw = {k: v for k, v in dict(mech).items() if k != "kind"}
-    try:
-        if kind == "direct":
-            out["mech"] = DirectRadial(**kw)
-        else:
-            R0, R1 = float(ctx.recon.R_min), float(ctx.recon.R_max)
-            out["mech"] = example_screw_linkage(R0, R1, **kw)
-            out["mech_info"] = out["mech"].check_range(R0, R1)
-    except (TypeError, ValueError) as err:
-        raise ConfigError(f"experiment.mechanism: {err}") from None
-    ref = e.get("refine", {})
-    out["refine"] = dict(enabled=bool(ref.get("enabled", True)), n_ctrl=int(ref.get("n_ctrl", 16)),
-                         steps=int(ref.get("steps", 150)), learning_rate=float(ref.get("learning_rate", 2e-4)))
-    if out["refine"]["n_ctrl"] < 6 or out["refine"]["steps"] < 1 or not out["refine"]["learning_rate"] > 0:
-        raise ConfigError(f"experiment.refine: n_ctrl >= 6, steps >= 1, learning_rate > 0 required, got {dict(ref)!r}")
-    cases = e.get("cases")
-    if not cases:
-        raise ConfigError("experiment.cases must list at least one case")
-    out["cases"] = {}
-    for name, c in cases.items():
-        kind = str(c.get("kind", ""))
-        boundary = str(c.get("boundary", "free"))
-        if boundary not in mo.BOUNDARIES:
-            raise ConfigError(f"experiment.cases.{name}.boundary must be one of {mo.BOUNDARIES}, got {boundary!r}")
-        law = str(c.get("law", "poly5"))
-        if law not in tr.MOTION_LAWS:
-            raise ConfigError(f"experiment.cases.{name}.law must be one of {sorted(tr.MOTION_LAWS)}, got {law!r}")
-        try:
-            if kind == "adept":
-                cyc = tr.adept_cycle([float(v) for v in c.centre], heading=math.radians(float(c.heading_deg)),
-                                     duration=float(c.duration), law=law, blend=float(c.get("blend", 0.5)),
-                                     n_samples=int(c.n_samples), dtype=ctx.dtype)
-            elif kind == "task":
-                cyc = mo.task_path([list(p) for p in c.points], segment_duration=float(c.segment_duration), law=law,
-                                   samples_per_segment=int(c.samples_per_segment), closed=bool(c.get("closed", False)),
-                                   dtype=ctx.dtype)
-            else:
-                raise ConfigError(f"experiment.cases.{name}.kind must be 'adept' or 'task', got {kind!r}")
-        except (ValueError, TypeError, AttributeError) as err:
-            if isinstance(err, ConfigError):
-                raise
-            raise ConfigError(f"experiment.cases.{name}: {err}") from None
-        out["cases"][name] = (cyc, boundary)
-    return out
 
 
 def _metrics_T(robot, cyc, R, Rd, Rdd, s):
@@ -236,12 +143,8 @@ def _plot_torques(ctx, name, t, data):
 
 
 def run(ctx) -> None:
-    s = _check(ctx)
-    rec0 = ctx.recon
-    try:
-        recon = ReconfigurableDelta.from_range(rec0.robot, float(rec0.R_min), float(rec0.R_max), s["R_step"])
-    except GeometryError as err:
-        raise ConfigError(f"experiment.R_step: {err}") from None
+    s = reconfig_motion_spec(ctx.cfg.experiment, ctx.cfg, ctx.robot, ctx.recon, dtype=ctx.dtype)
+    recon = s["recon"]
     robot = recon.robot
     res = ctx.results
     mech = s["mech"]

@@ -11,8 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..config import ConfigError
-
-PAPER = {"volume_fixed": 0.075, "volume_reconfigurable": 0.137, "increase_percent": 82.0}
+from ..papers import FRANCO2026_VOLUMES as PAPER
 
 
 def grid_from_config(cfg):

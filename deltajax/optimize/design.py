@@ -258,14 +258,6 @@ class DesignSpace:
         robot = Delta(base_radius=R_nom, mass=mass, **kw)
         return ReconfigurableDelta(robot=robot, R_min=R_lo, R_step=(R_hi - R_lo) / (self.n_R - 1), n_R=self.n_R)
 
-    def baseline_design(self) -> Union[Delta, ReconfigurableDelta]:
-        """The baseline robot as this space represents it (same n_R as every other design)."""
-        if not self.reconfigurable:
-            return self.baseline
-        b = self.baseline
-        return ReconfigurableDelta(robot=b.robot, R_min=b.R_min, R_step=(b.R_max - b.R_min) / (self.n_R - 1),
-                                   n_R=self.n_R)
-
     def describe(self, genes: Any) -> dict[str, float]:
         """``{parameter: value}`` of one gene vector (host side, for reports)."""
         vals = np.asarray(self.to_params(jnp.asarray(genes)))

@@ -16,15 +16,16 @@ One call for any robot (box sized from its reach bound, truncation flagged)::
 Host drivers (NumPy in/out, chunked, progress, checkpoint/resume)::
 
     resolve_redundancy_host(recon, points, criterion, mode="fast" | "exact", ...)
-    evaluate_fixed(robot, grid, ...), evaluate_reconfigurable(recon, grid, ...), index_stats(...)
+    fixed_workspace(robot, grid, ...), reconfigurable_workspace(recon, grid, ...), redundancy_grid(recon, grid, ...)
+    index_stats(fields, mask) -> {name: {min, max, mean, count}}
 """
 
 from .grid import (FIELD_NAMES, Grid, franco2026_grid, index_fields, make_grid, mirrored_point_indices, point_indices,
                    reachable_fraction, reachable_mask)
-from .redundancy import (Redundancy, feasible_window, indices_at_host, reach_interval, reach_k_range_host,
+from .redundancy import (Redundancy, indices_at_host, reach_interval, reach_k_range_host,
                          reconfigurable_reachable, resolve_redundancy, resolve_redundancy_host, sample_value)
 from .driver import CheckpointMismatch, GridJob, fixed_workspace, reconfigurable_workspace, redundancy_grid, run_chunks
-from .stats import PAPER_TABLES, TABLE_INDICES, index_stats
+from .stats import index_stats
 from ._nb_bench import bench_kernel_rates, bench_numba
 from . import boundary
 

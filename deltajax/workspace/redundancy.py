@@ -83,7 +83,6 @@ __all__ = [
     "resolve_redundancy_host",
     "reconfigurable_reachable",
     "reach_interval",
-    "feasible_window",
     "sample_value",
 ]
 
@@ -228,22 +227,6 @@ def _reach_k_range(recon, p):
     k_lo = jnp.clip(jnp.where(jnp.isfinite(k_lo), k_lo, recon.n_R), 0, recon.n_R)
     k_hi = jnp.clip(jnp.where(jnp.isfinite(k_hi), k_hi, -1), -1, recon.n_R - 1)
     return k_lo.astype(jnp.int32), k_hi.astype(jnp.int32)
-
-
-def feasible_window(recon: ReconfigurableDelta, p: Float[Array, "3"], *, width: int
-                    ) -> tuple[Int[Array, ""], Int[Array, ""]]:
-    """First and last IK-feasible sample (k_first, k_last) of one point; (n_R, -1) when none.
-
-    Only samples k_lo .. k_lo + width - 1 of the closed-form range (:func:`reach_interval`) are tested,
-    so ``width`` must cover it (the host driver picks it per bucket).
-    """
-    q = _canonical(jnp.asarray(p))
-    k_lo, k_hi = _reach_k_range(recon, q)
-    ks = k_lo + jnp.arange(width, dtype=jnp.int32)
-    ok = jax.vmap(lambda R: jnp.all(ik_cos_sin(recon.at(R), q).ok))(_sample_R(recon, ks)) & (ks <= k_hi)
-    first = jnp.min(jnp.where(ok, ks, recon.n_R))
-    last = jnp.max(jnp.where(ok, ks, -1))
-    return first, last
 
 
 def _nb_params(recon: ReconfigurableDelta):
