@@ -210,6 +210,8 @@ def test_mistyped_key_cli_and_api(tmp_path):
     (line,) = _error_lines(out.stderr)
     assert line.startswith("ERROR: robot.forarm is not a setting of robot") and "forearm" in line
     assert "+robot" not in out.stderr and not any(tmp_path.iterdir())
+    full = _cli("robot.forarm=0.4", f"hydra.run.dir={tmp_path}", env_extra={"HYDRA_FULL_ERROR": "1"})
+    assert full.returncode != 0 and "Traceback" in full.stderr  # Hydra's own error, with the traceback
     from deltajax.config import ConfigError
     from deltajax.run import run_experiment
 
