@@ -47,6 +47,15 @@ def _limits(masks: dict, axes) -> list:
     return out
 
 
+def _inner_ticks(axis, lo: float, hi: float, n: int = 5) -> None:
+    """About ``n`` round ticks strictly inside (lo, hi), none within 6 % of an end: labels of neighbouring
+    panels (or of two axes meeting at a corner) cannot run into each other."""
+    from matplotlib.ticker import MaxNLocator
+
+    margin = 0.06 * (hi - lo)
+    axis.set_ticks([t for t in MaxNLocator(n).tick_values(lo, hi) if lo + margin < t < hi - margin])
+
+
 def workspace_3d(x, y, z, masks: dict, max_points: int = 40000, seed: int = 0):
     """3-D view of one or more workspaces (Fig 7): their surface points, one panel per mask.
 
@@ -81,7 +90,12 @@ def workspace_3d(x, y, z, masks: dict, max_points: int = 40000, seed: int = 0):
         ax.set_ylabel("y [m]")
         ax.set_zlabel("z [m] (down)")
         ax.invert_zaxis()
-        ax.set_title(f"{title}\n{int(np.count_nonzero(mask))} reachable grid points")
+        for axis, (lo, hi) in zip((ax.xaxis, ax.yaxis), lims[:2]):
+            _inner_ticks(axis, lo, hi)  # x's last and y's first label meet at the corner otherwise
+        count = int(np.count_nonzero(mask))
+        cell = float(np.prod([np.mean(np.diff(np.asarray(a, float))) if len(a) > 1 else np.nan for a in (x, y, z)]))
+        vol = f", V = {count * cell:.4g} m$^3$" if np.isfinite(cell) else ""
+        ax.set_title(f"{title}\n{count} reachable grid points{vol}")
     if sc is not None:
         fig.colorbar(sc, ax=fig.axes, shrink=0.6, label="depth z [m] (down)")
     return fig
@@ -114,8 +128,6 @@ def index_slices(x, y, z_values: Sequence[float], columns: dict, label: str = "i
         vmin, vmax: colour range (default: robust common range of all panels).
         units: the index's units ("1": dimensionless).
     """
-    from matplotlib.ticker import MaxNLocator
-
     plt = _plt()
     vals = np.concatenate([np.asarray(v, float).ravel() for v in columns.values()])
     finite = vals[np.isfinite(vals)]
@@ -140,9 +152,7 @@ def index_slices(x, y, z_values: Sequence[float], columns: dict, label: str = "i
                 ax.set_xlabel("x [m]")
     # ticks strictly inside the panels (shared by every panel): neighbours' end labels ("0.4-0.4") cannot clash
     for axis, (lo, hi) in ((axes[0, 0].xaxis, axes[0, 0].get_xlim()), (axes[0, 0].yaxis, axes[0, 0].get_ylim())):
-        ticks = MaxNLocator(5).tick_values(lo, hi)
-        margin = 0.06 * (hi - lo)
-        axis.set_ticks([t for t in ticks if lo + margin < t < hi - margin])
+        _inner_ticks(axis, lo, hi)
     if im is not None:
         extend = {(False, False): "neither", (True, False): "min", (False, True): "max", (True, True): "both"}[
             (bool(finite.size and finite.min() < vmin), bool(finite.size and finite.max() > vmax))]

@@ -591,7 +591,8 @@ def cli(argv: Optional[list] = None) -> int:
                 print(f"ERROR: experiment={bad[0]} is not an experiment; choose one of: {', '.join(known)} "
                       "(python -m deltajax.run --help describes them)", file=sys.stderr)
                 return EXIT_USER_ERROR
-    problem = check_overrides(args)
+    # HYDRA_FULL_ERROR=1: the user wants Hydra's own error with its traceback
+    problem = None if os.environ.get("HYDRA_FULL_ERROR") == "1" else check_overrides(args)
     if problem is not None:  # Hydra would print several lines (and suggest +key=value for a typo), exit 1
         print(f"ERROR: {problem}", file=sys.stderr)
         return EXIT_USER_ERROR

@@ -110,3 +110,16 @@ def test_index_slices_ticks_stay_inside_the_panels():
         for ticks, (lo, hi) in ((ax.get_xticks(), ax.get_xlim()), (ax.get_yticks(), ax.get_ylim())):
             assert len(ticks) >= 3 and all(lo < t < hi for t in ticks), (ticks, lo, hi)
             assert min(ticks) - lo > 0.05 * (hi - lo) and hi - max(ticks) > 0.05 * (hi - lo)
+
+
+def test_workspace_3d_titles_give_the_volume_and_ticks_stay_inside():
+    x = y = np.linspace(-0.4, 0.4, 21)
+    z = np.linspace(0.0, 0.6, 16)
+    X, Y, Z = np.meshgrid(x, y, z, indexing="ij")
+    mask = X ** 2 + Y ** 2 + (Z - 0.35) ** 2 < 0.09
+    fig = plots.workspace_3d(x, y, z, {"A": mask})
+    (ax,) = [ax for ax in fig.axes if ax.get_label() != "<colorbar>"]
+    vol = mask.sum() * 0.04 * 0.04 * 0.04
+    assert f"V = {vol:.4g} m$^3$" in ax.get_title() and f"{mask.sum()} reachable grid points" in ax.get_title()
+    for ticks, (lo, hi) in ((ax.get_xticks(), ax.get_xlim()), (ax.get_yticks(), ax.get_ylim())):
+        assert len(ticks) >= 3 and min(ticks) - lo > 0.05 * (hi - lo) and hi - max(ticks) > 0.05 * (hi - lo)

@@ -210,6 +210,8 @@ def test_mistyped_key_cli_and_api(tmp_path):
     (line,) = _error_lines(out.stderr)
     assert line.startswith("ERROR: robot.forarm is not a setting of robot") and "forearm" in line
     assert "+robot" not in out.stderr and not any(tmp_path.iterdir())
+    full = _cli("robot.forarm=0.4", f"hydra.run.dir={tmp_path}", env_extra={"HYDRA_FULL_ERROR": "1"})
+    assert full.returncode != 0 and "Traceback" in full.stderr  # Hydra's own error, with the traceback
     from deltajax.config import ConfigError
     from deltajax.run import run_experiment
 
@@ -261,3 +263,31 @@ def test_float32_warning_points_at_the_users_line(tmp_path):
     out = subprocess.run([sys.executable, str(script)], env=env, capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.split() == [str(script), "4"]
+
+
+def test_file_sizes_tool_measures_the_uncompressed_size(tmp_path, capsys):
+    """experiments/file_sizes.py (the before/after figures in docs/CONVENTIONS.md): same data, no filters."""
+    import importlib.util
+
+    import h5py
+    import numpy as np
+
+    from deltajax.io import ResultsFile
+
+    spec = importlib.util.spec_from_file_location("file_sizes", REPO / "experiments" / "file_sizes.py")
+    tool = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tool)
+    x = np.linspace(-0.4, 0.4, 81)
+    mask = (x[:, None, None] ** 2 + x[None, :, None] ** 2 + x[None, None, :] ** 2) < 0.1
+    res = ResultsFile(tmp_path / "r.h5")
+    for n in "xyz":
+        res.put_axis("workspace", n, x, units="m")
+    res.put("workspace", "reachable", mask, units="1", dims=("x", "y", "z"))
+    path = res.flush()
+    raw = tool.uncompressed_copy(str(path), str(tmp_path / "plain.h5"))
+    assert raw == mask.size + 3 * x.nbytes
+    with h5py.File(tmp_path / "plain.h5") as f:
+        d = f["workspace/reachable"]
+        assert d.compression is None and d.chunks is None and d.attrs["units"] == "1"
+        np.testing.assert_array_equal(d[()], mask)
+    assert (tmp_path / "plain.h5").stat().st_size > 10 * path.stat().st_size
