@@ -23,7 +23,13 @@ from .fields import check_range, float_leaf
 from .geometry import Delta
 from .trajectory import trapezoid_weights
 
+#: The names that lived in :mod:`deltajax.dynamics` before the split; ``deltajax/__init__.py`` keeps them
+#: reachable as ``deltajax.dynamics.X`` for code written against it.
+MOVED_FROM_DYNAMICS = ("Limits", "CycleProfile", "CycleMetrics", "cycle_profile", "cycle_metrics", "within_limits",
+                       "min_cycle_time_bisection")
+
 __all__ = [
+    "MOVED_FROM_DYNAMICS",
     "Limits",
     "CycleProfile",
     "CycleMetrics",
