@@ -14,6 +14,7 @@ CONFIG_DIR = str(__import__("pathlib").Path(__file__).resolve().parents[1] / "co
 def _compose(experiment, *overrides):
     from hydra import compose, initialize_config_dir
 
+    C.register_schemas()  # as deltajax.run does at import
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         return compose(config_name="config", overrides=[f"experiment={experiment}", *overrides])
 
@@ -45,17 +46,15 @@ def test_papers_hold_the_numbers_the_jobs_store():
     assert set(dj.papers.FRANCO2026_INDEX_STATS) == {0.25, 0.5, 0.75}
 
 
+@pytest.mark.slow  # ~3.4 CPU-s: the first eager JAX ops of the cases (the job reuses them)
 def test_reconfig_motion_is_validated_before_the_claim():
-    import jax
-
-    with jax.experimental.enable_x64():
-        _validate(_compose("reconfig_motion"))
-        for override, message in (("experiment.drive.force=0", r"experiment\.drive\.force must be > 0"),
-                                  ("experiment.R_step=0.0013", r"experiment\.R_step=0\.0013 m"),
-                                  ("experiment.refine.n_ctrl=3", r"experiment\.refine\.n_ctrl must be >= 6"),
-                                  ("experiment.cases.adept.law=linear", r"experiment\.cases\.adept\.law")):
-            with pytest.raises(ConfigError, match=message):
-                _validate(_compose("reconfig_motion", override))
+    _validate(_compose("reconfig_motion"))  # float64 (conftest), as the CLI at its default precision
+    for override, message in (("experiment.drive.force=0", r"experiment\.drive\.force must be > 0"),
+                              ("experiment.R_step=0.0013", r"experiment\.R_step=0\.0013 m"),
+                              ("experiment.refine.n_ctrl=3", r"experiment\.refine\.n_ctrl must be >= 6"),
+                              ("experiment.cases.adept.law=linear", r"experiment\.cases\.adept\.law")):
+        with pytest.raises(ConfigError, match=message):
+            _validate(_compose("reconfig_motion", override))
 
 
 def test_job_specs_are_plain_values_read_once():
