@@ -154,24 +154,63 @@ def _validate_top(cfg: Mapping[str, Any]) -> None:
     _field("shard", cfg.get("shard", 0), kind="int", lo=0, hi=n_shards - 1)
 
 
+def workspace_grid_from_config(g: Mapping[str, Any], robot=None):
+    """The grid of ``experiment.grid`` (h, x, y, z, bounds in m); an axis given as null is sized from the robot's
+    reach bound (:func:`deltajax.workspace.driver.reach_box`, widened outwards to whole steps of h, y symmetric)."""
+    from .workspace import make_grid
+    from .workspace.driver import reach_box
+
+    h = _field("experiment.grid.h", g.get("h"), lo=0, lo_open=True)
+    box = reach_box(robot) if robot is not None else None
+
+    def pair(i, key):
+        v = g.get(key)
+        if v is None and box is not None:  # from the reach bound, on whole steps of h (y symmetric: mirror halving)
+            lo, hi = box[i]
+            if key == "y":
+                n = math.ceil(max(-lo, hi) / h - 1e-9)
+                return -n * h, n * h
+            return math.floor(lo / h + 1e-9) * h, math.ceil(hi / h - 1e-9) * h
+        lo, hi = _vector(f"experiment.grid.{key}", v, 2)
+        if not hi >= lo:
+            raise ConfigError(f"experiment.grid.{key} must be [lo, hi] with lo <= hi (m), got {[lo, hi]!r}")
+        return lo, hi
+
+    bounds = g.get("bounds")
+    auto = [k for k in ("x", "y", "z") if g.get(k) is None]
+    if auto and bounds is not None:
+        raise ConfigError(f"experiment.grid.bounds must be null when the grid is sized from the reach bound "
+                          f"(experiment.grid.{'/'.join(auto)}=null), got {bounds!r}")
+    if bounds is not None:
+        if not hasattr(bounds, "__len__") or len(bounds) != 3:
+            raise ConfigError(f"experiment.grid.bounds must be null or [[x0,x1],[y0,y1],[z0,z1]] (m), "
+                              f"got {bounds!r}")
+        bounds = [_vector(f"experiment.grid.bounds[{i}]", b, 2) for i, b in enumerate(bounds)]
+        for (lo, hi), k in zip(bounds, "xyz"):
+            if not hi > lo:
+                raise ConfigError(f"experiment.grid.bounds ({k}) must have lo < hi (m), got {[lo, hi]!r}")
+    axes = (pair(0, "x"), pair(1, "y"), pair(2, "z"))
+    try:
+        return make_grid(*axes, h, bounds=bounds)
+    except ValueError as err:
+        raise ConfigError(f"experiment.grid: {err}") from None
+
+
+def paper_grid_from_config(e: Mapping[str, Any]):
+    """The Franco-López 2026 grid at spacing ``experiment.h`` (m, default 0.002)."""
+    from .workspace import franco2026_grid
+
+    h = _field("experiment.h", e.get("h", 0.002), lo=0, lo_open=True)
+    try:
+        return franco2026_grid(h)
+    except ValueError as err:
+        raise ConfigError(f"experiment.h={h!r}: {err}") from None
+
+
 def _v_workspace_grid(e, cfg, robot, recon) -> None:
     from .indices import INDEX_NAMES
 
-    g = e.get("grid") or {}
-    _field("experiment.grid.h", g.get("h"), lo=0, lo_open=True)
-    for k in ("x", "y", "z"):
-        if g.get(k) is not None:
-            lo, hi = _vector(f"experiment.grid.{k}", g.get(k), 2)
-            if not hi >= lo:
-                raise ConfigError(f"experiment.grid.{k} must be [lo, hi] with lo <= hi (m), got {[lo, hi]!r}")
-    if g.get("bounds") is not None:
-        b = g.get("bounds")
-        if not hasattr(b, "__len__") or len(b) != 3:
-            raise ConfigError(f"experiment.grid.bounds must be null or [[x0,x1],[y0,y1],[z0,z1]] (m), got {b!r}")
-        for i, k in enumerate("xyz"):
-            lo, hi = _vector(f"experiment.grid.bounds[{i}]", b[i], 2)
-            if not hi > lo:
-                raise ConfigError(f"experiment.grid.bounds[{i}] ({k}) must have lo < hi (m), got {[lo, hi]!r}")
+    workspace_grid_from_config(e.get("grid") or {}, robot)
     _field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
     _field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True)
     _field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
@@ -187,7 +226,7 @@ def _v_workspace_grid(e, cfg, robot, recon) -> None:
 
 
 def _v_paper_grid(e, cfg, robot, recon) -> None:
-    _field("experiment.h", e.get("h"), lo=0, lo_open=True)
+    paper_grid_from_config(e)
     _field("experiment.chunk_points", e.get("chunk_points"), kind="int", lo=1)
     _field("experiment.checkpoint", e.get("checkpoint", True), kind="bool")
     if recon is None:

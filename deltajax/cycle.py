@@ -21,8 +21,15 @@ from .dynamics import (Motion, flat_efforts, flat_motion, inverse_dynamics_motio
                        require_mass, virtual_work_split)
 from .fields import check_range, float_leaf
 from .geometry import Delta
+from .trajectory import trapezoid_weights
+
+#: The names that lived in :mod:`deltajax.dynamics` before the split; ``deltajax/__init__.py`` keeps them
+#: reachable as ``deltajax.dynamics.X`` for code written against it.
+MOVED_FROM_DYNAMICS = ("Limits", "CycleProfile", "CycleMetrics", "cycle_profile", "cycle_metrics", "within_limits",
+                       "min_cycle_time_bisection")
 
 __all__ = [
+    "MOVED_FROM_DYNAMICS",
     "Limits",
     "CycleProfile",
     "CycleMetrics",
@@ -252,10 +259,6 @@ def _max_sum_reduce_jvp(primals, tangents):
     return out, t_out + tuple(jnp.sum(t, axis=0) for t in t_sum)
 
 
-def _trapezoid_weights(n, dtype):
-    return jnp.ones((n,), dtype).at[0].set(0.5).at[-1].set(0.5) / (n - 1)
-
-
 def cycle_metrics(robot: Delta, cycle, limits: Limits, *, method: str = "virtual_work") -> CycleMetrics:
     """Peak/RMS torque, peak speed and minimum cycle time of one design on one cycle (pure, vmappable).
 
@@ -278,7 +281,7 @@ def cycle_metrics(robot: Delta, cycle, limits: Limits, *, method: str = "virtual
     T = cycle.duration
     inv_T2 = 1.0 / (T * T)
     safe = lambda x: jnp.where(ok, x, 0.0)  # noqa: E731
-    w = _trapezoid_weights(ok.shape[0], col.fR_in.dtype)
+    w = trapezoid_weights(ok.shape[0], 1.0 / (ok.shape[0] - 1), col.fR_in.dtype)
     tq = jnp.broadcast_to(limits.torque, (3,))
     a = [safe(x) for x in col.tau_in] + [safe(col.fR_in)]
     g = [safe(x) for x in col.tau_g] + [safe(col.fR_g)]

@@ -565,17 +565,3 @@ def energy_from_joints(robot: Delta, theta, theta_dot, R_dot=0.0) -> tuple[Float
     q = jnp.concatenate([jnp.reshape(robot.base_radius, (1,)).astype(dtype), theta.astype(dtype)])
     qd = jnp.concatenate([jnp.reshape(jnp.asarray(R_dot, dtype), (1,)), jnp.asarray(theta_dot, dtype)])
     return _energies(robot, q, qd)
-
-
-# The cycle layer (profiles, limits, metrics) lives in :mod:`deltajax.cycle`, above this module; its names
-# stay reachable as ``deltajax.dynamics.X`` for code written before the split (resolved on first access, so
-# importing this module never imports the layer above it).
-_MOVED_TO_CYCLE = ("Limits", "CycleProfile", "CycleMetrics", "cycle_profile", "cycle_metrics", "within_limits",
-                   "min_cycle_time_bisection")
-
-
-def __getattr__(name: str):
-    if name in _MOVED_TO_CYCLE:
-        from . import cycle
-        return getattr(cycle, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -63,6 +63,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
+from .cycle import cycle_profile
 from .fields import check_range, float_leaf
 
 __all__ = [
@@ -431,8 +432,6 @@ def reconfiguration_drive(robot, cycle, mech: Mechanism, duration=None) -> tuple
     Returns:
         (:class:`deltajax.cycle.CycleProfile`, :class:`DriveProfile`).
     """
-    from .cycle import cycle_profile
-
     if cycle.R is None:
         raise ValueError("reconfiguration_drive needs a cycle with an R profile (cycle.R is None)")
     prof = cycle_profile(robot, cycle, duration)

@@ -67,7 +67,7 @@ from .cycle import cycle_profile
 from .fields import check_range, float_leaf
 from .geometry import ReconfigurableDelta
 from .indices import INDEX_NAMES, point_indices
-from .trajectory import Cycle, task_path, with_R
+from .trajectory import Cycle, task_path, trapezoid_weights, with_R
 
 __all__ = [
     "AGGREGATES",
@@ -161,17 +161,13 @@ class PathResult(NamedTuple):
     bands: tuple
 
 
-def _check_names(criterion: str, aggregate: str, boundary: str = "free") -> None:
+def check_path_args(criterion: str, aggregate: str, boundary: str = "free") -> None:
     if criterion not in INDEX_NAMES:
         raise ValueError(f"criterion must be one of {INDEX_NAMES}, got {criterion!r}")
     if aggregate not in AGGREGATES:
         raise ValueError(f"aggregate must be one of {AGGREGATES}, got {aggregate!r}")
     if boundary not in BOUNDARIES:
         raise ValueError(f"boundary must be one of {BOUNDARIES}, got {boundary!r}")
-
-
-def _trapezoid_weights(K: int, dt, dtype):
-    return (jnp.ones((K,), dtype).at[0].set(0.5).at[-1].set(0.5)) * dt
 
 
 def _check_cycle(cycle: Cycle) -> None:
@@ -181,7 +177,7 @@ def _check_cycle(cycle: Cycle) -> None:
         raise ValueError(f"the cycle needs >= 3 samples, got {cycle.n_samples}")
 
 
-def _criterion_at(robot, p, R, criterion, b_v, b_f, beta):
+def criterion_at(robot, p, R, criterion, b_v, b_f, beta):
     """(feasible, value) of one point at base radius R (m): the public kernel :func:`deltajax.point_indices`."""
     cs, ind = point_indices(robot.with_base_radius(R), p, b_v=b_v, b_f=b_f, beta=beta)
     v = getattr(ind, criterion)
@@ -189,7 +185,7 @@ def _criterion_at(robot, p, R, criterion, b_v, b_f, beta):
     return ok, jnp.where(ok, v, jnp.nan)
 
 
-def _forces(robot, cycle: Cycle, p, pd, pdd, R, R_dot, R_ddot):
+def path_forces(robot, cycle: Cycle, p, pd, pdd, R, R_dot, R_ddot):
     """F_R (N) at arbitrary samples (flat arrays) via the public :func:`deltajax.cycle_profile` at T = 1 s."""
     n = p.shape[0]
     probe = Cycle(u=jnp.linspace(0.0, 1.0, n, dtype=p.dtype), x=p, dx=pd, ddx=pdd, duration=1.0,
@@ -214,7 +210,7 @@ def path_tables(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_ti
     dtype = x.dtype
     R = recon.R_samples().astype(dtype)
     K, n = x.shape[0], R.shape[0]
-    feas, val = jax.vmap(jax.vmap(lambda p, r: _criterion_at(robot, p, r, criterion, b_v, b_f, beta),
+    feas, val = jax.vmap(jax.vmap(lambda p, r: criterion_at(robot, p, r, criterion, b_v, b_f, beta),
                                   in_axes=(None, 0)), in_axes=(0, None))(x, R)
     # four probes (Rdot, Rddot) = (0, 0), (1, 0), (-1, 0), (0, 1) give the exact quadratic/affine coefficients
     probes = jnp.asarray([[0.0, 0.0], [1.0, 0.0], [-1.0, 0.0], [0.0, 1.0]], dtype)
@@ -222,7 +218,7 @@ def path_tables(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_ti
     RR = jnp.broadcast_to(R[None, :, None], (K, n, 4)).reshape(-1)
     vd = jnp.broadcast_to(probes[None, None, :, 0], (K, n, 4)).reshape(-1)
     vdd = jnp.broadcast_to(probes[None, None, :, 1], (K, n, 4)).reshape(-1)
-    F, _, ok = _forces(robot, cycle, rep(x), rep(xd), rep(xdd), RR, vd, vdd)
+    F, _, ok = path_forces(robot, cycle, rep(x), rep(xd), rep(xdd), RR, vd, vdd)
     F = F.reshape(K, n, 4)
     ok = jnp.all(ok.reshape(K, n, 4), axis=-1)
     c0 = F[..., 0]
@@ -234,7 +230,7 @@ def path_tables(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_ti
     dt = cycle.duration / (K - 1)
     return PathTables(t=cycle.time(), R=R, value=jnp.where(feasible, val, jnp.nan), feasible=feasible,
                       force_coef=jnp.where(feasible[..., None], coef, jnp.nan),
-                      weights=_trapezoid_weights(K, dt, dtype), R_step=jnp.asarray(recon.R_step, dtype))
+                      weights=trapezoid_weights(K, dt, dtype), R_step=jnp.asarray(recon.R_step, dtype))
 
 
 def _force_eval(coef, v, acc):
@@ -254,7 +250,7 @@ def _bands(recon: ReconfigurableDelta, cycle: Cycle, limits: RDriveLimits) -> tu
 
 # -- the DP ------------------------------------------------------------------------------------------------
 
-def _lex_better(p1, s1, p2, s2):
+def lex_better(p1, s1, p2, s2):
     return (p1 > p2) | ((p1 == p2) & (s1 > s2))
 
 
@@ -462,7 +458,7 @@ def resolve_path(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_t
         :class:`PathResult` (``ok=False`` and NaN arrays when no sample path satisfies every constraint).
     """
     limits = RDriveLimits() if limits is None else limits  # built at call time: the caller's precision
-    _check_names(criterion, aggregate, boundary)
+    check_path_args(criterion, aggregate, boundary)
     _check_cycle(cycle)
     if tables is None:
         tables = jax.jit(path_tables, static_argnames=("criterion",))(recon, cycle, criterion, b_v=b_v, b_f=b_f,
@@ -484,7 +480,7 @@ def resolve_tables(tables: PathTables, dt: float, w: int, a: int, force_limit: f
         force_limit: |F_R| limit (N).
     """
     if aggregate not in AGGREGATES or boundary not in BOUNDARIES:
-        _check_names(INDEX_NAMES[0], aggregate, boundary)
+        check_path_args(INDEX_NAMES[0], aggregate, boundary)
     n = tables.value.shape[1]
     w = int(min(max(w, 0), n - 1))
     a = int(min(max(a, 0), 2 * w))
@@ -523,7 +519,7 @@ def path_optimum(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_t
     ``jax.vmap(lambda r: path_optimum(r, cycle, w=w, a=a))(population)``. For ``boundary="closed"`` every start
     sample is tried (no host filter), ``start_batch`` at a time.
     """
-    _check_names(criterion, aggregate, boundary)
+    check_path_args(criterion, aggregate, boundary)
     tab = path_tables(recon, cycle, criterion, b_v=b_v, b_f=b_f, beta=beta)
     dt = cycle.duration / (cycle.n_samples - 1)
     n = tab.value.shape[1]

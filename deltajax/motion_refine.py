@@ -1,4 +1,5 @@
-"""Smooth refinement of a path-optimal R(t): optax on a cubic B-spline (see :mod:`deltajax.motion`).
+"""Smooth refinement of a path-optimal R(t): optax on a cubic B-spline (see :mod:`deltajax.motion`), and
+:func:`path_report`, what running a given R(t) costs (efforts, drive, cycle times).
 
 R(t) = B c with a uniform cubic B-spline basis (``n_ctrl`` control points), initialised by least squares on the
 DP solution (shrunk toward its mean until it meets the rate limits), improved by Adam on a smooth surrogate of
@@ -18,12 +19,13 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .cycle import Limits, cycle_metrics, cycle_profile
 from .geometry import ReconfigurableDelta
-from .motion import (PathResult, RDriveLimits, _check_names, _criterion_at, _forces, _lex_better,
-                     _trapezoid_weights)
-from .trajectory import Cycle
+from .mechanism import drive_profile
+from .motion import PathResult, RDriveLimits, check_path_args, criterion_at, lex_better, path_forces
+from .trajectory import Cycle, trapezoid_weights, with_R
 
-__all__ = ["RefineResult", "refine_path", "spline_basis"]
+__all__ = ["RefineResult", "refine_path", "spline_basis", "path_cycle_times", "path_report"]
 
 
 def spline_basis(t: np.ndarray, T: float, n_ctrl: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, float]:
@@ -98,7 +100,7 @@ def refine_path(recon: ReconfigurableDelta, cycle: Cycle, dp: PathResult, criter
     import optax
 
     limits = RDriveLimits() if limits is None else limits  # built at call time: the caller's precision
-    _check_names(criterion, aggregate, boundary)
+    check_path_args(criterion, aggregate, boundary)
     if not dp.ok:
         raise ValueError("refine_path needs a feasible DP solution (dp.ok is False)")
     robot = recon.robot
@@ -110,7 +112,7 @@ def refine_path(recon: ReconfigurableDelta, cycle: Cycle, dp: PathResult, criter
     B, B1, B2, h = spline_basis(t, T, n_ctrl)
     c0 = np.linalg.lstsq(B, np.asarray(dp.R), rcond=None)[0]
     Bj, B1j, B2j = (jnp.asarray(M, dtype) for M in (B, B1, B2))
-    wts = _trapezoid_weights(K, T / (K - 1), dtype)
+    wts = trapezoid_weights(K, T / (K - 1), dtype)
     Rlo, Rhi = float(recon.R_min), float(recon.R_max)
     sp, ac, fm = float(limits.speed), float(limits.acceleration), float(limits.force)
     pm = aggregate == "min"
@@ -120,8 +122,8 @@ def refine_path(recon: ReconfigurableDelta, cycle: Cycle, dp: PathResult, criter
 
     def evaluate(c):
         R, Rd, Rdd = profile(c)
-        feas, val = jax.vmap(lambda p, r: _criterion_at(robot, p, r, criterion, b_v, b_f, beta))(x, R)
-        F, _, okd = _forces(robot, cycle, x, xd, xdd, R, Rd, Rdd)
+        feas, val = jax.vmap(lambda p, r: criterion_at(robot, p, r, criterion, b_v, b_f, beta))(x, R)
+        F, _, okd = path_forces(robot, cycle, x, xd, xdd, R, Rd, Rdd)
         return R, Rd, Rdd, feas & okd, val, F
 
     def viol(c, scale):
@@ -193,7 +195,7 @@ def refine_path(recon: ReconfigurableDelta, cycle: Cycle, dp: PathResult, criter
             upd, st = opt.update(g, st, c)
             c = project(optax.apply_updates(c, upd))
             ok, p, s = exact(c)
-            better = ok & _lex_better(p, s, best[1], best[2])
+            better = ok & lex_better(p, s, best[1], best[2])
             best = jax.tree.map(lambda new, old: jnp.where(better, new, old), (c, p, s), best)
             return (c, st, best), None
 
@@ -219,3 +221,47 @@ def refine_path(recon: ReconfigurableDelta, cycle: Cycle, dp: PathResult, criter
               else f"spline score {spline_score[0]:.6g} does not beat the DP's {dp_score[0]:.6g}")
     return RefineResult(False, np.asarray(dp.R), np.asarray(dp.R_dot), np.asarray(dp.R_ddot), np.asarray(dp.value),
                         np.asarray(dp.force_R), dp_score, dp_score, spline_score, np.asarray(c_best), reason)
+
+
+def path_cycle_times(robot, cycle: Cycle, R, R_dot, R_ddot, arms: Limits, drive: RDriveLimits) -> tuple[float, float]:
+    """(minimum cycle time for the arms only, minimum cycle time with the R drive too) of ``cycle`` carrying
+    R(t) (m, m/s, m/s^2 at the nominal duration), time-scaled with u fixed (:func:`deltajax.cycle_metrics`;
+    the drive's acceleration limit in closed form: R'' / T^2 <= limit)."""
+    c = with_R(cycle, R, R_dot, R_ddot)
+    t_arms = cycle_metrics(robot, c, arms).cycle_time
+    full = cycle_metrics(robot, c, Limits(torque=arms.torque, speed=arms.speed, force_R=float(drive.force),
+                                          speed_R=float(drive.speed)))
+    T = float(cycle.duration)
+    Rdd_u = np.max(np.abs(np.asarray(R_ddot))) * T * T        # R'' in normalised time
+    acc = float(drive.acceleration)
+    T_acc = math.sqrt(Rdd_u / acc) if math.isfinite(acc) else 0.0
+    return float(t_arms), max(float(full.cycle_time), T_acc)
+
+
+def path_report(robot, cycle: Cycle, mech, R, R_dot, R_ddot, value, arms: Limits, drive: RDriveLimits,
+                jump: float):
+    """What running R(t) along ``cycle`` costs: (CycleProfile, DriveProfile of ``mech``, summary dict).
+
+    The summary holds the trapezoid mean and the min of ``value`` (the criterion per sample), the largest
+    |Rdot|, |Rddot|, |F_R|, motor-side drive effort and speed, arm torque, the number of steps larger than
+    ``jump`` (m) and the largest step, both cycle times of :func:`path_cycle_times`, and whether the path keeps
+    the drive's limits (1/0).
+    """
+    prof = cycle_profile(robot, with_R(cycle, R, R_dot, R_ddot))
+    drv = drive_profile(mech, prof.R, prof.R_dot, prof.force_R)
+    T_arms, T_drive = path_cycle_times(robot, cycle, R, R_dot, R_ddot, arms, drive)
+    R, Rd, Rdd, value = (np.asarray(x) for x in (R, R_dot, R_ddot, value))
+    dR = np.abs(np.diff(R))
+    within = (np.all(np.abs(Rd) <= float(drive.speed) * (1 + 1e-9))
+              and np.all(np.abs(Rdd) <= float(drive.acceleration) * (1 + 1e-9) + 1e-9)
+              and np.all(np.abs(np.asarray(prof.force_R)) <= float(drive.force)))
+    w = np.asarray(trapezoid_weights(len(value), 1.0, np.float64))
+    row = dict(mean_value=float(np.sum(w * value) / (len(value) - 1)), min_value=float(np.min(value)),
+               max_abs_R_dot=float(np.max(np.abs(Rd))), max_abs_R_ddot=float(np.max(np.abs(Rdd))),
+               max_abs_force_R=float(np.max(np.abs(prof.force_R))),
+               max_abs_screw_torque=float(np.max(np.abs(drv.effort))),
+               max_screw_speed=float(np.max(np.abs(drv.motor_speed))),
+               peak_arm_torque=float(np.max(np.abs(prof.tau))), n_jumps=int(np.sum(dR > jump)),
+               max_jump=float(dR.max()), cycle_time_arms=T_arms, cycle_time_with_drive=T_drive,
+               within_drive_limits=int(bool(within)))
+    return prof, drv, row

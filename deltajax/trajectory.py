@@ -35,6 +35,7 @@ __all__ = [
     "with_R_profile",
     "with_R",
     "task_path",
+    "trapezoid_weights",
     "ADEPT_HEIGHT",
     "ADEPT_WIDTH",
 ]
@@ -341,3 +342,8 @@ def task_path(points: Sequence[Sequence[float]], *, segment_duration: float = 0.
     K = x.shape[0]
     u = jnp.arange(K, dtype=x.dtype) / (K - 1)
     return Cycle(u=u, x=x, dx=dx, ddx=ddx, duration=segment_duration * n_seg, space="cartesian")
+
+
+def trapezoid_weights(K: int, dt, dtype) -> jax.Array:
+    """Trapezoidal-rule weights of K equally spaced samples dt apart: sum_j w_j f_j ~ integral of f."""
+    return (jnp.ones((K,), dtype).at[0].set(0.5).at[-1].set(0.5)) * dt

@@ -35,6 +35,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import deltajax as dj  # noqa: E402
+from deltajax import cycle as cy  # noqa: E402
 from deltajax import dynamics as dyn  # noqa: E402
 from deltajax import trajectory as tr  # noqa: E402
 
@@ -198,11 +199,11 @@ def main():
             return dyn.inverse_dynamics_motion(robot, dyn.joint_motion(robot, p_, pd_, pdd_)).tau
         return jax.vmap(one)(p, pd, pdd)
 
-    limits = dyn.Limits(torque=20.0, speed=10.0)
+    limits = cy.Limits(torque=20.0, speed=10.0)
     fns = {
-        "jax_torque": jax.jit(jax.vmap(lambda rob: dyn.cycle_profile(rob, cycle).tau)),
+        "jax_torque": jax.jit(jax.vmap(lambda rob: cy.cycle_profile(rob, cycle).tau)),
         "jax_point_api": jax.jit(jax.vmap(point_api, in_axes=(0, None, None, None))),
-        "jax_metrics": jax.jit(jax.vmap(dyn.cycle_metrics, in_axes=(0, None, None))),
+        "jax_metrics": jax.jit(jax.vmap(cy.cycle_metrics, in_axes=(0, None, None))),
     }
     calls = {"jax_torque": lambda f: f(pop), "jax_point_api": lambda f: f(pop, x, xd, xdd),
              "jax_metrics": lambda f: f(pop, cycle, limits)}

@@ -426,7 +426,7 @@ BAD = [
     ("workspace_grid", "+foo=1", r"unknown top-level key\(s\) \['foo'\]"),
     ("reconfig_indices", "beta=nan", "beta must be a finite number, got nan"),
     ("reconfig_indices", "experiment.mode=slow", "experiment.mode must be one of"),
-    ("dynamics_cycle", "experiment.n_samples=1", "experiment.n_samples must be >= 2, got 1"),
+    ("dynamics_cycle", "experiment.n_samples=1", "experiment.n_samples must be >= 11, got 1"),
     ("boundary_search", "experiment.eps=nan", "experiment.eps must be a finite number"),
 ]
 

@@ -118,7 +118,7 @@ def test_force_is_exactly_quadratic_in_Rdot_and_affine_in_Rddot(tiny):
     k = np.array([1, 3, 2, 4])
     v = rng.uniform(-0.8, 0.8, 4)
     acc = rng.uniform(-20, 20, 4)
-    F, _, ok = mo._forces(recon.robot, cyc, x[j], xd[j], xdd[j], tab.R[k], jnp.asarray(v), jnp.asarray(acc))
+    F, _, ok = mo.path_forces(recon.robot, cyc, x[j], xd[j], xdd[j], tab.R[k], jnp.asarray(v), jnp.asarray(acc))
     c = np.asarray(tab.force_coef)[j, k]
     assert bool(jnp.all(ok))
     np.testing.assert_allclose(np.asarray(F), c[:, 0] + v * c[:, 1] + v ** 2 * c[:, 2] + acc * c[:, 3],

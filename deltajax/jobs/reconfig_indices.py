@@ -17,9 +17,8 @@ import time
 
 import numpy as np
 
-from ..config import ConfigError
+from ..config import ConfigError, paper_grid_from_config
 from ..indices import INDEX_NAMES
-from .reconfig_workspace import grid_from_config
 
 STATS = ("min", "max", "mean")
 
@@ -54,7 +53,7 @@ def run(ctx) -> None:
     for n in store:
         if n not in INDEX_NAMES:
             raise ConfigError(f"experiment.store_fields: {n!r} is not one of {INDEX_NAMES}")
-    grid = grid_from_config(cfg)
+    grid = paper_grid_from_config(cfg)
     h = grid.h
     chunk = int(cfg.get("chunk_points", 1 << 18))
     ck = ctx.run_dir / "checkpoint" if cfg.get("checkpoint", True) else None

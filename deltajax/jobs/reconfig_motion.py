@@ -33,49 +33,14 @@ import numpy as np
 
 from .. import motion as mo
 from ..config import reconfig_motion_spec
-from ..cycle import Limits, cycle_metrics, cycle_profile
-from ..mechanism import drive_profile
-from ..motion_refine import refine_path
+from ..cycle import Limits
+from ..motion_refine import path_report, refine_path
 
 METHODS = ("fixed", "pointwise", "path_dp", "path_refined")
 SUMMARY = (("mean_value", "1"), ("min_value", "1"), ("max_abs_R_dot", "m/s"), ("max_abs_R_ddot", "m/s^2"),
            ("max_abs_force_R", "N"), ("max_abs_screw_torque", "N m"), ("max_screw_speed", "rad/s"),
            ("peak_arm_torque", "N m"), ("n_jumps", "1"), ("max_jump", "m"), ("cycle_time_arms", "s"),
            ("cycle_time_with_drive", "s"), ("within_drive_limits", "1"))
-
-
-def _metrics_T(robot, cyc, R, Rd, Rdd, s):
-    """(cycle time for the arms only, cycle time with the R drive) of the time-scaled path."""
-    c = mo.with_R(cyc, R, Rd, Rdd)
-    arms = cycle_metrics(robot, c, Limits(torque=s["torque_limit"], speed=s["speed_limit"]))
-    lim = s["drive"]
-    full = cycle_metrics(robot, c, Limits(torque=s["torque_limit"], speed=s["speed_limit"], force_R=float(lim.force),
-                                          speed_R=float(lim.speed)))
-    T = float(cyc.duration)
-    Rdd_u = np.max(np.abs(np.asarray(Rdd))) * T * T        # R'' in normalised time
-    T_acc = math.sqrt(Rdd_u / float(lim.acceleration)) if math.isfinite(float(lim.acceleration)) else 0.0
-    return float(arms.cycle_time), max(float(full.cycle_time), T_acc)
-
-
-def _evaluate(robot, cyc, mech, R, Rd, Rdd, value, s, jump):
-    c = mo.with_R(cyc, R, Rd, Rdd)
-    prof = cycle_profile(robot, c)
-    drv = drive_profile(mech, prof.R, prof.R_dot, prof.force_R)
-    T_arms, T_drive = _metrics_T(robot, cyc, R, Rd, Rdd, s)
-    dR = np.abs(np.diff(np.asarray(R)))
-    lim = s["drive"]
-    within = (np.all(np.abs(Rd) <= float(lim.speed) * (1 + 1e-9)) and np.all(np.abs(Rdd) <= float(lim.acceleration)
-              * (1 + 1e-9) + 1e-9) and np.all(np.abs(np.asarray(prof.force_R)) <= float(lim.force)))
-    row = dict(mean_value=float(np.sum(np.asarray(mo._trapezoid_weights(len(value), 1.0, np.float64)) * value)
-                                / (len(value) - 1)),
-               min_value=float(np.min(value)), max_abs_R_dot=float(np.max(np.abs(Rd))),
-               max_abs_R_ddot=float(np.max(np.abs(Rdd))), max_abs_force_R=float(np.max(np.abs(prof.force_R))),
-               max_abs_screw_torque=float(np.max(np.abs(drv.effort))),
-               max_screw_speed=float(np.max(np.abs(drv.motor_speed))),
-               peak_arm_torque=float(np.max(np.abs(prof.tau))), n_jumps=int(np.sum(dR > jump)),
-               max_jump=float(dR.max()), cycle_time_arms=T_arms, cycle_time_with_drive=T_drive,
-               within_drive_limits=int(bool(within)))
-    return prof, drv, row
 
 
 def _plot_landscape(ctx, name, t, Rg, table, paths, crit):
@@ -151,6 +116,7 @@ def run(ctx) -> None:
     kw = dict(b_v=s["b_v"], b_f=s["b_f"], beta=s["beta"])
     tables_jit = jax.jit(mo.path_tables, static_argnames=("criterion",))
     lim = s["drive"]
+    arms = Limits(torque=s["torque_limit"], speed=s["speed_limit"])
     for name, (cyc, boundary) in s["cases"].items():
         t0 = time.perf_counter()
         c0 = time.process_time()
@@ -184,7 +150,7 @@ def run(ctx) -> None:
                     ctx.log(f"{name}: {m} has no feasible R on this path; skipped")
                     continue
                 R, Rd, Rdd, val = r.R, r.R_dot, r.R_ddot, r.value
-            prof, drv, row = _evaluate(robot, cyc, mech, R, Rd, Rdd, np.asarray(val), s, jump)
+            prof, drv, row = path_report(robot, cyc, mech, R, Rd, Rdd, np.asarray(val), arms, lim, jump)
             data[m] = dict(R=np.asarray(R), R_dot=np.asarray(Rd), R_ddot=np.asarray(Rdd), value=np.asarray(val),
                            force_R=np.asarray(prof.force_R), tau=np.asarray(prof.tau), screw_angle=np.asarray(drv.q),
                            screw_torque=np.asarray(drv.effort), drive_ok=np.asarray(drv.ok))

@@ -10,21 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import ConfigError
+from ..config import ConfigError, paper_grid_from_config
 from ..papers import FRANCO2026_VOLUMES as PAPER
-
-
-def grid_from_config(cfg):
-    """The paper's grid at spacing ``experiment.h`` (m), validated (errors name the field)."""
-    from ..workspace import franco2026_grid
-
-    h = float(cfg.get("h", 0.002))
-    if not h > 0:
-        raise ConfigError(f"experiment.h must be > 0 m, got {h!r}")
-    try:
-        return franco2026_grid(h)
-    except ValueError as e:
-        raise ConfigError(f"experiment.h={h!r}: {e}") from None
 
 
 def run(ctx) -> None:
@@ -35,7 +22,7 @@ def run(ctx) -> None:
     cfg = ctx.cfg.experiment
     if ctx.recon is None:
         raise ConfigError("reconfig_workspace needs a reconfigurable robot: robot.R_range is null")
-    grid = grid_from_config(cfg)
+    grid = paper_grid_from_config(cfg)
     h = grid.h
     chunk = int(cfg.get("chunk_points", 1 << 20))
     ck = ctx.run_dir / "checkpoint" if cfg.get("checkpoint", True) else None
