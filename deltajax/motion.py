@@ -263,10 +263,12 @@ def _lex_argmax(P, S, axis):
 
 
 def _dp(value, feasible, coef, weights, dR, dt, fmax, k0, *, w: int, a: int, primary_min: bool, boundary: str,
-        backtrack: bool):
+        backtrack: bool, speed=math.inf, accel=math.inf):
     """Viterbi over states (k_j, d_j = k_j - k_{j-1}); returns (P, S, path k (K,) or None).
 
-    ``k0`` (traced int) fixes the start sample for ``boundary="closed"`` (ignored otherwise).
+    ``k0`` (traced int) fixes the start sample for ``boundary="closed"`` (ignored otherwise). ``speed`` (m/s) and
+    ``accel`` (m/s^2) are traced limits applied inside the static bands w, a (for a population whose R step
+    differs per design: bands from the smallest step, limits per design); ``inf`` leaves the bands alone.
     """
     K, n = value.shape
     D, A = 2 * w + 1, 2 * a + 1
@@ -293,7 +295,8 @@ def _dp(value, feasible, coef, weights, dR, dt, fmax, k0, *, w: int, a: int, pri
     else:
         P = wv[0][k0c] + wv[1][:, None]
         S = jnp.minimum(v[0][k0c], v[1][:, None])
-    init_ok = valid0
+    slack = 1.0 + 1e-9   # as _bands: a limit that is exactly a whole number of samples keeps that band
+    init_ok = valid0 & (jnp.abs(ds)[None, :] * dR <= speed * dt * slack)
     if boundary in ("rest", "closed"):
         init_ok = init_ok & (ds[None, :] == 0)
     if boundary == "closed":
@@ -308,6 +311,7 @@ def _dp(value, feasible, coef, weights, dR, dt, fmax, k0, *, w: int, a: int, pri
     cur = kn - dn
     prev = cur - d_prev
     valid = (jnp.abs(d_prev) <= w) & (cur >= 0) & (cur < n)
+    valid = valid & (jnp.abs(dn) * dR <= speed * dt * slack) & (jnp.abs(delta) * dR <= accel * dt * dt * slack)
     cur_c = jnp.clip(cur, 0, n - 1)
     dprev_c = jnp.clip(d_prev + w, 0, D - 1)
     prev_c = jnp.clip(prev, 0, n - 1)
@@ -509,7 +513,8 @@ def path_bands(recon: ReconfigurableDelta, cycle: Cycle, limits: RDriveLimits) -
 
 def path_optimum(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_tilde", *, w: int, a: int,
                  force_limit: Any = math.inf, aggregate: str = "integral", boundary: str = "free",
-                 b_v: float = 2.0, b_f: float = 4.2, beta: float = 0.5, start_batch: int = 16
+                 b_v: float = 2.0, b_f: float = 4.2, beta: float = 0.5, start_batch: int = 16,
+                 speed_limit: Any = math.inf, accel_limit: Any = math.inf
                  ) -> tuple[Float[Array, ""], Float[Array, ""]]:
     """The DP's optimal (primary, secondary) score, pure and jit/vmap-able over designs (no path returned).
 
@@ -517,7 +522,9 @@ def path_optimum(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_t
     :func:`resolve_path` (``-inf`` where no path meets the limits). The bands are static: compute them once with
     :func:`path_bands` (they depend only on the R step and dt, shared by a population);
     ``jax.vmap(lambda r: path_optimum(r, cycle, w=w, a=a))(population)``. For ``boundary="closed"`` every start
-    sample is tried (no host filter), ``start_batch`` at a time.
+    sample is tried (no host filter), ``start_batch`` at a time. ``speed_limit`` (m/s) / ``accel_limit`` (m/s^2):
+    traced per-design limits inside the static bands (a population with different R steps: static bands from
+    the smallest step, or w = n_R - 1, a = 2 w, and the limits here).
     """
     check_path_args(criterion, aggregate, boundary)
     tab = path_tables(recon, cycle, criterion, b_v=b_v, b_f=b_f, beta=beta)
@@ -527,10 +534,12 @@ def path_optimum(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_t
     a = int(min(max(a, 0), 2 * w))
     args = (tab.value, tab.feasible, tab.force_coef, tab.weights, tab.R_step, dt, force_limit)
     pm = aggregate == "min"
+    lim = dict(speed=speed_limit, accel=accel_limit)
     if boundary != "closed":
-        P, S, _ = _dp(*args, 0, w=w, a=a, primary_min=pm, boundary=boundary, backtrack=False)
+        P, S, _ = _dp(*args, 0, w=w, a=a, primary_min=pm, boundary=boundary, backtrack=False, **lim)
         return P, S
-    one = lambda k0: _dp(*args, k0, w=w, a=a, primary_min=pm, boundary="closed", backtrack=False)[:2]  # noqa: E731
+    one = lambda k0: _dp(*args, k0, w=w, a=a, primary_min=pm, boundary="closed", backtrack=False,  # noqa: E731
+                         **lim)[:2]
     P, S = jax.lax.map(one, jnp.arange(n), batch_size=start_batch)
     best = jnp.argmax(jnp.where(P == jnp.max(P), S, -jnp.inf))
     return P[best], S[best]

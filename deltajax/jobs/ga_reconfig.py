@@ -54,7 +54,8 @@ STAGES = ("ga", "pareto", "verify", "results", "plots")
 
 _KEYS = {
     "": {"name", "resume", "stop_after", "design", "task", "good_workspace", "joints", "links", "motor", "cycle",
-         "regular_workspace", "objectives", "constraints", "ga", "pareto", "recommend", "verify"},
+         "regular_workspace", "objectives", "constraints", "ga", "pareto", "recommend", "verify",
+         "reconfig"},  # rtmode: experiment.reconfig is checked by deltajax.optimize.operating
     "design": {"n_R", "bounds"},
     "task": {"diameter", "height", "z_top", "n_r", "n_phi", "n_z"},
     "good_workspace": {"index", "threshold", "beta"},
@@ -156,6 +157,27 @@ class Settings:
     pareto: dict
     recommend: str
     verify: dict
+    reconfig: dict = dataclasses.field(default_factory=dict)  # rtmode: operating.settings_from_block
+
+
+def _operating_settings(e: Mapping[str, Any]) -> dict:  # rtmode
+    from ..optimize.operating import OperatingError, settings_from_block
+
+    try:
+        return settings_from_block(e.get("reconfig"))
+    except OperatingError as err:
+        raise ConfigError(str(err)) from None
+
+
+def _operating_spec(s: "Settings"):  # rtmode: the screw linkage is sized for the design space's R range
+    from ..optimize.operating import OperatingError, spec_from_settings
+
+    b = s.bounds
+    rr = (b["R_min"][0], b["R_max"][1]) if "R_min" in b and "R_max" in b else None
+    try:
+        return spec_from_settings(s.reconfig, rr)
+    except OperatingError as err:
+        raise ConfigError(str(err)) from None
 
 
 def settings_from_config(ectx: Mapping[str, Any]) -> Settings:
@@ -277,7 +299,7 @@ def settings_from_config(ectx: Mapping[str, Any]) -> Settings:
     return Settings(resume=resume, stop_after=sa, n_R=n_R, bounds=dict(d["bounds"]), task=task, good=good,
                     joints=joints, links=links, motor=motor, cycle=cycle, regular=regular, mode=mode,
                     objectives=tuple(names), primary=primary, weights=weights, constraints=cons, ga=ga,
-                    pareto=pareto, recommend=recommend, verify=verify)
+                    pareto=pareto, recommend=recommend, verify=verify, reconfig=_operating_settings(e))
 
 
 def _problem(s: Settings, *, fine: bool = False):
@@ -307,7 +329,8 @@ def _problem(s: Settings, *, fine: bool = False):
         enabled.append("size_budget")
     return DesignerProblem.build(task=task, cycle=cycle, motor=motor, joints=joints, links=links, good=good,
                                  regular=regular, n_R_operating=n_op, min_picks=s.constraints["min_picks_per_min"],
-                                 max_arm_sum=s.constraints["max_arm_sum"], enabled=enabled)
+                                 max_arm_sum=s.constraints["max_arm_sum"], enabled=enabled,
+                                 operating=_operating_spec(s))  # rtmode
 
 
 def build(ectx: Mapping[str, Any], robot, recon, *, n_R: Optional[int] = None):
@@ -746,6 +769,12 @@ SUMMARY_METRICS = ("picks_per_min", "regular_volume", "regular_diameter", "peak_
                    "interference_margin", "cycle_time", "R_operating", "gear_ratio", "arm_sum")
 #: The fixed-R variant (R frozen at the operating R) differs from the reconfigurable design only here.
 FIXED_R_METRIC = {"regular_volume": "regular_volume_fixed", "regular_diameter": "regular_diameter_fixed"}
+# rtmode: with experiment.reconfig.mode=path the cycle runs with R(t); its fixed-R variant runs it at the per-task R
+FIXED_R_METRIC.update({m: f"{m}_fixed" for m in ("picks_per_min", "cycle_time", "peak_utilisation", "rms_utilisation",
+                                                 "speed_utilisation", "joint_margin_deg", "interference_margin")})
+#: rtmode: rows added to the summary in mode=path (the R drive's margins, units in DESIGN_UNITS)
+PATH_SUMMARY_METRICS = ("R_path_min", "R_path_max", "path_index_mean", "cycle_time_drive", "R_speed_margin",
+                        "R_accel_margin", "R_force_margin", "screw_torque_peak", "screw_torque_margin")
 
 
 def _summary(ctx, res, data, space, objs, s) -> None:
@@ -754,6 +783,7 @@ def _summary(ctx, res, data, space, objs, s) -> None:
     from ..optimize.designer import DESIGN_SENSE, DESIGN_UNITS
 
     V = data["verify"]
+    metrics = SUMMARY_METRICS + (PATH_SUMMARY_METRICS if s.reconfig.get("mode") == "path" else ())  # rtmode
     rec = int(V["attrs"]["recommended"])
     if rec < 0:
         ctx.log("no feasible design was found on the fine grids: no recommendation (loosen the constraints)")
@@ -761,19 +791,21 @@ def _summary(ctx, res, data, space, objs, s) -> None:
         return
     names = list(V["design_name"])
     params = V["params"]
-    res.put_axis("summary", "metric", np.arange(len(SUMMARY_METRICS)), units="1")
-    res.put("summary", "metric_name", np.asarray(SUMMARY_METRICS, dtype=object), units="1", dims=("metric",))
-    res.put("summary", "metric_units", np.asarray([DESIGN_UNITS[m] for m in SUMMARY_METRICS], dtype=object),
+    res.put_axis("summary", "metric", np.arange(len(metrics)), units="1")
+    res.put("summary", "metric_name", np.asarray(metrics, dtype=object), units="1", dims=("metric",))
+    res.put("summary", "metric_units", np.asarray([DESIGN_UNITS[m] for m in metrics], dtype=object),
             units="1", dims=("metric",))
     direction = [{-1: "higher is better", 1: "lower is better"}.get(DESIGN_SENSE.get(m, 0), "describes the design")
-                 for m in SUMMARY_METRICS]
+                 for m in metrics]
     res.put("summary", "direction", np.asarray(direction, dtype=object), units="1", dims=("metric",))
     for col, i in (("baseline", 0), ("recommended", rec)):
-        res.put("summary", col, np.asarray([float(V[m][i]) for m in SUMMARY_METRICS]), units="mixed",
+        res.put("summary", col, np.asarray([float(V[m][i]) for m in metrics]), units="mixed",
                 dims=("metric",), attrs={"design": names[i], "units_see": "metric_units",
-                                         "variant": "reconfigurable (R chosen per point for the workspace)"})
+                                         "variant": "reconfigurable (R chosen per point for the workspace"
+                                                    + ("; the cycle run with R(t), experiment.reconfig.mode=path)"
+                                                       if s.reconfig.get("mode") == "path" else ")")})
         res.put("summary", f"{col}_fixed_R", np.asarray([float(V[FIXED_R_METRIC.get(m, m)][i])
-                                                         for m in SUMMARY_METRICS]), units="mixed",
+                                                         for m in metrics]), units="mixed",
                 dims=("metric",), attrs={"design": names[i], "units_see": "metric_units",
                                          "variant": "fixed R = the operating R chosen for the task"})
     res.put_axis("summary", "parameter", np.arange(space.dim), units="1")
@@ -784,8 +816,10 @@ def _summary(ctx, res, data, space, objs, s) -> None:
     res.put("summary", "recommended_params", params[rec], units="mixed", dims=("parameter",))
     res.set_attrs("summary", recommended=names[rec], rule=s.recommend, objectives=",".join(objs),
                   fixed_R_variant="R frozen at the operating R chosen for the task (same constraints); its picks/min "
-                                  "and margins equal the reconfigurable design's at that R, its regular workspace is "
-                                  "the good set at that R alone (base plate as the reconfigurable design's)",
+                                  "and margins equal the reconfigurable design's at that R (mode per_task; with "
+                                  "mode=path the reconfigurable design runs the cycle with R(t)), its regular "
+                                  "workspace is the good set at that R alone (base plate as the reconfigurable "
+                                  "design's)", operating_mode=s.reconfig.get("mode", "per_task"),
                   evaluation="fine verification grids (group verify)")
 
 
@@ -809,8 +843,13 @@ def _print_summary(ctx, data) -> None:
     pn, pu = list(S["parameter_name"]), list(S["parameter_units"])
     ctx.log("  parameters: " + "; ".join(f"{n} [{u}] {x:.4g} -> {y:.4g}" for n, u, x, y in
                                           zip(pn, pu, S["baseline_params"], S["recommended_params"])))
-    ctx.log("  the fixed-R variants run the task at the same R, so only the regular workspace differs: that "
-            "difference is what the R actuator buys")
+    if S["attrs"].get("operating_mode", "per_task") == "path":  # rtmode
+        ctx.log("  reconfigurable: the cycle runs with R(t) within the R drive's limits (experiment.reconfig); "
+                "fixed R: at the per-task R. Both columns differ in the cycle metrics and the regular workspace: "
+                "that difference is what the R actuator buys")
+    else:
+        ctx.log("  the fixed-R variants run the task at the same R, so only the regular workspace differs: that "
+                "difference is what the R actuator buys")
 
 
 def _plots(ctx, data, objs, s) -> None:

@@ -43,6 +43,7 @@ from .. import constraints as C
 from ..geometry import ReconfigurableDelta
 from ..trajectory import adept_cycle
 from .objectives import cylinder_points
+from . import operating as OP  # rtmode: the "R(t) along the cycle" operating mode
 
 __all__ = ["DesignerProblem", "DESIGN_METRICS", "DESIGN_UNITS", "DESIGN_SENSE", "CONSTRAINT_NAMES",
            "evaluate_designer", "knee_point"]
@@ -54,11 +55,14 @@ DESIGN_UNITS = {
     "task_index_min": "1", "joint_margin_deg": "deg", "interference_margin": "m", "R_operating": "m",
     "gear_ratio": "1", "arm_sum": "m", "cycle_time": "s",
 }
+# rtmode: the path mode's drive margins and the per-task (fixed-R) values of the cycle metrics
+DESIGN_UNITS.update({**OP.OPERATING_UNITS, **{f"{m}_fixed": DESIGN_UNITS[m] for m in OP.FIXED_VARIANT_METRICS}})
 DESIGN_METRICS = tuple(DESIGN_UNITS)
 DESIGN_SENSE = {"picks_per_min": -1, "regular_volume": -1, "regular_diameter": -1, "regular_volume_fixed": -1,
                 "regular_diameter_fixed": -1, "peak_utilisation": 1, "rms_utilisation": 1, "speed_utilisation": 1,
                 "task_good_fraction": -1, "task_index_min": -1, "joint_margin_deg": -1,
                 "interference_margin": -1, "cycle_time": 1, "arm_sum": 1, "regular_height": -1}
+DESIGN_SENSE.update({**OP.OPERATING_SENSE, **{f"{m}_fixed": DESIGN_SENSE[m] for m in OP.FIXED_VARIANT_METRICS}})  # rtmode
 #: Objectives a designer may choose (the others are reported, or describe the design).
 OBJECTIVES = ("picks_per_min", "regular_volume", "regular_diameter", "regular_volume_fixed", "peak_utilisation",
               "rms_utilisation", "joint_margin_deg", "interference_margin", "task_index_min", "arm_sum")
@@ -84,6 +88,9 @@ class DesignerProblem:
         min_picks: required cycle rate (1/min; 0: only "the cycle runs").
         max_arm_sum: size budget L1 + L2 (m) or None.
         enabled: which of :data:`CONSTRAINT_NAMES` are active (the others are reported, not enforced).
+        mode: operating mode of a reconfigurable design, ``"per_task"`` (one R per task, the candidates above) or
+            ``"path"`` (R(t) along the cycle under the R drive's limits, :mod:`deltajax.optimize.operating`).
+        operating: the :class:`deltajax.optimize.operating.OperatingSpec` (drive limits, mechanism) of ``mode``.
     """
 
     task_points: np.ndarray
@@ -103,11 +110,23 @@ class DesignerProblem:
     max_arm_sum: Optional[float]
     enabled: tuple
     settings: Mapping[str, Any] = dataclasses.field(default_factory=dict)
+    mode: str = "per_task"                          # rtmode
+    operating: Optional[OP.OperatingSpec] = None    # rtmode
+
+    def __post_init__(self):  # rtmode
+        if self.mode not in OP.MODES:
+            raise OP.OperatingError(f"DesignerProblem.mode must be one of {list(OP.MODES)}, got {self.mode!r}")
+        if self.operating is None:
+            object.__setattr__(self, "operating", OP.OperatingSpec(mode=self.mode))
+        elif self.operating.mode != self.mode:
+            raise OP.OperatingError(f"DesignerProblem.mode={self.mode!r} but operating.mode="
+                                    f"{self.operating.mode!r}")
 
     @staticmethod
     def build(*, task: Mapping[str, float], cycle: Mapping[str, Any], motor: C.Motor, joints: C.JointModel,
               links: C.LinkModel, good: C.GoodSpec, regular: Mapping[str, float], n_R_operating: int,
-              min_picks: float, max_arm_sum: Optional[float], enabled: Sequence[str]) -> "DesignerProblem":
+              min_picks: float, max_arm_sum: Optional[float], enabled: Sequence[str],
+              operating: Optional[OP.OperatingSpec] = None) -> "DesignerProblem":
         """Build from validated plain values (see :mod:`deltajax.jobs.ga_reconfig` for the config)."""
         tp = cylinder_points(task["diameter"], task["height"], task["z_top"], int(task["n_r"]), int(task["n_phi"]),
                              int(task["n_z"]))
@@ -124,7 +143,8 @@ class DesignerProblem:
                                max_arm_sum=None if max_arm_sum is None else float(max_arm_sum),
                                enabled=tuple(enabled),
                                settings={"task": dict(task), "cycle": dict(cycle), "regular": dict(regular),
-                                         "cycle_centre": centre})
+                                         "cycle_centre": centre},
+                               mode=operating.mode if operating is not None else "per_task", operating=operating)
 
 
 def _violations(pb: DesignerProblem, m: Mapping[str, jax.Array], arm_sum) -> jax.Array:
@@ -221,6 +241,15 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
     else:
         out.update({n: nan for n in ("regular_volume", "regular_diameter", "regular_height", "regular_z_top",
                                      "regular_volume_fixed", "regular_diameter_fixed")})
+    # -- rtmode: operating mode (deltajax/optimize/operating.py). The per-task R's cycle metrics stay reported as
+    # <m>_fixed (the fixed-R variant); in mode "path" the cycle metrics become those of R(t) along the cycle.
+    out.update({f"{n}_fixed": out[n] for n in OP.FIXED_VARIANT_METRICS})
+    if recon and pb.mode == "path":
+        out.update(OP.path_operating(pb, design, Rc[k], out["cycle_time"], _nanmin(cand.joint_margin[:, t_sl])[k],
+                                     _nanmin(cand.interference_margin[:, t_sl])[k]))
+    else:
+        out.update(OP.not_evaluated(dt))
+    # -- end rtmode
     g = _violations(pb, out, arm_sum)
     out["g"] = g
     out["violation"] = jnp.sum(jnp.maximum(g - FEASIBILITY_TOL, 0.0))

@@ -1,0 +1,258 @@
+"""Issue 14 item 4 / issue 12 item 5: the reconfigurable design's operating mode in ga_reconfig, "R per task" or
+"R(t) along the cycle" under the R drive's limits (deltajax/optimize/operating.py)."""
+
+import math
+
+import h5py
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from hydra import compose, initialize_config_dir
+
+from deltajax import motion
+from deltajax.config import ConfigError, robot_from_config
+from deltajax.dynamics import cycle_profile
+from deltajax.jobs.ga_reconfig import build
+from deltajax.mechanism import drive_profile
+from deltajax.motion_refine import spline_basis
+from deltajax.optimize import operating as OP
+from deltajax.optimize.designer import DESIGN_UNITS, evaluate_designer
+from deltajax.run import CONFIG_DIR, run_experiment
+
+# the designer's toy sizes (tests/test_ga_reconfig.py), with n_R = 7 so that the 4 per-task candidates are R samples
+SMALL = ["experiment.design.n_R=7", "experiment.task.n_r=1", "experiment.task.n_phi=3", "experiment.task.n_z=2",
+         "experiment.cycle.n_samples=11", "experiment.cycle.n_R_operating=4", "experiment.reconfig.mode=path",
+         "experiment.reconfig.n_R=9", "experiment.reconfig.segments=4"]
+TOY = [
+    "experiment.design.n_R=3", "experiment.task.n_r=1", "experiment.task.n_phi=3", "experiment.task.n_z=2",
+    "experiment.cycle.n_samples=11", "experiment.cycle.n_R_operating=2", "experiment.regular_workspace.n_r=6",
+    "experiment.regular_workspace.n_phi=2", "experiment.regular_workspace.n_z=6", "experiment.ga.population_size=8",
+    "experiment.ga.generations=4", "experiment.ga.checkpoint_every=2", "experiment.pareto.population_size=8",
+    "experiment.pareto.generations=3", "experiment.verify.n_R=3", "experiment.verify.n_R_operating=2",
+    "experiment.verify.task_n_r=1", "experiment.verify.task_n_phi=3", "experiment.verify.task_n_z=2",
+    "experiment.verify.cycle_samples=13", "experiment.verify.rw_n_r=7", "experiment.verify.rw_n_phi=2",
+    "experiment.verify.rw_n_z=7", "progress=false",
+]
+
+
+def _problem(overrides):
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose(config_name="config", overrides=["experiment=ga_reconfig", *overrides])
+    robot, recon = robot_from_config(cfg.robot)
+    s, space, pb, _ = build(cfg.experiment, robot, recon)
+    return s, space, pb
+
+
+# -- configuration ----------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("override, words", [
+    ("experiment.reconfig.mode=moving", ["experiment.reconfig.mode", "moving"]),
+    ("experiment.reconfig.drive.speed=-0.1", ["experiment.reconfig.drive.speed", "-0.1", "m/s"]),
+    ("experiment.reconfig.drive.acceleration=nan", ["experiment.reconfig.drive.acceleration", "nan", "m/s^2"]),
+    ("experiment.reconfig.drive.force=0", ["experiment.reconfig.drive.force", "0", "N"]),
+    ("experiment.reconfig.motor_torque=2.0", ["experiment.reconfig.motor_torque", "2.0", "N m", "screw_linkage"]),
+    ("experiment.reconfig.n_R=2", ["experiment.reconfig.n_R", "2"]),
+    ("experiment.reconfig.aggregate=mean", ["experiment.reconfig.aggregate", "mean"]),
+    ("+experiment.reconfig.drive.jerk=1", ["experiment.reconfig.drive.jerk", "unknown"]),
+])
+def test_bad_settings_are_one_line_errors(override, words):
+    with pytest.raises(ConfigError) as e:
+        _problem([override])
+    msg = str(e.value)
+    assert "\n" not in msg and all(w in msg for w in words), msg
+
+
+def test_defaults_are_per_task_and_path_builds_a_spec():
+    s, _, pb = _problem([])
+    assert pb.mode == "per_task" and s.reconfig["mode"] == "per_task"
+    _, _, pb = _problem(["experiment.reconfig.mode=path", "experiment.reconfig.mechanism=screw_linkage",
+                         "experiment.reconfig.motor_torque=1.5"])
+    op = pb.operating
+    assert pb.mode == op.mode == "path" and op.mechanism is not None and op.motor_torque == 1.5
+    assert (op.speed, op.accel, op.force) == (0.3, 10.0, 150.0)
+
+
+# -- pieces -----------------------------------------------------------------------------------------------------
+
+def test_u_rates_match_motion_discrete_rates():
+    R = np.random.default_rng(0).uniform(0.2, 0.3, 9)
+    v, a = OP.u_rates(jnp.asarray(R))
+    v0, a0 = motion.discrete_rates(R, 1.0 / 8)
+    np.testing.assert_allclose(v, v0, rtol=1e-12)
+    np.testing.assert_allclose(a, a0, rtol=1e-12)
+
+
+def test_periodic_basis_is_periodic_and_reproduces_constants():
+    B, B1, B2 = OP.periodic_basis(41, 6)
+    np.testing.assert_allclose(B.sum(axis=1), 1.0, atol=1e-12)
+    c = np.random.default_rng(1).normal(size=6)
+    for X in (B, B1, B2):
+        np.testing.assert_allclose((X @ c)[0], (X @ c)[-1], atol=1e-9)        # C2 across the repetition
+    # derivatives agree with central differences of the spline itself
+    u = np.linspace(0, 1, 41)
+    np.testing.assert_allclose(np.gradient(B @ c, u)[5:-5], (B1 @ c)[5:-5], atol=0.05 * np.abs(B1 @ c).max())
+    assert spline_basis(u, 1.0, 9)[0].shape == (41, 9)
+
+
+# -- the path mode on one design --------------------------------------------------------------------------------
+
+@pytest.fixture(scope="module")
+def small():
+    s, space, pb = _problem(SMALL)
+    ev = jax.jit(lambda g: evaluate_designer(pb, space.decode(g), regular=False))
+    genes = np.stack([space.baseline_genes()] + list(np.random.default_rng(3).uniform(0, 1, (2, space.dim))))
+    ms = [jax.tree_util.tree_map(np.asarray, ev(jnp.asarray(g))) for g in genes]
+    return s, space, pb, genes, ms
+
+
+def _profile(pb, space, g, m):
+    d = space.decode(jnp.asarray(g))
+    _, prof = OP.path_operating(pb, d, m["R_operating"], m["cycle_time_fixed"], jnp.nan, jnp.nan,
+                                return_profile=True)
+    return d, prof
+
+
+def test_path_mode_never_violates_the_limits(small):
+    """At the cycle time the path mode reports, the public inverse dynamics with moving R (independent of the
+    bisection) stays within every R drive limit; margins are >= 0 and match."""
+    s, space, pb, genes, ms = small
+    op = pb.operating
+    ran = 0
+    for g, m in zip(genes, ms):
+        if not (np.isfinite(m["picks_per_min"]) and m["picks_per_min"] > 0):
+            continue
+        ran += 1
+        d, prof = _profile(pb, space, g, m)
+        T = float(m["cycle_time"])
+        from deltajax.constraints import with_drive
+        rob = with_drive(d.robot, pb.motor, d.robot.mass.gear_ratio, pb.payload)
+        p = cycle_profile(rob, prof["cycle"], T)
+        Rd = np.asarray(prof["R_u"]) / T
+        Rdd = np.asarray(prof["R_uu"]) / T ** 2
+        F = np.asarray(p.force_R)
+        np.testing.assert_allclose(np.asarray(p.R), np.asarray(prof["R"]))
+        np.testing.assert_allclose(np.asarray(p.R_dot), Rd, atol=1e-12)
+        assert np.all(np.abs(Rd) <= op.speed * (1 + 1e-6)) and np.all(np.abs(Rdd) <= op.accel * (1 + 1e-6))
+        assert np.all(np.abs(F) <= op.force * (1 + 1e-6))
+        for k in ("R_speed_margin", "R_accel_margin", "R_force_margin"):
+            assert m[k] >= -1e-6 * {"R_speed_margin": op.speed, "R_accel_margin": op.accel,
+                                    "R_force_margin": op.force}[k], (k, m[k])
+        assert m["R_force_margin"] == pytest.approx(op.force - np.abs(F).max(), rel=1e-9, abs=1e-9)
+        assert np.all(np.asarray(prof["R"]) >= float(d.R_min) - 1e-12)
+        assert np.all(np.asarray(prof["R"]) <= float(d.R_max) + 1e-12)
+    assert ran >= 1
+
+
+def test_path_mode_at_least_as_good_as_fixed_R_and_per_task(small):
+    """On the path criterion (time-mean good-workspace index along the cycle samples), R(t) is never worse than
+    the per-task R (a constant path, feasible here) nor than any constant R of the planning window; and the
+    DP's plan is at least the best constant plan on its own grid (exact: :func:`deltajax.motion.fixed_path`)."""
+    s, space, pb, genes, ms = small
+    m = ms[0]
+    assert m["feasible"] and m["picks_per_min_fixed"] > 0
+    assert m["path_index_mean"] >= m["path_index_mean_fixed"] - 1e-12
+    d, prof = _profile(pb, space, genes[0], m)
+    # every constant R on a fine grid of the design's range that is feasible on the cycle scores <= R(t)
+    from deltajax import constraints as C
+    plate = d.R_max + pb.links.plate_overhang
+    x = prof["cycle"].x
+    K = x.shape[0]
+    wts = np.ones(K); wts[[0, -1]] = 0.5; wts /= K - 1
+    best = -np.inf
+    R_op = float(m["R_operating"])
+    for R in [R_op] + list(np.asarray(d.R_samples())):
+        pc = jax.vmap(lambda p: C.good_point(d.at(R), p, pb.good, plate_radius=plate))(x)
+        ok = np.all(np.asarray(pc.reachable)) and np.all(np.asarray(pc.joint_margin) >= 0) \
+            and np.all(np.asarray(pc.interference_margin) >= 0)
+        val = float(np.sum(wts * np.asarray(pc.index)))
+        if R == R_op:
+            assert ok and val == pytest.approx(float(m["path_index_mean_fixed"]), rel=1e-9)
+        if ok and R_op - 1e-9 <= R:   # the window starts at the per-task R here (R_op = R_min) ...
+            pass
+        best = max(best, val) if ok else best
+    assert m["path_index_mean"] >= float(m["path_index_mean_fixed"]) - 1e-12
+    assert m["path_accepted"] in (0.0, 1.0)
+
+
+def test_dp_with_traced_limits_equals_bands_and_brute_force():
+    """motion._dp with the traced speed/accel masks inside wide static bands = the DP with the exact bands
+    (w, a) from the same limits = brute force over every sample path (tiny instance)."""
+    rng = np.random.default_rng(5)
+    K, n = 5, 4
+    val = jnp.asarray(rng.uniform(0, 1, (K, n)))
+    fe = jnp.asarray(rng.uniform(0, 1, (K, n)) > 0.15)
+    coef = jnp.zeros((K, n, 4))
+    wts = jnp.ones(K)
+    dR, dt = 0.01, 0.1
+    for speed, accel in ((0.1, 1.0), (0.2, 1.0), (0.1, 2.0), (math.inf, 1.0)):
+        w = n - 1 if math.isinf(speed) else int(math.floor(speed * dt / dR * (1 + 1e-9)))
+        a = min(2 * w, int(math.floor(accel * dt * dt / dR * (1 + 1e-9))))
+        P1, S1, _ = motion._dp(val, fe, coef, wts, dR, dt, 1.0, 0, w=w, a=a, primary_min=False, boundary="free",
+                               backtrack=True)
+        P2, S2, path = motion._dp(val, fe, coef, wts, dR, dt, 1.0, 0, w=n - 1, a=2 * (n - 1), primary_min=False,
+                                  boundary="free", backtrack=True, speed=speed, accel=accel)
+        best = -np.inf
+        for ks in np.ndindex(*(n,) * K):
+            ks = np.asarray(ks)
+            if not all(fe[j, k] for j, k in enumerate(ks)):
+                continue
+            if np.any(np.abs(np.diff(ks)) > w) or np.any(np.abs(np.diff(ks, 2)) > a):
+                continue
+            best = max(best, float(sum(val[j, k] for j, k in enumerate(ks))))
+        assert float(P1) == pytest.approx(best) and float(P2) == pytest.approx(best), (speed, accel)
+
+
+def test_per_task_mode_reports_path_metrics_as_nan_and_fixed_equal(small):
+    s, space, pb, genes, _ = small
+    _, _, pb0 = _problem([o for o in SMALL if "reconfig.mode" not in o])
+    m = evaluate_designer(pb0, space.decode(jnp.asarray(genes[0])), regular=False)
+    for k in OP.OPERATING_UNITS:
+        assert np.isnan(float(m[k])), k
+    for k in OP.FIXED_VARIANT_METRICS:
+        assert float(m[k]) == float(m[f"{k}_fixed"]) or (np.isnan(float(m[k])) and np.isnan(float(m[f"{k}_fixed"])))
+    assert all(k in DESIGN_UNITS for k in m if k not in ("g", "violation", "feasible"))
+
+
+def test_screw_mechanism_torque_within_its_limit():
+    s, space, pb = _problem(SMALL + ["experiment.reconfig.mechanism=screw_linkage",
+                                     "experiment.reconfig.motor_torque=0.5"])
+    g = jnp.asarray(space.baseline_genes())
+    m = jax.tree_util.tree_map(np.asarray, jax.jit(lambda g: evaluate_designer(pb, space.decode(g),
+                                                                               regular=False))(g))
+    assert np.isfinite(m["screw_torque_peak"])
+    if m["picks_per_min"] > 0:
+        assert m["screw_torque_margin"] >= -1e-9
+        d, prof = _profile(pb, space, g, m)
+        T = float(m["cycle_time"])
+        from deltajax.constraints import with_drive
+        rob = with_drive(d.robot, pb.motor, d.robot.mass.gear_ratio, pb.payload)
+        p = cycle_profile(rob, prof["cycle"], T)
+        drv = drive_profile(pb.operating.mechanism, p.R, p.R_dot, p.force_R)
+        assert np.all(np.abs(np.asarray(drv.effort)) <= 0.5 * (1 + 1e-6))
+        assert float(np.abs(np.asarray(drv.effort)).max()) == pytest.approx(float(m["screw_torque_peak"]), rel=1e-9)
+
+
+# -- the job end to end -----------------------------------------------------------------------------------------
+
+@pytest.mark.slow
+def test_job_runs_with_mode_path_and_reports_both_variants(tmp_path):
+    p = run_experiment("ga_reconfig", TOY + ["experiment.reconfig.mode=path", "experiment.reconfig.n_R=9",
+                                             "experiment.reconfig.segments=4"], run_dir=tmp_path)
+    with h5py.File(p, "r") as f:
+        V, S = f["verify"], f["summary"]
+        for k, u in (("R_speed_margin", "m/s"), ("R_accel_margin", "m/s^2"), ("R_force_margin", "N"),
+                     ("picks_per_min_fixed", "1/min"), ("R_path_min", "m")):
+            assert V[k].attrs["units"] == u, k
+        feas = V["feasible"][()].astype(bool)
+        runs = feas & (V["picks_per_min"][()] > 0)
+        assert runs.any()
+        for k in ("R_speed_margin", "R_accel_margin", "R_force_margin"):
+            assert np.all(V[k][()][runs] >= -1e-6), k
+        names = [x.decode() if isinstance(x, bytes) else x for x in S["metric_name"][()]]
+        assert "R_force_margin" in names and "picks_per_min" in names
+        i = names.index("picks_per_min")
+        rec = S["recommended"][()]
+        recf = S["recommended_fixed_R"][()]
+        assert np.isfinite(rec[i]) and np.isfinite(recf[i])
+        assert S.attrs["operating_mode"] == "path"
