@@ -17,6 +17,7 @@ never call inside jit.
 
 from __future__ import annotations
 
+import dataclasses
 import datetime as _dt
 import errno as _errno
 import hashlib
@@ -30,7 +31,8 @@ from typing import Any, Mapping, Optional, Sequence
 import h5py
 import numpy as np
 
-__all__ = ["ResultsFile", "ResultsWriteError", "ChecksumError", "ResultsGroupError", "load", "groups",
+__all__ = ["ResultsFile", "ResultsWriteError", "ChecksumError", "ResultsGroupError", "load", "read", "Contents",
+           "Variable", "groups",
            "read_checked", "checksum", "write_atomic", "git_commit", "RESERVED_NAMES"]
 
 RESERVED_NAMES = ("attrs", "units")
@@ -192,6 +194,16 @@ class ResultsFile:
             raise ValueError(f"axis {group}/{name} must be 1-D, got shape {arr.shape}")
         self.put(group, name, arr, units=units, dims=(name,), attrs=attrs, long_name=long_name)
 
+    def put_variables(self, group: str, variables: Mapping[str, "Variable"]) -> None:
+        """Stage the :class:`Variable` s of a group as :func:`read` returns them (axes first), e.g. to carry
+        what an existing file holds into a new one."""
+        for name, v in variables.items():
+            if v.is_axis:
+                self.put_axis(group, name, v.data, units="" if v.units is None else v.units, attrs=v.attrs)
+        for name, v in variables.items():
+            if not v.is_axis:
+                self.put(group, name, v.data, units="" if v.units is None else v.units, dims=v.dims, attrs=v.attrs)
+
     def staged(self, prefix: str = "") -> list:
         """(group, name, data, units) of every staged dataset whose group starts with ``prefix`` (axes too)."""
         return [(g, n, v.data, v.units) for g, variables in self._groups.items() if g.startswith(prefix)
@@ -312,6 +324,11 @@ def read_checked(dset: "h5py.Dataset") -> np.ndarray:
         ChecksumError: the attribute is missing or does not match (the message names file and dataset).
     """
     data = dset[()]
+    _verify(dset, data)
+    return data
+
+
+def _verify(dset: "h5py.Dataset", data: Any) -> None:
     want = dset.attrs.get("checksum")
     want = want.decode() if isinstance(want, bytes) else want
     where = f"{dset.file.filename}:{dset.name}"
@@ -319,7 +336,6 @@ def read_checked(dset: "h5py.Dataset") -> np.ndarray:
         raise ChecksumError(f"{where} has no checksum (not written by this deltajax version, or edited)")
     if checksum(data) != want:
         raise ChecksumError(f"{where} does not match its checksum (the file is damaged or was edited)")
-    return data
 
 
 def _write_all(fd: int, data: bytes) -> None:
@@ -369,19 +385,91 @@ def _attr_value(v: Any) -> Any:
     return str(v)
 
 
-def _read_group(g: h5py.Group) -> dict[str, Any]:
-    out: dict[str, Any] = {"attrs": {k: to_python(v) for k, v in g.attrs.items()}, "units": {}}
-    for k, item in g.items():
-        if isinstance(item, h5py.Group):
-            out[k] = _read_group(item)
-        else:
-            data = item[()]
-            if item.dtype.kind == "O" or h5py.check_string_dtype(item.dtype) is not None:
-                data = item.asstr()[()]
-            out[k] = data
-            if "units" in item.attrs:
-                out["units"][k] = to_python(item.attrs["units"])
-    return out
+# -- the one reader ---------------------------------------------------------------------------------------------
+#: attributes HDF5 and netCDF use to wire dimension scales (not data attributes; ``units`` is kept apart)
+_WIRING_ATTRS = ("CLASS", "NAME", "REFERENCE_LIST", "DIMENSION_LIST", "DIMENSION_LABELS", "_Netcdf4Dimid",
+                 "_Netcdf4Coordinates", "units")
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Variable:
+    """One dataset as stored: its data, ``units`` (None when it has none), dimension names (its dimension
+    scales; ``<name>_dim<i>`` for an axis without one), other attributes, and whether it is an axis."""
+
+    data: Any
+    units: Optional[str]
+    dims: tuple
+    attrs: dict
+    is_axis: bool
+
+
+@dataclasses.dataclass(frozen=True, eq=False)
+class Contents:
+    """What :func:`read` returns: root attributes, and per group (full path, ``""`` for the root) its attributes
+    and its datasets. ``top`` is the group that was asked for (``""``: the whole file)."""
+
+    attrs: dict
+    group_attrs: dict
+    variables: dict
+    top: str = ""
+
+
+def read(path: os.PathLike, group: Optional[str] = None, *, max_elements: Optional[int] = None,
+         verify: bool = False) -> Contents:
+    """Read a results file, or the groups at and below ``group``, keeping dimensions, units and attributes.
+
+    The one HDF5 reader of deltajax: :func:`load` (plain dicts), :func:`open_xarray` (an xarray Dataset), the
+    shard merge and the sweep summaries (:mod:`deltajax.sweeps`) are views of what it returns.
+
+    Args:
+        path: the results file.
+        group: a group name ("a/b"); ``None``: the whole file.
+        max_elements: read only datasets of at most this many elements (a scalar has 1; 0 reads attributes
+            only); the others are left out of ``variables``. ``None``: every dataset.
+
+    Raises:
+        FileNotFoundError: no file at ``path``.
+        ResultsGroupError: ``group`` is not in the file; the message lists the groups it has.
+        ChecksumError: with ``verify``, a dataset does not match its checksum (or has none).
+    """
+    with _open(path) as f:
+        top = "" if group is None else group.strip("/")
+        g = f.get(top or "/")
+        if not isinstance(g, h5py.Group):
+            raise _no_group(path, str(group))
+        root = {k: to_python(v) for k, v in f.attrs.items()}
+        group_attrs: dict[str, dict] = {}
+        variables: dict[str, dict[str, Variable]] = {}
+
+        def walk(name: str, grp: h5py.Group) -> None:
+            group_attrs[name] = {k: to_python(v) for k, v in grp.attrs.items()}
+            own = variables.setdefault(name, {})
+            for key, item in grp.items():
+                if isinstance(item, h5py.Group):
+                    walk(f"{name}/{key}" if name else key, item)
+                elif max_elements is None or item.size <= max_elements:
+                    own[key] = _variable(key, item, verify)
+
+        walk(top, g)
+    return Contents(attrs=root, group_attrs=group_attrs, variables=variables, top=top)
+
+
+def _variable(name: str, dset: "h5py.Dataset", verify: bool = False) -> Variable:
+    if dset.dtype.kind == "O" or h5py.check_string_dtype(dset.dtype) is not None:
+        data = dset.asstr()[()]
+    else:
+        data = dset[()]
+    if verify:
+        _verify(dset, data)
+    is_axis = to_python(dset.attrs.get("CLASS", "")) == "DIMENSION_SCALE"
+    if is_axis:
+        dims: tuple = (name,)
+    else:
+        dims = tuple((to_python(next(iter(d.keys()))) if len(d) else f"{name}_dim{i}")
+                     for i, d in enumerate(dset.dims))
+    units = to_python(dset.attrs["units"]) if "units" in dset.attrs else None
+    attrs = {k: to_python(v) for k, v in dset.attrs.items() if k not in _WIRING_ATTRS}
+    return Variable(data=data, units=units, dims=dims, attrs=attrs, is_axis=is_axis)
 
 
 def to_python(v: Any) -> Any:
@@ -421,7 +509,7 @@ def _no_group(path: os.PathLike, group: str) -> ResultsGroupError:
 
 
 def load(path: os.PathLike, group: Optional[str] = None) -> dict[str, Any]:
-    """Load a results file (or one group of it) as plain Python/NumPy.
+    """Load a results file (or one group of it) as plain Python/NumPy: a view of :func:`read`.
 
     Args:
         path: the results file.
@@ -436,21 +524,29 @@ def load(path: os.PathLike, group: Optional[str] = None) -> dict[str, Any]:
         FileNotFoundError: no file at ``path``.
         ResultsGroupError: ``group`` is not in the file; the message lists the groups it has.
     """
-    with _open(path) as f:
-        if group is None:
-            return _read_group(f)
-        g = f.get(group.strip("/") or "/")
-        if not isinstance(g, h5py.Group):
-            raise _no_group(path, group)
-        return _read_group(g)
+    contents = read(path, group)
+    top = contents.top
+    nested: dict[str, dict[str, Any]] = {}
+    for name in sorted(contents.group_attrs, key=lambda n: (n.count("/") if n else -1, n)):
+        node: dict[str, Any] = {"attrs": dict(contents.group_attrs[name]), "units": {}}
+        for vname, v in contents.variables.get(name, {}).items():
+            node[vname] = v.data
+            if v.units is not None:
+                node["units"][vname] = v.units
+        nested[name] = node
+        if name != top:
+            parent = name.rpartition("/")[0] if "/" in name else ""
+            nested[parent][name.rpartition("/")[2]] = node
+    return nested[top]
 
 
 def open_xarray(path: os.PathLike, group: str):
-    """Open one group of a results file as an in-memory :class:`xarray.Dataset` (SPEC §5).
+    """Open one group of a results file as an in-memory :class:`xarray.Dataset` (SPEC §5): a view of :func:`read`.
 
     Gridded datasets come with their named dimensions and coordinate axes (the HDF5 dimension scales), each
-    variable with its ``units`` and ``long_name`` attributes; scalars are 0-d variables. The file is closed on
-    return.
+    variable with its ``units``, ``long_name`` and other attributes; scalars are 0-d variables; the group's
+    attributes are the dataset's. The same file also opens with ``xarray.open_dataset(path, group=...,
+    engine="h5netcdf")``.
 
     Example::
 
@@ -463,11 +559,15 @@ def open_xarray(path: os.PathLike, group: str):
     """
     import xarray as xr
 
-    with _open(path) as f:
-        if not isinstance(f.get(group.strip("/") or "/"), h5py.Group):
-            raise _no_group(path, group)
-    with xr.open_dataset(path, group=group, engine="h5netcdf", phony_dims="sort") as ds:
-        return ds.load()
+    contents = read(path, group)
+    variables = contents.variables.get(contents.top, {})
+
+    def attrs(v: Variable) -> dict[str, Any]:
+        return {"units": v.units, **v.attrs} if v.units is not None else dict(v.attrs)
+
+    coords = {n: xr.Variable(v.dims, v.data, attrs(v)) for n, v in variables.items() if v.is_axis}
+    data = {n: xr.Variable(v.dims, v.data, attrs(v)) for n, v in variables.items() if not v.is_axis}
+    return xr.Dataset(data, coords=coords, attrs=dict(contents.group_attrs[contents.top]))
 
 
 __all__ += ["open_xarray", "to_python"]

@@ -1,44 +1,20 @@
 """Merge sharded runs: ``python -m deltajax.merge <sweep dir>`` or ``python -m deltajax.merge a.h5 b.h5 -o out.h5``.
 
-With a sweep directory, every set of runs that differ only in ``shard`` (and have ``n_shards > 1``) is merged
-into ``<sweep>/merged/<label>/results.h5`` and the sweep's ``summary.csv``/``summary.json`` are rewritten.
-With files, they are merged into ``-o`` (default ``merged_results.h5`` beside the first). The merged datasets
-are identical to those of a single-process run (:func:`deltajax.sweep.merge_shards`).
+The same command as ``python -m deltajax.sweeps`` (:mod:`deltajax.sweeps.__main__`), kept under this name.
 """
 
 from __future__ import annotations
 
-import argparse
 import sys
-from pathlib import Path
 
-from .sweep import ShardError, merge_shards, merge_sweep, summarize_sweep
+from .sweeps.__main__ import main as _main
+
+__all__ = ["main"]
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m deltajax.merge", description=__doc__.splitlines()[0])
-    ap.add_argument("inputs", nargs="+", help="a sweep directory, or the shards' results.h5 files")
-    ap.add_argument("-o", "--out", help="output file when merging files")
-    args = ap.parse_args(argv)
-    paths = [Path(p) for p in args.inputs]
-    try:
-        if len(paths) == 1 and paths[0].is_dir():
-            written = merge_sweep(paths[0])
-            for w in written:
-                print(f"merged -> {w}")
-            if not written:
-                print(f"no complete set of shards (n_shards > 1) in {paths[0]}")
-            summary = summarize_sweep(paths[0])
-            print(f"summary -> {summary['csv']}")
-            return 0
-        missing = [str(p) for p in paths if not p.is_file()]
-        if missing:
-            ap.error(f"not a file: {', '.join(missing)}")
-        print(f"merged -> {merge_shards(paths, args.out)}")
-    except ShardError as e:
-        print(f"error: {e}", file=sys.stderr)
-        return 2
-    return 0
+    """``python -m deltajax.merge``: see :func:`deltajax.sweeps.__main__.main`."""
+    return _main(argv, prog="python -m deltajax.merge")
 
 
 if __name__ == "__main__":

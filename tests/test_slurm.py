@@ -21,7 +21,8 @@ import h5py
 import numpy as np
 import pytest
 
-from deltajax.sweep import _read_tree
+from _sweep_helpers import assert_identical, cli, finish, job, rows
+from deltajax.io import read
 
 REPO = Path(__file__).resolve().parent.parent
 DEFAULT_CONF = Path(os.environ.get("DELTAJAX_SLURM_DIR", "/tmp/deltajax-slurm")) / "slurm.conf"
@@ -69,24 +70,14 @@ def cluster(tmp_path_factory):
 
 
 def _cli(cluster, args, **kw):
-    return subprocess.Popen([sys.executable, "-m", "deltajax.run", *args], cwd=cluster["tmp"], env=cluster["env"],
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True, **kw)
+    return cli(args, cluster["tmp"], cluster["env"], **kw)
 
 
 def _finish(proc, what, ok=True):
-    try:
-        out, _ = proc.communicate(timeout=TIMEOUT)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        out, _ = proc.communicate()
-        pytest.fail(f"{what}: no answer in {TIMEOUT} s:\n{out[-4000:]}")
-    if ok:
-        assert proc.returncode == 0, f"{what} failed (rc {proc.returncode}):\n{out[-4000:]}"
-    return out
+    return finish(proc, what, TIMEOUT, ok=ok)
 
 
-def _job(run_dir):
-    return json.loads((Path(run_dir) / ".hydra" / "job_status.json").read_text())
+_job = job
 
 
 def _slurm_record(cluster, job_id, wait_s=60.0):
@@ -104,26 +95,12 @@ def _slurm_record(cluster, job_id, wait_s=60.0):
         time.sleep(0.5)
 
 
-def _rows(sweep):
-    return json.loads((Path(sweep) / "summary.json").read_text())["runs"]
+_rows = rows
 
 
 def _assert_identical(a_path, b_path, skip_attrs=()):
     """Same groups and datasets (bit for bit, NaN = NaN), units, dimensions and group attributes."""
-    a, b = _read_tree(a_path), _read_tree(b_path)
-    assert a[2].keys() == b[2].keys()
-    for g in b[2]:
-        assert a[2][g].keys() == b[2][g].keys(), g
-        for n, d in b[2][g].items():
-            e = a[2][g][n]
-            assert e.data.dtype == d.data.dtype and e.data.shape == d.data.shape, (g, n)
-            assert np.array_equal(e.data, d.data, equal_nan=d.data.dtype.kind in "fc"), (g, n)
-            assert (e.units, e.dims, e.attrs) == (d.units, d.dims, d.attrs), (g, n)
-        ka = {k for k in a[1][g] if not any(re.fullmatch(p, k) for p in skip_attrs)}
-        kb = {k for k in b[1][g] if not any(re.fullmatch(p, k) for p in skip_attrs)}
-        assert ka == kb, g
-        for k in kb:
-            assert np.array_equal(np.asarray(a[1][g][k]), np.asarray(b[1][g][k])), (g, k)
+    assert_identical(a_path, b_path, skip_attrs=skip_attrs)
 
 
 # -- (a) an array job -----------------------------------------------------------------------------------
@@ -207,7 +184,7 @@ def test_failed_point_is_reported_others_merge_and_merge_cli_recovers(cluster):
         assert status[r].startswith("failed: ConfigError: robot: forearm must be > 0 m, got -1.0"), status[r]
     merged = sweep / "merged" / "robot.forearm=0.4" / "results.h5"
     assert status["merged/robot.forearm=0.4"] == "ok" and len(rows) == 5
-    before = {k: v.data for k, v in _read_tree(merged)[2]["workspace"].items()}
+    before = {k: v.data for k, v in read(merged).variables["workspace"].items()}
     csv_before = (sweep / "summary.csv").read_text()
     assert "failed: ConfigError" in csv_before
     # as if the submitting process had died before its summary: the merge command rebuilds both
@@ -218,7 +195,7 @@ def test_failed_point_is_reported_others_merge_and_merge_cli_recovers(cluster):
                          capture_output=True, text=True, timeout=TIMEOUT)
     assert res.returncode == 0, res.stderr
     assert f"merged -> {merged}" in res.stdout
-    after = {k: v.data for k, v in _read_tree(merged)[2]["workspace"].items()}
+    after = {k: v.data for k, v in read(merged).variables["workspace"].items()}
     assert before.keys() == after.keys()
     assert all(np.array_equal(before[k], after[k], equal_nan=before[k].dtype.kind == "f") for k in before)
     assert (sweep / "summary.csv").read_text() == csv_before
@@ -326,7 +303,7 @@ def test_summary_status_from_job_records(tmp_path):
     """failed (the job raised), killed (SLURM's message in the job's stderr), running (no end and no trace),
     ok; the job records go to summary.json."""
     from deltajax.io import ResultsFile
-    from deltajax.sweep import summarize_sweep
+    from deltajax.sweeps import summarize_sweep
 
     records = {
         "0": {"status": "ok"},

@@ -9,8 +9,6 @@ The JAX backend's sharding is tested in-process.
 import importlib.util
 import json
 import os
-import subprocess
-import sys
 from pathlib import Path
 
 import h5py
@@ -19,9 +17,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from _sweep_helpers import assert_identical, cli, finish
 from deltajax.config import ConfigError
 from deltajax.jobs.workspace_grid import GridPlan
-from deltajax.sweep import ShardError, _read_tree, merge_shards, resolve_worker_cpus
+from deltajax.sweeps import ShardError, merge_shards, resolve_worker_cpus
 
 REPO = Path(__file__).resolve().parent.parent
 TINY = ["experiment=workspace_grid", "plots=false", "progress=false", "experiment.grid.h=0.1",
@@ -30,14 +29,11 @@ TIMEOUT = 240
 
 
 def _cli(args, tmp, env):
-    return subprocess.Popen([sys.executable, "-m", "deltajax.run", *args], cwd=tmp, env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    return cli(args, tmp, env)
 
 
 def _finish(proc, what):
-    out, _ = proc.communicate(timeout=TIMEOUT)
-    assert proc.returncode == 0, f"{what} failed (rc {proc.returncode}):\n{out[-4000:]}"
-    return out
+    return finish(proc, what, TIMEOUT)
 
 
 @pytest.fixture(scope="module")
@@ -68,22 +64,7 @@ def sweeps(tmp_path_factory):
 
 def _assert_identical(a_path, b_path, same_config=True):
     """Same groups, datasets (bit for bit, NaN = NaN), units, dimensions, group attributes and config."""
-    a, b = _read_tree(a_path), _read_tree(b_path)
-    assert a[2].keys() == b[2].keys()
-    for g in b[2]:
-        assert a[2][g].keys() == b[2][g].keys(), g
-        for n, d in b[2][g].items():
-            e = a[2][g][n]
-            assert e.data.dtype == d.data.dtype and e.data.shape == d.data.shape, (g, n)
-            if d.data.dtype.kind == "f":
-                assert np.array_equal(e.data, d.data, equal_nan=True), (g, n)
-            else:
-                assert np.array_equal(e.data, d.data), (g, n)
-            assert (e.units, e.dims, e.attrs) == (d.units, d.dims, d.attrs), (g, n)
-        assert a[1][g].keys() == b[1][g].keys()
-        for k, v in b[1][g].items():
-            assert np.array_equal(np.asarray(a[1][g][k]), np.asarray(v)), (g, k)
-    assert (a[0]["config"] == b[0]["config"]) == same_config
+    assert_identical(a_path, b_path, same_config=same_config)
 
 
 @pytest.mark.slow
@@ -239,7 +220,7 @@ def test_summary_indexes_runs_scalars_and_per_chain_maxima(tmp_path):
     """summarize_sweep on a hand-made sweep: overrides as columns, 0-d scalars, [max] of per-chain vectors,
     missing runs marked, axes not summarised."""
     from deltajax.io import ResultsFile
-    from deltajax.sweep import summarize_sweep
+    from deltajax.sweeps import summarize_sweep
 
     for i, forearm in enumerate(("0.3", "0.5")):
         run = tmp_path / str(i)

@@ -6,12 +6,13 @@
 The grid (inclusive end points, :func:`deltajax.workspace.make_grid`) is cut into chunks of whole x-planes
 (``experiment.chunk_points`` points each, padded to a fixed shape so that one compilation serves all of
 them). Each chunk is split over this process's JAX devices (``jax.sharding``; on a CPU node the
-:class:`deltajax.sweep.WorkerEnv` callback exposes one host device per CPU). With ``n_shards=N`` the chunks
+:class:`deltajax.sweeps.WorkerEnv` callback exposes one host device per CPU). With ``n_shards=N`` the chunks
 are divided among N jobs; ``shard=i`` computes the i-th contiguous block of x-planes. Because the shard
 boundaries fall on chunk boundaries, every point is computed in the same chunk position with the same
 compiled code as in a single run, and the per-plane partial statistics are reduced by the same NumPy code
-(:func:`reduce_shards`), so merged shards (:func:`deltajax.sweep.merge_shards`) equal a single run bit for
-bit.
+(:func:`deltajax.workspace.chunks.reduce_plane_shards`, the shard reducer ``"workspace_planes"``), so merged
+shards (:func:`deltajax.sweeps.merge_shards`) equal a single run bit for bit. Chunks, shards and checkpoints
+run on the one engine (:mod:`deltajax.workspace.chunks`), with results.h5 as the checkpoint.
 
 Results, group ``workspace`` (dims x, y, z; SPEC §5):
 ``reachable`` (uint8), the fields listed in ``experiment.store`` (NaN outside the workspace), per-plane
@@ -36,11 +37,14 @@ import numpy as np
 from ..config import ConfigError
 from ..rundir import CheckpointError, RunDirError
 
-GROUP = "workspace"
-REDUCER = "deltajax.jobs.workspace_grid:reduce_shards"
+from ..workspace.chunks import (CheckpointMismatch, ResultsCheckpoint, ShardPlan, plane_statistics, plane_summary,
+                               run_chunks, seal)
 
-__all__ = ["run", "reduce_shards", "GridPlan", "plan_chunks", "make_evaluator", "make_numba_evaluator",
-           "plane_statistics"]
+GROUP = "workspace"
+#: the registered shard reducer (deltajax.sweeps.reducers) of group ``workspace``
+REDUCER = "workspace_planes"
+
+__all__ = ["run", "GridPlan", "make_evaluator", "make_numba_evaluator"]
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -90,39 +94,14 @@ def _grid_from_config(g: Mapping[str, Any], robot=None):
         raise ConfigError(f"experiment.grid: {e}") from None
 
 
-class GridPlan:
-    """Chunks of whole x-planes and the slice of them one shard computes (host-side bookkeeping)."""
+class GridPlan(ShardPlan):
+    """:class:`deltajax.workspace.chunks.ShardPlan` whose refusals are :class:`ConfigError` (they name a setting)."""
 
     def __init__(self, shape: Sequence[int], chunk_points: int, n_devices: int, shard: int, n_shards: int):
-        nx, ny, nz = (int(s) for s in shape)
-        self.shape = (nx, ny, nz)
-        self.plane = ny * nz
-        self.planes_per_chunk = max(1, min(nx, int(chunk_points) // self.plane))
-        self.n_chunks = math.ceil(nx / self.planes_per_chunk)
-        if not 1 <= n_shards <= self.n_chunks:
-            raise ConfigError(f"n_shards must be in 1..{self.n_chunks} (the grid has {self.n_chunks} chunks of "
-                              f"{self.planes_per_chunk} x-planes; lower experiment.chunk_points for more), "
-                              f"got {n_shards!r}")
-        if not 0 <= shard < n_shards:
-            raise ConfigError(f"shard must be in 0..{n_shards - 1} (n_shards={n_shards}), got {shard!r}")
-        self.shard, self.n_shards = shard, n_shards
-        self.chunk0 = shard * self.n_chunks // n_shards
-        self.chunk1 = (shard + 1) * self.n_chunks // n_shards
-        self.x_start = self.chunk0 * self.planes_per_chunk
-        self.x_stop = min(nx, self.chunk1 * self.planes_per_chunk)
-        # fixed padded length: one compilation, and a multiple of the device count for even sharding
-        n = self.planes_per_chunk * self.plane
-        self.chunk_len = -(-n // n_devices) * n_devices
-
-    def chunk_planes(self, c: int) -> tuple[int, int]:
-        """Global x-plane range [a, b) of chunk ``c``."""
-        a = c * self.planes_per_chunk
-        return a, min(self.shape[0], a + self.planes_per_chunk)
-
-
-def plan_chunks(shape, chunk_points, n_devices=1, shard=0, n_shards=1) -> GridPlan:
-    """See :class:`GridPlan`."""
-    return GridPlan(shape, chunk_points, n_devices, shard, n_shards)
+        try:
+            super().__init__(shape, chunk_points, n_devices, shard, n_shards)
+        except ValueError as e:
+            raise ConfigError(str(e)) from None
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -174,79 +153,6 @@ def make_numba_evaluator(grid, *, b_v: float, b_f: float, beta: float):
         return job.ok.reshape(-1), vals.reshape(-1, len(FIELD_NAMES))
 
     return evaluate
-
-
-# ---------------------------------------------------------------------------------------------------------
-# statistics (NumPy, shared by the single run and the shard merge so that both are bit-identical)
-# ---------------------------------------------------------------------------------------------------------
-def plane_statistics(ok: np.ndarray, values: np.ndarray) -> dict[str, np.ndarray]:
-    """Per-x-plane partial statistics.
-
-    Args:
-        ok: bool[k, m] reachability of the k planes' m points.
-        values: float[k, m, n_index].
-
-    Returns:
-        ``plane_count`` int64[k] and ``plane_n`` (int64), ``plane_sum``, ``plane_min``, ``plane_max``
-        [k, n_index] over the reachable points whose value is finite (min/max are +inf/-inf for none).
-    """
-    finite = ok[..., None] & np.isfinite(values)
-    return {
-        "plane_count": ok.sum(axis=1, dtype=np.int64),
-        "plane_n": finite.sum(axis=1, dtype=np.int64),
-        "plane_sum": np.where(finite, values, 0.0).sum(axis=1),
-        "plane_min": np.where(finite, values, np.inf).min(axis=1),
-        "plane_max": np.where(finite, values, -np.inf).max(axis=1),
-    }
-
-
-def _face_count(planes: Mapping[str, np.ndarray], x_faces: tuple[bool, bool]) -> np.int64:
-    """Reachable points on the grid's faces: the y/z faces of every plane, plus whole first/last x-planes."""
-    pc, pf = planes["plane_count"], planes["plane_face_count"]
-    n = int(pf.sum())
-    if len(pc) and x_faces[0]:
-        n += int(pc[0] - pf[0])
-    if len(pc) > 1 and x_faces[1]:
-        n += int(pc[-1] - pf[-1])
-    return np.int64(n)
-
-
-def _summary(planes: Mapping[str, np.ndarray], names: Sequence[str], h: float, n_points: int,
-             box_volume: float, x_faces: tuple[bool, bool] = (True, True)) -> dict[str, np.ndarray]:
-    count = np.int64(planes["plane_count"].sum())
-    faces = _face_count(planes, x_faces)
-    n = planes["plane_n"].sum(axis=0)
-    total = planes["plane_sum"].sum(axis=0)
-    vmin = planes["plane_min"].min(axis=0)
-    vmax = planes["plane_max"].max(axis=0)
-    out = {
-        "count": count,
-        "volume": np.float64(count * h ** 3),
-        "volume_box": np.float64(count / n_points * box_volume),
-        "fraction": np.float64(count / n_points),
-        # reachable points on the box faces: the workspace continues outside the grid, volume is a lower bound
-        "face_count": faces,
-        "truncated": np.uint8(faces > 0),
-    }
-    with np.errstate(invalid="ignore", divide="ignore"):
-        mean = np.where(n > 0, total / np.maximum(n, 1), np.nan)
-    nan = np.asarray(np.nan, total.dtype)
-    for i, name in enumerate(names):  # NaN when no reachable point has a finite value
-        out[f"{name}_min"] = np.where(n[i] > 0, vmin[i], nan)
-        out[f"{name}_max"] = np.where(n[i] > 0, vmax[i], nan)
-        out[f"{name}_mean"] = mean[i].astype(total.dtype)
-    return out
-
-
-def reduce_shards(data: Mapping[str, np.ndarray], shard_attrs: Sequence[Mapping[str, Any]]):
-    """``shard_reduce`` of group ``workspace``: recompute the whole-grid scalars from the merged planes."""
-    a0 = shard_attrs[0]
-    names = [str(s) for s in data["index"]]
-    scalars = _summary(data, names, float(a0["h"]), int(a0["n_points"]), float(a0["box_volume"]))
-    planes_done = sum(int(a["planes_done"]) for a in shard_attrs)
-    size = int(a0["shard_axis_size"])
-    return scalars, {"planes_done": planes_done, "complete": int(planes_done == size),
-                     "resume_seal": _seal(str(a0["resume_key"]), planes_done, 0, size)}
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -309,12 +215,9 @@ def run(ctx) -> None:
               "plane_n": np.zeros((n_local, n_idx), np.int64),
               "plane_sum": np.zeros((n_local, n_idx), dtype), "plane_min": np.full((n_local, n_idx), np.inf, dtype),
               "plane_max": np.full((n_local, n_idx), -np.inf, dtype)}
-    done = 0  # planes of this shard finished
-    if ctx.results.path.exists():
-        if not ex.get("resume", True):
-            raise RunDirError(f"{ctx.results.path} exists and experiment.resume=false: add fresh=true to start over, "
-                              f"or choose another hydra.run.dir")
-        done = _resume(ctx, key, plan, reach, fields, planes)
+    if ctx.results.path.exists() and not ex.get("resume", True):
+        raise RunDirError(f"{ctx.results.path} exists and experiment.resume=false: add fresh=true to start over, "
+                          f"or choose another hydra.run.dir")
     x_faces = (plan.x_start == 0, plan.x_stop == nx)
 
     def stage(planes_done: int) -> None:
@@ -333,35 +236,39 @@ def run(ctx) -> None:
               attrs={"description": "reachable points of the x-plane on the y and z faces of the grid box"})
         for k in ("plane_n", "plane_sum", "plane_min", "plane_max"):
             r.put(GROUP, k, planes[k], units="1", dims=("x", "index"))
-        for k, v in _summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume, x_faces).items():
+        for k, v in plane_summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume, x_faces).items():
             r.put(GROUP, k, v, units={"count": "1", "volume": "m^3", "volume_box": "m^3"}.get(k, "1"), dims=())
         r.set_attrs(GROUP, shard_axis="x", shard=shard, n_shards=n_shards, shard_start=plan.x_start,
                     shard_stop=plan.x_stop, shard_axis_size=nx, shard_reduce=REDUCER, planes_done=planes_done,
                     complete=int(planes_done == n_local), resume_key=key, h=grid.h, n_points=grid.n_points,
                     box_volume=grid.box_volume, b_v=params["b_v"], b_f=params["b_f"], beta=params["beta"],
                     chunk_planes=plan.planes_per_chunk,
-                    resume_seal=_seal(key, planes_done, plan.x_start, plan.x_stop),
+                    resume_seal=seal(key, planes_done, plan.x_start, plan.x_stop),
                     description="fixed-R workspace grid: reachability, indices and their statistics")
 
+    def check(data, done: int) -> str:
+        counts = data["reachable"][:done].reshape(done, -1).sum(axis=1, dtype=np.int64)
+        return "" if np.array_equal(counts, data["plane_count"][:done]) else \
+            "plane_count does not match the reachable mask"
+
+    arrays = {"reachable": reach, **fields, **planes}
+    checkpoint = ResultsCheckpoint(ctx.results, GROUP, arrays, key, (plan.x_start, plan.x_stop), stage, check,
+                                   done_attr="planes_done",
+                                   remedy="move it away to keep it, or add fresh=true to start over")
     if backend == "jax":
         evaluate = make_evaluator(n_dev, **params)
     else:
         evaluate = make_numba_evaluator(grid, **params)
     robot = ctx.robot
-    first = plan.chunk0 + done // plan.planes_per_chunk
     ctx.log(f"workspace_grid: grid {nx}x{ny}x{nz} = {grid.n_points} points, shard {shard}/{n_shards} "
-            f"x[{plan.x_start}:{plan.x_stop}], {plan.chunk1 - first} chunks of {plan.planes_per_chunk} planes, "
-            + (f"JAX on {n_dev} device(s)" if backend == "jax" else
-               f"Numba on {os.environ.get('NUMBA_NUM_THREADS', 'all')} thread(s)"))
-    t_ckpt = time.monotonic()
+            f"x[{plan.x_start}:{plan.x_stop}], {plan.chunk1 - plan.chunk0} chunks of {plan.planes_per_chunk} "
+            f"planes, " + (f"JAX on {n_dev} device(s)" if backend == "jax" else
+                           f"Numba on {os.environ.get('NUMBA_NUM_THREADS', 'all')} thread(s)"))
     t0 = time.perf_counter()
-    n_eval = 0
-    first_chunk_s, n_first = None, 0  # the first chunk includes compilation: timed apart
-    every = float(ex.get("checkpoint_s", 60.0))
-    stop_after = ex.get("stop_after")  # stop as if killed after this many chunks (tests the resume path)
-    last = plan.chunk1 if stop_after is None else min(plan.chunk1, first + int(stop_after))
-    for c in ctx.progress(range(first, last), total=last - first, desc="workspace_grid"):
-        a, b = plan.chunk_planes(c)
+    timing = {"n_eval": 0, "first_s": None, "n_first": 0}  # the first chunk includes compilation: timed apart
+
+    def compute(la: int, lb: int) -> dict:
+        a, b = plan.x_start + la, plan.x_start + lb  # global x-planes of this chunk
         idx = np.arange(a * plan.plane, b * plan.plane, dtype=np.int64)
         if backend == "jax":
             pad = np.full(plan.chunk_len - idx.size, idx[0], np.int64)
@@ -371,23 +278,33 @@ def run(ctx) -> None:
             ok, vals = evaluate(robot, a, b)
         ok = np.asarray(ok)[: idx.size].reshape(b - a, plan.plane)
         vals = np.asarray(vals)[: idx.size].reshape(b - a, plan.plane, n_idx).astype(dtype, copy=False)
-        n_eval += idx.size
-        if first_chunk_s is None:
-            first_chunk_s, n_first = time.perf_counter() - t0, idx.size
-        la, lb = a - plan.x_start, b - plan.x_start
-        reach[la:lb] = ok.reshape(b - a, ny, nz)
-        for name in store:
-            fields[name][la:lb] = vals[..., FIELD_NAMES.index(name)].reshape(b - a, ny, nz)
-        for k, v in plane_statistics(ok, vals).items():
-            planes[k][la:lb] = v
+        timing["n_eval"] += idx.size
+        if timing["first_s"] is None:
+            timing["first_s"], timing["n_first"] = time.perf_counter() - t0, idx.size
         okp = ok.reshape(b - a, ny, nz)
-        planes["plane_face_count"][la:lb] = (okp.sum(axis=(1, 2)) - okp[:, 1:-1, 1:-1].sum(axis=(1, 2))
-                                             if min(ny, nz) > 2 else okp.sum(axis=(1, 2)))
-        done = lb
-        if time.monotonic() - t_ckpt > every and c + 1 < last:
-            stage(done)
-            ctx.results.flush()
-            t_ckpt = time.monotonic()
+        out = {"reachable": okp, **plane_statistics(ok, vals)}
+        out.update({name: vals[..., FIELD_NAMES.index(name)].reshape(b - a, ny, nz) for name in store})
+        out["plane_face_count"] = (okp.sum(axis=(1, 2)) - okp[:, 1:-1, 1:-1].sum(axis=(1, 2))
+                                   if min(ny, nz) > 2 else okp.sum(axis=(1, 2)))
+        return out
+
+    stop_after = ex.get("stop_after")  # stop as if killed after this many chunks (tests the resume path)
+    progress = {"done": 0}
+    with ctx.progress(total=n_local, desc="workspace_grid x-planes") as bar:
+        def advance(n: int) -> None:
+            if progress["done"] == 0 and n and timing["first_s"] is None:
+                ctx.log(f"resuming: {n} x-planes already done")
+            progress["done"] += n
+            bar.update(n)
+
+        try:
+            run_chunks(n_local, plan.planes_per_chunk, compute, {n: (a.dtype, None) for n, a in arrays.items()},
+                       checkpoint=checkpoint, checkpoint_every_s=float(ex.get("checkpoint_s", 60.0)),
+                       progress=advance, max_chunks=None if stop_after is None else int(stop_after))
+        except CheckpointMismatch as e:
+            raise CheckpointError(str(e)) from None
+    done = progress["done"]  # planes of this shard finished
+    n_eval, first_chunk_s, n_first = timing["n_eval"], timing["first_s"], timing["n_first"]
     elapsed = time.perf_counter() - t0
     stage(done)
     warm_s, warm_n = elapsed - (first_chunk_s or 0.0), n_eval - n_first
@@ -396,7 +313,7 @@ def run(ctx) -> None:
     rate = warm_n / warm_s if warm_s > 0 else 0.0
     ctx.results.set_attrs(points_evaluated=n_eval, points_per_s=rate, first_chunk_s=first_chunk_s or 0.0,
                           devices_used=n_dev if backend == "jax" else 0, backend=backend, worker_env=os.environ.get("DELTAJAX_WORKER_ENV", ""))
-    s = _summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume, x_faces)
+    s = plane_summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume, x_faces)
     if int(s["face_count"]):
         ctx.log(f"WARNING: {int(s['face_count'])} reachable points lie on the faces of the grid box: the workspace "
                 f"continues outside it, so the volume below is a lower bound (widen experiment.grid.x/y/z, or set "
@@ -410,67 +327,6 @@ def run(ctx) -> None:
             f"{rate / 1e6:.2f} M points/s after the first chunk ({first_chunk_s or 0.0:.1f} s with compilation)")
     if cfg.get("plots", True) and n_shards == 1:
         _plot(ctx, grid, reach)
-
-
-def _seal(key: str, planes_done: int, start: int, stop: int) -> str:
-    """Checksum of the attributes a resume trusts (the datasets carry their own checksums, deltajax.io)."""
-    import hashlib
-
-    return hashlib.sha256(json.dumps([key, int(planes_done), int(start), int(stop)]).encode()).hexdigest()
-
-
-def _resume(ctx, key, plan, reach, fields, planes) -> int:
-    """Load the finished planes of the checkpoint in results.h5 into the arrays; refuse a damaged one."""
-    import h5py
-
-    from ..io import ChecksumError, read_checked
-
-    path = ctx.results.path
-    n_local = plan.x_stop - plan.x_start
-
-    def refuse(what: str):
-        return CheckpointError(f"cannot resume from {path}: {what}; move it away to keep it, or add fresh=true to "
-                               f"start over")
-
-    try:
-        with h5py.File(path, "r") as f:
-            g = f.get(GROUP)
-            if g is None:
-                raise refuse(f"it has no group {GROUP!r}")
-            a = g.attrs
-            try:
-                done = int(a["planes_done"])
-                ok_seal = a.get("resume_seal") == _seal(a["resume_key"], done, a["shard_start"], a["shard_stop"])
-            except (KeyError, TypeError, ValueError):
-                raise refuse("its checkpoint attributes are missing or malformed") from None
-            if not ok_seal:
-                raise refuse("its checkpoint attributes (planes_done, resume_key, shard range) do not match their "
-                             "checksum (the file is damaged or was edited)")
-            if a["resume_key"] != key or [int(a["shard_start"]), int(a["shard_stop"])] != [plan.x_start, plan.x_stop]:
-                raise refuse("it was written by another grid, robot, backend or shard")
-            if not 0 <= done <= n_local:
-                raise refuse(f"planes_done={done} is outside 0..{n_local}")
-            data = {"reachable": read_checked(g["reachable"])}
-            for name in list(fields) + list(planes):
-                data[name] = read_checked(g[name])
-    except ChecksumError as e:
-        raise refuse(str(e).split(": ", 1)[-1].replace(f"{path}:", "")) from None
-    except (OSError, KeyError) as e:
-        raise refuse(f"it is unreadable or incomplete ({type(e).__name__}: {str(e).split('(')[0].strip()})") from None
-    for name, arr in data.items():
-        want = reach.shape if name == "reachable" or name in fields else planes[name].shape
-        if arr.shape != want:
-            raise refuse(f"{GROUP}/{name} has shape {arr.shape}, this run expects {want}")
-    counts = data["reachable"][:done].reshape(done, -1).sum(axis=1, dtype=np.int64)
-    if not np.array_equal(counts, data["plane_count"][:done]):
-        raise refuse("plane_count does not match the reachable mask")
-    reach[:done] = data["reachable"][:done]
-    for name in fields:
-        fields[name][:done] = data[name][:done]
-    for k in planes:
-        planes[k][:done] = data[k][:done]
-    ctx.log(f"resuming: {done} x-planes already done")
-    return done
 
 
 def _plot(ctx, grid, reach) -> None:

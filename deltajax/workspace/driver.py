@@ -6,13 +6,12 @@ When the grid is mirror-symmetric (:attr:`Grid.mirror_symmetric`) only the half 
 other half is copied: the kernels evaluate every point at (x, |y|, z), so the copy is bit-identical to
 computing it.
 
-Checkpoint/resume: with ``checkpoint_dir`` the outputs live in ``<dir>/<name>.npy`` memory maps and
-``<dir>/state.json`` records the number of finished chunks, rewritten atomically (temporary file + rename)
-after the chunk's data is flushed, with a sha256 of every finished chunk's outputs. A killed run restarts at the
-first unfinished chunk; chunks are deterministic, so the result is bit-for-bit that of an uninterrupted run. A
-checkpoint written with other parameters (its fingerprint differs), or one whose state or data is damaged (an
-unreadable state.json, a chunk count out of range, a missing or resized array, a finished chunk whose data no
-longer matches its checksum) is refused with an error naming the directory rather than silently used.
+Checkpoint/resume: the chunks run on the one engine, :func:`deltajax.workspace.chunks.run_chunks`; with
+``checkpoint_dir`` the outputs live in ``<dir>/<name>.npy`` memory maps and ``<dir>/state.json`` records the
+finished chunks with a sha256 of each (:class:`deltajax.workspace.chunks.MemmapCheckpoint`). A killed run
+restarts at the first unfinished chunk; chunks are deterministic, so the result is bit-for-bit that of an
+uninterrupted run. A checkpoint written with other parameters, or a damaged one, is refused with an error
+naming the directory rather than silently used.
 
 Jobs::
 
@@ -25,24 +24,20 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
-import json
 import math
 import os
 from pathlib import Path
-from typing import Any, Callable, Optional, Sequence
+from typing import Optional, Sequence
 
 import numpy as np
 
 from ..geometry import Delta, ReconfigurableDelta
 from ..indices import INDEX_NAMES
+from .chunks import CheckpointMismatch, run_chunks
 from .grid import Grid
 
 __all__ = ["GridJob", "run_chunks", "fixed_workspace", "reconfigurable_workspace", "redundancy_grid",
            "CheckpointMismatch", "reach_box", "face_count"]
-
-
-class CheckpointMismatch(RuntimeError):
-    """The checkpoint directory holds a run with different parameters, or a damaged checkpoint."""
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -68,115 +63,6 @@ class GridJob:
     def count(self) -> int:
         """Number of reachable / feasible grid points."""
         return int(np.count_nonzero(self.ok))
-
-
-def _fingerprint(obj: Any) -> str:
-    return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
-
-
-def run_chunks(n_items: int, chunk_size: int, compute: Callable[[int, int], dict], outputs: dict, *,
-               checkpoint_dir: Optional[os.PathLike] = None, fingerprint: Any = None,
-               progress: Optional[Callable[[int], None]] = None, max_chunks: Optional[int] = None
-               ) -> tuple[dict, bool]:
-    """Run ``compute(start, stop) -> {name: array[stop - start, ...]}`` over ``n_items`` in chunks.
-
-    Args:
-        n_items: number of items (grid points).
-        chunk_size: items per chunk.
-        compute: the chunk function (deterministic).
-        outputs: name -> (dtype, fill value) of each per-item output.
-        checkpoint_dir: resume from / checkpoint into this directory (memory-mapped outputs).
-        fingerprint: JSON-able description of the job; a checkpoint with another fingerprint is refused.
-        progress: called with the number of items finished after each chunk (e.g. ``tqdm.update``).
-        max_chunks: stop after this many chunks in *this call* (simulates a kill; resume later).
-
-    Returns:
-        (outputs, complete).
-    """
-    if chunk_size < 1:
-        raise ValueError(f"chunk_size must be >= 1, got {chunk_size!r}")
-    n_chunks = max(1, math.ceil(n_items / chunk_size))
-    fp = _fingerprint({"n": n_items, "chunk": chunk_size, "job": fingerprint,
-                       "outputs": {k: str(np.dtype(v[0])) for k, v in outputs.items()}})
-    done = 0
-    arrays: dict = {}
-    state_path = None
-    if checkpoint_dir is not None:
-        ck = Path(checkpoint_dir)
-        ck.mkdir(parents=True, exist_ok=True)
-        state_path = ck / "state.json"
-        if state_path.exists():
-            def damaged(what):
-                return CheckpointMismatch(f"checkpoint {ck} is damaged ({what}); delete that directory to recompute it")
-
-            try:
-                state = json.loads(state_path.read_text())
-                done = int(state["done_chunks"])
-                sums = [str(h) for h in state["chunk_sha256"]]
-            except (OSError, ValueError, KeyError, TypeError) as e:
-                raise damaged(f"state.json unreadable: {type(e).__name__}") from None
-            if state.get("fingerprint") != fp:
-                raise CheckpointMismatch(f"checkpoint {ck} was written by a different job "
-                                         f"(fingerprint {state.get('fingerprint')} != {fp}); use another directory")
-            if not 0 <= done <= n_chunks or len(sums) != done:
-                raise damaged(f"done_chunks={done} with {len(sums)} checksums, {n_chunks} chunks in the job")
-            for name, (dtype, _) in outputs.items():
-                try:
-                    arrays[name] = np.load(ck / f"{name}.npy", mmap_mode="r+")
-                except (OSError, ValueError) as e:
-                    raise damaged(f"{name}.npy unreadable: {type(e).__name__}") from None
-                if arrays[name].shape != (n_items,) or arrays[name].dtype != np.dtype(dtype):
-                    raise damaged(f"{name}.npy holds {arrays[name].dtype}{arrays[name].shape}, expected "
-                                  f"{np.dtype(dtype)}({n_items},)")
-            for c in range(done):
-                a, b = c * chunk_size, min(n_items, (c + 1) * chunk_size)
-                if _chunk_sha256({k: v[a:b] for k, v in arrays.items()}) != sums[c]:
-                    raise damaged(f"chunk {c} (items {a}:{b}) does not match its checksum")
-        else:
-            for name, (dtype, fill) in outputs.items():
-                arr = np.lib.format.open_memmap(ck / f"{name}.npy", mode="w+", dtype=dtype, shape=(n_items,))
-                arr[:] = fill
-                arrays[name] = arr
-            sums = []
-            _write_state(state_path, fp, 0, n_chunks, sums)
-    else:
-        arrays = {name: np.full(n_items, fill, dtype=dtype) for name, (dtype, fill) in outputs.items()}
-    if progress is not None and done:
-        progress(min(done * chunk_size, n_items))
-    ran = 0
-    while done < n_chunks:
-        if max_chunks is not None and ran >= max_chunks:
-            break
-        start = done * chunk_size
-        stop = min(n_items, start + chunk_size)
-        res = compute(start, stop)
-        for name in outputs:
-            arrays[name][start:stop] = res[name]
-        done += 1
-        ran += 1
-        if state_path is not None:
-            for a in arrays.values():
-                a.flush()
-            sums.append(_chunk_sha256({k: arrays[k][start:stop] for k in outputs}))
-            _write_state(state_path, fp, done, n_chunks, sums)
-        if progress is not None:
-            progress(stop - start)
-    return arrays, done >= n_chunks
-
-
-def _chunk_sha256(arrays: dict) -> str:
-    h = hashlib.sha256()
-    for k in sorted(arrays):
-        h.update(k.encode())
-        h.update(memoryview(np.ascontiguousarray(arrays[k])).cast("B"))
-    return h.hexdigest()
-
-
-def _write_state(path: Path, fp: str, done: int, n_chunks: int, sums: list) -> None:
-    from ..io import write_atomic
-
-    write_atomic(path, json.dumps({"fingerprint": fp, "done_chunks": done, "n_chunks": n_chunks,
-                                   "chunk_sha256": sums}).encode())
 
 
 # -- grid layout (mirror halving) ------------------------------------------------------------------------

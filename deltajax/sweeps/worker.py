@@ -1,0 +1,139 @@
+"""Worker environment of sweep jobs: CPUs, XLA threads, JAX host devices and GPU memory, set before JAX starts.
+
+:class:`WorkerEnv` is a Hydra callback (``configs/config.yaml``, ``hydra.callbacks.worker_env``) that sizes
+each job's process from its scheduler's allocation (:func:`resolve_worker_cpus`) and applies it
+(:func:`apply_worker_env`): one XLA thread pool per job sized to the job's CPUs (``PJRT_NPROC``), the job's
+CPUs exposed as that many JAX host devices (``jax_num_cpu_devices``) so that grid experiments can shard over
+them, and no GPU memory preallocation (``XLA_PYTHON_CLIENT_PREALLOCATE=false``) when several jobs share a GPU.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Any, Mapping, Optional
+
+from .layout import Callback
+
+__all__ = ["WorkerEnv", "resolve_worker_cpus", "apply_worker_env"]
+
+
+def _available_cpus() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:  # pragma: no cover - not Linux
+        return os.cpu_count() or 1
+
+
+def resolve_worker_cpus(launcher_cfg: Optional[Mapping[str, Any]], environ: Mapping[str, str] = os.environ,
+                        available: Optional[int] = None) -> tuple[int, str]:
+    """How many CPUs one job may use, and why.
+
+    Order: ``SLURM_CPUS_PER_TASK`` (inside a SLURM allocation), the submitit launcher's ``cpus_per_task``,
+    the joblib launcher's ``n_jobs`` (the machine's CPUs divided among the concurrent jobs), else all CPUs
+    this process may run on (its affinity mask).
+
+    Args:
+        launcher_cfg: ``hydra.launcher`` of the job's config (or ``None`` in a single run).
+        environ: the environment (for ``SLURM_CPUS_PER_TASK``).
+        available: CPUs of this machine usable by the process (default: the affinity mask).
+
+    Returns:
+        (cpus >= 1, a short explanation).
+    """
+    avail = available if available is not None else _available_cpus()
+    slurm = environ.get("SLURM_CPUS_PER_TASK")
+    if slurm and slurm.isdigit() and int(slurm) > 0:
+        return int(slurm), "SLURM_CPUS_PER_TASK"
+    cfg = dict(launcher_cfg or {})
+    target = str(cfg.get("_target_", ""))
+    cpt = cfg.get("cpus_per_task")
+    if "submitit" in target and cpt:
+        return max(1, min(int(cpt), avail)), "hydra.launcher.cpus_per_task"
+    if "joblib" in target:
+        n_jobs = int(cfg.get("n_jobs") or -1)
+        workers = n_jobs if n_jobs > 0 else max(1, avail + 1 + n_jobs)  # joblib: -1 = all, -2 = all but one
+        return max(1, avail // workers), f"{avail} CPUs / hydra.launcher.n_jobs={workers}"
+    return max(1, avail), "all CPUs of the process"
+
+
+def apply_worker_env(cpus: int, host_devices: Optional[int] = None, gpu_preallocate: bool = False,
+                     environ: Optional[dict] = None) -> dict[str, Any]:
+    """Set the environment of this process for ``cpus`` CPUs, before JAX creates its backend.
+
+    * ``PJRT_NPROC=cpus``: XLA's CPU client sizes its thread pool from it (default: all cores of the node,
+      which oversubscribes a node shared by several jobs);
+    * ``OMP/MKL/OPENBLAS/NUMBA_NUM_THREADS=cpus`` for libraries loaded later;
+    * ``jax_num_cpu_devices=host_devices`` (only while no backend exists): the CPUs appear as that many JAX
+      devices, over which grid experiments shard their chunks;
+    * ``XLA_PYTHON_CLIENT_PREALLOCATE=false`` unless ``gpu_preallocate``: several jobs can share one GPU.
+
+    Values already present in the environment win (an explicit user setting is kept). In a reused worker
+    process (joblib) whose backend already exists nothing JAX-side can change; this is reported.
+
+    Returns:
+        What was applied (for the log and the results' attributes).
+    """
+    env = os.environ if environ is None else environ
+    cpus = max(1, int(cpus))
+    for var in ("PJRT_NPROC", "OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS", "NUMBA_NUM_THREADS"):
+        env.setdefault(var, str(cpus))
+    if not gpu_preallocate:
+        env.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
+    import sys
+
+    if "numba" in sys.modules and environ is None:  # a reused worker: NUMBA_NUM_THREADS was read at its import
+        import numba
+
+        numba.set_num_threads(min(cpus, numba.config.NUMBA_NUM_THREADS))
+    applied: dict[str, Any] = {"cpus": cpus, "PJRT_NPROC": env["PJRT_NPROC"],
+                               "XLA_PYTHON_CLIENT_PREALLOCATE": env.get("XLA_PYTHON_CLIENT_PREALLOCATE", "")}
+    if environ is None:  # this process: the Numba thread pool size in effect (numba reads NUMBA_NUM_THREADS once)
+        import numba
+
+        applied["numba_threads"] = int(numba.get_num_threads())
+    import jax
+    from jax._src import xla_bridge
+
+    if xla_bridge.backends_are_initialized():
+        applied["host_devices"] = f"unchanged (backend already initialised: {jax.local_device_count()})"
+        return applied
+    n_dev = cpus if host_devices is None else max(1, int(host_devices))
+    if "xla_force_host_platform_device_count" in env.get("XLA_FLAGS", "") or "JAX_NUM_CPU_DEVICES" in env:
+        applied["host_devices"] = "from XLA_FLAGS/JAX_NUM_CPU_DEVICES"
+    else:
+        jax.config.update("jax_num_cpu_devices", n_dev)
+        applied["host_devices"] = n_dev
+    return applied
+
+
+class WorkerEnv(Callback):
+    """Hydra callback: prepare each job's process (threads, host devices, GPU memory) before it runs.
+
+    Registered in ``configs/config.yaml`` under ``hydra.callbacks.worker_env``; its arguments are overrides:
+    ``hydra.callbacks.worker_env.cpus=8`` (default: see :func:`resolve_worker_cpus`),
+    ``hydra.callbacks.worker_env.host_devices=1`` (default: one JAX host device per CPU),
+    ``hydra.callbacks.worker_env.gpu_preallocate=true``.
+    """
+
+    def __init__(self, cpus: Optional[int] = None, host_devices: Optional[int] = None,
+                 gpu_preallocate: bool = False) -> None:
+        self.cpus = cpus
+        self.host_devices = host_devices
+        self.gpu_preallocate = bool(gpu_preallocate)
+
+    def on_job_start(self, config, **kwargs: Any) -> None:
+        from omegaconf import OmegaConf
+
+        launcher = OmegaConf.to_container(config.hydra.launcher, resolve=False) if "launcher" in config.hydra else {}
+        mode = str(config.hydra.get("mode", ""))
+        if "MULTIRUN" not in mode:
+            launcher = {}  # a single run executes in this process, whatever launcher is configured
+        if self.cpus is not None:
+            cpus, why = int(self.cpus), "hydra.callbacks.worker_env.cpus"
+        else:
+            cpus, why = resolve_worker_cpus(launcher)
+        applied = apply_worker_env(cpus, self.host_devices, self.gpu_preallocate)
+        os.environ["DELTAJAX_WORKER_ENV"] = json.dumps({**applied, "cpus_from": why})
+        print(f"[deltajax] worker: {cpus} CPUs ({why}); XLA threads PJRT_NPROC={applied['PJRT_NPROC']}, "
+              f"host devices {applied['host_devices']}", flush=True)
