@@ -1,10 +1,18 @@
-"""Strict, fast test settings shared by every test file (STYLE §9)."""
+"""Strict, fast test settings shared by every test file (STYLE §9), and the session's shared toy job runs.
+
+Tiers: ``python -m pytest`` runs everything; ``python -m pytest -m "not slow"`` skips tests marked
+``@pytest.mark.slow`` (each over ~3 s on 2 cores).
+"""
 
 import os
+import subprocess
+import sys
+from pathlib import Path
 
 os.environ.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
 
 import jax  # noqa: E402
+import pytest  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_numpy_rank_promotion", "raise")
@@ -13,3 +21,46 @@ from hypothesis import settings  # noqa: E402
 
 settings.register_profile("deltajax", deadline=None, max_examples=25, derandomize=True)
 settings.load_profile("deltajax")
+
+REPO = Path(__file__).resolve().parent.parent
+
+
+@pytest.fixture(scope="session")
+def toy_run(tmp_path_factory):
+    """``toy_run(name, *extra) -> Path`` of results.h5: the job ``name`` at its toy size (tests/toy_jobs.py) plus
+    ``extra`` overrides, run once per session and shared. Treat the run directory as read-only (a rerun into it
+    with the same settings is a no-op; anything that writes must use its own ``tmp_path``)."""
+    from toy_jobs import CLI, overrides
+
+    runs = {}
+
+    def run(name, *extra):
+        key = (name, extra)
+        if isinstance(runs.get(key), BaseException):  # failed once: the same error for every test that needs it
+            raise runs[key]
+        if key not in runs:
+            from deltajax.run import list_experiments
+
+            if name not in list_experiments():
+                pytest.skip(f"experiment {name} is not in this checkout")
+            d = tmp_path_factory.mktemp(name) / "run"
+            try:
+                runs[key] = _run(name, extra, d)
+            except Exception as e:
+                runs[key] = e
+                raise
+        return runs[key]
+
+    def _run(name, extra, d):
+        from deltajax.run import run_experiment
+
+        if name in CLI:  # through the real command line: python -m deltajax.run
+            env = {**os.environ, "PYTHONPATH": str(REPO)}
+            out = subprocess.run([sys.executable, "-m", "deltajax.run", f"experiment={name}", *overrides(name, *extra),
+                                  f"hydra.run.dir={d}"], cwd=REPO, env=env, capture_output=True, text=True,
+                                 timeout=600)
+            assert out.returncode == 0, out.stderr[-3000:]
+            return d / "results.h5"
+        return run_experiment(name, overrides(name, *extra), run_dir=d)
+
+    return run

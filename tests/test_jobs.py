@@ -1,9 +1,30 @@
-"""The job table: every CLI job is listed once, has its config and a ``run(ctx)``."""
+"""The job table, and every CLI job end to end at its toy size (tests/toy_jobs.py): the run completes, its
+results file has data, its figures are real PNGs. Each run is the session's shared one (conftest ``toy_run``):
+the other test files check their numbers on the same files, so no job runs twice."""
 
+import json
 from pathlib import Path
 
-from deltajax.jobs import JOBS, load
+import pytest
+
+from deltajax.io import groups, load
+from deltajax.jobs import JOBS, load as load_job
 from deltajax.run import CONFIG_DIR, list_experiments
+
+from toy_jobs import GA_STAGES_OFF, HAS_REFINE, TOY
+
+#: figures each job writes (at least these)
+PLOTS = {
+    "indices_examples": ["index_curves.png"],
+    "reconfig_workspace": ["fig7_workspace.png"],
+    "reconfig_indices": ["fig8_omega_v_slices.png"],
+    "boundary_search": ["boundary_slice.png", "boundary_surface.png"],
+    "workspace_grid": ["workspace_grid.png"],
+    "dynamics_cycle": ["industrial_adept_profiles.png", "franco2026_adept_profiles.png"],
+    "bench_kernel": [],
+    "reconfig_motion": ["adept_landscape.png", "task_profiles.png"],
+    "ga_reconfig": ["ga_pareto.png", "ga_convergence.png"],
+}
 
 
 def test_jobs_table_matches_configs_and_modules():
@@ -11,4 +32,48 @@ def test_jobs_table_matches_configs_and_modules():
     assert sorted(JOBS) == configs
     assert list(list_experiments())[0] == "ga_reconfig"  # the main job first in --help
     for name in JOBS:
-        assert callable(load(name).run), name
+        assert callable(load_job(name).run), name
+    assert sorted(TOY) == sorted(JOBS) == sorted(PLOTS)  # every job has a toy size and is run below
+
+
+def _assert_complete(path, name):
+    run_dir = path.parent
+    manifest = json.loads((run_dir / "deltajax_run.json").read_text())
+    assert manifest["experiment"] == name and manifest["status"] == "complete", manifest
+    assert groups(path), "no data in the results file"
+    assert "end_time" in load(path)["attrs"]
+    assert not list(run_dir.glob("*.tmp")) and not list(run_dir.glob(".*.tmp"))
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", sorted(TOY))
+def test_every_job_end_to_end_at_toy_size(name, toy_run):
+    path = toy_run(name)
+    _assert_complete(path, name)
+    for png in PLOTS[name]:
+        data = (path.parent / png).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 10_000, png
+
+
+def _stages(path):
+    return load(path)["attrs"]["ga_reconfig_stages"].split(",")
+
+
+@pytest.mark.slow
+def test_ga_reconfig_with_optional_stages_on(toy_run):
+    path = toy_run("ga_reconfig")
+    stages = _stages(path)
+    assert stages[:2] == ["ga", "pareto"] and stages[-2:] == ["results", "plots"], stages
+    assert "pareto" in groups(path) and "verify" in stages
+    if HAS_REFINE:
+        assert "refine" in stages, stages
+
+
+@pytest.mark.slow
+def test_ga_reconfig_with_optional_stages_off(toy_run):
+    path = toy_run("ga_reconfig", *GA_STAGES_OFF)
+    _assert_complete(path, "ga_reconfig")
+    stages = _stages(path)
+    assert "pareto" not in stages and "refine" not in stages and stages[-1] == "plots", stages
+    assert "pareto" not in groups(path)
+    assert (path.parent / "ga_convergence.png").read_bytes()[:4] == b"\x89PNG"

@@ -6,35 +6,9 @@ import numpy as np
 import pytest
 
 from deltajax.io import ResultsFile, ResultsGroupError, groups, load, open_xarray
-from deltajax.run import list_experiments, run_experiment
+from deltajax.run import list_experiments
 
-COMMON = ["plots=false", "progress=false", "compilation_cache=null"]
-#: toy overrides per experiment (seconds each, not minutes)
-TOY = {
-    "indices_examples": ["experiment.R_step=1e-3"],
-    "reconfig_workspace": ["experiment.h=0.04"],
-    "reconfig_indices": ["experiment.h=0.04"],
-    "boundary_search": ["experiment.steps_deg=[15.0]", "experiment.grid_h=0.2", "experiment.profile_samples=64",
-                        "experiment.centre_sweep_z=[1.62]", "experiment.sweep_step_deg=15.0",
-                        "experiment.timing_repeats=1"],
-    "workspace_grid": ["experiment.grid.h=0.1", "experiment.grid.z=[0.0,0.6]", "experiment.chunk_points=100"],
-    "dynamics_cycle": ["experiment.n_samples=41", "experiment.robots=[franco2026]"],
-    "bench_kernel": ["experiment.n_points=4000", "experiment.n_baseline=1000", "experiment.block=1000",
-                     "experiment.repeats=1"],
-    # issue 14's job (motion branch); listed here so the merged suite covers it, skipped while it is absent
-    "reconfig_motion": ["experiment.R_step=0.007", "experiment.cases.adept.n_samples=11",
-                        "experiment.cases.task.samples_per_segment=5", "experiment.refine.enabled=false",
-                        "experiment.cases.task.points=[[0.0,0.0,0.30],[0.15,0.08,0.42],[-0.12,0.12,0.45]]"],
-    "ga_reconfig": [  # the main job's own toy size (tests/test_ga_reconfig.py)
-        "experiment.design.n_R=3", "experiment.task.n_r=1", "experiment.task.n_phi=3", "experiment.task.n_z=2",
-        "experiment.cycle.n_samples=11", "experiment.cycle.n_R_operating=2", "experiment.regular_workspace.n_r=6",
-        "experiment.regular_workspace.n_phi=2", "experiment.regular_workspace.n_z=6",
-        "experiment.ga.population_size=8", "experiment.ga.generations=2", "experiment.ga.checkpoint_every=2",
-        "experiment.pareto.population_size=8", "experiment.pareto.generations=2", "experiment.verify.n_R=3",
-        "experiment.verify.n_R_operating=2", "experiment.verify.task_n_r=1", "experiment.verify.task_n_phi=3",
-        "experiment.verify.task_n_z=2", "experiment.verify.cycle_samples=13", "experiment.verify.rw_n_r=7",
-        "experiment.verify.rw_n_phi=2", "experiment.verify.rw_n_z=7"],
-}
+from toy_jobs import TOY  # the toy sizes, shared with every test through conftest's toy_run (one run per job)
 
 
 def test_every_experiment_has_a_toy_config():
@@ -44,10 +18,8 @@ def test_every_experiment_has_a_toy_config():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(TOY))
-def test_xarray_opens_every_group_with_units(name, tmp_path):
-    if name not in list_experiments():
-        pytest.skip(f"experiment {name} is not in this checkout")
-    path = run_experiment(name, [*COMMON, *TOY[name]], run_dir=tmp_path)
+def test_xarray_opens_every_group_with_units(name, toy_run):
+    path = toy_run(name)  # the session's one toy run of this job (also checked by tests/test_jobs.py)
     names = groups(path)
     assert names, "no data in the results file"
     for g in names:
@@ -61,8 +33,8 @@ def test_xarray_opens_every_group_with_units(name, tmp_path):
                 assert v.attrs["units"] == "m", f"{g}/{v.name}"
         if "z" in ds.coords and ds["z"].attrs["units"] == "m":
             assert ds["z"].attrs["positive"] == "down", g
-    assert not (tmp_path / "checkpoint").exists()  # a completed run keeps no resume state
-    assert "wrote" in (tmp_path / "run.log").read_text()  # the run's own log, not just JAX's
+    assert not (path.parent / "checkpoint").exists()  # a completed run keeps no resume state
+    assert "wrote" in (path.parent / "run.log").read_text()  # the run's own log, not just JAX's
 
 
 def test_compression_attributes_and_group_errors(tmp_path):

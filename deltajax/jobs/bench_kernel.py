@@ -133,5 +133,5 @@ def run(ctx) -> None:
         from ..plots import bench_rates_from_results
 
         ctx.savefig(bench_rates_from_results(res, f"kernel throughput (IK + Jacobian + indices), {n} points, "
-                                                  f"{len(devices)} {jax.default_backend()} device(s)"),
+                                                  f"{len(jax.devices())} {jax.default_backend()} device(s)"),
                     "bench_kernel")
