@@ -89,7 +89,8 @@ def test_dynamics_cycle_plots_draw_actuators_in_distinguishable_styles():
     prof = types.SimpleNamespace(t=t, tau=three, theta_dot=three, theta_ddot=three, p=three, p_dot=three,
                                  p_ddot=three, R_dot=np.zeros_like(t), force_R=np.zeros_like(t))
     job._plot_torques(ctx, "r", prof, "title", "torques")
-    job._plot_adept(ctx, "r", prof, prof, 0.5)
+    half = types.SimpleNamespace(t=t, tau=0.5 * three, theta_dot=0.5 * three, theta_ddot=0.5 * three)
+    job._plot_adept(ctx, "r", prof, half, 0.5)
     job._plot_platform(ctx, "r", prof, "title")
     assert [n for n, _ in figs] == ["torques", "r_adept_profiles", "r_ga_motion_platform"]
     for _name, fig in figs:
@@ -97,8 +98,12 @@ def test_dynamics_cycle_plots_draw_actuators_in_distinguishable_styles():
             lines = ax.get_lines()
             styles = {(ln.get_color(), str(ln.get_linestyle()), ln.get_linewidth()) for ln in lines[:3]}
             assert len(lines) >= 3 and len(styles) == 3, _name
-        assert fig.axes[0].get_legend() is not None
+        assert fig.axes[0].get_legend() is not None or fig.legends
         matplotlib.pyplot.close(fig)
+    adept = figs[1][1]
+    for row in range(3):  # nominal vs minimum cycle time: compared on one y scale per row
+        left, right = adept.axes[2 * row], adept.axes[2 * row + 1]
+        assert left.get_ylim() == right.get_ylim()
 
 
 def test_index_slices_ticks_stay_inside_the_panels():

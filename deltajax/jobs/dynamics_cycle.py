@@ -141,7 +141,7 @@ def _plot_torques(ctx, name, prof, title, fname):
 def _plot_adept(ctx, name, prof_nom, prof_min, T_min):
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(3, 2, figsize=(11, 8), sharex="col")
+    fig, axes = plt.subplots(3, 2, figsize=(11, 8), sharex="col", sharey="row")  # columns compared row by row
     cases = ((prof_nom, "nominal duration"), (prof_min, f"minimum cycle time {T_min:.3f} s"))
     for col, (prof, label) in enumerate(cases):
         t = np.asarray(prof.t)
@@ -152,7 +152,7 @@ def _plot_adept(ctx, name, prof_nom, prof_min, T_min):
             axes[row, col].grid(alpha=0.3)
         axes[0, col].set_title(f"{name}, standard cycle, {label}")
         axes[-1, col].set_xlabel("t (s)")
-    axes[0, 0].legend(title="actuator", ncol=3)
+    fig.legend(*axes[0, 0].get_legend_handles_labels(), title="actuator", ncol=3, loc="lower center", bbox_to_anchor=(0.5, 0.92))
     ctx.savefig(fig, f"{name}_adept_profiles")
 
 
