@@ -111,6 +111,7 @@ def test_jq_theta_and_jx_det():
 
 
 @pytest.mark.parametrize("method,code", METHODS)
+@pytest.mark.slow
 def test_sym3_top2(method, code):
     # random positive semi-definite matrices (what the kernel feeds it), some with a repeated eigenvalue
     mats = []
@@ -144,6 +145,7 @@ def _jx_d(pts):
 
 
 @pytest.mark.parametrize("method,code", METHODS)
+@pytest.mark.slow
 def test_singular_values(method, code):
     Jx, d = _jx_d(_points(2000))
     sv_ref = ref.singular_values(Jx, d)
@@ -169,6 +171,7 @@ def test_indices_from_sv():
 
 # -- the whole kernel on one batch, all three backends ---------------------------------------------------------
 @pytest.mark.parametrize("method,code", METHODS)
+@pytest.mark.slow
 def test_every_backend_agrees_on_point_kernel(method, code):
     pts = _points(3000)
     pts[:, 1] = np.abs(pts[:, 1])  # the Numba drivers evaluate mirror-canonical points (see workspace.grid)

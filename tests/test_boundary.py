@@ -70,6 +70,7 @@ def test_conti_count_reproduces_paper_table3(robot):
     np.testing.assert_allclose(width, RHO_MAX / 2 ** 9, rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_bracket_is_a_boundary_crossing(reach, searches):
     """radius_in reachable, radius_out not, for both methods; on star rays a point eps beyond is unreachable."""
     conti, cont, prof = searches
@@ -226,14 +227,14 @@ def test_experiment_config_errors():
 
 
 @pytest.mark.slow
-def test_experiment_writes_results(tmp_path, searches):
+def test_experiment_writes_results(toy_run, searches):
     from deltajax.io import load
-    from deltajax.run import run_experiment
 
-    path = run_experiment("boundary_search", overrides=[
-        "plots=false", "progress=false", f"experiment.steps_deg=[{STEP}]", "experiment.grid_h=0.2",
-        "experiment.profile_samples=64", "experiment.centre_sweep_z=[1.62]", f"experiment.sweep_step_deg={STEP}",
-        "experiment.timing_repeats=1"], run_dir=tmp_path)
+    from toy_jobs import TOY
+
+    # the session's shared toy run: steps of STEP degrees, grid_h=0.2, 64 profile samples, one centre-sweep z
+    assert f"experiment.steps_deg=[{STEP}]" in TOY["boundary_search"]
+    path = toy_run("boundary_search")
     out = load(path)
     assert "boundary2d" in out["attrs"]["config"]  # the experiment's default robot
     g = out["boundary"]["step_15deg"]

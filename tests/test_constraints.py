@@ -76,6 +76,7 @@ def test_segment_distance_against_dense_sampling(v, parallel):
     assert b <= d + 2 * seg_len / 800 + 1e-12
 
 
+@pytest.mark.slow
 def test_interference_against_brute_force_capsules():
     links = C.LinkModel(forearm_radius=0.02, upper_arm_radius=0.025, clearance=0.005, plate_overhang=0.03)
     th = _thetas()
@@ -136,6 +137,7 @@ def _numpy_loads(n, T, dwell, payload):
 
 
 @pytest.mark.parametrize("n, T, dwell, payload", [(20.0, 0.4, 0.0, 0.0), (12.0, 0.6, 0.1, 1.0)])
+@pytest.mark.slow
 def test_drive_loads_against_an_independent_computation(n, T, dwell, payload):
     peak, rms, spd, cyc = _numpy_loads(n, T, dwell, payload)
     L = C.drive_loads(ROBOT, cyc, MOTOR, n, dwell=dwell, payload_mass=payload)
@@ -144,6 +146,7 @@ def test_drive_loads_against_an_independent_computation(n, T, dwell, payload):
     np.testing.assert_allclose(float(L.speed_utilisation), spd, rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_min_cycle_time_is_the_feasibility_edge():
     cyc = dj.adept_cycle((0, 0, 0.4), n_samples=61)
     rate = jax.jit(lambda n, dwell, payload: C.cycle_rate(ROBOT, cyc, MOTOR, n, dwell=dwell, payload_mass=payload))

@@ -65,10 +65,12 @@ def _assert_same_results(a, b, skip=()):
 
 
 @pytest.fixture(scope="module")
-def reference_grid(tmp_path_factory):
-    """One uninterrupted toy workspace_grid run."""
-    d = tmp_path_factory.mktemp("ref")
-    return run_experiment("workspace_grid", WG, run_dir=d / "run")
+def reference_grid(toy_run):
+    """One uninterrupted toy workspace_grid run (the session's shared one: tests/toy_jobs.py, the same grid as WG)."""
+    from toy_jobs import overrides
+
+    assert set(overrides("workspace_grid")) == set(WG) - {"plots=false", "compilation_cache=null"}
+    return toy_run("workspace_grid")
 
 
 def _partial(tmp_path, chunks=3):
@@ -500,6 +502,7 @@ def test_grid_touching_the_box_is_flagged_and_the_reach_box_holds_everything(tmp
         run_experiment("workspace_grid", [*WG, "experiment.grid.x=null"], run_dir=tmp_path / "bad")
 
 
+@pytest.mark.slow
 def test_reach_box_contains_every_reachable_point():
     from deltajax.workspace import make_grid, reachable_mask
     from deltajax.workspace.driver import reach_box

@@ -13,16 +13,9 @@ from deltajax.io import load
 from deltajax.run import run_experiment
 from deltajax.rundir import RunDirError
 
-TOY = [
-    "experiment.design.n_R=3", "experiment.task.n_r=1", "experiment.task.n_phi=3", "experiment.task.n_z=2",
-    "experiment.cycle.n_samples=11", "experiment.cycle.n_R_operating=2", "experiment.regular_workspace.n_r=6",
-    "experiment.regular_workspace.n_phi=2", "experiment.regular_workspace.n_z=6", "experiment.ga.population_size=8",
-    "experiment.ga.generations=4", "experiment.ga.checkpoint_every=2", "experiment.pareto.population_size=8",
-    "experiment.pareto.generations=3", "experiment.verify.n_R=3", "experiment.verify.n_R_operating=2",
-    "experiment.verify.task_n_r=1", "experiment.verify.task_n_phi=3", "experiment.verify.task_n_z=2",
-    "experiment.verify.cycle_samples=13", "experiment.verify.rw_n_r=7", "experiment.verify.rw_n_phi=2",
-    "experiment.verify.rw_n_z=7", "progress=false",
-]
+from toy_jobs import GA_STAGES_OFF, overrides
+
+TOY = overrides("ga_reconfig")  # tests/toy_jobs.py: the suite's one toy size of the main job
 VOLATILE = {"start_time", "end_time", "wall_time_s", "git_commit"}
 
 
@@ -54,9 +47,8 @@ def _assert_same(a, b):
 
 
 @pytest.fixture(scope="module")
-def full_run(tmp_path_factory):
-    d = tmp_path_factory.mktemp("full")
-    return run_experiment("ga_reconfig", TOY, run_dir=d)
+def full_run(toy_run):
+    return toy_run("ga_reconfig")  # the session's uninterrupted toy run (shared with tests/test_jobs.py)
 
 
 @pytest.mark.slow
@@ -82,14 +74,14 @@ def test_toy_run_front_feasible_summary_and_units(full_run):
     assert data["attrs"]["ga_reconfig_stages"] == "ga,pareto,verify,results,plots"
 
 
-@pytest.mark.slow
 def _logged(caplog):
     text = caplog.text
     caplog.clear()
     return text
 
 
-def test_rerun_three_times_into_one_dir(tmp_path, caplog):
+@pytest.mark.slow
+def test_rerun_three_times_into_one_dir(full_run, tmp_path, caplog):
     # 1: killed after 2 generations; 2: resumed and completed; 3: a no-op that says so (the run's lines go
     # through the "deltajax" logger: console and run.log)
     caplog.set_level(logging.INFO, logger="deltajax")
@@ -103,6 +95,7 @@ def test_rerun_three_times_into_one_dir(tmp_path, caplog):
     out = _logged(caplog)
     assert "complete results of this ga_reconfig run; nothing to do" in out and "starting the GA" not in out
     _assert_same(snap, p)
+    _assert_same(full_run, p)   # killed inside the GA and resumed: bit-identical to the uninterrupted run
     assert load(p)["ga"]["checkpoint"]["attrs"]["generations_done"] == 4   # the checkpoint survives
 
 
@@ -110,11 +103,8 @@ def test_rerun_three_times_into_one_dir(tmp_path, caplog):
 def test_kill_and_resume_is_bit_identical(full_run, tmp_path, monkeypatch):
     import deltajax.jobs.ga_reconfig as job
 
-    # killed inside the GA ...
-    run_experiment("ga_reconfig", TOY + ["experiment.stop_after=2"], run_dir=tmp_path / "a")
-    a = run_experiment("ga_reconfig", TOY, run_dir=tmp_path / "a")
-    _assert_same(full_run, a)
-    # ... and after the verify stage (before the summary is written)
+    # killed inside the GA: test_rerun_three_times_into_one_dir; here killed after the verify stage (before the
+    # summary is written)
     real = job._summary
 
     def killed(*args, **kw):
@@ -130,8 +120,8 @@ def test_kill_and_resume_is_bit_identical(full_run, tmp_path, monkeypatch):
 
 
 @pytest.mark.slow
-def test_pareto_disabled_runs_end_to_end(tmp_path):
-    p = run_experiment("ga_reconfig", TOY + ["experiment.pareto.enabled=false"], run_dir=tmp_path)
+def test_pareto_disabled_runs_end_to_end(toy_run):
+    p = toy_run("ga_reconfig", *GA_STAGES_OFF)  # the session's one run with the optional stages off
     data = load(p)
     assert "pareto" not in data
     names = list(data["verify"]["design_name"])

@@ -170,6 +170,7 @@ def test_singularity_types_2_3_4():
     assert not bool(s0.singular) and int(s0.jx_rank) == 3 and int(s0.jq_rank) == 3 and int(s0.jq_full_rank) == 3
 
 
+@pytest.mark.slow
 def test_point_indices_hot_path_equals_reference():
     key = jax.random.PRNGKey(1)
     p = jax.random.uniform(key, (500, 3), minval=jnp.array([-0.35, -0.35, 0.05]), maxval=jnp.array([0.35, 0.35, 0.6]))

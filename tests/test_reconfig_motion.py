@@ -13,8 +13,8 @@ TINY = ["experiment.R_step=0.007", "experiment.cases.adept.n_samples=11", "exper
 
 
 @pytest.mark.slow
-def test_reconfig_motion_tiny(tmp_path):
-    path = run_experiment("reconfig_motion", TINY, run_dir=tmp_path)
+def test_reconfig_motion_tiny(toy_run):
+    path = toy_run("reconfig_motion")  # TINY's sizes: the session's shared toy run (tests/toy_jobs.py)
     out = load(path)["reconfig_motion"]
     for case, K in (("adept", 11), ("task", 9)):
         g = out[case]

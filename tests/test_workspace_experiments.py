@@ -8,8 +8,10 @@ from deltajax.io import load
 from deltajax.run import run_experiment
 
 
-def test_reconfig_workspace(tmp_path):
-    path = run_experiment("reconfig_workspace", ["experiment.h=0.04", "progress=false"], run_dir=tmp_path)
+@pytest.mark.slow
+def test_reconfig_workspace(toy_run):
+    path = toy_run("reconfig_workspace")  # experiment.h=0.04: the session's shared toy run (tests/toy_jobs.py)
+    tmp_path = path.parent
     r = load(path)["workspace"]
     assert r["reachable_fixed"].shape == (21, 21, 15)
     assert r["units"]["volume_box_fixed"] == "m^3" and r["units"]["x"] == "m"
@@ -21,9 +23,9 @@ def test_reconfig_workspace(tmp_path):
     assert ds["reachable_fixed"].dims == ("x", "y", "z")
 
 
-def test_reconfig_indices_beta_override(tmp_path):
-    path = run_experiment("reconfig_indices", ["experiment.h=0.04", "beta=0.75", "progress=false",
-                                               "experiment.slices_z=[0.4]"], run_dir=tmp_path)
+@pytest.mark.slow
+def test_reconfig_indices_beta_override(toy_run, tmp_path):
+    path = toy_run("reconfig_indices")  # h=0.04, beta=0.75, slices_z=[0.4]: the session's shared toy run
     r = load(path)["workspace"]
     assert r["attrs"]["beta"] == 0.75
     assert r["stats"].shape == (2, 8, 3)
@@ -32,6 +34,6 @@ def test_reconfig_indices_beta_override(tmp_path):
     assert rdr[i_omv, 0] > odr[i_omv, 0]  # reconfiguration avoids low velocity manipulability
     assert not np.isnan(r["paper_stats"][0, i_omv, 2])
     assert np.all(np.isnan(r["R_star"][r["reachable_fixed"] == 0]))
-    assert (tmp_path / "fig8_omega_v_slices.png").exists()
+    assert (path.parent / "fig8_omega_v_slices.png").exists()
     with pytest.raises(ConfigError, match="beta"):
         run_experiment("reconfig_indices", ["experiment.h=0.04", "beta=1.5"], run_dir=tmp_path / "bad")

@@ -6,7 +6,9 @@ settings (tests/test_jobs.py runs each end to end; other files check their own n
 Change a size here, not in a test file, so the shared runs stay shared.
 """
 
-COMMON = ["progress=false", "compilation_cache=null"]
+#: plots on (a job's figures are part of its end-to-end run); conftest's toy_run adds compilation_cache=<the
+#: session's persistent XLA cache>
+COMMON = ["progress=false"]
 #: jobs the fixture runs through the real CLI (``python -m deltajax.run``, a subprocess) rather than in-process
 CLI = {"indices_examples"}
 TOY = {
