@@ -229,9 +229,11 @@ def loop_closure(dx, py, pz, L1, L2, lim: LimitTerms, sign: float = 1.0) -> Loop
     disc = rho2 - m * m  # rho^2 sin^2(acos(m / rho))
     reach = (disc >= 0.0) & (rho2 > 0.0)
     w = jnp.sqrt(jnp.where(disc > 0.0, disc, 0.0))
-    inv_rho2 = 1.0 / jnp.where(reach, rho2, 1.0)
-    c = (dx * m + sign * pz * w) * inv_rho2
-    s = (pz * m - sign * dx * w) * inv_rho2
+    rho2_safe = jnp.where(reach, rho2, 1.0)
+    # two divides, not one reciprocal and two products: XLA:CPU computes a divide once and lets every later
+    # loop read it, whereas a product of a shared reciprocal is recomputed (with the IK under it) in each
+    c = (dx * m + sign * pz * w) / rho2_safe
+    s = (pz * m - sign * dx * w) / rho2_safe
     margin = c * lim.cos_mid + s * lim.sin_mid - lim.cos_half
     return LoopClosure(cos=c, sin=s, disc=disc, reach=reach, margin=margin, ok=reach & (margin >= 0.0))
 

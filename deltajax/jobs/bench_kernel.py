@@ -1,8 +1,9 @@
 """Kernel benchmark: IK + Jacobian + all indices, evaluations per CPU-second and per wall-second (warm).
 
 Measured in the same process (ratios are what we report; absolute rates depend on the machine and its load):
-(a) the new core kernel ``jit(vmap(point_indices))`` (fast closed form; and the exact Jacobi form), f64 and
-f32; (b) the frozen pre-issue-9 kernel (:mod:`deltajax.baseline_kernel`, main 9f54c88) as the baseline; (c) the
+(a) the new core kernel ``point_indices`` vmapped in cache-sized blocks (:func:`deltajax.indices.map_points`,
+the form the index fields use; fast closed form and exact Jacobi form) and as one plain ``jit(vmap(...))``,
+f64 and f32; (b) the frozen pre-issue-9 kernel (:mod:`deltajax.baseline_kernel`, main 9f54c88) as the baseline; (c) the
 independent NumPy reference (:mod:`deltajax.reference`); (d) Numba (exact kernel + minimal loop ceiling)
 when :mod:`deltajax.workspace` provides the hook ``bench_kernel_rates`` (the numba colleague's module).
 Every JAX result is checked against the NumPy reference before timing; XLA fusion counts are printed.
@@ -20,7 +21,7 @@ import numpy as np
 
 from .. import reference
 from ..config import ConfigError
-from ..indices import point_indices
+from ..indices import POINT_BLOCK, map_points, point_indices
 from .. import baseline_kernel as _kernel_baseline
 
 
@@ -65,6 +66,9 @@ def run(ctx) -> None:
     for dt in e.dtypes:
         if dt not in ("float32", "float64"):
             raise ConfigError(f"experiment.dtypes entries must be float32/float64, got {dt!r}")
+    block = int(e.get("block", POINT_BLOCK))
+    if block < 0:
+        raise ConfigError(f"experiment.block must be >= 0 (0: one plain vmap), got {e.block!r}")
     if ctx.cfg.precision != "float64" and "float64" in e.dtypes:
         raise ConfigError("bench_kernel with float64 in experiment.dtypes needs precision=float64")
     robot64 = ctx.robot.with_base_radius(float(e.R))
@@ -93,9 +97,11 @@ def run(ctx) -> None:
         p = jnp.asarray(pts, dt)
         variants = {
             "old kernel (main 9f54c88)": lambda rb, q: jax.vmap(lambda x: _kernel_baseline.point_indices(rb, x)[1])(q),
-            "new kernel fast": lambda rb, q: jax.vmap(lambda x: point_indices(rb, x)[1])(q),
-            "new kernel exact (jacobi)": lambda rb, q: jax.vmap(
-                lambda x: point_indices(rb, x, sv_method="jacobi")[1])(q),
+            f"new kernel fast (blocks of {block})": lambda rb, q: map_points(lambda x: point_indices(rb, x)[1], q,
+                                                                              block=block),
+            "new kernel fast, one vmap": lambda rb, q: jax.vmap(lambda x: point_indices(rb, x)[1])(q),
+            "new kernel exact (jacobi)": lambda rb, q: map_points(
+                lambda x: point_indices(rb, x, sv_method="jacobi")[1], q, block=block),
         }
         base = None
         for label, fn in variants.items():
@@ -113,7 +119,7 @@ def run(ctx) -> None:
             nf = fusion_count(compiled)
             lines.append(f"{'':34s}  compile {t_compile:.2f} s, {nf} fusions, max rel err sigma_min_v vs numpy "
                          f"{err:.1e}, ok mask {'identical' if same_mask else 'DIFFERENT'}")
-            g = f"bench/{dt_name}/{label.split(' (')[0].replace(' ', '_')}"
+            g = f"bench/{dt_name}/{label.split(' (')[0].replace(',', '').replace(' ', '_')}"
             res.put(g, "rate_cpu", rate, units="1/s")
             res.put(g, "rate_wall", n / wall, units="1/s")
             res.put(g, "compile_time", t_compile, units="s")
@@ -133,5 +139,5 @@ def run(ctx) -> None:
         from ..plots import bench_rates_from_results
 
         ctx.savefig(bench_rates_from_results(res, f"kernel throughput (IK + Jacobian + indices), {n} points, "
-                                                  f"{len(jax.devices())} {jax.default_backend()} device(s)"),
+                                                  f"{jax.device_count()} {jax.default_backend()} device(s)"),
                     "bench_kernel")

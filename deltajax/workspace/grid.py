@@ -36,7 +36,7 @@ import numpy as np
 from jaxtyping import Array, Bool, Float
 
 from ..geometry import Delta
-from ..indices import INDEX_NAMES, Indices, point_indices, point_kernel
+from ..indices import INDEX_NAMES, Indices, map_points, point_indices, point_kernel
 from ..kinematics import ik_cos_sin
 
 __all__ = [
@@ -233,6 +233,6 @@ def index_fields(robot: Delta, points: Float[Array, "n 3"], *, b_v: float = 2.0,
     Returns:
         (ok[n], {name: float[n]} for name in :data:`FIELD_NAMES`).
     """
-    ok, ind = jax.vmap(lambda q: mirrored_point_indices(robot, q, b_v=b_v, b_f=b_f, beta=beta, sv_method=sv_method)
-                       )(jnp.asarray(points))
+    ok, ind = map_points(lambda q: mirrored_point_indices(robot, q, b_v=b_v, b_f=b_f, beta=beta,
+                                                          sv_method=sv_method), points)
     return ok, {name: getattr(ind, name) for name in FIELD_NAMES}
