@@ -21,6 +21,8 @@ from typing import Any, Iterable, Optional
 import hydra
 from omegaconf import DictConfig, OmegaConf
 
+from .io import ResultsWriteError
+
 log = logging.getLogger("deltajax")
 
 #: Exit status of a run stopped by a user error (bad config value, unknown experiment): one line on stderr.
