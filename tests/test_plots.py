@@ -128,3 +128,23 @@ def test_workspace_3d_titles_give_the_volume_and_ticks_stay_inside():
     assert f"V = {vol:.4g} m$^3$" in ax.get_title() and f"{mask.sum()} reachable grid points" in ax.get_title()
     for ticks, (lo, hi) in ((ax.get_xticks(), ax.get_xlim()), (ax.get_yticks(), ax.get_ylim())):
         assert len(ticks) >= 3 and min(ticks) - lo > 0.05 * (hi - lo) and hi - max(ticks) > 0.05 * (hi - lo)
+
+
+def test_reconfig_motion_landscape_legend_shows_the_white_fixed_line():
+    import types
+
+    import matplotlib
+    import matplotlib.colors as mcolors
+
+    matplotlib.use("Agg")
+    from deltajax.jobs import reconfig_motion as job
+
+    figs = []
+    ctx = types.SimpleNamespace(savefig=lambda fig, name: figs.append(fig))
+    t, Rg = np.linspace(0.0, 0.5, 6), np.linspace(0.15, 0.45, 7)
+    job._plot_landscape(ctx, "adept", t, Rg, np.full((6, 7), 0.6), {"fixed": np.full(6, 0.27)}, "k_tilde")
+    (ax,) = [a for a in figs[0].axes if a.get_label() != "<colorbar>"]
+    frame = mcolors.to_rgb(ax.get_legend().get_frame().get_facecolor())
+    line = mcolors.to_rgb(ax.get_lines()[0].get_color())
+    assert np.abs(np.subtract(frame, line)).sum() > 0.5  # the legend's handle differs from its background
+    matplotlib.pyplot.close(figs[0])

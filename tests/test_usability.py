@@ -291,3 +291,18 @@ def test_file_sizes_tool_measures_the_uncompressed_size(tmp_path, capsys):
         assert d.compression is None and d.chunks is None and d.attrs["units"] == "1"
         np.testing.assert_array_equal(d[()], mask)
     assert (tmp_path / "plain.h5").stat().st_size > 10 * path.stat().st_size
+
+
+@pytest.mark.slow
+def test_an_internal_error_is_reported_as_itself(tmp_path):
+    """A bug inside a job (not a user error) shows its own exception, not a NameError from run.py's handler."""
+    code = ("import sys, deltajax.run as r\n"
+            "def boom(*a, **k):\n"
+            "    raise RuntimeError('boom inside the job')\n"
+            "r.execute = boom\n"
+            f"sys.exit(r.cli(['experiment=indices_examples', 'hydra.run.dir={tmp_path}']))\n")
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    env.pop("HYDRA_FULL_ERROR", None)
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=300)
+    assert out.returncode == 1
+    assert "RuntimeError: boom inside the job" in out.stderr and "NameError" not in out.stderr, out.stderr

@@ -56,7 +56,7 @@ def _plot_landscape(ctx, name, t, Rg, table, paths, crit):
     ax.set_xlabel("t (s)")
     ax.set_ylabel("R (m)")
     ax.set_title(f"{name}: {crit} over (t, R) and the four R(t)")
-    ax.legend(loc="upper right", fontsize=8, framealpha=0.8)
+    ax.legend(loc="upper right", fontsize=8, framealpha=0.8, facecolor="0.6")  # grey: the white "fixed" line shows
     ctx.savefig(fig, f"{name}_landscape")
 
 
