@@ -9,7 +9,7 @@ minimum cycle time under :class:`Limits` is closed-form per sample (:func:`cycle
 
 from __future__ import annotations
 
-from typing import Any, NamedTuple
+from typing import Any, NamedTuple, Optional
 
 import equinox as eqx
 import jax
@@ -21,6 +21,7 @@ from .dynamics import (Motion, flat_efforts, flat_motion, inverse_dynamics_motio
                        require_mass, virtual_work_split)
 from .fields import check_range, float_leaf
 from .geometry import Delta
+from .mass import FOREARM_MODELS
 from .trajectory import trapezoid_weights
 
 #: The names that lived in :mod:`deltajax.dynamics` before the split; ``deltajax/__init__.py`` keeps them
@@ -37,6 +38,7 @@ __all__ = [
     "cycle_metrics",
     "within_limits",
     "min_cycle_time_bisection",
+    "metrics_by_forearm_model",
 ]
 
 
@@ -344,3 +346,18 @@ def min_cycle_time_bisection(robot: Delta, cycle, limits: Limits, *, T_low: floa
     dtype = cycle.duration.dtype
     lo, hi = jax.lax.fori_loop(0, n_iter, body, (jnp.asarray(T_low, dtype), jnp.asarray(T_high, dtype)))
     return jnp.where(feasible(jnp.asarray(T_high, dtype)), hi, jnp.inf)
+
+
+def metrics_by_forearm_model(robot: Delta, cycle, limits: Limits, *, method: str = "virtual_work", metrics=None,
+                             own: Optional[CycleMetrics] = None) -> dict:
+    """{forearm model: :class:`CycleMetrics`} of one design on one cycle under every model of
+    :data:`deltajax.mass.FOREARM_MODELS` (the robot's own model included; ``own``: its metrics if already
+    computed). ``metrics``: the (e.g. jitted) :func:`cycle_metrics` to call."""
+    metrics = cycle_metrics if metrics is None else metrics
+    mass = require_mass(robot)
+    out = {mass.forearm_model: metrics(robot, cycle, limits, method=method) if own is None else own}
+    for fm in FOREARM_MODELS:
+        if fm not in out:
+            out[fm] = metrics(eqx.tree_at(lambda d: d.mass, robot, mass.with_forearm_model(fm)), cycle, limits,
+                              method=method)
+    return out

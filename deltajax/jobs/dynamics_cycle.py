@@ -29,7 +29,7 @@ import numpy as np
 from .. import plots, presets
 from .. import trajectory as tr
 from ..config import ConfigError, dynamics_cycle_spec
-from ..cycle import Limits, cycle_metrics, cycle_profile
+from ..cycle import Limits, cycle_metrics, cycle_profile, metrics_by_forearm_model
 from ..mass import FOREARM_MODELS
 
 CASE_FIELDS = (("p", "m"), ("p_dot", "m/s"), ("p_ddot", "m/s^2"), ("theta", "rad"), ("theta_dot", "rad/s"),
@@ -204,11 +204,7 @@ def run(ctx) -> None:
                               ("ok", "1"), ("reachable", "1"), ("n_bad", "1")):
                 res.put(mg, key, np.asarray(getattr(m, key)), units=unit)
             summary.append((name, case, m, gap))
-            by_model = {robot.mass.forearm_model: m}
-            for fm in FOREARM_MODELS:
-                if fm not in by_model:
-                    other_rob = eqx.tree_at(lambda d: d.mass, robot, robot.mass.with_forearm_model(fm))
-                    by_model[fm] = metrics_jit(other_rob, cyc, limits, method=method)
+            by_model = metrics_by_forearm_model(robot, cyc, limits, method=method, metrics=metrics_jit, own=m)
             _save_forearm_models(res, f"dynamics/{name}/{case}_forearm_models", by_model)
             comparison.append((f"{name}/{case}", by_model))
             ctx.log(_forearm_line(name, case, by_model))
@@ -251,15 +247,14 @@ def run(ctx) -> None:
             _plot_torques(ctx, cfg_name, prof, f"{cfg_name}: GA motion with moving R", f"{cfg_name}_ga_motion_moving_R")
     names = [f"{n}/{c}" for n, c, _, _ in summary]
     res.put("dynamics/summary", "case", np.asarray(names, dtype="S"), units="1", dims=("case",))
-    for key, unit in (("cycle_time", "s"), ("cycles_per_minute", "1/min")):
-        res.put("dynamics/summary", key, np.asarray([float(getattr(m, key)) for _, _, m, _ in summary]), units=unit,
-                dims=("case",))
-    res.put("dynamics/summary", "peak_torque", np.asarray([np.asarray(m.peak_torque) for _, _, m, _ in summary]),
-            units="N m", dims=("case", "chain"))
-    res.put("dynamics/summary", "rms_torque", np.asarray([np.asarray(m.rms_torque) for _, _, m, _ in summary]),
-            units="N m", dims=("case", "chain"))
-    res.put("dynamics/summary", "peak_joint_speed", np.asarray([np.asarray(m.peak_speed) for _, _, m, _ in summary]),
-            units="rad/s", dims=("case", "chain"))
+    for key, stored, unit, dims in (("cycle_time", "cycle_time", "s", ("case",)),
+                                    ("cycles_per_minute", "cycles_per_minute", "1/min", ("case",)),
+                                    ("peak_torque", "peak_torque", "N m", ("case", "chain")),
+                                    ("rms_torque", "rms_torque", "N m", ("case", "chain")),
+                                    ("peak_speed", "peak_joint_speed", "rad/s", ("case", "chain"))):
+        as_is = float if dims == ("case",) else np.asarray
+        res.put("dynamics/summary", stored, np.asarray([as_is(getattr(m, key)) for _, _, m, _ in summary]),
+                units=unit, dims=dims)
     _save_forearm_summary(res, comparison)
     res.set_attrs("dynamics", method=method, law=spec["law"], blend=spec["blend"], n_samples=K,
                   max_formulation_gap=max_formulation_gap)
