@@ -20,20 +20,22 @@ For one design (pure, jit/vmap-able over a population):
    time T_plan is the per-task R's fastest cycle (the nominal duration when that is not finite): the drive must
    keep up with the cycle as the robot runs it.
 2. **Realise**: R(u) = the periodic uniform cubic B-spline with the plan as control points (C2 across the
-   cycle's repetition; its speed and acceleration lie in the convex hull of the control points' differences,
-   i.e. within the planned limits at every instant). The exact criterion on the cycle samples decides: the
-   spline is *accepted* only if it is feasible at every cycle sample and not worse than the best feasible
-   constant R of the window (the per-task R is one of them); otherwise R(t) = that constant
-   (``path_accepted`` = 0). So the path mode is never worse on the criterion than the best fixed R of the window
-   nor than "R per task" (tested).
-3. **Cycle metrics at R(t)** (inverse dynamics with moving R, :func:`deltajax.cycle_profile` via
-   :func:`deltajax.constraints.cycle_rate` / ``drive_loads``): T_motor, the fastest time for the arm motors, and
-   T_drive, the fastest for the R drive (smallest T with the time-scaled R(t) inside the speed, acceleration and
-   force (and screw torque) limits at every cycle sample; monotone in T, bisection). The cycle runs at
-   T = max(T_motor, T_drive): picks/min = 60 / (T + 2 dwell), motor loads at T.
+   cycle's repetition; its speed and acceleration lie in the convex hull of the control points' differences).
+3. **Choose and run the cycle.** Three candidates: the spline, the constant per-task R and the window's constant
+   R best on the exact criterion (cycle samples). For each, inverse dynamics with moving R
+   (:func:`deltajax.cycle_profile` via :func:`deltajax.constraints.cycle_rate` / ``drive_loads``) give T_motor,
+   the fastest time for the arm motors, and T_drive, the fastest for the R drive (smallest T with the
+   time-scaled R(t) inside the speed, acceleration, force and screw-torque limits at every cycle sample;
+   monotone in T, bisection); the cycle runs at T = max(T_motor, T_drive): picks/min = 60 / (T + 2 dwell),
+   motor loads at T. Chosen: feasible at every cycle sample and running first, then the most picks/min, then the
+   higher criterion (``path_accepted`` = 1 when the spline wins). So the path mode never runs fewer picks/min
+   than the per-task R whenever that R, held constant, is within the R drive's limits at its own cycle time
+   (the R drive must hold R against the arms' radial force even when R does not move), nor than the window's
+   best-index constant R (tested).
 4. **Margins** at T (limit - worst value over the cycle samples, in the drive's units): ``R_speed_margin``
    (m/s), ``R_accel_margin`` (m/s^2), ``R_force_margin`` (N), ``screw_torque_margin`` (N m, screw mechanism
-   only); with ``screw_torque_peak`` (N m), ``R_path_min`` / ``R_path_max`` (m), ``path_index_mean`` (time mean
+   only); with ``screw_torque_peak`` (N m), ``R_path_min`` / ``R_path_max`` (m), the planning window
+   ``R_window_min`` / ``R_window_max`` (m), ``path_index_mean`` (time mean
    of the index along R(t)) and ``path_index_mean_fixed`` (at the per-task R), ``cycle_time_drive`` (s). The
    limits bind twice: in the plan at T_plan, and through T_drive (the cycle slows down rather than exceed them),
    so every margin is >= 0 whenever the cycle runs (tested). A design whose R drive cannot hold even the static
@@ -71,8 +73,9 @@ MECHANISM_NAMES = ("none", "screw_linkage")
 #: metrics of the path mode (NaN in per_task mode) and their units
 OPERATING_UNITS = {"R_speed_margin": "m/s", "R_accel_margin": "m/s^2", "R_force_margin": "N",
                    "screw_torque_margin": "N m", "screw_torque_peak": "N m", "R_path_min": "m", "R_path_max": "m",
-                   "path_index_mean": "1", "path_index_mean_fixed": "1", "path_accepted": "1",
-                   "cycle_time_drive": "s"}
+                   "R_window_min": "m", "R_window_max": "m",
+                   "path_index_mean": "1", "path_index_mean_fixed": "1", "path_index_mean_plan": "1",
+                   "path_accepted": "1", "cycle_time_drive": "s", "cycle_time_motor": "s"}
 OPERATING_SENSE = {"R_speed_margin": -1, "R_accel_margin": -1, "R_force_margin": -1, "screw_torque_margin": -1,
                    "screw_torque_peak": 1, "path_index_mean": -1, "path_index_mean_fixed": -1}
 #: cycle metrics whose per-task (fixed-R) value is also reported as ``<name>_fixed``
@@ -333,34 +336,88 @@ def path_operating(pb, design, R_op, T_plan, task_joint_margin, task_interferenc
     P, S, plan = _dp(*args, k0, boundary="closed", backtrack=True, **kw)
     planned = jnp.isfinite(P)
 
-    # (2) realise: periodic cubic B-spline through the plan's control points. The exact criterion on the cycle
-    # samples decides between it and every constant R of the window (the per-task R among them): the spline is
-    # kept only if it is feasible at every sample and not worse than the best feasible constant
+    # (2) realise: periodic cubic B-spline through the plan's control points. Candidates: the spline, the
+    # constant per-task R and the window's best constant R on the exact criterion (cycle samples)
     B, B1, B2 = (jnp.asarray(x, dt) for x in periodic_basis(K, M))
     ctrl = R_lo + plan[:M].astype(dt) * dR
-    rows = jnp.concatenate([(B @ ctrl)[None, :], jnp.broadcast_to(Rk[:, None], (n, K))])     # (1 + n, K)
-    pc = jax.vmap(lambda Rrow: jax.vmap(lambda p, r: C.good_point(design.at(r), p, pb.good, plate_radius=plate))(
-        cyc.x, Rrow))(rows)
-    ok_row = jnp.all(pc.reachable & jnp.isfinite(pc.index), axis=1)
+    consts = jnp.broadcast_to(Rk[:, None], (n, K))
+    pcc = _cycle_checks(pb, design, plate, cyc.x, consts)
+    ok_c, integ_c, crit_c = _criterion(pb, spec, pcc, K, dt)
+    best_c = jnp.argmax(jnp.where(ok_c, crit_c, -jnp.inf))           # ties: the smaller R
+    zero = jnp.zeros((K,), dt)
+    rows = jnp.stack([B @ ctrl, consts[m_op], consts[best_c]])         # (3, K)
+    rows_u = jnp.stack([B1 @ ctrl, zero, zero])
+    rows_uu = jnp.stack([B2 @ ctrl, zero, zero])
+    pcs = _cycle_checks(pb, design, plate, cyc.x, rows[:1])
+    ok_s, integ_s, _ = _criterion(pb, spec, pcs, K, dt)
+    ok_row = jnp.stack([ok_s[0] & planned, ok_c[m_op], ok_c[best_c]])
+    integ = jnp.stack([integ_s[0], integ_c[m_op], integ_c[best_c]])
+    jm = jnp.stack([_nanmin(pcs.joint_margin[0]), _nanmin(pcc.joint_margin[m_op]), _nanmin(pcc.joint_margin[best_c])])
+    im = jnp.stack([_nanmin(pcs.interference_margin[0]), _nanmin(pcc.interference_margin[m_op]),
+                    _nanmin(pcc.interference_margin[best_c])])
+
+    # (3) per candidate: fastest cycle for the arm motors and for the R drive; it runs at the slower of the two
+    cand = jax.vmap(lambda R, Ru, Ruu: _run_cycle(pb, spec, robot, robot_d, cyc, T_plan, T_nom, R, Ru, Ruu))(
+        rows, rows_u, rows_uu)
+    ppm = cand["picks_per_min"]
+    runs = ok_row & jnp.isfinite(ppm) & (ppm > 0)
+    best_p = jnp.max(jnp.where(runs, ppm, -jnp.inf))
+    top = runs & (ppm >= best_p * (1 - 1e-12))
+    # feasible and running first, then the most picks/min, then the higher criterion; none: the per-task R
+    sel = jnp.where(jnp.any(runs), jnp.argmax(jnp.where(top, integ, -jnp.inf)), 1)
+    out = {k: v[sel] for k, v in cand.items()}
+    R, Ru = rows[sel], rows_u[sel]
+    out.update({
+        "joint_margin_deg": jnp.rad2deg(jnp.minimum(task_joint_margin, jm[sel])),
+        "interference_margin": jnp.minimum(task_interference_margin, im[sel]),
+        "R_path_min": jnp.min(R), "R_path_max": jnp.max(R),
+        "R_window_min": R_lo, "R_window_max": R_lo + (n - 1) * dR,
+        "path_index_mean": integ[sel], "path_index_mean_fixed": integ[1],
+        "path_index_mean_plan": integ[0], "path_accepted": (sel == 0).astype(dt),
+    })
+    if spec.mechanism is not None:
+        Tl = jnp.where(jnp.isfinite(out["cycle_time"]), out["cycle_time"], T_nom)
+        drv = drive_profile(spec.mechanism, R, Ru / Tl, out.pop("force_R"))
+        peak = jnp.where(jnp.all(drv.ok), jnp.max(jnp.abs(drv.effort)), jnp.nan)
+        out["screw_torque_peak"] = peak
+        out["screw_torque_margin"] = spec.motor_torque - peak
+    else:
+        out.pop("force_R")
+        out["screw_torque_peak"] = out["screw_torque_margin"] = jnp.asarray(jnp.nan, dt)
+    cyc_R = with_R(cyc, R, Ru / T_plan, rows_uu[sel] / (T_plan * T_plan))
+    out = {k: jnp.asarray(v, dt) for k, v in out.items()}
+    if return_profile:
+        return out, {"R": R, "R_u": Ru, "R_uu": rows_uu[sel], "cycle": cyc_R, "T_plan": T_plan}
+    return out
+
+
+def _nanmin(a):
+    return jnp.where(jnp.any(jnp.isnan(a)), jnp.nan, jnp.min(a))
+
+
+def _cycle_checks(pb, design, plate, x, rows):
+    """:func:`deltajax.constraints.good_point` at (x_j, rows[i, j]) for every row i: (rows, K) fields."""
+    return jax.vmap(lambda Rrow: jax.vmap(lambda p, r: C.good_point(design.at(r), p, pb.good, plate_radius=plate))(
+        x, Rrow))(rows)
+
+
+def _criterion(pb, spec, pc, K, dt):
+    """(feasible, time-mean index, criterion) per row of :func:`_cycle_checks` (the designer's enabled checks)."""
+    ok = jnp.all(pc.reachable & jnp.isfinite(pc.index), axis=1)
     if "passive_joints" in pb.enabled:
-        ok_row = ok_row & jnp.all(pc.joint_margin >= 0, axis=1)
+        ok = ok & jnp.all(pc.joint_margin >= 0, axis=1)
     if "interference" in pb.enabled:
-        ok_row = ok_row & jnp.all(pc.interference_margin >= 0, axis=1)
-    ok_row = ok_row.at[0].set(ok_row[0] & planned)
+        ok = ok & jnp.all(pc.interference_margin >= 0, axis=1)
     wts = jnp.ones((K,), dt).at[0].set(0.5).at[-1].set(0.5) / (K - 1)
     integ = jnp.sum(wts[None, :] * jnp.where(jnp.isfinite(pc.index), pc.index, 0.0), axis=1)
-    crit = integ if spec.aggregate == "integral" else jnp.min(pc.index, axis=1)
-    score = jnp.where(ok_row, crit, -jnp.inf)
-    best_c = 1 + jnp.argmax(score[1:])                    # ties: the smaller R
-    accept = ok_row[0] & (score[0] >= score[best_c])
-    # nothing feasible: the per-task R (its violations are reported as they are)
-    sel = jnp.where(accept, 0, jnp.where(jnp.isfinite(score[best_c]), best_c, 1 + m_op))
-    R = rows[sel]
-    Ru = jnp.where(accept, B1 @ ctrl, 0.0)
-    Ruu = jnp.where(accept, B2 @ ctrl, 0.0)
-    cyc_R = with_R(cyc, R, Ru / T_plan, Ruu / (T_plan * T_plan))
+    return ok, integ, (integ if spec.aggregate == "integral" else jnp.min(pc.index, axis=1))
 
-    # (3) fastest cycle for the arm motors and for the R drive; the cycle runs at the slower of the two
+
+def _run_cycle(pb, spec, robot, robot_d, cyc, T_plan, T_nom, R, Ru, Ruu):
+    """Cycle metrics of one R(u) profile (u-derivatives Ru, Ruu): T = max(T_motor, T_drive) and the margins."""
+    dt = R.dtype
+    gear = robot.mass.gear_ratio
+    cyc_R = with_R(cyc, R, Ru / T_plan, Ruu / (T_plan * T_plan))
     rate = C.cycle_rate(robot, cyc_R, pb.motor, gear, dwell=pb.dwell, payload_mass=pb.payload)
     prof1 = cycle_profile(robot_d, cyc_R, 1.0)
     fa, fg = prof1.force_R_inertial_unit, prof1.force_R_gravity
@@ -378,32 +435,8 @@ def path_operating(pb, design, R_op, T_plan, task_joint_margin, task_interferenc
     dw = jnp.asarray(pb.dwell, dt)
     ppm = jnp.where(jnp.isfinite(T), 60.0 / (T + 2.0 * dw), jnp.where(jnp.isnan(T), jnp.nan, 0.0))
     F = fa / (Tl * Tl) + fg
-    out = {
-        "picks_per_min": ppm, "cycle_time": T, "cycle_time_drive": T_drive,
-        "peak_utilisation": loads.peak_utilisation, "rms_utilisation": loads.rms_utilisation,
-        "speed_utilisation": loads.speed_utilisation,
-        "joint_margin_deg": jnp.rad2deg(jnp.minimum(task_joint_margin, _nanmin(pc.joint_margin[sel]))),
-        "interference_margin": jnp.minimum(task_interference_margin, _nanmin(pc.interference_margin[sel])),
-        "R_speed_margin": spec.speed - vmax / Tl,
-        "R_accel_margin": spec.accel - amax / (Tl * Tl),
-        "R_force_margin": spec.force - jnp.max(jnp.abs(F)),
-        "R_path_min": jnp.min(R), "R_path_max": jnp.max(R),
-        "path_index_mean": integ[sel],
-        "path_index_mean_fixed": integ[1 + m_op],
-        "path_accepted": accept.astype(dt),
-    }
-    if spec.mechanism is not None:
-        drv = drive_profile(spec.mechanism, R, Ru / Tl, F)
-        peak = jnp.where(jnp.all(drv.ok), jnp.max(jnp.abs(drv.effort)), jnp.nan)
-        out["screw_torque_peak"] = peak
-        out["screw_torque_margin"] = spec.motor_torque - peak
-    else:
-        out["screw_torque_peak"] = out["screw_torque_margin"] = jnp.asarray(jnp.nan, dt)
-    out = {k: jnp.asarray(v, dt) for k, v in out.items()}
-    if return_profile:
-        return out, {"R": R, "R_u": Ru, "R_uu": Ruu, "cycle": cyc_R, "T_plan": T_plan}
-    return out
-
-
-def _nanmin(a):
-    return jnp.where(jnp.any(jnp.isnan(a)), jnp.nan, jnp.min(a))
+    return {"picks_per_min": ppm, "cycle_time": T, "cycle_time_drive": T_drive, "cycle_time_motor": rate.cycle_time,
+            "peak_utilisation": loads.peak_utilisation, "rms_utilisation": loads.rms_utilisation,
+            "speed_utilisation": loads.speed_utilisation, "R_speed_margin": spec.speed - vmax / Tl,
+            "R_accel_margin": spec.accel - amax / (Tl * Tl), "R_force_margin": spec.force - jnp.max(jnp.abs(F)),
+            "force_R": F}
