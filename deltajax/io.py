@@ -1,4 +1,9 @@
-"""HDF5 results (SPEC §5): one self-describing file per run, written atomically; plain-NumPy loader.
+"""HDF5 results (SPEC §5): one self-describing file per run, written atomically, and the one reader.
+
+The bottom of the import graph: this module imports nothing else from deltajax. :func:`read` is the reader of
+results files; it keeps every dataset's dimensions, units and attributes, and :func:`load` (plain
+Python/NumPy), :func:`open_xarray` (xarray), the sweep merge and summaries (:mod:`deltajax.sweeps`) and the
+results-file checkpoint (:mod:`deltajax.workspace.chunks`) are views of what it returns.
 
 Layout: root attributes (version, git commit, resolved config as YAML, experiment, seed, precision,
 backend/device, start/end time); one group per kind of result (``robot``, ``workspace``, ``boundary``,

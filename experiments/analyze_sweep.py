@@ -3,7 +3,7 @@
     python experiments/analyze_sweep.py outputs/multirun/workspace_grid/<date>_<time>
     python experiments/analyze_sweep.py <sweep dir> --x robot.forearm --metrics workspace/volume,dynamics/tau_peak
 
-Steps: refresh the sweep's ``summary.csv``/``summary.json`` (:func:`deltajax.sweep.summarize_sweep`; sharded
+Steps: refresh the sweep's ``summary.csv``/``summary.json`` (:func:`deltajax.sweeps.summarize_sweep`; sharded
 jobs count once, through their merged file), pick the swept parameter (``--x``, default the first override
 that takes several numeric values), then write into ``--out`` (default the sweep directory):
 
@@ -115,7 +115,7 @@ def analyze(sweep_dir: Path, x: Optional[str] = None, metrics: Optional[str] = N
     import numpy as np
 
     from deltajax.io import open_xarray
-    from deltajax.sweep import summarize_sweep
+    from deltajax.sweeps import summarize_sweep
 
     sweep_dir = Path(sweep_dir)
     if not sweep_dir.is_dir():
