@@ -23,6 +23,7 @@ def _thetas():
     return np.stack([np.asarray(dj.ik(ROBOT, jnp.asarray(p)).theta) for p in POINTS])
 
 
+@pytest.mark.slow
 def test_ball_joint_cones_match_the_passive_angles():
     jm = C.JointModel(limit=math.radians(50), elbow_neutral=math.radians(80), platform_neutral=math.radians(35))
     f = jax.jit(jax.vmap(lambda p, t: C.joint_angles(ROBOT, p, t, jm)))
@@ -204,6 +205,7 @@ def test_largest_cylinder_against_brute_force(seed, lam):
     np.testing.assert_allclose(float(out.diameter), D, rtol=1e-12, atol=1e-15)
 
 
+@pytest.mark.slow
 def test_regular_workspace_of_a_known_good_set():
     # good set: the cylinder r <= 0.15, 0.3 <= z <= 0.45: with H/D = 0.5 the answer is D = 0.3, H = 0.15
     pts, r, z = C.polar_grid(0.3, 0.2, 0.6, 31, 4, 41)
@@ -214,6 +216,7 @@ def test_regular_workspace_of_a_known_good_set():
     np.testing.assert_allclose(float(out.volume), math.pi * 0.15 ** 2 * 0.15, rtol=1e-12)
 
 
+@pytest.mark.slow
 def test_good_point_combines_the_margins():
     spec = C.GoodSpec(joints=C.JointModel(limit=math.radians(50), platform_neutral=math.radians(40)),
                       links=C.LinkModel(), threshold=0.3)

@@ -475,6 +475,7 @@ def _ne_check(robot, cycle, *, has_R=False):
 
 @pytest.mark.parametrize("preset", ["franco2026", "industrial"])
 @pytest.mark.parametrize("model", ["rigid_rod", "point_split"])
+@pytest.mark.slow
 def test_newton_euler_reference_on_presets(preset, model):
     """Both presets, both forearm models: standard cycle and a 3-D move against free-body Newton-Euler, 1e-9."""
     if preset == "franco2026":

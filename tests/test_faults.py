@@ -460,6 +460,7 @@ def test_valid_keys_for_composition_errors():
     assert "seed" in valid_keys("sed") and valid_keys("experiment.x", "no_such_job") is None
 
 
+@pytest.mark.slow
 def test_every_experiment_composes_and_validates_at_its_defaults():
     for name in ("workspace_grid", "reconfig_workspace", "reconfig_indices", "indices_examples", "bench_kernel",
                  "dynamics_cycle", "boundary_search", "ga_reconfig"):
@@ -525,6 +526,7 @@ _ik_batch = jax.jit(jax.vmap(dj.ik, in_axes=(None, 0)))
 @settings(max_examples=10, deadline=None)
 @given(st.lists(st.tuples(*[st.one_of(st.floats(-2, 2), st.sampled_from([np.nan, np.inf, -np.inf, 1e300]))] * 3),
                 min_size=1, max_size=16))
+@pytest.mark.slow
 def test_fuzzed_points_never_raise_and_non_finite_points_are_not_ok(points):
     robot = dj.presets.franco2026().robot
     p = jnp.asarray(np.array(points, dtype=np.float64))

@@ -88,6 +88,7 @@ def test_z_up_round_trip():
     assert np.linalg.det(M) == pytest.approx(1.0)
 
 
+@pytest.mark.slow
 def test_robot_is_a_pytree_that_vmaps_over_designs():
     rec = dj.presets.franco2026()
     Rs = jnp.array([0.2, 0.3, 0.4])

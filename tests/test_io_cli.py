@@ -88,6 +88,7 @@ def test_indices_examples_through_the_cli(toy_run):
     ds.close()
 
 
+@pytest.mark.slow
 def test_cli_rejects_bad_config_before_compiling(tmp_path):
     out = _cli("experiment=indices_examples", "robot.forearm=-0.4", f"hydra.run.dir={tmp_path}")
     assert out.returncode != 0

@@ -30,6 +30,7 @@ def _points(n, seed, axis=0):
 
 
 @pytest.mark.parametrize("R", [0.14, 0.2, 0.3])
+@pytest.mark.slow
 def test_fast_and_exact_singular_values_match_lapack_reference(R):
     rb = FRANCO.at(R)
     p = _points(3000, 1, axis=100)
@@ -59,6 +60,7 @@ def test_indices_of_invalid_inputs_are_nan():
         assert not bool(s.ok) and not bool(s.singular) and int(s.jx_rank) == -1
 
 
+@pytest.mark.slow
 def test_invalid_designs_in_a_vmapped_batch_give_ok_false():
     base = ROBOT
     bad = [("upper_arm", -0.2), ("forearm", -0.4), ("base_radius", 0.0), ("base_radius", -0.1),
@@ -117,6 +119,7 @@ def _with(rb, field, v):
     return eqx.tree_at(lambda r: getattr(r, field), rb, jnp.asarray(v, jnp.float64))
 
 
+@pytest.mark.slow
 def test_issue_point_gradient_matches_svd_and_central_difference():
     rb = dj.presets.franco2026(fixed_R=0.2)
     p = jnp.array([0.02744933, 0.04406817, 0.25658779])
@@ -170,6 +173,7 @@ def test_design_gradients_finite_over_an_8mm_grid():
             assert float(grads[j][i]) == pytest.approx(fd, rel=1e-4, abs=1e-6), (f, pts[i])
 
 
+@pytest.mark.slow
 def test_gradients_finite_on_fuzzed_mixed_batches():
     rng = np.random.default_rng(3)
     good = _points(64, 4, axis=8)

@@ -80,6 +80,7 @@ def test_ik_reference_point_and_branches():
                                _wrap(inner), atol=1e-12)
 
 
+@pytest.mark.slow
 def test_failure_is_data_in_batches():
     pts = jnp.array([
         [0.0, 0.0, 0.3],      # reachable
@@ -99,6 +100,7 @@ def test_failure_is_data_in_batches():
     assert np.isnan(np.asarray(ind.k_tilde)[~ok]).all() and np.isfinite(np.asarray(ind.k_tilde)[ok]).all()
 
 
+@pytest.mark.slow
 def test_joint_limit_flag():
     robot = FRANCO.robot
     # On a grid through the workspace, the limited robot's verdict equals "the free robot solves the point and
@@ -194,6 +196,7 @@ def test_new_parameter_values_do_not_retrace():
     assert len(traces) == 1
 
 
+@pytest.mark.slow
 def test_gradients_finite_and_correct():
     from jax.test_util import check_grads
 

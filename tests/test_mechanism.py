@@ -18,6 +18,7 @@ def _loop_residual(m, phi, alpha):
             - m.d2 ** 2)
 
 
+@pytest.mark.slow
 def test_example_covers_franco2026_range_without_singularity():
     info = MECH.check_range(0.138, 0.495)
     assert info["phi_min"] == pytest.approx(0.0, abs=1e-9)
@@ -26,6 +27,7 @@ def test_example_covers_franco2026_range_without_singularity():
     assert bool(ok) and float(MECH.position(phi)) == pytest.approx(0.138, abs=1e-12)
 
 
+@pytest.mark.slow
 def test_both_assembly_branches_close_the_loop():
     phis = jnp.linspace(-50.0, 250.0, 31)
     both, ok = jax.vmap(MECH.angles)(phis)
@@ -38,6 +40,7 @@ def test_both_assembly_branches_close_the_loop():
 
 
 @pytest.mark.parametrize("assembly", [1, -1])
+@pytest.mark.slow
 def test_ratio_matches_jacfwd_and_finite_differences(assembly):
     m = ScrewLinkage(**{f: getattr(MECH, f) for f in FIELDS}, assembly=assembly)
     phis = np.linspace(-40.0, 240.0, 15)
@@ -52,6 +55,7 @@ def test_ratio_matches_jacfwd_and_finite_differences(assembly):
         assert float(st.ratio) == pytest.approx(fd, rel=1e-6, abs=1e-12)
 
 
+@pytest.mark.slow
 def test_inverse_is_the_inverse_of_position():
     Rs = jnp.linspace(0.138, 0.495, 41)
     phi, ok = jax.vmap(MECH.inverse)(Rs)
@@ -129,6 +133,7 @@ def test_effort_is_virtual_work_with_efficiency():
     assert float(d.ratio(0.3)) == 1.0
 
 
+@pytest.mark.slow
 def test_drive_profile_along_R():
     R = jnp.linspace(0.15, 0.45, 11)
     Rd = jnp.full((11,), 0.2)
@@ -139,6 +144,7 @@ def test_drive_profile_along_R():
     assert dj.mechanism.MECHANISMS["screw_linkage"] is example_screw_linkage
 
 
+@pytest.mark.slow
 def test_reconfiguration_drive_reports_motor_torque_along_R():
     robot = dj.presets.franco2026(fixed_R=0.2, with_mass=True)
     cyc = dj.trajectory.with_R_profile(
