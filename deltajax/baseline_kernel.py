@@ -230,13 +230,14 @@ def patch_old_kernel():
     (the fitness baseline of ``experiments/bench_fitness.py``). Must wrap tracing (``jax.jit(...)`` calls)."""
     import contextlib
 
-    from . import dynamics
     from .optimize import objectives
     from .workspace import grid, redundancy
 
+    # dynamics (the cycle terms) calls the core's loop_closure directly since the flat rewrite: it runs the
+    # current core on both sides of the comparison
     patches = [(redundancy, "_kernel", redundancy_kernel), (grid, "mirrored_point_indices", mirrored_point_indices),
                (objectives, "mirrored_point_indices", mirrored_point_indices), (grid, "ik_cos_sin", ik_cos_sin_result),
-               (redundancy, "ik_cos_sin", ik_cos_sin_result), (dynamics, "ik_cos_sin", ik_cos_sin_result)]
+               (redundancy, "ik_cos_sin", ik_cos_sin_result)]
 
     @contextlib.contextmanager
     def ctx():

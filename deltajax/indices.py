@@ -270,11 +270,13 @@ def map_points(fn, points, *, block: Optional[int] = None):
     if block <= 0 or n <= block:
         return jax.vmap(fn)(points)
     nb = -(-n // block)
-    # pad with copies of the last point to whole blocks (one compiled block, no separate remainder program)
+    # pad with copies of the last point to whole blocks (one compiled block, no separate remainder program);
+    # block j holds the points j, j + nb, j + 2 nb, ...: the point axis stays the outer one, so a batch
+    # sharded over devices along its points keeps each device on its own points in every block
     pad = jnp.broadcast_to(points[-1:], (nb * block - n,) + points.shape[1:])
-    blocks = jnp.concatenate([points, pad]).reshape((nb, block) + points.shape[1:])
+    blocks = jnp.swapaxes(jnp.concatenate([points, pad]).reshape((block, nb) + points.shape[1:]), 0, 1)
     out = jax.lax.map(jax.vmap(fn), blocks)
-    return jax.tree_util.tree_map(lambda a: a.reshape((nb * block,) + a.shape[2:])[:n], out)
+    return jax.tree_util.tree_map(lambda a: jnp.swapaxes(a, 0, 1).reshape((nb * block,) + a.shape[2:])[:n], out)
 
 
 class PointKernel(NamedTuple):
