@@ -163,40 +163,32 @@ def test_path_mode_never_violates_the_limits(small):
 
 @pytest.mark.slow  # shares one ~60-100 s compile (module fixture) under load
 def test_path_mode_at_least_as_good_as_fixed_R_and_per_task(small):
-    """On the path criterion (time-mean good-workspace index over the cycle samples) R(t) is never worse than
-    the per-task R (feasible as a constant path here) nor than any constant R of the design's samples that is
-    feasible on the cycle and inside the planning window."""
-    from deltajax import constraints as C
+    """R(t) runs at least the per-task R's picks/min whenever that R, held constant, is within the R drive's limits
+    at its own cycle time (checked here independently with the public inverse dynamics), and its index along the
+    cycle is never below the per-task R's when it runs as many picks/min. (The plan itself is the exact DP,
+    never below the best constant plan on its grid: test_dp_with_traced_limits_equals_bands_and_brute_force.)"""
+    from deltajax.constraints import with_drive
 
     s, space, pb, _, genes, out = small
-    m0, m, prof = out[0]
-    assert m0["feasible"] and m0["picks_per_min"] > 0
-    d = space.decode(jnp.asarray(genes[0]))
-    plate = d.R_max + pb.links.plate_overhang
-    x = prof["cycle"].x
-    K = x.shape[0]
-    wts = np.ones(K)
-    wts[[0, -1]] = 0.5
-    wts /= K - 1
-    R_op = float(m0["R_operating"])
-    assert R_op in [float(r) for r in np.asarray(d.R_samples())]          # n_R = 7, 4 candidates
+    op = pb.operating
     checked = 0
-    Rs = np.asarray(d.R_samples())
-    pcs = jax.jit(jax.vmap(lambda R: jax.vmap(lambda p: C.good_point(d.at(R), p, pb.good, plate_radius=plate))(x)))(
-        jnp.asarray(Rs))
-    for i, R in enumerate(Rs):
-        pc = jax.tree_util.tree_map(lambda a: np.asarray(a)[i], pcs)
-        ok = np.all(pc.reachable) and np.all(pc.joint_margin >= 0) and np.all(pc.interference_margin >= 0)
-        val = float(np.sum(wts * pc.index))
-        if R == R_op:
-            assert ok and val == pytest.approx(float(m["path_index_mean_fixed"]), rel=1e-9)
-        if ok and float(m["R_window_min"]) - 1e-12 <= R <= float(m["R_window_max"]) + 1e-12:
-            assert float(m["path_index_mean"]) >= val - 1e-12, R
-            checked += 1
+    for g, (m0, m, prof) in zip(genes, out):
+        if not (m0["feasible"] and m0["picks_per_min"] > 0):
+            continue
+        d = space.decode(jnp.asarray(g))
+        T0, R_op = float(m0["cycle_time"]), float(m0["R_operating"])
+        rob = with_drive(d.robot.with_base_radius(R_op), pb.motor, d.robot.mass.gear_ratio, pb.payload)
+        p0 = cycle_profile(rob, pb.cycle, T0)                                # constant R: no R profile
+        dp = drive_profile(op.mechanism, jnp.full_like(p0.force_R, R_op), jnp.zeros_like(p0.force_R), p0.force_R)
+        const_ok = (np.abs(np.asarray(p0.force_R)).max() <= op.force
+                    and np.abs(np.asarray(dp.effort)).max() <= TORQUE)
+        if not const_ok:
+            continue
+        checked += 1
+        assert float(m["picks_per_min"]) >= float(m0["picks_per_min"]) * (1 - 1e-9)
+        if float(m["picks_per_min"]) <= float(m0["picks_per_min"]) * (1 + 1e-9):
+            assert float(m["path_index_mean"]) >= float(m["path_index_mean_fixed"]) - 1e-12
     assert checked >= 1
-    assert float(m["path_index_mean"]) >= float(m["path_index_mean_fixed"]) - 1e-12
-    # and the cycle still runs: the path mode's picks/min are a finite number
-    assert np.isfinite(m["picks_per_min"]) and m["picks_per_min"] > 0
 
 
 def test_dp_with_traced_limits_equals_bands_and_brute_force():
