@@ -212,6 +212,7 @@ def test_gradients_finite_on_fuzzed_mixed_batches():
     assert np.isfinite(np.asarray(gp)).all()
 
 
+@pytest.mark.slow
 def test_on_axis_gradient_is_finite():
     p = jnp.array([0.0, 0.0, 0.35])
     for m in ("fast", "jacobi"):

@@ -152,6 +152,7 @@ def test_wedge_quadrature_weights_and_volumes():
     assert bool(m["feasible"])
 
 
+@pytest.mark.slow
 def test_soft_margin_sign_matches_reachability_and_has_gradients():
     robot = dj.presets.franco2026(fixed_R=0.2)
     pts = np.array([[0.0, 0.1, 0.4], [0.2, -0.1, 0.35], [0.9, 0.0, 0.3], [0.0, 0.0, 0.05], [0.1, 0.3, 0.55]])
@@ -168,6 +169,7 @@ def test_soft_margin_sign_matches_reachability_and_has_gradients():
                 (jnp.asarray(0.2),), order=1, modes=("rev",))
 
 
+@pytest.mark.slow
 def test_refinement_improves_the_true_objective():
     pb = _problem({"volume": 1.0}, coverage_min=0.0)
     g0 = np.array([[0.3, 0.3, 0.5, 0.2, 0.2]])

@@ -196,6 +196,7 @@ def test_bad_shard_settings_name_the_field():
         GridPlan((9, 9, 7), 100, 1, 0, 10)
 
 
+@pytest.mark.slow
 def test_jax_backend_shards_merge_to_single_run(sweeps, tmp_path):
     """backend=jax through the Python API: 3 shards merged equal one run bit for bit; the JAX kernel agrees
     with the Numba one the CLI runs used (backend=auto on CPU) to rounding, with the same reachable set."""

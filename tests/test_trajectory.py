@@ -18,6 +18,7 @@ PEAK_ACC = {"poly5": 10.0 / math.sqrt(3.0), "cycloidal": 2.0 * math.pi, "modifie
 
 
 @pytest.mark.parametrize("name", sorted(tr.MOTION_LAWS))
+@pytest.mark.slow
 def test_motion_law_boundary_values_and_derivatives(name):
     law = tr.motion_law(name)
     t = jnp.linspace(0.0, 1.0, 2001)
@@ -75,6 +76,7 @@ def test_adept_cycle_geometry(heading, blend, law):
     np.testing.assert_allclose(dx_int, dx, atol=1e-4 * np.abs(dx).max())
 
 
+@pytest.mark.slow
 def test_ga_paper_motion_is_the_papers():
     cyc = tr.ga_paper_motion(n_samples=101)
     t = np.asarray(cyc.time())
@@ -131,6 +133,7 @@ def test_joint_motion_matches_autodiff_of_ik_and_round_trips(xy, z, pd, pdd, R, 
     np.testing.assert_allclose(back.p_ddot, pdd, atol=1e-8)
 
 
+@pytest.mark.slow
 def test_reachability_checked_along_the_whole_path():
     """A move that leaves the workspace part-way is flagged at exactly the unreachable samples."""
     robot = dj.presets.franco2026(fixed_R=0.2, with_mass=True)
