@@ -4,6 +4,7 @@
     python experiments/bench_workspace.py                 # 2 mm paper grid, fast mode; baselines on a subset
     python experiments/bench_workspace.py --audit         # also check the screen's error bound on the subset
     python experiments/bench_workspace.py --backends 0.004 0.002   # workspace_grid job: JAX path vs Numba path
+    python experiments/bench_workspace.py --versus 6b6bd19         # Numba kernel + Table-6 parts: old vs new
 
 The job: (1) fixed robot R = 0.200 over the whole grid (mask + every index), (2) the reconfigurable robot's
 k~-optimal R* at every ODR workspace point (358 samples), (3) min/max/mean of every index for both.
@@ -87,6 +88,87 @@ def compare_backends(hs) -> None:
               f"reachable sets identical: {same} ({n} points), index means agree to {d:.1e}")
 
 
+def import_baseline(rev: str):
+    """The deltajax package of git revision ``rev`` of this repository, importable as ``deltajax_<rev>``
+    next to the working tree's (for old-vs-new ratios in one process; its Numba cache is kept in
+    ~/.cache/deltajax_bench so that the old kernels compile once)."""
+    import importlib
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    repo = Path(__file__).resolve().parents[1]
+    rev = subprocess.run(["git", "rev-parse", "--short", rev], cwd=repo, check=True, capture_output=True,
+                         text=True).stdout.strip()
+    name = f"deltajax_{rev}"
+    root = Path.home() / ".cache" / "deltajax_bench" / rev
+    if not (root / name / "__init__.py").exists():
+        root.mkdir(parents=True, exist_ok=True)
+        tar = subprocess.run(["git", "archive", rev, "deltajax"], cwd=repo, check=True, capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(root)], input=tar, check=True)
+        (root / "deltajax").rename(root / name)
+    sys.path.insert(0, str(root))
+    return importlib.import_module(name), rev
+
+
+def versus(rev: str, n_points: int, h: float, repeats: int) -> None:
+    """Old (git ``rev``) vs new Numba code in this process, same inputs: the kernel rates of
+    :func:`deltajax.workspace._nb_bench.bench_kernel_rates` (M eval per CPU-s; single thread) and the two Numba
+    parts of the Table-6 job on the ``h`` grid: ODR fields (``fixed_workspace``, every index) and the RDR
+    redundancy resolution (fast mode, screen-and-verify) of the mirror-unique ODR points, CPU s (all threads)
+    and wall s; the selections must be identical."""
+    import importlib
+
+    import deltajax as dj
+    from deltajax import workspace as ws
+
+    old, rev = import_baseline(rev)
+    nb_old = importlib.import_module(f"{old.__name__}.workspace._nb_bench")
+    from deltajax.workspace import _nb_bench as nb_new
+
+    rng = np.random.default_rng(0)
+    pts = rng.uniform([-0.45, -0.45, 0.0], [0.45, 0.45, 0.6], (n_points, 3))
+    geo = [0.2, 0.065, 0.2, 0.4, float(dj.presets.franco2026().robot.theta_min),
+           float(dj.presets.franco2026().robot.theta_max)]
+    print(f"old = {rev}, new = working tree; CPUs {len(os.sched_getaffinity(0))}; load {os.getloadavg()}")
+    nb_old.bench_kernel_rates(pts[:1000], geo, 1), nb_new.bench_kernel_rates(pts[:1000], geo, 1)  # compile
+    a = nb_old.bench_kernel_rates(pts, geo, repeats)
+    b = nb_new.bench_kernel_rates(pts, geo, repeats)
+    print(f"KERNEL (Numba, 1 thread, best of {repeats}; {n_points} random points, load {os.getloadavg()[0]:.1f})")
+    print(f"  {'label':34s} {'old M/CPU-s':>12s} {'new M/CPU-s':>12s} {'new/old':>8s}   (new wall s)")
+    for label in b:
+        ra = a[label][0] / a[label][2] / 1e6 if label in a else float("nan")
+        rb = b[label][0] / b[label][2] / 1e6
+        print(f"  {label:34s} {ra:12.1f} {rb:12.1f} {rb / ra:8.2f}x   ({b[label][1]:.3f})")
+
+    res = {}
+    for tag, pkg in (("old", old), ("new", dj)):
+        wsp = pkg.workspace
+        rec, fixed = pkg.presets.franco2026(), pkg.presets.franco2026(fixed_R=0.2)
+        small = wsp.franco2026_grid(0.05)
+        wsp.redundancy_grid(rec, small, mask=wsp.fixed_workspace(fixed, small).ok)  # compile
+        grid = wsp.franco2026_grid(h)
+        load = os.getloadavg()[0]
+        clk = _Clock()
+        odr = wsp.fixed_workspace(fixed, grid, fields=True, field_dtype=np.float32)
+        t_odr = clk.lap()
+        pts_odr = grid.points_at(np.flatnonzero(odr.ok.reshape(-1)))
+        clk.lap()
+        red, work = wsp.resolve_redundancy_host(rec, pts_odr, "k_tilde", mode="fast", return_indices=False)
+        t_rdr = clk.lap()
+        res[tag] = (t_odr, t_rdr, red, work, load, odr)
+    (o_odr, o_rdr, o_red, o_w, o_load, o_f), (n_odr, n_rdr, n_red, n_w, n_load, n_f) = res["old"], res["new"]
+    same = bool(np.array_equal(o_red.k, n_red.k) and np.array_equal(o_red.value, n_red.value)
+                and np.array_equal(o_f.ok, n_f.ok))
+    print(f"TABLE-6 PARTS (h = {h} m, {len(o_red.k)} ODR points, {o_w['points']} solved; load old {o_load:.1f}, "
+          f"new {n_load:.1f})")
+    for name, a_, b_ in (("ODR fields", o_odr, n_odr), ("RDR resolve", o_rdr, n_rdr)):
+        print(f"  {name:12s} old {a_[1]:7.2f} CPU-s {a_[0]:7.2f} s wall | new {b_[1]:7.2f} CPU-s {b_[0]:7.2f} s wall | "
+              f"old/new {a_[1] / b_[1]:.2f}x CPU, {a_[0] / b_[0]:.2f}x wall")
+    print(f"  RDR screened samples {o_w['screened']} -> {n_w['screened']}, exact kernels {o_w['full']} -> "
+          f"{n_w['full']}, fallbacks {n_w['fallback']}; identical reachable set, R* and values: {same}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--h", type=float, default=0.002)
@@ -96,7 +178,14 @@ def main() -> None:
     ap.add_argument("--audit", action="store_true", help="check the screen's bound on every subset sample")
     ap.add_argument("--backends", type=float, nargs="+", metavar="H",
                     help="only compare the workspace_grid job's JAX and Numba paths on grids of these spacings (m)")
+    ap.add_argument("--versus", metavar="REV", help="old (git REV) vs new Numba code: kernel rates and the "
+                    "Table-6 job's ODR/RDR parts on the --h grid, in this process")
+    ap.add_argument("--points", type=int, default=400_000, help="--versus: random points of the kernel rates")
+    ap.add_argument("--repeats", type=int, default=3)
     args = ap.parse_args()
+    if args.versus:
+        versus(args.versus, args.points, args.h, args.repeats)
+        return
     if args.backends:
         compare_backends(args.backends)
         return

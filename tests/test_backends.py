@@ -219,3 +219,15 @@ def test_benchmark_hook_and_minimal_loop():
     assert {"exact (jacobi)", "fast (cubic)", "exact on reachable", "minimal loop ceiling (reachable)"} <= set(rates)
     assert rates["exact on reachable"][0] == ok.sum() and all(v[2] >= 0 for v in rates.values())
     assert bench_numba(pts[:100], ROBOT)["fast (cubic)"]["n"] == 100
+
+
+def test_jacobi_rotation_survives_underflowing_off_diagonals():
+    # a repeated eigenvalue: the sweeps drive a_pq to ~1e-156 with a_qq == a_pp exactly, where the squares
+    # of the one-division rotation underflow (they gave inf/NaN before the guard)
+    A = (1.524432339144239, 0.3983987489261778, 0.6310453646442962, 0.26725819731717965, 0.5894091119446706,
+         0.1327923499557009)
+    M = np.array([[A[0], A[3], A[4]], [A[3], A[1], A[5]], [A[4], A[5], A[2]]])
+    got = nbk.sym3_top2(*A, 0.0, 0.0, nbk.JACOBI)
+    np.testing.assert_allclose(got, np.linalg.eigvalsh(M)[::-1][:2], rtol=1e-13)
+    app, aqq, arp, arq = nbk._jacobi_rotate(0.3, 0.3, 1e-160, 1e-170, 2e-170)
+    assert all(math.isfinite(v) for v in (app, aqq, arp, arq)) and abs(app - 0.3) < 1e-159

@@ -29,6 +29,22 @@ __all__ = ["N_IDX", "CRITERION", "SV_METHODS", "JACOBI", "FAST", "limits_tuple",
 _ik_ok = ik_ok
 _tcubic = tcubic
 _tcubic2 = tcubic2
+_inline = dict(inline="always", **OPTS)
+
+
+@nb.njit(**_inline)
+def store_masked(out, j, f, i0, i1, i2, i3, i4, i5, i6, i7):
+    """Write the 8 indices of point ``j`` into the rows ``out`` (:func:`rows`), NaN where not ``f``."""
+    nan = math.nan
+    o0, o1, o2, o3, o4, o5, o6, o7 = out
+    o0[j] = i0 if f else nan
+    o1[j] = i1 if f else nan
+    o2[j] = i2 if f else nan
+    o3[j] = i3 if f else nan
+    o4[j] = i4 if f else nan
+    o5[j] = i5 if f else nan
+    o6[j] = i6 if f else nan
+    o7[j] = i7 if f else nan
 
 
 @nb.njit(**OPTS)
@@ -41,18 +57,18 @@ def fixed_fields(x, y, z, R, r, L1, L2, lim, kt, out, ok, method=JACOBI):
     layouts, or a strided 2-D block, do not vectorise: measured 4x slower).
     """
     lim, kt = as_tuple4(lim), as_tuple4(kt)
-    o0, o1, o2, o3, o4, o5, o6, o7 = out
+    # one loop per solver, the method a constant in each (LLVM does not unswitch a loop body this large)
+    if method == JACOBI:
+        _fields_loop(x, y, z, R, r, L1, L2, lim, kt, out, ok, JACOBI)
+    else:
+        _fields_loop(x, y, z, R, r, L1, L2, lim, kt, out, ok, FAST)
+
+
+@nb.njit(**_inline)
+def _fields_loop(x, y, z, R, r, L1, L2, lim, kt, out, ok, method):
     for j in range(x.shape[0]):
         f, i0, i1, i2, i3, i4, i5, i6, i7 = point_indices(x[j], abs(y[j]), z[j], R, r, L1, L2, lim, kt, method)
-        nan = math.nan
-        o0[j] = i0 if f else nan
-        o1[j] = i1 if f else nan
-        o2[j] = i2 if f else nan
-        o3[j] = i3 if f else nan
-        o4[j] = i4 if f else nan
-        o5[j] = i5 if f else nan
-        o6[j] = i6 if f else nan
-        o7[j] = i7 if f else nan
+        store_masked(out, j, f, i0, i1, i2, i3, i4, i5, i6, i7)
         ok[j] = f
 
 
@@ -61,21 +77,11 @@ def fields_at(x, y, z, ks, R_min, R_step, r, L1, L2, lim, kt, out):
     """Indices at sample ks[j] per point (NaN where ks < 0 or not feasible); exact (Jacobi); ``out`` as in
     :func:`fixed_fields`."""
     lim, kt = as_tuple4(lim), as_tuple4(kt)
-    o0, o1, o2, o3, o4, o5, o6, o7 = out
     for j in range(x.shape[0]):
         k = ks[j]
         f, i0, i1, i2, i3, i4, i5, i6, i7 = point_indices(x[j], abs(y[j]), z[j], R_min + max(k, 0) * R_step, r, L1,
                                                           L2, lim, kt, JACOBI)
-        f = f & (k >= 0)
-        nan = math.nan
-        o0[j] = i0 if f else nan
-        o1[j] = i1 if f else nan
-        o2[j] = i2 if f else nan
-        o3[j] = i3 if f else nan
-        o4[j] = i4 if f else nan
-        o5[j] = i5 if f else nan
-        o6[j] = i6 if f else nan
-        o7[j] = i7 if f else nan
+        store_masked(out, j, f & (k >= 0), i0, i1, i2, i3, i4, i5, i6, i7)
 
 
 def rows(out: np.ndarray, a: int = 0, b: int | None = None) -> tuple:

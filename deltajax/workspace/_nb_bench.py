@@ -21,8 +21,8 @@ import time
 import numba as nb
 import numpy as np
 
-from ._nb_kernel import (FAST, JACOBI, N_IDX, OPTS, _T_POLY, as_tuple4, chain_local, jx_det, jx_row,
-                         limits_tuple, kt_tuple)
+from ._nb_kernel import (FAST, JACOBI, N_IDX, OPTS, _T_POLY, as_tuple4, chain_local, jx_row, kt_tuple, limits_tuple,
+                         sv_matrix)
 
 __all__ = ["bench_kernel_rates", "bench_numba", "minimal_loop"]
 
@@ -74,24 +74,9 @@ def minimal_loop(x, y, z, R, r, L1, L2, lim, kt, out, ok):
         ok0, j00, j01, j02, d0 = _min_chain(xj, yj, zj, R, r, L1, h1, iL2, c0, lim, 0)
         ok1, j10, j11, j12, d1 = _min_chain(xj, yj, zj, R, r, L1, h1, iL2, c0, lim, 1)
         ok2, j20, j21, j22, d2 = _min_chain(xj, yj, zj, R, r, L1, h1, iL2, c0, lim, 2)
-        det = abs(jx_det(j00, j01, j02, j10, j11, j12, j20, j21, j22))
-        g00 = j00 * j00 + j01 * j01 + j02 * j02
-        g11 = j10 * j10 + j11 * j11 + j12 * j12
-        g22 = j20 * j20 + j21 * j21 + j22 * j22
-        g01 = j00 * j10 + j01 * j11 + j02 * j12
-        g02 = j00 * j20 + j01 * j21 + j02 * j22
-        g12 = j10 * j20 + j11 * j21 + j12 * j22
-        prod = abs(d0 * d1 * d2)
-        jx_side = det < prod
-        a0 = d1 * d2 if jx_side else d0
-        a1 = d0 * d2 if jx_side else d1
-        a2 = d0 * d1 if jx_side else d2
-        x00 = a0 * (g00 if jx_side else g11 * g22 - g12 * g12) * a0
-        x11 = a1 * (g11 if jx_side else g00 * g22 - g02 * g02) * a1
-        x22 = a2 * (g22 if jx_side else g00 * g11 - g01 * g01) * a2
-        x01 = a0 * (g01 if jx_side else g02 * g12 - g01 * g22) * a1
-        x02 = a0 * (g02 if jx_side else g01 * g12 - g02 * g11) * a2
-        x12 = a1 * (g12 if jx_side else g01 * g02 - g00 * g12) * a2
+        # the kernel's matrix X (its unused invariants are dead code after inlining)
+        jx_side, prod, det, _, _, x00, x11, x22, x01, x02, x12 = sv_matrix(j00, j01, j02, j10, j11, j12, j20, j21,
+                                                                            j22, d0, d1, d2)
         q = (x00 + x11 + x22) * (1.0 / 3.0)
         b00, b11, b22 = x00 - q, x11 - q, x22 - q
         p2 = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (x01 * x01 + x02 * x02 + x12 * x12)) * (1.0 / 6.0)

@@ -96,15 +96,21 @@ def as_tuple4(a):
     return a[0], a[1], a[2], a[3]
 
 
+@nb.njit(**_inline)
+def _rotate_z(a, b, c, i, sign):
+    """(a, b, c) rotated about z by -sign alpha_i (sign +1: base -> chain frame, -1: back); chain 0 unchanged."""
+    if i == 0:
+        return a, b, c
+    ca = _COS_A[i]
+    sa = sign * _SIN_A[i]
+    return ca * a + sa * b, ca * b - sa * a, c
+
+
 # -- kinematics (twins of deltajax.kinematics) ------------------------------------------------------------------
 @nb.njit(**_inline)
 def chain_local(px, py, pz, i):
     """P in the local frame of chain ``i`` (0, 1, 2; a constant after inlining); chain 0 is the base frame."""
-    if i == 0:
-        return px, py, pz
-    ca = _COS_A[i]
-    sa = _SIN_A[i]
-    return ca * px + sa * py, ca * py - sa * px, pz
+    return _rotate_z(px, py, pz, i, 1.0)
 
 
 @nb.njit(**_inline)
@@ -123,7 +129,7 @@ def loop_closure(dx, py, pz, L1, L2, lim):
     py = py if inside else 0.0
     pz = pz if inside else 0.0
     rho2 = dx * dx + pz * pz
-    m = (rho2 + py * py + L1 * L1 - L2 * L2) / (2.0 * L1)
+    m = (rho2 + py * py + L1 * L1 - L2 * L2) * (0.5 / L1)  # a loop-invariant reciprocal: one division less
     disc = rho2 - m * m
     reach = inside & (disc >= 0.0) & (rho2 > 0.0)
     w = math.sqrt(disc) if (reach & (disc > 0.0)) else 0.0
@@ -145,11 +151,7 @@ def loop_vectors(dx, py, pz, c, s, L1, L2):
 @nb.njit(**_inline)
 def jx_row(ux, uy, uz, i):
     """Row i of Jx in the base frame: the unit forearm vector of chain ``i`` rotated back."""
-    if i == 0:
-        return ux, uy, uz
-    ca = _COS_A[i]
-    sa = _SIN_A[i]
-    return ca * ux - sa * uy, sa * ux + ca * uy, uz
+    return _rotate_z(ux, uy, uz, i, -1.0)
 
 
 @nb.njit(**_inline)
@@ -254,12 +256,18 @@ def sv_matrix(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2):
 
 @nb.njit(**_inline)
 def _jacobi_rotate(app, aqq, apq, arp, arq):
-    """One Jacobi rotation zeroing a_pq: (a_pp, a_qq, a_rp, a_rq) after it (r the third index)."""
+    """One Jacobi rotation zeroing a_pq: (a_pp, a_qq, a_rp, a_rq) after it (r the third index).
+
+    t = sign(tau) / (|tau| + sqrt(1 + tau^2)), tau = (a_qq - a_pp) / (2 a_pq), written with |2 a_pq| through
+    numerator and denominator (one division instead of two; where a_pq and a_qq - a_pp are so small that
+    their squares underflow, |t| = 1 is as good as any: the a_pq being zeroed is below 1e-154)."""
     nz = apq != 0.0
-    tau = (aqq - app) / (2.0 * (apq if nz else 1.0))
-    sg = 1.0 if (tau + (1.0 if tau == 0.0 else 0.0)) > 0 else -1.0
-    t = sg / (abs(tau) + math.sqrt(1.0 + tau * tau))
-    t = t if nz else 0.0
+    num = aqq - app
+    den = 2.0 * apq
+    sg = 1.0 if (num == 0.0) | ((num > 0.0) == (den > 0.0)) else -1.0  # sign of tau, +1 at tau = 0
+    q = abs(num) + math.sqrt(num * num + den * den)  # 0 only where both squares underflow: then t = sign
+    t = sg * abs(den) / (q if q > 0.0 else 1.0)
+    t = (t if q > 0.0 else sg) if nz else 0.0
     c = 1.0 / math.sqrt(1.0 + t * t)
     s = t * c
     return app - t * apq, aqq + t * apq, c * arp - s * arq, s * arp + c * arq
@@ -382,7 +390,7 @@ def singular_values(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2, met
 def sigma_tilde(sig, a, b):
     """The paper's piecewise quadratic: 1 - ((sig - a) / a)^2 up to a, 1 - ((sig - a) / (b - a))^2 up to b,
     0 above; NaN stays NaN."""
-    t = (sig - a) / (a if sig <= a else b - a)
+    t = (sig - a) * (1.0 / a if sig <= a else 1.0 / (b - a))  # loop-invariant reciprocals
     v = 1.0 - t * t
     return 0.0 if sig > b else v
 
@@ -394,8 +402,10 @@ def indices_from_sv(s1, s2, s3, raw_scale, kt):
     omega_v = s1 * s2 * s3
     manip = omega_v * raw_scale
     sigma_min_f = 1.0 / s1
-    return (s3 / s1, s3, sigma_min_f, omega_v, 1.0 / omega_v,
-            sigma_tilde(s3, kt[0], kt[1]) * sigma_tilde(sigma_min_f, kt[2], kt[3]), manip, 1.0 / manip)
+    omega_f = 1.0 / omega_v
+    return (s3 * sigma_min_f, s3, sigma_min_f, omega_v, omega_f,
+            sigma_tilde(s3, kt[0], kt[1]) * sigma_tilde(sigma_min_f, kt[2], kt[3]), manip,
+            omega_f * (1.0 / raw_scale))
 
 
 @nb.njit(**_inline)

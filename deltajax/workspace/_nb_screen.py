@@ -17,7 +17,7 @@ import numba as nb
 import numpy as np
 
 from ._nb_kernel import (INV_COND, JACOBI, K_TILDE, MANIPULABILITY, OMEGA_F, OMEGA_V, OPTS, SIGMA_MIN_F,
-                         SIGMA_MIN_V, as_tuple4, ik_ok, jacobian_blocks, point_value, sv_matrix)
+                         SIGMA_MIN_V, as_tuple4, ik_ok, jacobian_blocks, point_value, sigma_tilde, sv_matrix)
 
 _inline = dict(inline="always", **OPTS)
 
@@ -121,6 +121,17 @@ def _dt_bound2(tp, tm, a, dw):
 
 
 @nb.njit(**_inline)
+def eig_with_bound(a00, a11, a22, a01, a02, a12):
+    """:func:`eig_cubic_parts` (q, p, tp, tm) and e_lam, a bound on the distance of each of the three
+    eigenvalues so obtained from the exact kernel's (Jacobi) eigenvalue of the same floating-point matrix:
+    the rounding of both solvers plus how far the roots move under the rounding of r (:func:`_dt_bound2`)."""
+    q, p, tp, tm, ip = eig_cubic_parts(a00, a11, a22, a01, a02, a12)
+    dw = 2.0 * _C_R * _EPS * (1.0 + abs(q) * ip) if p > 0.0 else 0.0  # error of wp, wm
+    dt_a = math.sqrt(dw * (1.0 / 3.0))
+    return q, p, tp, tm, _C_LAMBDA * _EPS * (abs(q) + 2.0 * p) + p * _dt_bound2(tp, tm, dt_a, dw)
+
+
+@nb.njit(**_inline)
 def _criterion_bound(crit, sv3, inv1, er1, er3, prod_d, det_jx, L13, kt):
     """(approximate value, absolute error bound, bound unavailable) of criterion ``crit`` from the screened
     s3, 1/s1 and their relative error bounds er3, er1.
@@ -131,11 +142,7 @@ def _criterion_bound(crit, sv3, inv1, er1, er3, prod_d, det_jx, L13, kt):
     """
     a_v, b_v, a_f, b_f = kt[0], kt[1], kt[2], kt[3]
     if crit == K_TILDE:
-        fv = 1.0 - ((sv3 - a_v) / a_v) ** 2 if sv3 <= a_v else 1.0 - ((sv3 - a_v) / (b_v - a_v)) ** 2
-        fv = fv if sv3 <= b_v else 0.0
-        ff = 1.0 - ((inv1 - a_f) / a_f) ** 2 if inv1 <= a_f else 1.0 - ((inv1 - a_f) / (b_f - a_f)) ** 2
-        ff = ff if inv1 <= b_f else 0.0
-        val = fv * ff
+        val = sigma_tilde(sv3, a_v, b_v) * sigma_tilde(inv1, a_f, b_f)
         err = 2.0 / min(a_v, b_v - a_v) * sv3 * er3 + 2.0 / min(a_f, b_f - a_f) * inv1 * er1 + 16.0 * _EPS
         return val, err, False
     if crit == INV_COND:
@@ -179,12 +186,9 @@ def screen_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, kt, crit, tol,
         ok = ok & (det_s != 0.0)
         jx_side, prod_d, det_jx, _, _, a00, a11, a22, a01, a02, a12 = sv_matrix(j00, j01, j02, j10, j11, j12, j20,
                                                                                  j21, j22, d0, d1, d2)
-        q, p, tp, tm, ip = eig_cubic_parts(a00, a11, a22, a01, a02, a12)
-        dw = 2.0 * _C_R * _EPS * (1.0 + abs(q) * ip) if p > 0.0 else 0.0  # error of wp, wm
-        dt_a = math.sqrt(dw * (1.0 / 3.0))
+        q, p, tp, tm, e_lam = eig_with_bound(a00, a11, a22, a01, a02, a12)
         lam_hi = q + p * (1.0 + tp)
         lam_mid = q + p * (tm - tp)
-        e_lam = _C_LAMBDA * _EPS * (abs(q) + 2.0 * p) + p * _dt_bound2(tp, tm, dt_a, dw)
         # singular values (the formulas of singular_values_from_eig, rearranged: two divisions)
         r1 = math.sqrt(max(lam_hi, 0.0))
         r2 = math.sqrt(max(lam_mid, 0.0))
@@ -234,6 +238,21 @@ def _verify(x, y, z, k0, n, R_min, R_step, r, L1, L2, lim, kt, crit, feas, hi, T
     return bk, bv, cnt
 
 
+@nb.njit(**_inline)
+def point_window(pts, k_start, k_stop, j):
+    """Point j made mirror-canonical (y -> |y|) and its sample window [k0, k1)."""
+    return pts[j, 0], abs(pts[j, 1]), pts[j, 2], k_start[j], k_stop[j]
+
+
+@nb.njit(**OPTS)
+def window_buffers(k_start, k_stop):
+    """(lo, hi, feas) scratch arrays long enough for the widest window [k_start, k_stop) of a block."""
+    width = 1
+    for j in range(k_start.shape[0]):
+        width = max(width, k_stop[j] - k_start[j])
+    return np.empty(width), np.empty(width), np.empty(width, np.uint8)
+
+
 @nb.njit(**OPTS)
 def resolve_screened(pts, k_start, k_stop, R_min, R_step, r, L1, L2, lim, kt, crit, tol, best_k, best_v, n_full,
                      n_fallback):
@@ -248,19 +267,9 @@ def resolve_screened(pts, k_start, k_stop, R_min, R_step, r, L1, L2, lim, kt, cr
     sample defining T) the point falls back to the full exact sweep of its window (counted in n_fallback).
     """
     lim, kt = as_tuple4(lim), as_tuple4(kt)
-    n = pts.shape[0]
-    width = 1
-    for j in range(n):
-        width = max(width, k_stop[j] - k_start[j])
-    lo = np.empty(width)
-    hi = np.empty(width)
-    feas = np.empty(width, np.uint8)
-    for j in range(n):
-        x = pts[j, 0]
-        y = abs(pts[j, 1])
-        z = pts[j, 2]
-        k0 = k_start[j]
-        k1 = k_stop[j]
+    lo, hi, feas = window_buffers(k_start, k_stop)
+    for j in range(pts.shape[0]):
+        x, y, z, k0, k1 = point_window(pts, k_start, k_stop, j)
         bk = -1
         bv = -math.inf
         cnt = 0
@@ -300,23 +309,10 @@ def screen_audit(pts, k_start, k_stop, R_min, R_step, r, L1, L2, lim, kt, crit, 
     number of feasible samples]; approx is the interval's centre. NaN exact values are skipped.
     """
     lim, kt = as_tuple4(lim), as_tuple4(kt)
-    n = pts.shape[0]
-    width = 1
-    for j in range(n):
-        width = max(width, k_stop[j] - k_start[j])
-    lo = np.empty(width)
-    hi = np.empty(width)
-    feas = np.empty(width, np.uint8)
-    for j in range(n):
-        x = pts[j, 0]
-        y = abs(pts[j, 1])
-        z = pts[j, 2]
-        k0 = k_start[j]
-        k1 = k_stop[j]
-        e_abs = 0.0
-        e_rel = 0.0
-        bad = 0
-        nf = 0
+    lo, hi, feas = window_buffers(k_start, k_stop)
+    for j in range(pts.shape[0]):
+        x, y, z, k0, k1 = point_window(pts, k_start, k_stop, j)
+        e_abs, e_rel, bad, nf = 0.0, 0.0, 0, 0
         if k1 > k0:
             screen_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, kt, crit, 0.0, lo, hi, feas)
             for i in range(k1 - k0):
