@@ -24,7 +24,6 @@ finite value, and the scalars ``count``, ``volume`` (count h^3), ``volume_box`` 
 
 from __future__ import annotations
 
-import functools
 import importlib.util
 import json
 import math
@@ -37,6 +36,7 @@ import numpy as np
 from ..config import ConfigError
 from ..rundir import CheckpointError, RunDirError
 
+from ..workspace.driver import make_evaluator, make_numba_evaluator  # (the job's kernels; also benchmarked)
 from ..workspace.chunks import (CheckpointMismatch, ResultsCheckpoint, ShardPlan, plane_statistics, plane_summary,
                                run_chunks, seal)
 
@@ -102,57 +102,6 @@ class GridPlan(ShardPlan):
             super().__init__(shape, chunk_points, n_devices, shard, n_shards)
         except ValueError as e:
             raise ConfigError(str(e)) from None
-
-
-# ---------------------------------------------------------------------------------------------------------
-# device kernel
-# ---------------------------------------------------------------------------------------------------------
-@functools.lru_cache(maxsize=8)  # one jitted function per setting: repeated runs in a process compile once
-def make_evaluator(n_devices: int, *, b_v: float, b_f: float, beta: float):
-    """A jitted ``f(robot, points[n, 3]) -> (ok[n], values[n, n_index])`` sharded over ``n_devices`` devices.
-
-    ``n`` must be a multiple of ``n_devices``; the points are split along their first axis, the robot is
-    replicated. Per-point results do not depend on the split (elementwise kernel).
-    """
-    import jax
-    import jax.numpy as jnp
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
-
-    from ..workspace import FIELD_NAMES, index_fields
-
-    devices = jax.local_devices()[:n_devices]
-    mesh = Mesh(np.asarray(devices), ("d",))
-    rows = NamedSharding(mesh, P("d", None))
-    flat = NamedSharding(mesh, P("d"))
-    repl = NamedSharding(mesh, P())
-
-    def f(robot, pts):
-        ok, fields = index_fields(robot, pts, b_v=b_v, b_f=b_f, beta=beta)
-        return ok, jnp.stack([fields[n] for n in FIELD_NAMES], axis=-1)
-
-    jf = jax.jit(f, out_shardings=(flat, rows))
-
-    def evaluate(robot, pts):
-        robot = jax.device_put(robot, repl)
-        return jf(robot, jax.device_put(pts, rows))
-
-    return evaluate
-
-
-def make_numba_evaluator(grid, *, b_v: float, b_f: float, beta: float):
-    """``f(robot, a, b) -> (ok[n], values[n, n_index])`` for the x-planes ``a:b`` of ``grid``, on the CPU
-    threads of :func:`deltajax.workspace.fixed_workspace` (Numba, ``NUMBA_NUM_THREADS``; float64)."""
-    from ..workspace import FIELD_NAMES, Grid, fixed_workspace
-
-    def evaluate(robot, a: int, b: int):
-        # the same coordinate values as the full grid (sliced, not rebuilt), so shards see identical points
-        sub = Grid(x=grid.x[a:b], y=grid.y, z=grid.z, h=grid.h, bounds=grid.bounds)
-        job = fixed_workspace(robot, sub, fields=True, b_v=b_v, b_f=b_f, beta=beta, chunk_size=sub.n_points,
-                              mirror=True)
-        vals = np.stack([job.fields[n] for n in FIELD_NAMES], axis=-1)
-        return job.ok.reshape(-1), vals.reshape(-1, len(FIELD_NAMES))
-
-    return evaluate
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -312,7 +261,8 @@ def run(ctx) -> None:
         warm_s, warm_n = elapsed, n_eval
     rate = warm_n / warm_s if warm_s > 0 else 0.0
     ctx.results.set_attrs(points_evaluated=n_eval, points_per_s=rate, first_chunk_s=first_chunk_s or 0.0,
-                          devices_used=n_dev if backend == "jax" else 0, backend=backend, worker_env=os.environ.get("DELTAJAX_WORKER_ENV", ""))
+                          devices_used=n_dev if backend == "jax" else 0, backend=backend,
+                          worker_env=os.environ.get("DELTAJAX_WORKER_ENV", ""))
     s = plane_summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume, x_faces)
     if int(s["face_count"]):
         ctx.log(f"WARNING: {int(s['face_count'])} reachable points lie on the faces of the grid box: the workspace "

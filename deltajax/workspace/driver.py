@@ -23,6 +23,7 @@ Jobs::
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import math
 import os
@@ -37,7 +38,7 @@ from .chunks import CheckpointMismatch, run_chunks
 from .grid import Grid
 
 __all__ = ["GridJob", "run_chunks", "fixed_workspace", "reconfigurable_workspace", "redundancy_grid",
-           "CheckpointMismatch", "reach_box", "face_count"]
+           "CheckpointMismatch", "reach_box", "face_count", "make_evaluator", "make_numba_evaluator"]
 
 
 @dataclasses.dataclass(frozen=True, eq=False)
@@ -409,6 +410,57 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
     out = lay.expand_all(arrays, list(outputs))
     ok = out.pop("ok")
     return GridJob(ok=ok, fields=out, complete=complete, stats=st)
+
+
+# -- whole-plane kernels of a sharded grid (workspace_grid) ----------------------------------------------------
+
+@functools.lru_cache(maxsize=8)  # one jitted function per setting: repeated runs in a process compile once
+def make_evaluator(n_devices: int, *, b_v: float, b_f: float, beta: float):
+    """The JAX kernel of ``workspace_grid``: a jitted ``f(robot, points[n, 3]) -> (ok[n], values[n, n_index])``
+    sharded over ``n_devices`` devices.
+
+    ``n`` must be a multiple of ``n_devices``; the points are split along their first axis, the robot is
+    replicated. Per-point results do not depend on the split (elementwise kernel).
+    """
+    import jax
+    import jax.numpy as jnp
+    from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
+
+    from .grid import FIELD_NAMES, index_fields
+
+    devices = jax.local_devices()[:n_devices]
+    mesh = Mesh(np.asarray(devices), ("d",))
+    rows = NamedSharding(mesh, P("d", None))
+    flat = NamedSharding(mesh, P("d"))
+    repl = NamedSharding(mesh, P())
+
+    def f(robot, pts):
+        ok, fields = index_fields(robot, pts, b_v=b_v, b_f=b_f, beta=beta)
+        return ok, jnp.stack([fields[n] for n in FIELD_NAMES], axis=-1)
+
+    jf = jax.jit(f, out_shardings=(flat, rows))
+
+    def evaluate(robot, pts):
+        robot = jax.device_put(robot, repl)
+        return jf(robot, jax.device_put(pts, rows))
+
+    return evaluate
+
+
+def make_numba_evaluator(grid, *, b_v: float, b_f: float, beta: float):
+    """The Numba kernel of ``workspace_grid``: ``f(robot, a, b) -> (ok[n], values[n, n_index])`` for the x-planes
+    ``a:b`` of ``grid``, on the CPU threads of :func:`fixed_workspace` (Numba, ``NUMBA_NUM_THREADS``; float64)."""
+    from .grid import FIELD_NAMES
+
+    def evaluate(robot, a: int, b: int):
+        # the same coordinate values as the full grid (sliced, not rebuilt), so shards see identical points
+        sub = Grid(x=grid.x[a:b], y=grid.y, z=grid.z, h=grid.h, bounds=grid.bounds)
+        job = fixed_workspace(robot, sub, fields=True, b_v=b_v, b_f=b_f, beta=beta, chunk_size=sub.n_points,
+                              mirror=True)
+        vals = np.stack([job.fields[n] for n in FIELD_NAMES], axis=-1)
+        return job.ok.reshape(-1), vals.reshape(-1, len(FIELD_NAMES))
+
+    return evaluate
 
 
 # -- box from the reach bound, truncation -----------------------------------------------------------------
