@@ -775,6 +775,15 @@ FIXED_R_METRIC.update({m: f"{m}_fixed" for m in ("picks_per_min", "cycle_time", 
 #: rtmode: rows added to the summary in mode=path (the R drive's margins, units in DESIGN_UNITS)
 PATH_SUMMARY_METRICS = ("R_path_min", "R_path_max", "path_index_mean", "cycle_time_drive", "R_speed_margin",
                         "R_accel_margin", "R_force_margin", "screw_torque_peak", "screw_torque_margin")
+FIXED_R_METRIC.update({"path_index_mean": "path_index_mean_fixed", "R_path_min": "R_operating",
+                       "R_path_max": "R_operating"})
+
+
+def _fixed_value(V, m: str, i: int) -> float:  # rtmode
+    """The fixed-R variant's value of summary metric m (NaN for the R drive's margins: its R does not move)."""
+    if m in PATH_SUMMARY_METRICS and m not in FIXED_R_METRIC:
+        return float("nan")
+    return float(V[FIXED_R_METRIC.get(m, m)][i])
 
 
 def _summary(ctx, res, data, space, objs, s) -> None:
@@ -804,7 +813,7 @@ def _summary(ctx, res, data, space, objs, s) -> None:
                                          "variant": "reconfigurable (R chosen per point for the workspace"
                                                     + ("; the cycle run with R(t), experiment.reconfig.mode=path)"
                                                        if s.reconfig.get("mode") == "path" else ")")})
-        res.put("summary", f"{col}_fixed_R", np.asarray([float(V[FIXED_R_METRIC.get(m, m)][i])
+        res.put("summary", f"{col}_fixed_R", np.asarray([_fixed_value(V, m, i)
                                                          for m in metrics]), units="mixed",
                 dims=("metric",), attrs={"design": names[i], "units_see": "metric_units",
                                          "variant": "fixed R = the operating R chosen for the task"})

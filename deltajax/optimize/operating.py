@@ -425,8 +425,9 @@ def _run_cycle(pb, spec, robot, robot_d, cyc, T_plan, T_nom, R, Ru, Ruu):
     vmax, amax = jnp.max(jnp.abs(Ru)), jnp.max(jnp.abs(Ruu))
 
     def drive_ok(T):
-        return ((vmax <= spec.speed * T * (1 + 1e-9)) & (amax <= spec.accel * T * T * (1 + 1e-9))
-                & jnp.all(jnp.abs(fa / (T * T) + fg) <= Lp * (1 + 1e-9)) & jnp.all(mech_p))
+        # no slack: the returned T (the bracket's feasible end) meets every limit as computed below
+        return ((vmax <= spec.speed * T) & (amax <= spec.accel * T * T)
+                & jnp.all(jnp.abs(fa / (T * T) + fg) <= Lp) & jnp.all(mech_p))
 
     T_drive = _bisect(drive_ok, 1e-3, 60.0, dt)
     T = jnp.maximum(rate.cycle_time, T_drive)
