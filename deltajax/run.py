@@ -478,4 +478,8 @@ def cli(argv: Optional[list] = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(cli())
+    # run the imported module's cli, not this __main__ copy: Hydra's logging config instantiates
+    # deltajax.run.RunLogHandler, whose class-wide switch _run_log_open must flip (else no run.log via python -m)
+    from deltajax.run import cli as _package_cli
+
+    sys.exit(_package_cli())

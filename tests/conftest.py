@@ -20,7 +20,7 @@ jax.config.update("jax_numpy_rank_promotion", "raise")
 # (configs/config.yaml compilation_cache) also serves the tests, in-process and in CLI subprocesses, so a rerun
 # compiles only what changed. Cached executables are keyed by the HLO, JAX version and flags, never stale;
 # DELTAJAX_TEST_JAX_CACHE=<dir> picks another folder (an empty one measures a cold start).
-JAX_CACHE = os.path.expanduser(os.environ.get("DELTAJAX_TEST_JAX_CACHE", "~/.cache/deltajax/jax"))
+from toy_jobs import JAX_CACHE  # noqa: E402
 JAX_CACHE_MIN_S = 0.2  # the tests' many small compilations too (the CLI caches those over 1 s)
 jax.config.update("jax_compilation_cache_dir", JAX_CACHE)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", JAX_CACHE_MIN_S)
@@ -65,12 +65,12 @@ def toy_run(tmp_path_factory):
         if name in CLI:  # through the real command line: python -m deltajax.run
             env = {**os.environ, "PYTHONPATH": str(REPO)}
             out = subprocess.run([sys.executable, "-m", "deltajax.run", f"experiment={name}", *overrides(name, *extra),
-                                  f"compilation_cache={JAX_CACHE}", f"hydra.run.dir={d}"], cwd=REPO, env=env,
+                                  f"hydra.run.dir={d}"], cwd=REPO, env=env,
                                  capture_output=True, text=True, timeout=600)
             assert out.returncode == 0, out.stderr[-3000:]
             return d / "results.h5"
         try:
-            return run_experiment(name, [*overrides(name, *extra), f"compilation_cache={JAX_CACHE}"], run_dir=d)
+            return run_experiment(name, overrides(name, *extra), run_dir=d)
         finally:  # the job sets the CLI's threshold (1 s); the tests keep theirs
             jax.config.update("jax_persistent_cache_min_compile_time_secs", JAX_CACHE_MIN_S)
 

@@ -24,6 +24,7 @@ def _error_lines(stderr: str) -> list:
     return [ln for ln in stderr.splitlines() if ln.strip() and not ln.startswith("[deltajax] worker")]
 
 
+@pytest.mark.slow
 def test_user_error_is_one_line_exit_2_and_logged(tmp_path):
     out = _cli("experiment=indices_examples", "robot.theta_min_deg=120", f"hydra.run.dir={tmp_path}")
     assert out.returncode == 2, out.stderr
@@ -45,6 +46,7 @@ def test_unknown_experiment_lists_the_choices():
     assert "experiment=ga_reconfg" in line and "ga_reconfig" in line and "bench_kernel" in line
 
 
+@pytest.mark.slow
 def test_help_lists_every_experiment_and_bare_run_is_the_main_job():
     out = _cli("--help")
     assert out.returncode == 0
@@ -93,6 +95,7 @@ def _count_float32_warnings(prefix: str) -> str:
     return out.stdout.strip()
 
 
+@pytest.mark.slow
 def test_float32_warning_once_unless_requested():
     assert _count_float32_warnings("") == "1"  # forgot jax_enable_x64: warned once per process, not per robot
     assert _count_float32_warnings("import jax; jax.config.update('jax_enable_x64', True)\n") == "0"

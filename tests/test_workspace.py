@@ -53,6 +53,7 @@ def test_grid_rejects_bad_ranges():
 
 
 # -- volumes -------------------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_fixed_and_reconfigurable_volume_match_jax(fixed20):
     pts = G20.points()
     m_jax = np.asarray(ws.reachable_mask(FIXED, pts)).reshape(G20.shape)
@@ -80,6 +81,7 @@ def test_fields_nan_outside_and_mirror_symmetric(fixed20):
         np.testing.assert_array_equal(f, f[:, ::-1, :])  # bit-for-bit mirror image
 
 
+@pytest.mark.slow
 def test_numba_and_jax_kernels_agree_with_core_indices(fixed20):
     idx = np.flatnonzero(fixed20.ok.reshape(-1))[::40]
     pts = G20.points_at(idx)

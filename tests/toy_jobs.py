@@ -6,9 +6,13 @@ settings (tests/test_jobs.py runs each end to end; other files check their own n
 Change a size here, not in a test file, so the shared runs stay shared.
 """
 
-#: plots on (a job's figures are part of its end-to-end run); conftest's toy_run adds compilation_cache=<the
-#: session's persistent XLA cache>
-COMMON = ["progress=false"]
+import os
+
+#: the persistent XLA cache of the test session (tests/conftest.py) and of the toy runs; DELTAJAX_TEST_JAX_CACHE
+#: picks another folder (an empty one measures a cold start)
+JAX_CACHE = os.path.expanduser(os.environ.get("DELTAJAX_TEST_JAX_CACHE", "~/.cache/deltajax/jax"))
+#: plots on (a job's figures are part of its end-to-end run)
+COMMON = ["progress=false", f"compilation_cache={JAX_CACHE}"]
 #: jobs the fixture runs through the real CLI (``python -m deltajax.run``, a subprocess) rather than in-process
 CLI = {"indices_examples"}
 TOY = {
