@@ -125,7 +125,7 @@ class BenchKernelSchema:
     name: str = "bench_kernel"
     n_points: int = _REQ
     n_baseline: int = _REQ
-    block: int = 1000
+    block: int = 4096
     repeats: int = _REQ
     R: float = _REQ
     dtypes: List[str] = _list()
