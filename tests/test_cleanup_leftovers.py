@@ -62,3 +62,54 @@ def test_grid_bars_start_with_the_computed_total_and_are_never_reset():
         ws.fixed_workspace(robot, g, fields=False, chunk_size=100, progress=bar.update)
         assert bar.n == bar.total == computed_points(g) and resets == []
     assert f"0/{g.n_points}" not in log.getvalue()
+
+
+def test_rundir_checks_a_results_file_through_io_read(tmp_path):
+    import inspect
+
+    import h5py
+
+    from deltajax import rundir
+    from deltajax.rundir import RunDirError
+
+    assert "h5py" not in inspect.getsource(rundir)
+    good = tmp_path / "good.h5"
+    with h5py.File(good, "w") as f:
+        f.create_group("a").attrs["x"] = 1
+        f["a"].create_dataset("v", data=[1.0, 2.0])
+    rundir._check_readable(good)
+    rundir._check_readable(tmp_path / "missing.h5")  # nothing to resume over
+    for name, data in (("garbage.h5", b"garbage" * 100), ("cut.h5", good.read_bytes()[:800])):
+        (tmp_path / name).write_bytes(data)
+        with pytest.raises(RunDirError, match=rf"cannot resume: .*{name} is not a readable HDF5 file.*fresh=true"):
+            rundir._check_readable(tmp_path / name)
+
+
+def test_reconfig_motion_torque_methods_stay_distinguishable_where_they_agree():
+    import types
+
+    import matplotlib
+    import numpy as np
+
+    matplotlib.use("Agg")
+    from deltajax.jobs import reconfig_motion as job
+
+    figs = []
+    ctx = types.SimpleNamespace(savefig=lambda fig, name: figs.append(fig))
+    t = np.linspace(0.0, 1.0, 20)
+    tau = np.stack([np.sin(t), np.cos(t), t], axis=1)
+    job._plot_torques(ctx, "adept", t, {m: {"tau": tau} for m in job.METHODS})
+    for ax in figs[0].axes:
+        styles = {(str(ln.get_linestyle()), ln.get_linewidth()) for ln in ax.get_lines()}
+        assert len(ax.get_lines()) == len(job.METHODS) == len(styles)
+    matplotlib.pyplot.close(figs[0])
+
+
+@pytest.mark.slow
+def test_jobs_show_progress_over_their_stages(tmp_path, capfd):
+    from deltajax.run import run_experiment
+
+    run_experiment("indices_examples", ["progress=true", "plots=false", "experiment.R_step=1e-3"],
+                   run_dir=tmp_path / "ie")
+    err = capfd.readouterr().err.replace("\r", "\n")
+    assert "indices_examples: 100%" in err and "6/6" in err

@@ -95,10 +95,12 @@ def _plot_torques(ctx, name, t, data):
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
-    colors = {"fixed": "C0", "pointwise": "C3", "path_dp": "C1", "path_refined": "k"}
+    # colours as in the profiles; wide solid under dashed/dotted, so methods that agree stay distinguishable
+    styles = {"fixed": dict(color="C0", ls="-", lw=2.8, alpha=0.6), "pointwise": dict(color="C3", ls=":", lw=1.2),
+              "path_dp": dict(color="C1", ls="--", lw=1.6), "path_refined": dict(color="k", ls="-.", lw=1.0)}
     for i, ax in enumerate(axes):
         for m, d in data.items():
-            ax.plot(t, np.asarray(d["tau"])[:, i], color=colors[m], lw=0.8 if m == "pointwise" else 1.4, label=m)
+            ax.plot(t, np.asarray(d["tau"])[:, i], label=m, **styles[m])
         ax.set_ylabel(f"tau_{i + 1} (N m)")
         ax.grid(alpha=0.3)
     axes[0].legend(ncol=4, fontsize=8)
