@@ -22,8 +22,10 @@ class ConfigError(ValueError):
 
 # ---- the one set of field readers: every value of the configuration goes through these ----
 def _field(path: str, v: Any, *, kind: str = "float", lo: Optional[float] = None, hi: Optional[float] = None,
-           lo_open: bool = False, hi_open: bool = False, none: bool = False) -> Any:
-    """Check one value; ``kind`` is "float" (finite number), "int" or "bool". Returns it as a Python value."""
+           lo_open: bool = False, hi_open: bool = False, none: bool = False, unit: str = "") -> Any:
+    """Check one value; ``kind`` is "float" (finite number), "int" or "bool". Returns it as a Python value.
+    ``unit`` (the unit the user writes it in: "m", "deg", "s", ...) follows every bound and value in the message."""
+    u = f" {unit}" if unit else ""
     if v is None:
         if none:
             return None
@@ -43,27 +45,27 @@ def _field(path: str, v: Any, *, kind: str = "float", lo: Optional[float] = None
         try:
             v = float(v)
         except (TypeError, ValueError):
-            raise ConfigError(f"{path} must be a number, got {v!r}") from None
+            raise ConfigError(f"{path} must be a number{u and f' ({unit})'}, got {v!r}") from None
         if not math.isfinite(v):
-            raise ConfigError(f"{path} must be a finite number, got {v!r}")
+            raise ConfigError(f"{path} must be a finite number{u and f' ({unit})'}, got {v!r}")
     bad_lo = lo is not None and (v <= lo if lo_open else v < lo)
     bad_hi = hi is not None and (v >= hi if hi_open else v > hi)
     if bad_lo or bad_hi:
         left = "" if lo is None else ("(" if lo_open else "[") + f"{lo:g}"
         right = "" if hi is None else f"{hi:g}" + (")" if hi_open else "]")
         if lo is not None and hi is None:
-            rng = f"{'>' if lo_open else '>='} {lo:g}"
+            rng = f"{'>' if lo_open else '>='} {lo:g}{u}"
         elif hi is not None and lo is None:
-            rng = f"{'<' if hi_open else '<='} {hi:g}"
+            rng = f"{'<' if hi_open else '<='} {hi:g}{u}"
         else:
-            rng = f"in {left}, {right}"
-        raise ConfigError(f"{path} must be {rng}, got {v!r}")
+            rng = f"in {left}, {right}{u}"
+        raise ConfigError(f"{path} must be {rng}, got {v!r}{u}")
     return v
 
 
 def _choice(path: str, v: Any, options) -> str:
     if v not in tuple(options):
-        raise ConfigError(f"{path} must be one of {sorted(options)}, got {v!r}")
+        raise ConfigError(f"{path} must be one of {', '.join(map(str, sorted(options)))}, got {v!r}")
     return v
 
 
@@ -72,17 +74,19 @@ def _names(path: str, v: Any, options, *, min_len: int = 0) -> list:
     for x in items:
         _choice(f"{path} entry", x, options)
     if len(items) < min_len:
-        raise ConfigError(f"{path} must list at least {min_len} of {sorted(options)}, got {items!r}")
+        raise ConfigError(f"{path} must list at least {min_len} of {', '.join(map(str, sorted(options)))}, "
+                          f"got {items!r}")
     return items
 
 
-def _vector(path: str, v: Any, n: int) -> list:
+def _vector(path: str, v: Any, n: int, unit: str = "m") -> list:
+    u = f" ({unit})" if unit else ""
     try:
         items = [float(t) for t in v]
     except (TypeError, ValueError):
-        raise ConfigError(f"{path} must be a list of {n} numbers, got {v!r}") from None
+        raise ConfigError(f"{path} must be a list of {n} numbers{u}, got {v!r}") from None
     if len(items) != n or not all(math.isfinite(t) for t in items):
-        raise ConfigError(f"{path} must be a list of {n} finite numbers, got {v!r}")
+        raise ConfigError(f"{path} must be a list of {n} finite numbers{u}, got {v!r}")
     return items
 
 
@@ -99,10 +103,10 @@ def robot_from_config(cfg: Mapping[str, Any], prefix: str = "robot") -> Tuple[De
     Raises:
         ConfigError: a missing or invalid field; the message names ``robot.<field>`` and the value.
     """
-    kw = {key: _field(f"{prefix}.{key}", cfg.get(key)) for key in ("base_radius", "platform_radius", "upper_arm",
-                                                                   "forearm")}
-    lo = _field(f"{prefix}.theta_min_deg", cfg.get("theta_min_deg"), none=True)
-    hi = _field(f"{prefix}.theta_max_deg", cfg.get("theta_max_deg"), none=True)
+    kw = {key: _field(f"{prefix}.{key}", cfg.get(key), unit="m")
+          for key in ("base_radius", "platform_radius", "upper_arm", "forearm")}
+    lo = _field(f"{prefix}.theta_min_deg", cfg.get("theta_min_deg"), none=True, unit="deg")
+    hi = _field(f"{prefix}.theta_max_deg", cfg.get("theta_max_deg"), none=True, unit="deg")
     mass_cfg = cfg.get("mass") if hasattr(cfg, "get") else None
     mass = None
     if mass_cfg is not None:
@@ -115,7 +119,7 @@ def robot_from_config(cfg: Mapping[str, Any], prefix: str = "robot") -> Tuple[De
     if rng is None:
         return robot, None
     p = f"{prefix}.R_range"
-    r_min, r_max, r_step = (_field(f"{p}.{k}", rng.get(k)) for k in ("min", "max", "step"))
+    r_min, r_max, r_step = (_field(f"{p}.{k}", rng.get(k), unit="m") for k in ("min", "max", "step"))
     try:
         recon = ReconfigurableDelta.from_range(robot, r_min, r_max, r_step)
     except GeometryError as e:
@@ -160,7 +164,7 @@ def workspace_grid_from_config(g: Mapping[str, Any], robot=None):
     from .workspace import make_grid
     from .workspace.driver import reach_box
 
-    h = _field("experiment.grid.h", g.get("h"), lo=0, lo_open=True)
+    h = _field("experiment.grid.h", g.get("h"), lo=0, lo_open=True, unit="m")
     box = reach_box(robot) if robot is not None else None
 
     def pair(i, key):
@@ -200,7 +204,7 @@ def paper_grid_from_config(e: Mapping[str, Any]):
     """The Franco-López 2026 grid at spacing ``experiment.h`` (m, default 0.002)."""
     from .workspace import franco2026_grid
 
-    h = _field("experiment.h", e.get("h", 0.002), lo=0, lo_open=True)
+    h = _field("experiment.h", e.get("h", 0.002), lo=0, lo_open=True, unit="m")
     try:
         return franco2026_grid(h)
     except ValueError as err:
@@ -220,7 +224,7 @@ def _v_workspace_grid(e, cfg, robot, recon) -> None:
     dev = e.get("devices", "all")
     if dev not in ("all", None):
         _field("experiment.devices", dev, kind="int", lo=1)
-    _field("experiment.checkpoint_s", e.get("checkpoint_s"), lo=0)
+    _field("experiment.checkpoint_s", e.get("checkpoint_s"), lo=0, unit="s")
     _field("experiment.resume", e.get("resume", True), kind="bool")
     _field("experiment.stop_after", e.get("stop_after"), kind="int", lo=1, none=True)
 
@@ -245,13 +249,13 @@ def _v_reconfig_indices(e, cfg, robot, recon) -> None:
     _choice("experiment.slice_index", e.get("slice_index"), INDEX_NAMES)
     _names("experiment.store_fields", e.get("store_fields"), INDEX_NAMES)
     for i, z in enumerate(e.get("slices_z") or []):
-        _field(f"experiment.slices_z[{i}]", z)
+        _field(f"experiment.slices_z[{i}]", z, unit="m")
 
 
 def _v_bench_kernel(e, cfg, robot, recon) -> None:
     for k in ("n_points", "n_baseline", "block", "repeats"):
         _field(f"experiment.{k}", e.get(k), kind="int", lo=1)
-    _field("experiment.R", e.get("R"), lo=0, lo_open=True)
+    _field("experiment.R", e.get("R"), lo=0, lo_open=True, unit="m")
     _names("experiment.dtypes", e.get("dtypes"), ("float32", "float64"), min_len=1)
 
 
@@ -259,7 +263,7 @@ def indices_examples_spec(e, cfg=None, robot=None, recon=None) -> dict:
     """``experiment.*`` of indices_examples as plain values (the paper's example points, the R curve step)."""
     if recon is None:
         raise ConfigError("experiment=indices_examples needs a reconfigurable robot: robot.R_range is null")
-    return dict(R_step=_field("experiment.R_step", e.get("R_step"), lo=0, lo_open=True),
+    return dict(R_step=_field("experiment.R_step", e.get("R_step"), lo=0, lo_open=True, unit="m"),
                 points=[_vector(f"experiment.points[{i}]", p, 3) for i, p in enumerate(e.get("points") or [])],
                 b_v=_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True),
                 b_f=_field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True),
@@ -269,9 +273,9 @@ def indices_examples_spec(e, cfg=None, robot=None, recon=None) -> dict:
 
 def _cycle_setup(s, path: str) -> dict:
     out = dict(centre=_vector(f"{path}.centre", s.get("centre"), 3),
-               heading_deg=_field(f"{path}.heading_deg", s.get("heading_deg")))
-    for k in ("duration", "torque_limit", "speed_limit"):
-        out[k] = _field(f"{path}.{k}", s.get(k), lo=0, lo_open=True)
+               heading_deg=_field(f"{path}.heading_deg", s.get("heading_deg"), unit="deg"))
+    for k, unit in (("duration", "s"), ("torque_limit", "N m"), ("speed_limit", "rad/s")):
+        out[k] = _field(f"{path}.{k}", s.get(k), lo=0, lo_open=True, unit=unit)
     return out
 
 
@@ -296,7 +300,7 @@ def dynamics_cycle_spec(e, cfg=None, robot=None, recon=None) -> dict:
             raise ConfigError(f"experiment.setups.{name} (or experiment.setups.default) is required")
         setups[name] = _cycle_setup(blocks.get(key), f"experiment.setups.{key}")
     gm = e.get("ga_motion") or {}
-    amp = _field("experiment.recon_R_amplitude", e.get("recon_R_amplitude"), lo=0)
+    amp = _field("experiment.recon_R_amplitude", e.get("recon_R_amplitude"), lo=0, unit="m")
     if recon is not None and amp != 0.0:
         R0, lo, hi = float(recon.robot.base_radius), float(recon.R_min), float(recon.R_max)
         if not (lo <= R0 - amp and R0 + amp <= hi + 1e-12):
@@ -307,8 +311,9 @@ def dynamics_cycle_spec(e, cfg=None, robot=None, recon=None) -> dict:
                 law=_choice("experiment.law", e.get("law"), MOTION_LAWS),
                 blend=_field("experiment.blend", e.get("blend"), lo=0, hi=1, hi_open=True),
                 robots=robots, cfg_name=cfg_name, setups=setups,
-                ga_amplitude=_field("experiment.ga_motion.amplitude", gm.get("amplitude"), lo=0, lo_open=True),
-                ga_duration=_field("experiment.ga_motion.duration", gm.get("duration"), lo=0, lo_open=True),
+                ga_amplitude=_field("experiment.ga_motion.amplitude", gm.get("amplitude"), lo=0, lo_open=True,
+                                    unit="rad"),
+                ga_duration=_field("experiment.ga_motion.duration", gm.get("duration"), lo=0, lo_open=True, unit="s"),
                 recon_R_amplitude=amp)
 
 
@@ -316,12 +321,14 @@ def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
     """``experiment.*`` of boundary_search as plain values (m, deg)."""
     from .workspace import boundary as B
 
-    pos = lambda k: _field(f"experiment.{k}", e.get(k), lo=0, lo_open=True)  # noqa: E731
-    out = dict(eps=pos("eps"), rho_max=pos("rho_max"), grid_h=pos("grid_h"), sweep_step_deg=pos("sweep_step_deg"),
+    pos = lambda k, unit: _field(f"experiment.{k}", e.get(k), lo=0, lo_open=True, unit=unit)  # noqa: E731
+    out = dict(eps=pos("eps", "m"), rho_max=pos("rho_max", "m"), grid_h=pos("grid_h", "m"),
+               sweep_step_deg=pos("sweep_step_deg", "deg"),
                centre=_vector("experiment.centre", e.get("centre"), 3))
     if out["rho_max"] <= out["eps"]:
-        raise ConfigError(f"experiment.rho_max must exceed experiment.eps, got {out['rho_max']} <= {out['eps']}")
-    steps = [_field(f"experiment.steps_deg[{i}]", s, lo=0, lo_open=True) for i, s in enumerate(e.get("steps_deg") or [])]
+        raise ConfigError(f"experiment.rho_max must exceed experiment.eps, got {out['rho_max']} m <= {out['eps']} m")
+    steps = [_field(f"experiment.steps_deg[{i}]", s, lo=0, lo_open=True, unit="deg")
+             for i, s in enumerate(e.get("steps_deg") or [])]
     if not steps:
         raise ConfigError("experiment.steps_deg must list at least one angular step (deg)")
     for s in steps:
@@ -345,7 +352,7 @@ def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
             raise ConfigError(f"experiment.grid_box {name} side ({a}, {b}) m is not a whole number of "
                               f"experiment.grid_h = {out['grid_h']} m")
     out["grid_box"] = box
-    out["centre_sweep_z"] = [_field(f"experiment.centre_sweep_z[{i}]", z)
+    out["centre_sweep_z"] = [_field(f"experiment.centre_sweep_z[{i}]", z, unit="m")
                              for i, z in enumerate(e.get("centre_sweep_z") or [])]
     out["half_space"] = _field("experiment.half_space", e.get("half_space", True), kind="bool")
     out["timing_repeats"] = _field("experiment.timing_repeats", e.get("timing_repeats", 3), kind="int", lo=1)
@@ -366,17 +373,17 @@ def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dic
         raise ConfigError("experiment=reconfig_motion needs a reconfigurable robot: robot.R_range is null")
     if recon.robot.mass is None:
         raise ConfigError("experiment=reconfig_motion needs a mass model: robot.mass is null")
-    pos = lambda k: _field(f"experiment.{k}", e.get(k), lo=0, lo_open=True)  # noqa: E731
+    pos = lambda k, unit="": _field(f"experiment.{k}", e.get(k), lo=0, lo_open=True, unit=unit)  # noqa: E731
     out = dict(criterion=_choice("experiment.criterion", e.get("criterion", "k_tilde"), INDEX_NAMES),
                aggregate=_choice("experiment.aggregate", e.get("aggregate", "integral"), AGGREGATES),
-               b_v=pos("b_v"), b_f=pos("b_f"), R_step=pos("R_step"), torque_limit=pos("torque_limit"),
-               speed_limit=pos("speed_limit"),
+               b_v=pos("b_v"), b_f=pos("b_f"), R_step=pos("R_step", "m"), torque_limit=pos("torque_limit", "N m"),
+               speed_limit=pos("speed_limit", "rad/s"),
                beta=_field("experiment.beta", e.get("beta", 0.5), lo=0, hi=1, lo_open=True, hi_open=True))
     d = e.get("drive")
     if d is None:
         raise ConfigError("experiment.drive is required (speed m/s, acceleration m/s^2, force N)")
-    lim = {k: _field(f"experiment.drive.{k}", d.get(k), lo=0, lo_open=True) for k in ("speed", "acceleration",
-                                                                                      "force")}
+    lim = {k: _field(f"experiment.drive.{k}", d.get(k), lo=0, lo_open=True, unit=unit)
+           for k, unit in (("speed", "m/s"), ("acceleration", "m/s^2"), ("force", "N"))}
     out["drive"] = RDriveLimits(**lim)
     try:  # the DP's R samples: the robot's range at experiment.R_step
         out["recon"] = ReconfigurableDelta.from_range(recon.robot, float(recon.R_min), float(recon.R_max),
@@ -413,15 +420,15 @@ def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dic
         try:
             if kind == "adept":
                 cyc = tr.adept_cycle(_vector(f"{p}.centre", c.get("centre"), 3),
-                                     heading=math.radians(_field(f"{p}.heading_deg", c.get("heading_deg"))),
-                                     duration=_field(f"{p}.duration", c.get("duration"), lo=0, lo_open=True),
+                                     heading=math.radians(_field(f"{p}.heading_deg", c.get("heading_deg"), unit="deg")),
+                                     duration=_field(f"{p}.duration", c.get("duration"), lo=0, lo_open=True, unit="s"),
                                      law=law, blend=_field(f"{p}.blend", c.get("blend", 0.5), lo=0, hi=1, hi_open=True),
                                      n_samples=_field(f"{p}.n_samples", c.get("n_samples"), kind="int", lo=3),
                                      dtype=dtype)
             else:
                 pts = [_vector(f"{p}.points[{i}]", q, 3) for i, q in enumerate(c.get("points") or [])]
                 cyc = tr.task_path(pts, segment_duration=_field(f"{p}.segment_duration", c.get("segment_duration"),
-                                                                lo=0, lo_open=True),
+                                                                lo=0, lo_open=True, unit="s"),
                                    law=law, samples_per_segment=_field(f"{p}.samples_per_segment",
                                                                        c.get("samples_per_segment"), kind="int", lo=2),
                                    closed=_field(f"{p}.closed", c.get("closed", False), kind="bool"), dtype=dtype)
@@ -493,7 +500,8 @@ def check_keys(cfg: Mapping[str, Any]) -> None:
     """
     extra = [k for k in cfg.keys() if k not in TOP_LEVEL_KEYS]
     if extra:
-        raise ConfigError(f"unknown top-level key(s) {extra}; valid keys: {list(TOP_LEVEL_KEYS)}")
+        raise ConfigError(f"unknown top-level key(s) {', '.join(map(str, extra))}; "
+                          f"valid keys: {', '.join(TOP_LEVEL_KEYS)}")
     e = cfg.get("experiment")
     blocks = (("robot", cfg.get("robot"), RobotSchema),
               ("experiment", e, EXPERIMENT_SCHEMAS.get(e.get("name")) if e is not None else None))
@@ -538,9 +546,10 @@ def mass_from_config(mass_cfg: Mapping[str, Any], geometry_kwargs: Optional[Mapp
     keys = list(mass_cfg.keys())
     for k in keys:
         if k not in known:
-            raise ConfigError(f"{prefix}.{k} is not a mass-model field (known: {sorted(known)})")
+            raise ConfigError(f"{prefix}.{k} is not a mass-model field; valid keys: {', '.join(sorted(known))}")
     ranges = {"nonneg": dict(lo=0), "pos": dict(lo=0, lo_open=True), "frac": dict(lo=0, hi=1)}
     kinds = {name: kind for name, _u, kind in MASS_FIELDS}
+    units = {name: u for name, u, _k in MASS_FIELDS if u != "1"} | {"upper_arm_inertia": "kg m^2"}
     values: dict[str, Any] = {}
     for k in keys:
         v = mass_cfg[k]
@@ -549,7 +558,7 @@ def mass_from_config(mass_cfg: Mapping[str, Any], geometry_kwargs: Optional[Mapp
         if k == "forearm_model":
             values[k] = str(_choice(f"{prefix}.forearm_model", v, FOREARM_MODELS))
         else:
-            values[k] = _field(f"{prefix}.{k}", v, **ranges[kinds.get(k, "nonneg")])
+            values[k] = _field(f"{prefix}.{k}", v, unit=units.get(k, ""), **ranges[kinds.get(k, "nonneg")])
     if values.get("forearm_model") == "point_split" and "forearm_inertia_factor" in values:
         raise ConfigError(f"{prefix}.forearm_inertia_factor={values['forearm_inertia_factor']!r} applies to "
                           "forearm_model: rigid_rod only (point_split's inertia is that of its two end masses)")

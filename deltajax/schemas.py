@@ -234,7 +234,7 @@ def unknown_key(node: Any, schema, path: str) -> Optional[str]:
     fields = _schema_fields(schema)
     for k in node.keys():
         if k not in fields:
-            return f"{path}.{k} is not a setting of {path}; valid keys: {sorted(fields)}"
+            return f"{path}.{k} is not a setting of {path}; valid keys: {', '.join(sorted(fields))}"
         sub, is_dict = _unwrap(fields[k])
         v = node.get(k)
         if sub is None or v is None:

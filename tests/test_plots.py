@@ -80,18 +80,15 @@ def test_dynamics_cycle_plots_draw_actuators_in_distinguishable_styles():
     import matplotlib
 
     matplotlib.use("Agg")
-    from deltajax.jobs import dynamics_cycle as job
-
     figs = []
-    ctx = types.SimpleNamespace(savefig=lambda fig, name: figs.append((name, fig)))
     t = np.linspace(0.0, 1.0, 30)
     three = np.stack([np.sin(t), np.cos(t), np.sin(t)], axis=1)  # 1 and 3 equal
     prof = types.SimpleNamespace(t=t, tau=three, theta_dot=three, theta_ddot=three, p=three, p_dot=three,
                                  p_ddot=three, R_dot=np.zeros_like(t), force_R=np.zeros_like(t))
-    job._plot_torques(ctx, "r", prof, "title", "torques")
+    figs.append(("torques", plots.cycle_torques(prof, "title")))
     half = types.SimpleNamespace(t=t, tau=0.5 * three, theta_dot=0.5 * three, theta_ddot=0.5 * three)
-    job._plot_adept(ctx, "r", prof, half, 0.5)
-    job._plot_platform(ctx, "r", prof, "title")
+    figs.append(("r_adept_profiles", plots.adept_profiles("r", prof, half, 0.5)))
+    figs.append(("r_ga_motion_platform", plots.cycle_platform(prof, "title")))
     assert [n for n, _ in figs] == ["torques", "r_adept_profiles", "r_ga_motion_platform"]
     for _name, fig in figs:
         for ax in fig.axes:

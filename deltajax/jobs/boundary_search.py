@@ -192,7 +192,8 @@ def _plot(ctx, robot, p, conti, cont, step):
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("z (m, down)")
-    ax.set_title(f"Slice y = 0: workspace (blue), boundaries at {step:g} deg; orange: rays that re-enter")
+    n_re = int((np.asarray(prof_c.n_exits) > 1).sum())
+    ax.set_title(f"Slice y = 0: workspace (blue), boundaries at {step:g} deg; orange: rays that re-enter ({n_re})")
     ax.legend(loc="lower right", fontsize=8)
     ctx.savefig(fig, "boundary_slice")
 
@@ -202,8 +203,9 @@ def _plot(ctx, robot, p, conti, cont, step):
     fig = plt.figure(figsize=(7, 6))
     ax = fig.add_subplot(projection="3d")
     sel = ~ns
-    ax.scatter(q[sel, 0][::7], q[sel, 1][::7], q[sel, 2][::7], s=0.5, c=q[sel, 2][::7], cmap="viridis")
-    ax.scatter(q[ns, 0], q[ns, 1], q[ns, 2], s=2, c="orange", label="rays that leave and re-enter")
+    sc = ax.scatter(q[sel, 0][::7], q[sel, 1][::7], q[sel, 2][::7], s=0.5, c=q[sel, 2][::7], cmap="viridis")
+    fig.colorbar(sc, ax=ax, shrink=0.6, pad=0.1, label="z (m, down)")
+    ax.scatter(q[ns, 0], q[ns, 1], q[ns, 2], s=2, c="orange", label=f"rays that leave and re-enter ({int(ns.sum())})")
     ax.invert_zaxis()
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")

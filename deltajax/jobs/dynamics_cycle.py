@@ -102,60 +102,6 @@ def _forearm_line(name, case, by_model):
             f"min cycle time {ct[0]:.4f} vs {ct[1]:.4f} s ({100 * float(_rel(*ct)):+.2f} %)")
 
 
-def _plot_platform(ctx, name, prof, title):
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
-    t = np.asarray(prof.t)
-    for ax, key, unit in zip(axes, ("p", "p_dot", "p_ddot"), ("m", "m/s", "m/s$^2$")):
-        arr = np.asarray(getattr(prof, key))
-        plots.actuator_lines(ax, t, arr, names="xyz", legend=False)  # distinguishable where they overlap
-        ax.set_ylabel(f"{key} ({unit})")
-        ax.grid(alpha=0.3)
-    axes[0].legend(ncol=3)
-    axes[0].set_title(title)
-    axes[-1].set_xlabel("t (s)")
-    ctx.savefig(fig, f"{name}_ga_motion_platform")
-
-
-def _plot_torques(ctx, name, prof, title, fname):
-    import matplotlib.pyplot as plt
-
-    has_R = np.any(np.abs(np.asarray(prof.R_dot)) > 0)
-    fig, axes = plt.subplots(2 if has_R else 1, 1, figsize=(7, 6 if has_R else 3.6), sharex=True, squeeze=False)
-    t = np.asarray(prof.t)
-    tau = np.asarray(prof.tau)
-    plots.actuator_lines(axes[0, 0], t, tau[:, :3])  # distinguishable styles: equal torques stay visible
-    axes[0, 0].set_ylabel("torque (N m)")
-    axes[0, 0].legend()
-    axes[0, 0].grid(alpha=0.3)
-    axes[0, 0].set_title(title)
-    if has_R:
-        axes[1, 0].plot(t, np.asarray(prof.force_R), color="k")
-        axes[1, 0].set_ylabel("R actuator force (N)")
-        axes[1, 0].grid(alpha=0.3)
-    axes[-1, 0].set_xlabel("t (s)")
-    ctx.savefig(fig, fname)
-
-
-def _plot_adept(ctx, name, prof_nom, prof_min, T_min):
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(3, 2, figsize=(11, 8), sharex="col", sharey="row")  # columns compared row by row
-    cases = ((prof_nom, "nominal duration"), (prof_min, f"minimum cycle time {T_min:.3f} s"))
-    for col, (prof, label) in enumerate(cases):
-        t = np.asarray(prof.t)
-        for row, (key, unit) in enumerate((("tau", "N m"), ("theta_dot", "rad/s"), ("theta_ddot", "rad/s$^2$"))):
-            arr = np.asarray(getattr(prof, key))
-            plots.actuator_lines(axes[row, col], t, arr[:, :3], label="{i}", legend=False)
-            axes[row, col].set_ylabel(f"{key} ({unit})")
-            axes[row, col].grid(alpha=0.3)
-        axes[0, col].set_title(f"{name}, standard cycle, {label}")
-        axes[-1, col].set_xlabel("t (s)")
-    fig.legend(*axes[0, 0].get_legend_handles_labels(), title="actuator", ncol=3, loc="lower center", bbox_to_anchor=(0.5, 0.92))
-    ctx.savefig(fig, f"{name}_adept_profiles")
-
-
 def run(ctx) -> None:
     spec = dynamics_cycle_spec(ctx.cfg.experiment, ctx.cfg, ctx.robot, ctx.recon)
     dtype = ctx.dtype
@@ -219,11 +165,13 @@ def run(ctx) -> None:
                 prof_min = profile_jit(robot, cyc, m.cycle_time, method=method)
                 _save_case(res, f"dynamics/{name}/adept_at_min_cycle_time", prof_min,
                            dict(duration=float(m.cycle_time), method=method))
-                _plot_adept(ctx, name, prof, prof_min, float(m.cycle_time))
+                ctx.savefig(plots.adept_profiles(name, prof, prof_min, float(m.cycle_time)),
+                            f"{name}_adept_profiles")
             if case == "ga_motion" and bool(m.reachable):
-                _plot_platform(ctx, name, prof, f"{name}: GA paper motion, platform (cf. its Fig. 5)")
-                _plot_torques(ctx, name, prof, f"{name}: GA paper motion, actuator torques (cf. its Fig. 6)",
-                              f"{name}_ga_motion_torques")
+                ctx.savefig(plots.cycle_platform(prof, f"{name}: GA paper motion, platform (cf. its Fig. 5)"),
+                            f"{name}_ga_motion_platform")
+                ctx.savefig(plots.cycle_torques(prof, f"{name}: GA paper motion, actuator torques (cf. its Fig. 6)"),
+                            f"{name}_ga_motion_torques")
         res.flush()
     if ctx.recon is not None and spec["recon_R_amplitude"] != 0.0:
         recon = ctx.recon
@@ -244,7 +192,8 @@ def run(ctx) -> None:
         ctx.log(f"{cfg_name} GA motion with R = {R0} + {A} sin(2 pi t/T): peak R force {float(m.peak_force_R):.3f} N, "
                 f"peak torque {np.array2string(np.asarray(m.peak_torque), precision=3)} N m")
         if bool(m.reachable):
-            _plot_torques(ctx, cfg_name, prof, f"{cfg_name}: GA motion with moving R", f"{cfg_name}_ga_motion_moving_R")
+            ctx.savefig(plots.cycle_torques(prof, f"{cfg_name}: GA motion with moving R"),
+                        f"{cfg_name}_ga_motion_moving_R")
     names = [f"{n}/{c}" for n, c, _, _ in summary]
     res.put("dynamics/summary", "case", np.asarray(names, dtype="S"), units="1", dims=("case",))
     for key, stored, unit, dims in (("cycle_time", "cycle_time", "s", ("case",)),

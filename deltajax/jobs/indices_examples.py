@@ -34,7 +34,10 @@ def run(ctx) -> None:
     at_jit = jax.jit(at)
     res = ctx.results
     rows = []
+    # one bar: each paper example (the first compiles), then the index-vs-R curves (one compiled vmap), the plot
+    bar = ctx.progress(total=len(FRANCO2026_EXAMPLES) + 2, desc="indices_examples")
     for name, tab in FRANCO2026_EXAMPLES.items():
+        bar.set_postfix_str(name)
         p = jnp.asarray(tab["p"], dtype)
         sol, ind = at_jit(jnp.asarray(tab["R"], dtype), p)
         g = f"examples/{name}"
@@ -49,6 +52,7 @@ def run(ctx) -> None:
             rows.append((name, k, paper, ours, abs(ours - paper) / abs(paper)))
             res.put(g, f"match_{k}", rows[-1][-1] <= 2e-4, units="1",
                     attrs={"misprint": int((name, k) in FRANCO2026_MISPRINTS)})
+        bar.update(1)
     for name, k, paper, ours, rel in rows:
         flag = "ok" if rel <= 2e-4 else ("paper misprint" if (name, k) in FRANCO2026_MISPRINTS else "MISMATCH")
         ctx.log(f"{name:7s} {k:12s} paper {paper:.5g}  ours {ours:.6g}  rel {rel:.1e}  {flag}")
@@ -59,7 +63,9 @@ def run(ctx) -> None:
     R = float(recon.R_min) + step * np.arange(n)
     pts = np.asarray(spec["points"])
     curve = jax.jit(jax.vmap(jax.vmap(at, in_axes=(0, None)), in_axes=(None, 0)))
-    sol, ind = curve(jnp.asarray(R, dtype), jnp.asarray(pts, dtype))
+    bar.set_postfix_str(f"curves ({len(pts)} points x {n} R)")
+    sol, ind = jax.block_until_ready(curve(jnp.asarray(R, dtype), jnp.asarray(pts, dtype)))
+    bar.update(1)
     ok = np.asarray(sol.ok)
     res.put_axis("curves", "R", R, units="m")
     res.put_axis("curves", "point", np.arange(len(pts)), units="1")
@@ -84,5 +90,8 @@ def run(ctx) -> None:
     if ctx.cfg.get("plots", True):
         from ..plots_core import plot_index_curves
 
+        bar.set_postfix_str("plot")
         ctx.savefig(plot_index_curves(R, pts, {k: np.asarray(getattr(ind, k)) for k in SCALAR_INDICES}, ok,
                                       argmax), "index_curves")
+    bar.update(1)
+    bar.close()

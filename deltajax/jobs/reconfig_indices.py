@@ -27,7 +27,7 @@ def run(ctx) -> None:
     from .. import plots
     from ..papers import FRANCO2026_INDEX_STATS as PAPER_TABLES
     from ..workspace import fixed_workspace, redundancy_grid
-    from ..workspace.driver import face_count
+    from ..workspace.driver import computed_points, face_count
     from ..workspace.redundancy import resolve_redundancy_host
 
     cfg = ctx.cfg.experiment
@@ -60,13 +60,13 @@ def run(ctx) -> None:
     kw = dict(b_v=b_v, b_f=b_f, beta=beta)
 
     t0 = time.perf_counter()
-    with ctx.progress(total=grid.n_points, desc="ODR fields") as bar:
+    with ctx.progress(total=computed_points(grid), desc="ODR fields") as bar:
         # only the fields written below are kept on the grid; the statistics accumulate chunk by chunk
         odr = fixed_workspace(ctx.robot, grid, fields=True, field_dtype=np.float32, chunk_size=1 << 20,
                               keep=sorted(set(store) | {slice_index}), stats=True, progress=bar.update, checkpoint_dir=None if ck is None else ck / "odr", **kw)
     t1 = time.perf_counter()
     work: dict = {}
-    with ctx.progress(total=grid.n_points, desc=f"RDR R* ({mode})") as bar:
+    with ctx.progress(total=computed_points(grid, mode == "fast"), desc=f"RDR R* ({mode})") as bar:
         rdr = redundancy_grid(ctx.recon, grid, mask=odr.ok, criterion=criterion, mode=mode, field_dtype=np.float32,
                               chunk_size=chunk, keep=["R_star", *store], stats=True, R_dtype=np.float32,
                               progress=bar.update, work=work,

@@ -95,10 +95,12 @@ def _plot_torques(ctx, name, t, data):
     import matplotlib.pyplot as plt
 
     fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
-    colors = {"fixed": "C0", "pointwise": "C3", "path_dp": "C1", "path_refined": "k"}
+    # colours as in the profiles; wide solid under dashed/dotted, so methods that agree stay distinguishable
+    styles = {"fixed": dict(color="C0", ls="-", lw=2.8, alpha=0.6), "pointwise": dict(color="C3", ls=":", lw=1.2),
+              "path_dp": dict(color="C1", ls="--", lw=1.6), "path_refined": dict(color="k", ls="-.", lw=1.0)}
     for i, ax in enumerate(axes):
         for m, d in data.items():
-            ax.plot(t, np.asarray(d["tau"])[:, i], color=colors[m], lw=0.8 if m == "pointwise" else 1.4, label=m)
+            ax.plot(t, np.asarray(d["tau"])[:, i], label=m, **styles[m])
         ax.set_ylabel(f"tau_{i + 1} (N m)")
         ax.grid(alpha=0.3)
     axes[0].legend(ncol=4, fontsize=8)
@@ -117,22 +119,34 @@ def run(ctx) -> None:
     tables_jit = jax.jit(mo.path_tables, static_argnames=("criterion",))
     lim = s["drive"]
     arms = Limits(torque=s["torque_limit"], speed=s["speed_limit"])
+    # one bar over every stage of every case (tables, DP, refinement if on, per-method reports, write and plots)
+    stages = 4 + bool(s["refine"]["enabled"])
+    bar = ctx.progress(total=stages * len(s["cases"]), desc="reconfig_motion")
+
+    def done(case: str, following: str) -> None:
+        bar.update(1)
+        bar.set_postfix_str(f"{case}: {following}")
+
     for name, (cyc, boundary) in s["cases"].items():
         t0 = time.perf_counter()
         c0 = time.process_time()
+        bar.set_postfix_str(f"{name}: index tables")
         tab = jax.block_until_ready(tables_jit(recon, cyc, s["criterion"], **kw))
+        done(name, "path DP")
         dt = float(cyc.duration) / (cyc.n_samples - 1)
         fixed = mo.fixed_path(tab, lim, s["aggregate"], dt)
         pw = mo.pointwise_path(tab, s["aggregate"], dt)
         dp = mo.resolve_path(recon, cyc, s["criterion"], limits=lim, aggregate=s["aggregate"], boundary=boundary,
                              tables=tab, **kw)
         t_dp = time.perf_counter() - t0
+        done(name, "spline refinement" if s["refine"]["enabled"] else "reports")
         if not dp.ok:
             raise RuntimeError(f"case {name!r}: no R(t) meets the drive limits {lim} on this path (bands {dp.bands})")
         if s["refine"]["enabled"]:
             rf = refine_path(recon, cyc, dp, s["criterion"], limits=lim, aggregate=s["aggregate"],
                                 boundary=boundary, n_ctrl=s["refine"]["n_ctrl"], steps=s["refine"]["steps"],
                                 learning_rate=s["refine"]["learning_rate"], **kw)
+            done(name, "reports")
         else:
             rf = None
         wall, cpu = time.perf_counter() - t0, time.process_time() - c0
@@ -155,6 +169,7 @@ def run(ctx) -> None:
                            force_R=np.asarray(prof.force_R), tau=np.asarray(prof.tau), screw_angle=np.asarray(drv.q),
                            screw_torque=np.asarray(drv.effort), drive_ok=np.asarray(drv.ok))
             rows[m] = row
+        done(name, "write and plots")
         g = f"reconfig_motion/{name}"
         t = np.asarray(cyc.time())
         res.put_axis(g, "t", t, units="s")
@@ -200,6 +215,8 @@ def run(ctx) -> None:
         _plot_landscape(ctx, name, t, np.asarray(tab.R), np.asarray(tab.value), paths, s["criterion"])
         _plot_profiles(ctx, name, t, shown, s)
         _plot_torques(ctx, name, t, shown)
+        bar.update(1)
+    bar.close()
     if "mech_info" in s:
         res.set_attrs("reconfig_motion", mechanism="screw_linkage",
                       **{f"mechanism_{k}": float(np.asarray(getattr(mech, k))) for k in

@@ -17,7 +17,7 @@ from ..papers import FRANCO2026_VOLUMES as PAPER
 def run(ctx) -> None:
     from .. import plots
     from ..workspace import fixed_workspace, reconfigurable_workspace
-    from ..workspace.driver import face_count
+    from ..workspace.driver import computed_points, face_count
 
     cfg = ctx.cfg.experiment
     if ctx.recon is None:
@@ -27,10 +27,10 @@ def run(ctx) -> None:
     chunk = int(cfg.get("chunk_points", 1 << 20))
     ck = ctx.run_dir / "checkpoint" if cfg.get("checkpoint", True) else None
     ctx.log(f"grid {grid.shape} = {grid.n_points} points, h = {h} m")
-    with ctx.progress(total=grid.n_points, desc="fixed") as bar:
+    with ctx.progress(total=computed_points(grid), desc="fixed") as bar:
         fixed = fixed_workspace(ctx.robot, grid, fields=False, chunk_size=chunk, progress=bar.update,
                                 checkpoint_dir=None if ck is None else ck / "fixed")
-    with ctx.progress(total=grid.n_points, desc="reconfigurable") as bar:
+    with ctx.progress(total=computed_points(grid), desc="reconfigurable") as bar:
         recon = reconfigurable_workspace(ctx.recon, grid, chunk_size=chunk, progress=bar.update,
                                          checkpoint_dir=None if ck is None else ck / "reconf")
     res = ctx.results

@@ -26,14 +26,13 @@ from __future__ import annotations
 
 import importlib.util
 import json
-import math
 import os
 import time
-from typing import Any, Mapping, Sequence
+from typing import Sequence
 
 import numpy as np
 
-from ..config import ConfigError
+from ..config import ConfigError, workspace_grid_from_config
 from ..rundir import CheckpointError, RunDirError
 
 from ..workspace.driver import make_evaluator, make_numba_evaluator  # (the job's kernels; also benchmarked)
@@ -48,52 +47,8 @@ __all__ = ["run", "GridPlan", "make_evaluator", "make_numba_evaluator"]
 
 
 # ---------------------------------------------------------------------------------------------------------
-# configuration
+# configuration (the grid reader is config.workspace_grid_from_config)
 # ---------------------------------------------------------------------------------------------------------
-def _grid_from_config(g: Mapping[str, Any], robot=None):
-    """The grid of ``experiment.grid``; an axis given as null is sized from the robot's reach bound
-    (:func:`deltajax.workspace.driver.reach_box`, widened outwards to whole steps of h, y symmetric)."""
-    from ..workspace import make_grid
-    from ..workspace.driver import reach_box
-
-    h = g.get("h")
-    if not isinstance(h, (int, float)) or isinstance(h, bool) or not h > 0 or not math.isfinite(h):
-        raise ConfigError(f"experiment.grid.h must be a positive number (m), got {h!r}")
-    box = reach_box(robot) if robot is not None else None
-
-    def pair(i, key):
-        v = g.get(key)
-        if v is None and box is not None:  # from the reach bound, on whole steps of h (y symmetric: mirror halving)
-            lo, hi = box[i]
-            if key == "y":
-                n = math.ceil(max(-lo, hi) / h - 1e-9)
-                return -n * h, n * h
-            return math.floor(lo / h + 1e-9) * h, math.ceil(hi / h - 1e-9) * h
-        try:
-            lo, hi = (float(t) for t in v)
-        except (TypeError, ValueError):
-            raise ConfigError(f"experiment.grid.{key} must be [lo, hi] in m (or null: from the reach bound), "
-                              f"got {v!r}") from None
-        return lo, hi
-
-    bounds = g.get("bounds")
-    auto = [k for k in ("x", "y", "z") if g.get(k) is None]
-    if auto and bounds is not None:
-        raise ConfigError(f"experiment.grid.bounds must be null when the grid is sized from the reach bound "
-                          f"(experiment.grid.{'/'.join(auto)}=null), got {bounds!r}")
-    if bounds is not None:
-        try:
-            bounds = [[float(a), float(b)] for a, b in bounds]
-            assert len(bounds) == 3
-        except (TypeError, ValueError, AssertionError):
-            raise ConfigError(f"experiment.grid.bounds must be null or [[x0,x1],[y0,y1],[z0,z1]] (m), "
-                              f"got {g.get('bounds')!r}") from None
-    try:
-        return make_grid(pair(0, "x"), pair(1, "y"), pair(2, "z"), float(h), bounds=bounds)
-    except ValueError as e:
-        raise ConfigError(f"experiment.grid: {e}") from None
-
-
 class GridPlan(ShardPlan):
     """:class:`deltajax.workspace.chunks.ShardPlan` whose refusals are :class:`ConfigError` (they name a setting)."""
 
@@ -121,7 +76,7 @@ def run(ctx) -> None:
 
     cfg = ctx.cfg
     ex = cfg.experiment
-    grid = _grid_from_config(ex.grid, ctx.robot)
+    grid = workspace_grid_from_config(ex.grid, ctx.robot)
     shard = _int(cfg, "shard", "shard", 0)
     n_shards = _int(cfg, "n_shards", "n_shards", 1)
     chunk_points = _int(ex, "chunk_points", "experiment.chunk_points", 1)

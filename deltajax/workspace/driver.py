@@ -37,7 +37,7 @@ from ..indices import INDEX_NAMES
 from .chunks import CheckpointMismatch, run_chunks
 from .grid import Grid
 
-__all__ = ["GridJob", "run_chunks", "fixed_workspace", "reconfigurable_workspace", "redundancy_grid",
+__all__ = ["GridJob", "run_chunks", "fixed_workspace", "reconfigurable_workspace", "redundancy_grid", "computed_points",
            "CheckpointMismatch", "reach_box", "face_count", "make_evaluator", "make_numba_evaluator"]
 
 
@@ -178,11 +178,18 @@ def _grid_desc(grid: Grid) -> dict:
     return {"shape": grid.shape, "h": grid.h, "x0": float(grid.x[0]), "y0": float(grid.y[0]), "z0": float(grid.z[0])}
 
 
+def computed_points(grid: Grid, mirror: bool = True) -> int:
+    """How many points a grid job computes: the whole grid, or its y >= 0 half under mirror halving (the total of
+    its progress bar: create the bar with it, ``ctx.progress(total=computed_points(grid))``)."""
+    return _Layout(grid, mirror).n
+
+
 def _progress_total(progress, total):
-    """Set the bar's total to the points actually computed (half the grid under mirror halving), whether the
-    caller passed the bar or its ``update`` method (``progress=bar.update``: the bar is ``__self__``)."""
+    """Correct the bar's total to the points actually computed when the caller created it with another one,
+    whether the caller passed the bar or its ``update`` method (``progress=bar.update``: the bar is ``__self__``).
+    A bar created with :func:`computed_points` is left alone (no second line in a log file)."""
     bar = getattr(progress, "__self__", progress)
-    if progress is not None and hasattr(bar, "reset"):
+    if progress is not None and hasattr(bar, "reset") and getattr(bar, "total", None) != total:
         bar.reset(total=total)
 
 
