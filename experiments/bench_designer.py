@@ -53,6 +53,15 @@ def _objectives(path, which):
     return objs, np.asarray([float(V[o][i]) for o in objs]), np.asarray(V["params"][i]), d
 
 
+def _complete(path):
+    import h5py
+
+    if not Path(path).exists():
+        return False
+    with h5py.File(path, "r") as f:
+        return "verify" in str(f.attrs.get("ga_reconfig_stages", "")).split(",")
+
+
 def dominates(a, b, sense):
     """a dominates b (sense -1: higher is better)."""
     fa, fb = np.asarray(a) * sense, np.asarray(b) * sense
@@ -68,6 +77,9 @@ def main(argv=None):
                                                    "experiment.pareto.population_size=48",
                                                    "experiment.pareto.generations=30"])
     ap.add_argument("--scan-log2", type=int, default=17, help="Sobol scan of 2^k designs (>= 17 for 1e5)")
+    ap.add_argument("--skip-runs", action="store_true",
+                    help="do not start runs: analyse the complete ones found in --out (seeds without one are skipped)")
+    ap.add_argument("--scan-only", action="store_true", help="only compute the scan (saved to <out>/scan_<k>.npz)")
     ap.add_argument("--cache", default=None, help="XLA compilation cache folder for the runs (default: <out>/xla)")
     ap.add_argument("--tol", type=float, default=0.05, help="stated stability tolerance (relative spread)")
     ap.add_argument("--large-seeds", type=int, nargs="*", default=None,
@@ -83,6 +95,10 @@ def main(argv=None):
         for s in seeds:
             # a finished run directory is a no-op for the job, a killed one resumes: always just rerun
             d = out / f"{budget}_seed{s}"
+            if args.skip_runs or args.scan_only:
+                if _complete(d / "results.h5"):
+                    runs[(budget, s)] = d / "results.h5"
+                continue
             cmd = [sys.executable, "-m", "deltajax.run", "experiment=ga_reconfig", f"seed={s}", "plots=false",
                    "progress=false", f"hydra.run.dir={d}", f"compilation_cache={args.cache or out / 'xla'}", *extra]
             t1 = time.perf_counter()
@@ -90,27 +106,6 @@ def main(argv=None):
             print(f"{budget} seed {s}: {time.perf_counter() - t1:.0f} s wall", flush=True)
             runs[(budget, s)] = d / "results.h5"
     t_runs, c_runs = time.perf_counter() - t0, _cpu() - c0
-
-    from deltajax.optimize.designer import DESIGN_SENSE
-
-    rec = {k: _objectives(p, "recommended") for k, p in runs.items()}
-    objs = rec[("default", args.seeds[0])][0]
-    sense = np.asarray([DESIGN_SENSE[o] for o in objs], float)
-    report = {"objectives": objs, "seeds": args.seeds, "large": args.large, "load_before": load0}
-    for budget, seeds in (("default", args.seeds), ("large", large_seeds)):
-        M = np.stack([rec[(budget, s)][1] for s in seeds])
-        med = np.median(M, axis=0)
-        spread = (M.max(axis=0) - M.min(axis=0)) / np.abs(med)
-        report[f"{budget}_recommended"] = M.tolist()
-        report[f"{budget}_params"] = np.stack([rec[(budget, s)][2] for s in seeds]).tolist()
-        report[f"{budget}_spread"] = spread.tolist()
-        report[f"{budget}_stable_within_tol"] = bool(np.all(spread <= args.tol))
-        print(f"(a) {budget}: recommended {objs} per seed:\n{M}\n    spread (max-min)/median = {spread} "
-              f"(tolerance {args.tol}): {'stable' if np.all(spread <= args.tol) else 'NOT stable'}")
-    lost = [s for s in large_seeds if dominates(rec[("default", s)][1], rec[("large", s)][1], sense)]
-    report["larger_budget_dominated_by_smaller"] = lost
-    print(f"(b) seeds {large_seeds}: those where the larger budget's recommendation is dominated by the smaller "
-          f"run's: {lost or 'none'}")
 
     # (c) quasi-random scan of the same problem with the job's coarse evaluator (two passes)
     import jax
@@ -128,18 +123,62 @@ def main(argv=None):
         cfg = compose(config_name="config", overrides=["experiment=ga_reconfig"])
     robot, recon = robot_from_config(cfg.robot)
     s, space, pb, _ = ga_reconfig_build(cfg.experiment, robot, recon)
+    from deltajax.optimize.designer import DESIGN_SENSE
+
+    objs = list(s.objectives)
+    sense = np.asarray([DESIGN_SENSE[o] for o in objs], float)
+    report = {"objectives": objs, "seeds": args.seeds, "large": args.large, "load_before": load0}
     ev = batch_evaluator(pb, space, 64)
     ev_cheap = batch_evaluator(pb, space, 1024, regular=False)
     X = qmc.Sobol(d=space.dim, scramble=True, seed=12345).random_base2(args.scan_log2)
     t1, c1 = time.perf_counter(), _cpu()
     base = {k: v[0] for k, v in ev(space.baseline_genes()[None, :]).items()}
-    parts = [ev_cheap(X[i:i + 8192]) for i in range(0, len(X), 8192)]
-    feas = np.concatenate([p["feasible"] for p in parts]).astype(bool)
-    prim = np.concatenate([p[s.primary] for p in parts])
-    t_cheap, c_cheap = time.perf_counter() - t1, _cpu() - c1
-    Xf = X[feas]
-    Mf = ev(Xf) if len(Xf) else None
-    t_scan, c_scan = time.perf_counter() - t1, _cpu() - c1
+    cached = out / f"scan_{args.scan_log2}.npz"
+    if cached.exists() and not args.scan_only:
+        z = np.load(cached)
+        feas, prim, Xf = z["feas"], z["prim"], z["Xf"]
+        Mf = {o: z[f"Mf_{o}"] for o in objs} if len(Xf) else None
+        Mf = dict(Mf, feasible=np.ones(len(Xf), bool)) if Mf is not None else None
+        t_scan, c_scan, c_cheap = float(z["t_scan"]), float(z["c_scan"]), float(z["c_cheap"])
+        print(f"scan: reused {cached}", flush=True)
+    else:
+        feas = None
+    if feas is None:
+        parts = [ev_cheap(X[i:i + 8192]) for i in range(0, len(X), 8192)]
+        feas = np.concatenate([p["feasible"] for p in parts]).astype(bool)
+        prim = np.concatenate([p[s.primary] for p in parts])
+        t_cheap, c_cheap = time.perf_counter() - t1, _cpu() - c1
+        Xf = X[feas]
+        Mf = ev(Xf) if len(Xf) else None
+        t_scan, c_scan = time.perf_counter() - t1, _cpu() - c1
+        np.savez(out / f"scan_{args.scan_log2}.npz", feas=feas, prim=prim, Xf=Xf, t_scan=t_scan, c_scan=c_scan,
+                 c_cheap=c_cheap, t_cheap=t_cheap, **{f"Mf_{o}": Mf[o] for o in objs} if len(Xf) else {})
+        print(f"scan: {len(X)} Sobol designs, {int(feas.sum())} feasible, {t_scan:.0f} s wall / {c_scan:.0f} CPU-s "
+              f"(cheap pass {c_cheap:.0f} CPU-s); load {os.getloadavg()}", flush=True)
+    if args.scan_only:
+        return
+    # (a) stability and (b) budget, over the seeds with a complete run
+    rec = {k: _objectives(p, "recommended") for k, p in runs.items()}
+    for budget in ("default", "large"):
+        seeds_b = [sd for sd in (args.seeds if budget == "default" else large_seeds) if (budget, sd) in rec]
+        if not seeds_b:
+            continue
+        M = np.stack([rec[(budget, sd)][1] for sd in seeds_b])
+        med = np.median(M, axis=0)
+        spread = (M.max(axis=0) - M.min(axis=0)) / np.abs(med)
+        report[f"{budget}_seeds"] = seeds_b
+        report[f"{budget}_recommended"] = M.tolist()
+        report[f"{budget}_params"] = np.stack([rec[(budget, sd)][2] for sd in seeds_b]).tolist()
+        report[f"{budget}_spread"] = spread.tolist()
+        report[f"{budget}_stable_within_tol"] = bool(np.all(spread <= args.tol))
+        print(f"(a) {budget}, seeds {seeds_b}: recommended {objs} per seed:\n{M}\n    spread (max-min)/median = "
+              f"{spread} (tolerance {args.tol}): {'stable' if np.all(spread <= args.tol) else 'NOT stable'}")
+    both = [sd for sd in large_seeds if ("default", sd) in rec and ("large", sd) in rec]
+    lost = [sd for sd in both if dominates(rec[("default", sd)][1], rec[("large", sd)][1], sense)]
+    report["larger_budget_seeds"] = both
+    report["larger_budget_dominated_by_smaller"] = lost
+    print(f"(b) seeds {both}: those where the larger budget's recommendation is dominated by the smaller run's: "
+          f"{lost or 'none'}")
     scale = sense / np.abs(np.asarray([float(base[o]) for o in objs]))
     Ff = objective_matrix(Mf, objs, scale) if len(Xf) else np.zeros((0, len(objs)))
     Ff = Ff[np.all(np.isfinite(Ff), axis=1)]
@@ -149,6 +188,8 @@ def main(argv=None):
     per_seed = []
     for budget, seeds in (("default", args.seeds), ("large", large_seeds)):
         for seed in seeds:
+            if (budget, seed) not in runs:
+                continue
             d = load(runs[(budget, seed)])
             mg = ev(np.asarray(d["ga"]["best_genes"])[None, :])
             G = np.asarray(d["verify"]["genes"])

@@ -65,8 +65,8 @@ def print_summary(ctx, data) -> None:
     b, r = S["baseline"], S["recommended"]
     bf, rf = S["baseline_fixed_R"], S["recommended_fixed_R"]
     rec = S["attrs"]["recommended"]
-    ctx.log(f"baseline (franco2026 + motor) vs recommended design ({rec}), fine verification grids; "
-            "reconfigurable (R per point) | fixed R (R frozen at the operating R):")
+    ctx.log(f"baseline (franco2026 + motor) vs recommended design ({rec}; rule {S['attrs'].get('rule_text', '')}), "
+            "fine verification grids; reconfigurable (R per point) | fixed R (R frozen at the operating R):")
     ctx.log(f"  {'metric':20s} {'units':6s} {'baseline':>9s} {'recommended':>11s} {'change':>8s} | "
             f"{'base fixR':>9s} {'rec fixR':>9s}  direction")
     for n, u, d, x, y, xf, yf in zip(names, units, dirs, b, r, bf, rf):
@@ -132,8 +132,14 @@ def plots(ctx, data, objs, s) -> None:
     ax.plot(x[0] * sx, y[0] * sy, "k*", ms=14, label="baseline franco2026" + ("" if feas[0] else " (infeasible)"))
     if feas[1]:
         ax.plot(x[1] * sx, y[1] * sy, "s", color="C2", ms=8, mfc="none", mew=2, label=f"GA best on {s.primary}")
+    ref_i = [i for i, n in enumerate(V["design_name"]) if str(n).startswith("refined_")]
+    if ref_i:
+        ax.plot(x[ref_i] * sx, y[ref_i] * sy, "^", color="C1", ms=7, mfc="none", mew=1.5,
+                label="refined by optax (accepted: feasible, no objective worse)")
     if rec >= 0:
-        ax.plot(x[rec] * sx, y[rec] * sy, "D", color="C3", ms=10, label="recommended (" + s.recommend + ")")
+        what = (f"band: {s.primary} within {100 * s.recommend_band:g} % of the best, then the most {o1}"
+                if s.recommend == "band" else s.recommend)
+        ax.plot(x[rec] * sx, y[rec] * sy, "D", color="C3", ms=10, label=f"recommended ({what})")
         if "regular_volume_fixed" == o1 or o1 == "regular_volume":
             yf = float(V["regular_volume_fixed"][rec]) * sy if o1 == "regular_volume" else None
             if yf is not None:
