@@ -221,9 +221,25 @@ def test_refine_designs_accepts_only_feasible_improvements_and_fails_loudly(desi
     assert np.all(ro.F_after[ro.accepted] <= ro.F_before[ro.accepted] + 1e-12)
     assert np.all(ro.F_after[ro.accepted, 0] < ro.F_before[ro.accepted, 0])
     np.testing.assert_array_equal(ro.genes_after[~ro.accepted], ro.genes_before[~ro.accepted])
-    with pytest.raises(FloatingPointError, match="non-finite gradient"):
-        refine_designs(pb, space, np.full((1, space.dim), np.nan), objs, scale, "picks_per_min", steps=3,
-                       learning_rate=0.02)
+    # a loss whose gradient is NaN (sqrt of a negative gene combination) must stop the refinement, never be zeroed
+    import deltajax.optimize.designer as D
+    import deltajax.optimize.workflow as W
+
+    real = D.evaluate_designer
+
+    def broken(pb_, design, **kw):
+        m = dict(real(pb_, design, **kw))
+        m["picks_per_min"] = m["picks_per_min"] * jnp.sqrt(design.robot.upper_arm - 10.0)
+        return m
+
+    W._DESCENT.clear()
+    try:
+        D.evaluate_designer = broken
+        with pytest.raises(FloatingPointError, match="non-finite gradient"):
+            refine_designs(pb, space, g0[:1], objs, scale, "picks_per_min", steps=3, learning_rate=0.02)
+    finally:
+        D.evaluate_designer = real
+        W._DESCENT.clear()
 
 
 @pytest.fixture(scope="module")
