@@ -388,6 +388,33 @@ def _bisect_time(a, g, thd, motor, n, dwell, T_low, T_high, n_iter):
     return jnp.where(feasible(jnp.exp(hi)), T, jnp.inf)
 
 
+def _implicit_time(T, a, g, thd, motor, n, dwell, T_low):
+    """``T`` (the bisection's value, unchanged) carrying the implicit-function derivative of the active limit.
+
+    Bisection is piecewise constant in the design, so its derivative is zero. At an interior T_min the binding
+    limit h(T, design) = max(peak utilisation, RMS utilisation) - 1 is 0, hence dT/d(design) = -h_design / h_T
+    (implicit function theorem). The value stays the bisection's exactly (the correction term is
+    h - stop_gradient(h) = 0); where T is not interior (inf, NaN, at T_low) or h_T is not negative the
+    derivative is zero. Checked against central differences of the bisection (tests/test_constraints.py).
+    """
+    sg = jax.lax.stop_gradient
+    T0 = sg(T)
+
+    def h(T_, a_, g_, thd_, n_, dw_):
+        L = _loads_from_unit(a_, g_, thd_, T_, dw_, motor, n_, jnp.asarray(True))
+        return jnp.maximum(L.peak_utilisation, L.rms_utilisation) - 1.0
+
+    interior = jnp.isfinite(T0) & (T0 > T_low * (1.0 + 1e-9))
+    Ts = jnp.where(interior, T0, 1.0)
+    args = (a, g, thd, n, dwell)
+    hT = jax.grad(h)(Ts, *(sg(x) for x in args))
+    use = interior & jnp.isfinite(hT) & (hT < 0)
+    # where not used, the design enters only through stop_gradient: no 0 x inf in the backward pass
+    hv = h(Ts, *(jnp.where(use, x, sg(x)) for x in args))
+    corr = (hv - sg(hv)) / jnp.where(use, hT, -1.0)
+    return T0 - jnp.where(use, corr, 0.0)
+
+
 class CycleRate(NamedTuple):
     """Fastest cycle of one design within its motors: ``cycle_time`` T_min (s; inf: no T meets the limits,
     NaN: unreachable), ``picks_per_min`` (1/min; 0 / NaN likewise) and the motor ``loads`` at T_min
@@ -410,7 +437,9 @@ def cycle_rate(robot: Delta, cycle, motor: Motor, gear_ratio, *, dwell=0.0, payl
     a, g, thd, ok = _unit_profile(r, cycle)
     n = jnp.asarray(gear_ratio, a.dtype)
     dw = jnp.asarray(dwell, a.dtype)
-    T = jnp.where(ok, _bisect_time(a, g, thd, motor, n, dw, T_low, T_high, n_iter), jnp.nan)
+    sg = jax.lax.stop_gradient                      # the derivative comes from _implicit_time, not the loop
+    T = jnp.where(ok, _bisect_time(sg(a), sg(g), sg(thd), motor, sg(n), sg(dw), T_low, T_high, n_iter), jnp.nan)
+    T = _implicit_time(T, a, g, thd, motor, n, dw, T_low)
     ppm = jnp.where(jnp.isfinite(T), 60.0 / (T + 2.0 * dw), jnp.where(jnp.isnan(T), jnp.nan, 0.0))
     Tl = jnp.where(jnp.isfinite(T), T, cycle.duration)
     return CycleRate(cycle_time=T, picks_per_min=ppm, loads=_loads_from_unit(a, g, thd, Tl, dw, motor, n, ok))

@@ -71,7 +71,18 @@ def test_toy_run_front_feasible_summary_and_units(full_run):
     assert S["recommended_fixed_R"][1] <= S["recommended"][1] + 1e-15   # R per point can only add
     assert V["units"]["picks_per_min"] == "1/min" and V["units"]["regular_volume"] == "m^3"
     assert "ga/checkpoint" in {k for k in _datasets(full_run)[1]}
-    assert data["attrs"]["ga_reconfig_stages"] == "ga,pareto,verify,results,plots"
+    assert data["attrs"]["ga_reconfig_stages"] == "screen,ga,pareto,refine,verify,results,plots"
+    # the refined winners: accepted only if feasible and no objective worse, and verified like every candidate
+    R = data["refine"]
+    acc = np.asarray(R["accepted"]).astype(bool)
+    assert np.all(R["F_after"][acc] <= R["F_before"][acc] + 1e-12)
+    assert np.all(R["F_after"][~acc] == R["F_before"][~acc])
+    assert sum(n.startswith("refined_") for n in V["design_name"]) == int(acc.sum())
+    # the GA was seeded by the screen's best: its best is at least as good as the screen's best
+    ga = data["ga"]["attrs"]
+    ga_best_picks = -float(ga["fitness_best"]) * float(ga["baseline_primary"])    # fitness = -picks / |baseline|
+    assert ga_best_picks >= float(data["screen"]["top_primary"][0]) * (1 - 1e-12)
+    assert "recommend_rule_text" in V["attrs"] and "within 2 %" in V["attrs"]["recommend_rule_text"]
 
 
 def _logged(caplog):
@@ -101,32 +112,50 @@ def test_rerun_three_times_into_one_dir(full_run, tmp_path, caplog):
 
 @pytest.mark.slow
 def test_kill_and_resume_is_bit_identical(full_run, tmp_path, monkeypatch):
-    import deltajax.jobs.ga_reconfig as job
+    import deltajax.optimize.report as job
 
     # killed inside the GA: test_rerun_three_times_into_one_dir; here killed after the verify stage (before the
     # summary is written)
-    real = job._summary
+    real = job.summary
 
     def killed(*args, **kw):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(job, "_summary", killed)
+    monkeypatch.setattr(job, "summary", killed)
     with pytest.raises(KeyboardInterrupt):
         run_experiment("ga_reconfig", TOY, run_dir=tmp_path / "b")
-    assert load(tmp_path / "b" / "results.h5")["attrs"]["ga_reconfig_stages"] == "ga,pareto,verify"
-    monkeypatch.setattr(job, "_summary", real)
+    assert load(tmp_path / "b" / "results.h5")["attrs"]["ga_reconfig_stages"] == "screen,ga,pareto,refine,verify"
+    monkeypatch.setattr(job, "summary", real)
     b = run_experiment("ga_reconfig", TOY, run_dir=tmp_path / "b")
     _assert_same(full_run, b)
 
 
 @pytest.mark.slow
-def test_pareto_disabled_runs_end_to_end(toy_run):
-    p = toy_run("ga_reconfig", *GA_STAGES_OFF)  # the session's one run with the optional stages off
+@pytest.mark.parametrize("refine", [True, False])
+def test_pareto_disabled_runs_end_to_end(toy_run, tmp_path, refine):
+    if refine:
+        p = run_experiment("ga_reconfig", TOY + ["experiment.pareto.enabled=false"], run_dir=tmp_path)
+    else:
+        p = toy_run("ga_reconfig", *GA_STAGES_OFF)  # the session's one run with the optional stages off
     data = load(p)
-    assert "pareto" not in data
+    assert "pareto" not in data and ("refine" in data) == refine
     names = list(data["verify"]["design_name"])
-    assert names == ["baseline", "ga_best"]
-    assert data["summary"]["attrs"]["recommended"] in ("ga_best", "baseline", "none")
+    n_ref = int(np.sum(data["refine"]["accepted"])) if refine else 0
+    assert names == ["baseline", "ga_best"] + [f"refined_{i}" for i in range(n_ref)]
+    assert data["summary"]["attrs"]["recommended"] in names + ["none"]
+    stages = data["attrs"]["ga_reconfig_stages"].split(",")
+    assert ("refine" in stages) == refine and "pareto" not in stages
+
+
+@pytest.mark.slow
+def test_pareto_on_refine_and_screen_off(tmp_path):
+    p = run_experiment("ga_reconfig", TOY + ["experiment.refine.enabled=false", "experiment.screen.enabled=false"],
+                       run_dir=tmp_path)
+    data = load(p)
+    assert "refine" not in data and "screen" not in data and "pareto" in data
+    V = data["verify"]
+    front = np.asarray(V["front"]).reshape(-1)
+    assert np.all(V["feasible"][front] == 1) and np.all(V["constraint_values"][front] <= 1e-9)
 
 
 @pytest.mark.slow

@@ -185,3 +185,80 @@ def test_refinement_improves_the_true_objective():
     assert r.metrics_after["volume"][0] > r.metrics_before["volume"][0]
     assert bool(r.accepted[0])
     assert np.all((r.genes_after >= 0) & (r.genes_after <= 1))
+
+
+def test_ga_seeded_with_several_designs_keeps_the_best_seed():
+    seeds = np.asarray([[0.3, 0.3, 0.3, 0.31], [0.9, 0.9, 0.9, 0.9], [0.1, 0.2, 0.3, 0.4]])
+    cfg = GAConfig(**{**CFG.__dict__, "generations": 2, "checkpoint_every": 2})
+    r = run_ga(sphere, 4, cfg, init_genes=seeds)
+    # the best seed (fitness 1e-4) is never lost: the GA's best is at least as good
+    assert r.best_fitness <= 1e-4 + 1e-15
+
+
+def test_recommendation_rules_on_a_front():
+    from deltajax.optimize.workflow import recommend
+
+    # minimised, baseline-normalised objectives: primary (picks) column 0, regular volume column 1
+    F = np.asarray([[-1.30, -0.90], [-1.29, -1.10], [-1.275, -1.30], [-1.20, -1.60], [-1.00, -2.00]])
+    front = np.arange(5)
+    assert recommend(F, front, "primary", 0) == 0
+    assert recommend(F, front, "band", 0, band=0.02) == 2        # picks within 2 % of 1.30, then the most volume
+    assert recommend(F, front, "band", 0, band=0.0) == 0
+    assert recommend(F, front, "band", 0, band=0.25) == 4
+    # stable by construction: perturbing the points outside the band does not move the recommendation
+    G = F.copy()
+    G[3:] += np.asarray([[0.05, -0.3], [0.1, 0.2]])
+    assert recommend(G, front, "band", 0, band=0.02) == 2
+    assert recommend(F, np.zeros((0,), int), "band", 0) == -1
+    assert recommend(F, front[[4, 1]], "band", 0, band=0.02) == 1
+
+
+@pytest.mark.slow
+def test_refine_designs_accepts_only_feasible_improvements_and_fails_loudly(designer_small):
+    from deltajax.optimize.workflow import refine_designs
+
+    pb, space, scale, objs = designer_small
+    g0 = np.stack([space.baseline_genes(), np.full(space.dim, 0.5)])
+    ro = refine_designs(pb, space, g0, objs, scale, "picks_per_min", steps=3, learning_rate=0.02)
+    assert np.all(ro.F_after[ro.accepted] <= ro.F_before[ro.accepted] + 1e-12)
+    assert np.all(ro.F_after[ro.accepted, 0] < ro.F_before[ro.accepted, 0])
+    np.testing.assert_array_equal(ro.genes_after[~ro.accepted], ro.genes_before[~ro.accepted])
+    # a loss whose gradient is NaN (sqrt of a negative gene combination) must stop the refinement, never be zeroed
+    import deltajax.optimize.designer as D
+    import deltajax.optimize.workflow as W
+
+    real = D.evaluate_designer
+
+    def broken(pb_, design, **kw):
+        m = dict(real(pb_, design, **kw))
+        m["picks_per_min"] = m["picks_per_min"] * jnp.sqrt(design.robot.upper_arm - 10.0)
+        return m
+
+    W._DESCENT.clear()
+    try:
+        D.evaluate_designer = broken
+        with pytest.raises(FloatingPointError, match="non-finite gradient"):
+            refine_designs(pb, space, g0[:1], objs, scale, "picks_per_min", steps=3, learning_rate=0.02)
+    finally:
+        D.evaluate_designer = real
+        W._DESCENT.clear()
+
+
+@pytest.fixture(scope="module")
+def designer_small():
+    from hydra import compose, initialize_config_dir
+
+    from deltajax.config import ga_reconfig_build, robot_from_config
+    from deltajax.optimize.workflow import batch_evaluator
+    from deltajax.run import CONFIG_DIR
+
+    toy = ["experiment.design.n_R=3", "experiment.task.n_r=1", "experiment.task.n_phi=3", "experiment.task.n_z=2",
+           "experiment.cycle.n_samples=11", "experiment.cycle.n_R_operating=2", "experiment.regular_workspace.n_r=6",
+           "experiment.regular_workspace.n_phi=2", "experiment.regular_workspace.n_z=6"]
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose(config_name="config", overrides=["experiment=ga_reconfig"] + toy)
+    robot, recon = robot_from_config(cfg.robot)
+    s, space, pb, _ = ga_reconfig_build(cfg.experiment, robot, recon)
+    objs = ["picks_per_min", "regular_volume"]
+    b = batch_evaluator(pb, space, 2)(space.baseline_genes()[None])
+    return pb, space, -1.0 / np.abs(np.asarray([b[o][0] for o in objs])), objs

@@ -207,14 +207,15 @@ def _engine(fitness_fn, d: int, cfg: GAConfig):
 
     @jax.jit
     def init_fn(key, seed_genes):
+        # seed_genes (P, d): rows with every gene finite replace those members (NaN rows: no seed)
         k_init, k_pop, k_run = jax.random.split(key, 3)
-        has_seed = jnp.all(jnp.isfinite(seed_genes))
+        has_seed = jnp.all(jnp.isfinite(seed_genes), axis=1)
         if cfg.init == "uniform":
             pop = jax.random.uniform(k_pop, (P, d))
         else:
-            base = jnp.where(has_seed, seed_genes, 0.5)
+            base = jnp.where(has_seed[0], seed_genes[0], 0.5)
             pop = base[None, :] + cfg.sigma * jax.random.normal(k_pop, (P, d))
-        pop = pop.at[0].set(jnp.where(has_seed, seed_genes, pop[0]))
+        pop = jnp.where(has_seed[:, None], seed_genes, pop)
         pop, fit, aux = evaluate(pop)
         state = strat.init(k_init, pop, fit, params)
         return state, k_run, pop, fit
@@ -268,7 +269,8 @@ def run_ga(fitness_fn: Callable[[jax.Array], tuple[jax.Array, Mapping[str, jax.A
             ``aux`` must contain ``feasible`` (bool) for the feasible-fraction history (optional otherwise).
         num_dims: number of genes d.
         cfg: GA settings.
-        init_genes: genes of a design to seed the initial population with (member 0), e.g. the baseline.
+        init_genes: genes (d,) of a design to seed the initial population with (member 0), e.g. the baseline, or
+            (k, d) designs for members 0..k-1 (e.g. the baseline and the best of a quasi-random screen).
         checkpoint: a previous checkpoint (as passed to ``save_checkpoint``) to resume from; its fingerprint
             must match, otherwise :class:`GAError` (never a silent restart).
         save_checkpoint: called on the host with a dict of NumPy arrays and attributes after every chunk.
@@ -284,7 +286,11 @@ def run_ga(fitness_fn: Callable[[jax.Array], tuple[jax.Array, Mapping[str, jax.A
     G = cfg.generations
     init_fn, chunk = _engine(fitness_fn, num_dims, dataclasses.replace(cfg, seed=0, generations=1,
                                                                           checkpoint_every=1))
-    seed_genes = jnp.full((num_dims,), jnp.nan) if init_genes is None else jnp.asarray(init_genes, float)
+    seed_genes = np.full((cfg.population_size, num_dims), np.nan)
+    if init_genes is not None:
+        ig = np.asarray(init_genes, float).reshape(-1, num_dims)[:cfg.population_size]
+        seed_genes[:len(ig)] = ig
+    seed_genes = jnp.asarray(seed_genes)
 
     if checkpoint is not None:
         if checkpoint.get("fingerprint") != fp:

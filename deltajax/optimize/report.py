@@ -1,0 +1,235 @@
+"""The main job's report: the baseline-vs-recommended summary (stored and printed) and the plots, drawn from the
+stored results only (so a resumed run reports the same)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["SUMMARY_METRICS", "FIXED_R_METRIC", "summary", "print_summary", "plots"]
+
+SUMMARY_METRICS = ("picks_per_min", "regular_volume", "regular_diameter", "peak_utilisation", "rms_utilisation",
+                   "speed_utilisation", "task_good_fraction", "task_index_min", "joint_margin_deg",
+                   "interference_margin", "cycle_time", "R_operating", "gear_ratio", "arm_sum")
+#: The fixed-R variant (R frozen at the operating R) differs from the reconfigurable design only here.
+FIXED_R_METRIC = {"regular_volume": "regular_volume_fixed", "regular_diameter": "regular_diameter_fixed"}
+# rtmode: with experiment.reconfig.mode=path the cycle runs with R(t); its fixed-R variant runs it at the per-task R
+FIXED_R_METRIC.update({m: f"{m}_fixed" for m in ("picks_per_min", "cycle_time", "peak_utilisation", "rms_utilisation",
+                                                 "speed_utilisation", "joint_margin_deg", "interference_margin")})
+#: rtmode: rows added to the summary in mode=path (the R drive's margins, units in DESIGN_UNITS)
+PATH_SUMMARY_METRICS = ("R_path_min", "R_path_max", "path_index_mean", "cycle_time_drive", "R_speed_margin",
+                        "R_accel_margin", "R_force_margin", "screw_torque_peak", "screw_torque_margin")
+FIXED_R_METRIC.update({"path_index_mean": "path_index_mean_fixed", "R_path_min": "R_operating",
+                       "R_path_max": "R_operating"})
+
+
+def _fixed_value(V, m: str, i: int) -> float:  # rtmode
+    """The fixed-R variant's value of summary metric m (NaN for the R drive's margins: its R does not move)."""
+    if m in PATH_SUMMARY_METRICS and m not in FIXED_R_METRIC:
+        return float("nan")
+    return float(V[FIXED_R_METRIC.get(m, m)][i])
+
+
+def summary(ctx, res, data, space, objs, s) -> None:
+    """Stage baseline vs recommended design, per metric with units and direction, and the parameters of each
+    design (``data``: the results file as loaded after the verify stage)."""
+    from .designer import DESIGN_SENSE, DESIGN_UNITS
+
+    V = data["verify"]
+    rec = int(V["attrs"]["recommended"])
+    if rec < 0:
+        ctx.log("no feasible design was found on the fine grids: no recommendation (loosen the constraints)")
+        res.set_attrs("summary", recommended="none")
+        return
+    names = list(V["design_name"])
+    params = V["params"]
+    path_mode = s.reconfig.get("mode") == "path"  # rtmode
+    metrics = SUMMARY_METRICS + (PATH_SUMMARY_METRICS if path_mode else ())
+    res.put_axis("summary", "metric", np.arange(len(metrics)), units="1")
+    res.put("summary", "metric_name", np.asarray(metrics, dtype=object), units="1", dims=("metric",))
+    res.put("summary", "metric_units", np.asarray([DESIGN_UNITS[m] for m in metrics], dtype=object),
+            units="1", dims=("metric",))
+    direction = [{-1: "higher is better", 1: "lower is better"}.get(DESIGN_SENSE.get(m, 0), "describes the design")
+                 for m in metrics]
+    res.put("summary", "direction", np.asarray(direction, dtype=object), units="1", dims=("metric",))
+    for col, i in (("baseline", 0), ("recommended", rec)):
+        res.put("summary", col, np.asarray([float(V[m][i]) for m in metrics]), units="mixed",
+                dims=("metric",), attrs={"design": names[i], "units_see": "metric_units",
+                                         "variant": "reconfigurable (R chosen per point for the workspace"
+                                                    + ("; the cycle run with R(t), experiment.reconfig.mode=path)"
+                                                       if path_mode else ")")})
+        res.put("summary", f"{col}_fixed_R", np.asarray([_fixed_value(V, m, i) for m in metrics]), units="mixed",
+                dims=("metric",), attrs={"design": names[i], "units_see": "metric_units",
+                                         "variant": "fixed R = the operating R chosen for the task"})
+    res.put_axis("summary", "parameter", np.arange(space.dim), units="1")
+    res.put("summary", "parameter_name", np.asarray(space.names, dtype=object), units="1", dims=("parameter",))
+    res.put("summary", "parameter_units", np.asarray([space.units(n) for n in space.names], dtype=object),
+            units="1", dims=("parameter",))
+    res.put("summary", "baseline_params", params[0], units="mixed", dims=("parameter",))
+    res.put("summary", "recommended_params", params[rec], units="mixed", dims=("parameter",))
+    res.set_attrs("summary", recommended=names[rec], rule=s.recommend, rule_text=rule_text(s), objectives=",".join(objs),
+                  fixed_R_variant="R frozen at the operating R chosen for the task (same constraints); its picks/min "
+                                  "and margins equal the reconfigurable design's at that R (mode per_task; with "
+                                  "mode=path the reconfigurable design runs the cycle with R(t)), its regular "
+                                  "workspace is the good set at that R alone (base plate as the reconfigurable "
+                                  "design's)", operating_mode=s.reconfig.get("mode", "per_task"),
+                  evaluation="fine verification grids (group verify)")
+
+
+def print_summary(ctx, data) -> None:
+    S = data.get("summary")
+    if not S or "metric_name" not in S:
+        return
+    names = list(S["metric_name"])
+    units = list(S["metric_units"])
+    dirs = list(S["direction"])
+    b, r = S["baseline"], S["recommended"]
+    bf, rf = S["baseline_fixed_R"], S["recommended_fixed_R"]
+    rec = S["attrs"]["recommended"]
+    ctx.log(f"baseline (franco2026 + motor) vs recommended design ({rec}; rule {S['attrs'].get('rule_text', '')}), "
+            "fine verification grids; reconfigurable (R per point) | fixed R (R frozen at the operating R):")
+    ctx.log(f"  {'metric':20s} {'units':6s} {'baseline':>9s} {'recommended':>11s} {'change':>8s} | "
+            f"{'base fixR':>9s} {'rec fixR':>9s}  direction")
+    for n, u, d, x, y, xf, yf in zip(names, units, dirs, b, r, bf, rf):
+        ch = f"{100 * (y - x) / x:+7.1f}%" if np.isfinite(x) and x > 0 and np.isfinite(y) and y > 0 else "     -  "
+        ctx.log(f"  {n:20s} {u:6s} {x:9.4g} {y:11.4g} {ch:>8s} | {xf:9.4g} {yf:9.4g}  {d}")
+    pn, pu = list(S["parameter_name"]), list(S["parameter_units"])
+    ctx.log("  parameters: " + "; ".join(f"{n} [{u}] {x:.4g} -> {y:.4g}" for n, u, x, y in
+                                          zip(pn, pu, S["baseline_params"], S["recommended_params"])))
+    if S["attrs"].get("operating_mode", "per_task") == "path":  # rtmode
+        ctx.log("  reconfigurable: the cycle runs with R(t) within the R drive's limits (experiment.reconfig); "
+                "fixed R: at the per-task R. Both columns differ in the cycle metrics and the regular workspace: "
+                "that difference is what the R actuator buys")
+    else:
+        ctx.log("  the fixed-R variants run the task at the same R, so only the regular workspace differs: that "
+                "difference is what the R actuator buys")
+
+
+def plots(ctx, data, objs, s) -> None:
+    """Plots drawn from the staged results only (so a resumed run draws the same figures)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .designer import DESIGN_UNITS
+
+    G = data.get("ga", {})
+    if "best_fitness" in G:
+        fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
+        bf = np.asarray(G["best_fitness"])
+        gens = np.arange(1, len(bf) + 1)
+        ax[0].plot(gens, np.where(bf < 1e3, bf, np.nan), label="best so far (feasible)")
+        gb = np.asarray(G["gen_best_fitness"])
+        ax[0].plot(gens, np.where(gb < 1e3, gb, np.nan), ".", label="best of generation")
+        ax[0].set_xlabel("generation")
+        ax[0].set_ylabel("fitness (minimised; baseline = -1 per objective)")
+        ax[0].legend(fontsize=8)
+        ax[0].set_title(str(G["attrs"].get("objective", "")), fontsize=9)
+        ax[1].plot(gens, np.asarray(G["gen_feasible_fraction"]))
+        ax[1].set_ylim(0, 1.02)
+        ax[1].set_xlabel("generation")
+        ax[1].set_ylabel("feasible fraction of the population")
+        ctx.savefig(fig, "ga_convergence")
+    V = data.get("verify")
+    if V is None or len(objs) < 2:
+        return
+    o0, o1 = objs[0], objs[1]
+    x, y = np.asarray(V[o0], float), np.asarray(V[o1], float)
+    feas = np.asarray(V["feasible"]).astype(bool)
+    front = np.asarray(V["front"], int).reshape(-1)
+    rec = int(V["attrs"]["recommended"])
+    sx = 1e3 if DESIGN_UNITS[o0] == "m^3" else 1.0
+    sy = 1e3 if DESIGN_UNITS[o1] == "m^3" else 1.0
+    ux = "dm^3 (L)" if sx == 1e3 else DESIGN_UNITS[o0]
+    uy = "dm^3 (L)" if sy == 1e3 else DESIGN_UNITS[o1]
+    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    others = np.setdiff1d(np.arange(2, len(x)), front)
+    dom, bad = others[feas[others]], others[~feas[others]]
+    if len(dom):
+        ax.plot(x[dom] * sx, y[dom] * sy, "o", mfc="none", color="0.55", ms=5, label="candidates, feasible, dominated")
+    if len(bad):
+        ax.plot(x[bad] * sx, y[bad] * sy, "x", color="0.55", ms=5,
+                label="candidates feasible on the search grids, infeasible on the fine grids")
+    if len(front):
+        o = front[np.argsort(x[front])]
+        ax.step(x[o] * sx, y[o] * sy, "-", where="pre", color="C0", lw=1, alpha=0.6)
+        ax.plot(x[o] * sx, y[o] * sy, "o", color="C0", ms=6, label="Pareto front (verified, all feasible)")
+    ax.plot(x[0] * sx, y[0] * sy, "k*", ms=14, label="baseline franco2026" + ("" if feas[0] else " (infeasible)"))
+    if feas[1]:
+        ax.plot(x[1] * sx, y[1] * sy, "s", color="C2", ms=8, mfc="none", mew=2, label=f"GA best on {s.primary}")
+    ref_i = [i for i, n in enumerate(V["design_name"]) if str(n).startswith("refined_")]
+    if ref_i:
+        ax.plot(x[ref_i] * sx, y[ref_i] * sy, "^", color="C1", ms=7, mfc="none", mew=1.5,
+                label="refined by optax (accepted: feasible, no objective worse)")
+    if rec >= 0:
+        what = (f"band: {s.primary} within {100 * s.recommend_band:g} % of the best, then the most {o1}"
+                if s.recommend == "band" else s.recommend)
+        ax.plot(x[rec] * sx, y[rec] * sy, "D", color="C3", ms=10, label=f"recommended ({what})")
+        if "regular_volume_fixed" == o1 or o1 == "regular_volume":
+            yf = float(V["regular_volume_fixed"][rec]) * sy if o1 == "regular_volume" else None
+            if yf is not None:
+                ax.plot(x[rec] * sx, yf, "v", color="C3", ms=9, mfc="none", mew=1.5,
+                        label="recommended, fixed R (operating R)")
+    ax.set_xlabel(f"{o0} [{ux}]  (higher is better)" if o0 in ("picks_per_min", "regular_volume") else
+                  f"{o0} [{ux}]")
+    ax.set_ylabel(f"{o1} [{uy}]  (higher is better)" if o1 in ("picks_per_min", "regular_volume") else
+                  f"{o1} [{uy}]")
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="best")
+    hv = V["attrs"].get("hypervolume", float("nan"))
+    ax.set_title(f"All designs verified on the fine grids. Hypervolume of the front {hv:.3g}\n"
+                 f"(objectives / baseline, reference at 0: the baseline alone spans 1)", fontsize=9)
+    ctx.savefig(fig, "ga_pareto")
+
+
+def rule_text(s) -> str:
+    """The recommendation rule in words (stored and printed with the recommendation)."""
+    if s.recommend == "band":
+        return (f"band: among verified front points whose {s.primary} is within {100 * s.recommend_band:g} % of "
+                f"the front's best, the best on {', '.join(o for o in s.objectives if o != s.primary)}")
+    if s.recommend == "knee":
+        return "knee of the verified front (objectives normalised over the front)"
+    return f"best {s.primary} on the verified front"
+
+
+def store_verify(res, space, cand, names, mv, Fv, nd, rec, hv, hv_base, ref, objs, s) -> None:
+    """Group ``verify``: every candidate's fine-grid metrics, constraint values, parameters, the front, the
+    recommendation and the hypervolume with its reference."""
+    import jax
+    import jax.numpy as jnp
+
+    from .designer import CONSTRAINT_NAMES, DESIGN_UNITS
+
+    res.put_axis("verify", "design", np.arange(len(cand)), units="1")
+    res.put_axis("verify", "gene", np.arange(space.dim), units="1")
+    res.put_axis("verify", "constraint", np.arange(len(CONSTRAINT_NAMES)), units="1")
+    res.put_axis("verify", "objective", np.arange(len(objs)), units="1")
+    res.put("verify", "design_name", np.asarray(names, dtype=object), units="1", dims=("design",))
+    res.put("verify", "constraint_names", np.asarray(CONSTRAINT_NAMES, dtype=object), units="1", dims=("constraint",))
+    res.put("verify", "genes", cand, units="1", dims=("design", "gene"))
+    params = np.asarray(jax.vmap(space.to_params)(jnp.asarray(cand)))
+    res.put("verify", "params", params, units="mixed", dims=("design", "gene"),
+            attrs={"gene_names": ",".join(space.names),
+                   "units_per_gene": ",".join(space.units(n) for n in space.names)})
+    for k, v in mv.items():
+        if k == "g":
+            res.put("verify", "constraint_values", v, units="1", dims=("design", "constraint"),
+                    attrs={"meaning": "normalised constraint values, <= 0 satisfied (see deltajax.optimize.designer)"})
+        else:
+            res.put("verify", k, v.astype(float) if v.dtype != bool else v.astype(np.uint8),
+                    units=DESIGN_UNITS.get(k, "1"), dims=("design",))
+    res.put("verify", "front", np.asarray(nd, int), units="1", dims=("front_point",),
+            attrs={"meaning": "indices (design axis) of the verified Pareto front, sorted by the first objective"})
+    res.put("verify", "F", Fv, units="1", dims=("design", "objective"),
+            attrs={"meaning": "minimised objectives: sense x metric / |verified baseline metric|"})
+    v = s.verify
+    res.set_attrs("verify", recommended=int(rec), recommend_rule=s.recommend, recommend_rule_text=rule_text(s),
+                  recommend_band=s.recommend_band, hypervolume=hv, hypervolume_baseline_only=hv_base,
+                  hypervolume_reference="objectives normalised by the baseline verified on the fine grids "
+                                        "(sense x metric / |baseline|); reference point 0 for maximised objectives "
+                                        f"(zero picks/min, zero volume), {s.pareto['ref_min_factor']} x baseline for "
+                                        "minimised ones",
+                  reference_point=np.asarray(ref), objectives=",".join(objs),
+                  grids=f"task {v['task_n_r']}x{v['task_n_phi']}x{v['task_n_z']}, cycle {v['cycle_samples']} samples, "
+                        f"regular grid {v['rw_n_z']}x{v['rw_n_r']}x{v['rw_n_phi']}, n_R {v['n_R']}, operating-R "
+                        f"candidates {v['n_R_operating']}")
