@@ -5,6 +5,7 @@ Every error raised here names the config field and the value, before anything is
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any, Mapping, Optional, Tuple
 
