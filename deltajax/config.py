@@ -494,40 +494,18 @@ def _ga_block(e: Mapping[str, Any], name: str) -> dict:
 
 
 def _ga_num(b: Mapping[str, Any], key: str, where: str, *, lo: Optional[float] = None, hi: Optional[float] = None,
-         lo_open: bool = False, integer: bool = False, allow_none: bool = False) -> Any:
-    v = b.get(key)
+            lo_open: bool = False, integer: bool = False, allow_none: bool = False, unit: str = "") -> Any:
     path = f"experiment.{where}.{key}" if where else f"experiment.{key}"
-    if v is None and allow_none:
-        return None
-    if isinstance(v, bool) or v is None or isinstance(v, (list, dict, str)):
-        raise ConfigError(f"{path} must be a number, got {v!r}")
-    try:
-        f = float(v)
-    except (TypeError, ValueError):
-        raise ConfigError(f"{path} must be a number, got {v!r}") from None
-    if not math.isfinite(f):
-        raise ConfigError(f"{path} must be finite, got {v!r}")
-    if integer and not f.is_integer():
-        raise ConfigError(f"{path} must be an integer, got {v!r}")
-    if lo is not None and (f < lo or (lo_open and f == lo)):
-        raise ConfigError(f"{path} must be {'>' if lo_open else '>='} {lo:g}, got {v!r}")
-    if hi is not None and f > hi:
-        raise ConfigError(f"{path} must be <= {hi:g}, got {v!r}")
-    return int(f) if integer else f
+    return _field(path, b.get(key), kind="int" if integer else "float", lo=lo, hi=hi, lo_open=lo_open,
+                  none=allow_none, unit=unit)
 
 
 def _ga_flag(b, key, where):
-    v = b.get(key)
-    if not isinstance(v, bool):
-        raise ConfigError(f"experiment.{where}.{key} must be true or false, got {v!r}")
-    return v
+    return _field(f"experiment.{where}.{key}", b.get(key), kind="bool")
 
 
 def _ga_choice(b, key, where, options):
-    v = b.get(key)
-    if v not in options:
-        raise ConfigError(f"experiment.{where}.{key} must be one of {list(options)}, got {v!r}")
-    return v
+    return _choice(f"experiment.{where}.{key}", b.get(key), options)
 
 
 @dataclasses.dataclass(frozen=True)

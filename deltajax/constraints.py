@@ -52,7 +52,8 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Float
 
-from .dynamics import cycle_profile
+from .cycle import cycle_profile, log_bisect
+from .fields import float_leaf
 from .geometry import CHAIN_ANGLES, Delta
 from .indices import point_indices
 from .kinematics import elbows, forearm_units, ik
@@ -65,10 +66,6 @@ __all__ = ["JointModel", "LinkModel", "Motor", "GoodSpec", "JointAngles", "Inter
 
 class ConstraintError(ValueError):
     """Invalid constraint model (names the field and the value)."""
-
-
-def _leaf(x):
-    return jnp.asarray(x, dtype=jnp.result_type(float))
 
 
 def _check(cls: str, name: str, v, lo: float = 0.0, strict: bool = True, hi: float = math.inf):
@@ -95,9 +92,9 @@ class JointModel(eqx.Module):
             the base joint in the chain plane, rad.
     """
 
-    limit: jax.Array = eqx.field(converter=_leaf)
-    elbow_neutral: jax.Array = eqx.field(converter=_leaf, default=math.pi / 2)
-    platform_neutral: jax.Array = eqx.field(converter=_leaf, default=0.0)
+    limit: jax.Array = eqx.field(converter=float_leaf)
+    elbow_neutral: jax.Array = eqx.field(converter=float_leaf, default=math.pi / 2)
+    platform_neutral: jax.Array = eqx.field(converter=float_leaf, default=0.0)
     kind: str = eqx.field(static=True, default="ball")
 
     def __check_init__(self):
@@ -170,10 +167,10 @@ class LinkModel(eqx.Module):
             pass ``plate_radius`` explicitly (it must hold the motors at R_max).
     """
 
-    forearm_radius: jax.Array = eqx.field(converter=_leaf, default=0.02)
-    upper_arm_radius: jax.Array = eqx.field(converter=_leaf, default=0.02)
-    clearance: jax.Array = eqx.field(converter=_leaf, default=0.005)
-    plate_overhang: jax.Array = eqx.field(converter=_leaf, default=0.0)
+    forearm_radius: jax.Array = eqx.field(converter=float_leaf, default=0.02)
+    upper_arm_radius: jax.Array = eqx.field(converter=float_leaf, default=0.02)
+    clearance: jax.Array = eqx.field(converter=float_leaf, default=0.005)
+    plate_overhang: jax.Array = eqx.field(converter=float_leaf, default=0.0)
 
     def __check_init__(self):
         for n in ("forearm_radius", "upper_arm_radius", "clearance"):
@@ -254,12 +251,12 @@ class Motor(eqx.Module):
         efficiency: gearbox efficiency eta in (0, 1].
     """
 
-    peak_torque: jax.Array = eqx.field(converter=_leaf)
-    rated_torque: jax.Array = eqx.field(converter=_leaf)
-    max_speed: jax.Array = eqx.field(converter=_leaf)
-    corner_speed: jax.Array = eqx.field(converter=_leaf)
-    rotor_inertia: jax.Array = eqx.field(converter=_leaf, default=0.0)
-    efficiency: jax.Array = eqx.field(converter=_leaf, default=1.0)
+    peak_torque: jax.Array = eqx.field(converter=float_leaf)
+    rated_torque: jax.Array = eqx.field(converter=float_leaf)
+    max_speed: jax.Array = eqx.field(converter=float_leaf)
+    corner_speed: jax.Array = eqx.field(converter=float_leaf)
+    rotor_inertia: jax.Array = eqx.field(converter=float_leaf, default=0.0)
+    efficiency: jax.Array = eqx.field(converter=float_leaf, default=1.0)
 
     def __check_init__(self):
         for n in ("peak_torque", "rated_torque", "max_speed", "corner_speed"):
@@ -375,17 +372,7 @@ def _bisect_time(a, g, thd, motor, n, dwell, T_low, T_high, n_iter):
         L = _loads_from_unit(a, g, thd, T, dwell, motor, n, jnp.asarray(True))
         return (L.peak_utilisation <= 1.0) & (L.rms_utilisation <= 1.0)
 
-    lo, hi = jnp.log(jnp.asarray(T_low, a.dtype)), jnp.log(jnp.asarray(T_high, a.dtype))
-
-    def body(_, lh):
-        l, h = lh
-        m = 0.5 * (l + h)
-        f = feasible(jnp.exp(m))
-        return jnp.where(f, l, m), jnp.where(f, m, h)
-
-    l, h = jax.lax.fori_loop(0, n_iter, body, (lo, hi))
-    T = jnp.where(feasible(jnp.exp(lo)), jnp.exp(lo), jnp.exp(h))
-    return jnp.where(feasible(jnp.exp(hi)), T, jnp.inf)
+    return log_bisect(feasible, T_low, T_high, a.dtype, n_iter)
 
 
 def _implicit_time(T, a, g, thd, motor, n, dwell, T_low):
@@ -467,9 +454,9 @@ class GoodSpec(eqx.Module):
 
     joints: JointModel
     links: LinkModel
-    threshold: jax.Array = eqx.field(converter=_leaf, default=0.3)
+    threshold: jax.Array = eqx.field(converter=float_leaf, default=0.3)
     index: str = eqx.field(static=True, default="k_tilde")
-    beta: jax.Array = eqx.field(converter=_leaf, default=0.5)
+    beta: jax.Array = eqx.field(converter=float_leaf, default=0.5)
 
 
 class PointCheck(NamedTuple):

@@ -37,7 +37,7 @@ __all__ = [
     "cycle_profile",
     "cycle_metrics",
     "within_limits",
-    "min_cycle_time_bisection",
+    "min_cycle_time_bisection", "log_bisect",
     "metrics_by_forearm_model",
 ]
 
@@ -325,6 +325,22 @@ def within_limits(profile: CycleProfile, limits: Limits, rtol: float = 0.0) -> j
     return (jnp.all(jnp.abs(profile.tau) <= tq) & jnp.all(jnp.abs(profile.theta_dot) <= sp)
             & jnp.all(jnp.abs(profile.force_R) <= limits.force_R * (1 + rtol))
             & jnp.all(jnp.abs(profile.R_dot) <= limits.speed_R * (1 + rtol)))
+
+
+def log_bisect(feasible, T_low, T_high, dtype, n_iter: int = 60) -> jax.Array:
+    """Smallest T in [T_low, T_high] with ``feasible(T)`` by bisection on log T (feasibility monotone in T:
+    infeasible below, feasible above); ``T_low`` when that is feasible, ``inf`` when ``T_high`` is not."""
+    lo, hi = jnp.log(jnp.asarray(T_low, dtype)), jnp.log(jnp.asarray(T_high, dtype))
+
+    def body(_, lh):
+        a, b = lh
+        m = 0.5 * (a + b)
+        f = feasible(jnp.exp(m))
+        return jnp.where(f, a, m), jnp.where(f, m, b)
+
+    _, h = jax.lax.fori_loop(0, n_iter, body, (lo, hi))
+    T = jnp.where(feasible(jnp.exp(lo)), jnp.exp(lo), jnp.exp(h))
+    return jnp.where(feasible(jnp.exp(hi)), T, jnp.inf)
 
 
 def min_cycle_time_bisection(robot: Delta, cycle, limits: Limits, *, T_low: float = 1e-3, T_high: float = 100.0,

@@ -411,12 +411,12 @@ def _validate(cfg):
 
 BAD = [
     ("ga_reconfig", "experiment.regular_workspace.z_max=-1", "experiment.regular_workspace.z_max must be > 0, got -1"),
-    ("ga_reconfig", "experiment.pareto.ref_min_factor=nan", "experiment.pareto.ref_min_factor must be finite"),
-    ("ga_reconfig", "experiment.motor.rated_torque=nan", "experiment.motor.rated_torque must be finite"),
+    ("ga_reconfig", "experiment.pareto.ref_min_factor=nan", "experiment.pareto.ref_min_factor must be a finite number"),
+    ("ga_reconfig", "experiment.motor.rated_torque=nan", "experiment.motor.rated_torque must be a finite number"),
     ("ga_reconfig", "experiment.pareto.population_size=0", "experiment.pareto.population_size must be >= 4, got 0"),
     ("ga_reconfig", "experiment.verify.task_n_r=0", "experiment.verify.task_n_r must be >= 1, got 0"),
     ("ga_reconfig", "experiment.ga.sigma=inf", r"experiment.ga.sigma \(gene units, genes in \[0,1\]\) must be in"),
-    ("ga_reconfig", "+experiment.foo=1", r"experiment: unknown keys \['foo'\]"),
+    ("ga_reconfig", "+experiment.foo=1", r"experiment: unknown keys foo; valid keys: constraints, "),
     ("reconfig_indices", "robot.R_range.max=10", r"robot.R_range.max=10.0 m: at R = 10 m the geometry can reach nothing"),
     ("ga_reconfig", "robot.forearm=0.35", r"robot.R_range.max=0.495 m: at R = 0.495 m the geometry can reach nothing"),
     ("workspace_grid", "experiment.checkpoint_s=-1", "experiment.checkpoint_s must be >= 0 s, got -1.0 s"),

@@ -168,7 +168,7 @@ def test_a_different_config_into_a_finished_dir_is_refused(full_run):
 
 @pytest.mark.parametrize("override, match", [
     ("experiment.pareto.population_size=0", "experiment.pareto.population_size must be >= 4, got 0"),
-    ("experiment.joints.limit_deg=nan", "experiment.joints.limit_deg must be finite"),
+    ("experiment.joints.limit_deg=nan", "experiment.joints.limit_deg must be a finite number"),
     ("experiment.motor.rated_torque=10", "experiment.motor.rated_torque=10.0 N m must be <="),
     ("experiment.objectives.primary=volume", "experiment.objectives.primary must be one of"),
     ("experiment.objectives.names=[picks_per_min,volume]", "unknown objective 'volume'"),

@@ -63,7 +63,8 @@ def _stages(path):
 def test_ga_reconfig_with_optional_stages_on(toy_run):
     path = toy_run("ga_reconfig")
     stages = _stages(path)
-    assert stages[:2] == ["ga", "pareto"] and stages[-2:] == ["results", "plots"], stages
+    assert stages[-2:] == ["results", "plots"], stages
+    assert stages.index("ga") < stages.index("pareto") < stages.index("verify"), stages
     assert "pareto" in groups(path) and "verify" in stages
     if HAS_REFINE:
         assert "refine" in stages, stages

@@ -58,7 +58,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..dynamics import Limits, cycle_metrics
+from ..cycle import Limits, cycle_metrics
 from ..geometry import Delta, ReconfigurableDelta
 from ..jacobian import jacobian
 from ..kinematics import ik

@@ -57,7 +57,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import constraints as C
-from ..dynamics import cycle_profile
+from ..cycle import cycle_profile, log_bisect
 from ..mechanism import Mechanism, drive_profile, example_screw_linkage
 from ..geometry import ReconfigurableDelta
 from ..motion import AGGREGATES, _dp, path_tables, with_R
@@ -223,22 +223,6 @@ def _force_limit(spec: OperatingSpec, R):
     ratio, ok = jax.vmap(one)(R)
     lim = spec.motor_torque * m.gear_ratio * m.efficiency / jnp.abs(ratio)
     return jnp.where(ok, jnp.minimum(L, lim.astype(dt)), 0.0), ok
-
-
-def _bisect(feasible, T_low, T_high, dtype, n_iter=60):
-    """Smallest T in [T_low, T_high] (log bisection) with ``feasible(T)`` (monotone: infeasible below, feasible
-    above); inf when T_high is infeasible."""
-    lo, hi = jnp.log(jnp.asarray(T_low, dtype)), jnp.log(jnp.asarray(T_high, dtype))
-
-    def body(_, lh):
-        a, b = lh
-        m = 0.5 * (a + b)
-        f = feasible(jnp.exp(m))
-        return jnp.where(f, a, m), jnp.where(f, m, b)
-
-    _, h = jax.lax.fori_loop(0, n_iter, body, (lo, hi))
-    T = jnp.where(feasible(jnp.exp(lo)), jnp.exp(lo), jnp.exp(h))
-    return jnp.where(feasible(jnp.exp(hi)), T, jnp.inf)
 
 
 def not_evaluated(dtype) -> dict:
@@ -429,7 +413,7 @@ def _run_cycle(pb, spec, robot, robot_d, cyc, T_plan, T_nom, R, Ru, Ruu):
         return ((vmax <= spec.speed * T) & (amax <= spec.accel * T * T)
                 & jnp.all(jnp.abs(fa / (T * T) + fg) <= Lp) & jnp.all(mech_p))
 
-    T_drive = _bisect(drive_ok, 1e-3, 60.0, dt)
+    T_drive = log_bisect(drive_ok, 1e-3, 60.0, dt)
     T = jnp.maximum(rate.cycle_time, T_drive)
     Tl = jnp.where(jnp.isfinite(T), T, T_nom)
     loads = C.drive_loads(robot, cyc_R, pb.motor, gear, duration=Tl, dwell=pb.dwell, payload_mass=pb.payload)
