@@ -1,0 +1,267 @@
+"""The reader of ``experiment.*`` for ``experiment=ga_reconfig`` (the designer's problem): every field, unknown
+keys included; the job and the validator call it. The design space, GA settings and problem are then built by
+:mod:`deltajax.optimize.workflow` (errors there become :class:`ConfigError` here)."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any, Mapping, Optional
+
+from ._readers import ConfigError, _choice, _field
+
+# ---- ga_reconfig: the designer's problem (every field, unknown keys included); owner: designer ----
+# The one reader of experiment.* for experiment=ga_reconfig (the job and the validator call it); the design space,
+# GA settings and problem are then built by deltajax.optimize.workflow.setup (errors there become ConfigError here).
+
+_GA_KEYS = {
+    "": {"name", "resume", "stop_after", "design", "task", "good_workspace", "joints", "links", "motor", "cycle",
+         "regular_workspace", "objectives", "constraints", "screen", "ga", "pareto", "refine", "recommend",
+         "recommend_band", "verify",
+         "reconfig"},  # rtmode: experiment.reconfig is checked by deltajax.optimize.operating
+    "screen": {"enabled", "log2_size", "seed_fraction"},
+    "refine": {"enabled", "steps", "learning_rate", "penalty"},
+    "design": {"n_R", "bounds"},
+    "task": {"diameter", "height", "z_top", "n_r", "n_phi", "n_z"},
+    "good_workspace": {"index", "threshold", "beta"},
+    "joints": {"kind", "limit_deg", "elbow_neutral_deg", "platform_neutral_deg"},
+    "links": {"forearm_radius", "upper_arm_radius", "clearance", "plate_overhang"},
+    "motor": {"peak_torque", "rated_torque", "max_speed", "corner_speed", "rotor_inertia", "efficiency",
+              "gear_ratio"},
+    "cycle": {"payload", "dwell", "duration", "n_samples", "law", "n_R_operating"},
+    "regular_workspace": {"hd_ratio", "r_max", "z_min", "z_max", "n_r", "n_phi", "n_z"},
+    "objectives": {"mode", "names", "primary", "weights"},
+    "constraints": {"task_in_good_workspace", "passive_joints", "interference", "min_picks_per_min",
+                    "max_arm_sum"},
+    "pareto": {"enabled", "population_size", "generations", "ref_min_factor"},
+    "verify": {"n_R", "n_R_operating", "task_n_r", "task_n_phi", "task_n_z", "cycle_samples", "rw_n_r", "rw_n_phi",
+               "rw_n_z"},
+}
+
+
+def _ga_plain(x: Any) -> Any:
+    from omegaconf import DictConfig, ListConfig, OmegaConf
+
+    if isinstance(x, (DictConfig, ListConfig)):
+        return OmegaConf.to_container(x, resolve=True)
+    return x
+
+
+def _ga_block(e: Mapping[str, Any], name: str) -> dict:
+    v = e.get(name) if name else e
+    where = f"experiment.{name}" if name else "experiment"
+    if not isinstance(v, Mapping):
+        raise ConfigError(f"{where} must be a mapping, got {v!r}")
+    extra = set(v) - _GA_KEYS[name]
+    if extra:
+        raise ConfigError(f"{where}: unknown keys {', '.join(sorted(extra))}; valid keys: "
+                          f"{', '.join(sorted(_GA_KEYS[name]))}")
+    missing = _GA_KEYS[name] - set(v)
+    if missing and name not in ("",):
+        raise ConfigError(f"{where}: missing keys {', '.join(sorted(missing))}")
+    return dict(v)
+
+
+def _ga_num(b: Mapping[str, Any], key: str, where: str, *, lo: Optional[float] = None, hi: Optional[float] = None,
+            lo_open: bool = False, integer: bool = False, allow_none: bool = False, unit: str = "") -> Any:
+    path = f"experiment.{where}.{key}" if where else f"experiment.{key}"
+    return _field(path, b.get(key), kind="int" if integer else "float", lo=lo, hi=hi, lo_open=lo_open,
+                  none=allow_none, unit=unit)
+
+
+def _ga_flag(b, key, where):
+    return _field(f"experiment.{where}.{key}", b.get(key), kind="bool")
+
+
+def _ga_choice(b, key, where, options):
+    return _choice(f"experiment.{where}.{key}", b.get(key), options)
+
+
+@dataclasses.dataclass(frozen=True)
+class GaReconfigSettings:
+    """Validated plain settings of the job (SI units; angles in degrees where the name says so)."""
+
+    resume: str
+    stop_after: Optional[int]
+    n_R: int
+    bounds: dict
+    task: dict
+    good: dict
+    joints: dict
+    links: dict
+    motor: dict
+    cycle: dict
+    regular: dict
+    mode: str
+    objectives: tuple
+    primary: str
+    weights: dict
+    constraints: dict
+    ga: dict
+    pareto: dict
+    recommend: str
+    verify: dict
+    screen: dict = dataclasses.field(default_factory=lambda: {"enabled": False, "log2_size": 0, "seed_fraction": 0.0})
+    refine: dict = dataclasses.field(default_factory=lambda: {"enabled": False, "steps": 0, "learning_rate": 0.0,
+                                                               "penalty": 0.0})
+    recommend_band: float = 0.02
+    reconfig: dict = dataclasses.field(default_factory=dict)  # rtmode: operating.settings_from_block
+
+
+def _operating_settings(e: Mapping[str, Any]) -> dict:  # rtmode
+    from ..optimize.operating import OperatingError, settings_from_block
+
+    try:
+        return settings_from_block(e.get("reconfig"))
+    except OperatingError as err:
+        raise ConfigError(str(err)) from None
+
+
+def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
+    """Validate every field of ``experiment`` (one ``ConfigError`` line naming field and value)."""
+    from ..indices import INDEX_NAMES
+    from ..optimize.designer import CONSTRAINT_NAMES, OBJECTIVES
+
+    e = _ga_block(_ga_plain(ectx), "")
+    resume = e.get("resume", "auto")
+    if resume not in ("auto", "never", "must"):
+        raise ConfigError(f"experiment.resume must be auto, never or must, got {resume!r}")
+    sa = e.get("stop_after")
+    if sa is not None and (isinstance(sa, bool) or not isinstance(sa, int) or sa < 1):
+        raise ConfigError(f"experiment.stop_after must be null or an integer >= 1, got {sa!r}")
+    d = _ga_block(e, "design")
+    n_R = _ga_num(d, "n_R", "design", lo=2, integer=True)
+    if not isinstance(d.get("bounds"), Mapping) or not d["bounds"]:
+        raise ConfigError(f"experiment.design.bounds must be a non-empty mapping, got {d.get('bounds')!r}")
+    t = _ga_block(e, "task")
+    task = {k: _ga_num(t, k, "task", lo=0, lo_open=True) for k in ("diameter", "height", "z_top")}
+    task.update({k: _ga_num(t, k, "task", lo=1, integer=True) for k in ("n_r", "n_phi")})
+    task["n_z"] = _ga_num(t, "n_z", "task", lo=2, integer=True)
+    gw = _ga_block(e, "good_workspace")
+    good = {"index": _ga_choice(gw, "index", "good_workspace", INDEX_NAMES),
+            "threshold": _ga_num(gw, "threshold", "good_workspace", lo=0), "beta": _ga_num(gw, "beta", "good_workspace",
+                                                                                     lo=0, hi=1)}
+    j = _ga_block(e, "joints")
+    joints = {"kind": _ga_choice(j, "kind", "joints", ("ball", "universal")),
+              "limit_deg": _ga_num(j, "limit_deg", "joints", lo=0, lo_open=True, hi=180),
+              "elbow_neutral_deg": _ga_num(j, "elbow_neutral_deg", "joints", lo=-180, hi=180),
+              "platform_neutral_deg": _ga_num(j, "platform_neutral_deg", "joints", lo=-180, hi=180)}
+    lk = _ga_block(e, "links")
+    links = {k: _ga_num(lk, k, "links", lo=0, hi=1) for k in ("forearm_radius", "upper_arm_radius", "clearance")}
+    links["plate_overhang"] = _ga_num(lk, "plate_overhang", "links", lo=-1, hi=1)
+    mo = _ga_block(e, "motor")
+    motor = {k: _ga_num(mo, k, "motor", lo=0, lo_open=True) for k in ("peak_torque", "rated_torque", "max_speed",
+                                                                   "corner_speed", "gear_ratio")}
+    motor["rotor_inertia"] = _ga_num(mo, "rotor_inertia", "motor", lo=0)
+    motor["efficiency"] = _ga_num(mo, "efficiency", "motor", lo=0, lo_open=True, hi=1)
+    if motor["rated_torque"] > motor["peak_torque"]:
+        raise ConfigError(f"experiment.motor.rated_torque={motor['rated_torque']!r} N m must be <= "
+                          f"experiment.motor.peak_torque={motor['peak_torque']!r} N m")
+    if motor["corner_speed"] > motor["max_speed"]:
+        raise ConfigError(f"experiment.motor.corner_speed={motor['corner_speed']!r} rad/s must be <= "
+                          f"experiment.motor.max_speed={motor['max_speed']!r} rad/s")
+    c = _ga_block(e, "cycle")
+    cycle = {"payload": _ga_num(c, "payload", "cycle", lo=0), "dwell": _ga_num(c, "dwell", "cycle", lo=0),
+             "duration": _ga_num(c, "duration", "cycle", lo=0, lo_open=True),
+             "n_samples": _ga_num(c, "n_samples", "cycle", lo=5, integer=True),
+             "law": _ga_choice(c, "law", "cycle", ("poly5", "cycloidal", "modified_trapezoid")),
+             "n_R_operating": _ga_num(c, "n_R_operating", "cycle", lo=1, integer=True)}
+    if cycle["n_samples"] % 2 == 0:
+        raise ConfigError(f"experiment.cycle.n_samples must be odd (a sample at the place point), "
+                          f"got {cycle['n_samples']}")
+    rw = _ga_block(e, "regular_workspace")
+    regular = {"hd_ratio": _ga_num(rw, "hd_ratio", "regular_workspace", lo=0, lo_open=True),
+               "r_max": _ga_num(rw, "r_max", "regular_workspace", lo=0, lo_open=True),
+               "z_min": _ga_num(rw, "z_min", "regular_workspace", lo=0),
+               "z_max": _ga_num(rw, "z_max", "regular_workspace", lo=0, lo_open=True),
+               "n_r": _ga_num(rw, "n_r", "regular_workspace", lo=2, integer=True),
+               "n_phi": _ga_num(rw, "n_phi", "regular_workspace", lo=2, integer=True),
+               "n_z": _ga_num(rw, "n_z", "regular_workspace", lo=2, integer=True)}
+    if not regular["z_min"] < regular["z_max"]:
+        raise ConfigError(f"experiment.regular_workspace.z_min={regular['z_min']!r} m must be < "
+                          f"z_max={regular['z_max']!r} m")
+    if task["z_top"] + task["height"] > regular["z_max"] or task["z_top"] < regular["z_min"] or \
+            task["diameter"] / 2 > regular["r_max"]:
+        raise ConfigError(f"experiment.task (z {task['z_top']!r}..{task['z_top'] + task['height']!r} m, radius "
+                          f"{task['diameter'] / 2!r} m) must lie inside experiment.regular_workspace's grid "
+                          f"(z {regular['z_min']!r}..{regular['z_max']!r} m, r <= {regular['r_max']!r} m)")
+    o = _ga_block(e, "objectives")
+    mode = _ga_choice(o, "mode", "objectives", ("pareto", "weighted"))
+    names = o.get("names")
+    if not isinstance(names, (list, tuple)) or not names:
+        raise ConfigError(f"experiment.objectives.names must be a non-empty list from {list(OBJECTIVES)}, got "
+                          f"{names!r}")
+    for nm in names:
+        if nm not in OBJECTIVES:
+            raise ConfigError(f"experiment.objectives.names: unknown objective {nm!r}; known: {list(OBJECTIVES)}")
+    if len(set(names)) != len(names):
+        raise ConfigError(f"experiment.objectives.names has duplicates: {names!r}")
+    primary = o.get("primary")
+    if primary not in names:
+        raise ConfigError(f"experiment.objectives.primary must be one of experiment.objectives.names {names!r}, "
+                          f"got {primary!r}")
+    wts = o.get("weights")
+    if not isinstance(wts, Mapping):
+        raise ConfigError(f"experiment.objectives.weights must be a mapping, got {wts!r}")
+    weights = {}
+    for k in wts:
+        if k not in names:
+            raise ConfigError(f"experiment.objectives.weights.{k}: not in experiment.objectives.names {names!r}")
+        weights[k] = _ga_num(wts, k, "objectives.weights", lo=0)
+    if mode == "weighted" and not any(w > 0 for w in weights.values()):
+        raise ConfigError("experiment.objectives.weights: all weights are zero (objectives.mode=weighted)")
+    if mode == "pareto" and len(names) < 2:
+        raise ConfigError(f"experiment.objectives.names needs >= 2 objectives for mode=pareto, got {names!r}")
+    cs = _ga_block(e, "constraints")
+    cons = {k: _ga_flag(cs, k, "constraints") for k in ("task_in_good_workspace", "passive_joints", "interference")}
+    cons["min_picks_per_min"] = _ga_num(cs, "min_picks_per_min", "constraints", lo=0)
+    cons["max_arm_sum"] = _ga_num(cs, "max_arm_sum", "constraints", lo=0, lo_open=True, allow_none=True)
+    assert set(CONSTRAINT_NAMES) >= {"task_in_good_workspace", "passive_joints", "interference"}
+    ga = dict(e.get("ga") or {})
+    p = _ga_block(e, "pareto")
+    pareto = {"enabled": _ga_flag(p, "enabled", "pareto"),
+              "population_size": _ga_num(p, "population_size", "pareto", lo=4, integer=True),
+              "generations": _ga_num(p, "generations", "pareto", lo=1, integer=True),
+              "ref_min_factor": _ga_num(p, "ref_min_factor", "pareto", lo=1, lo_open=True)}
+    recommend = e.get("recommend")
+    if recommend not in ("band", "knee", "primary"):
+        raise ConfigError(f"experiment.recommend must be band, knee or primary, got {recommend!r}")
+    band = _ga_num(e, "recommend_band", "", lo=0, hi=1) if "recommend_band" in e else 0.02
+    sc = _ga_block(e, "screen")
+    screen = {"enabled": _ga_flag(sc, "enabled", "screen"),
+              "log2_size": _ga_num(sc, "log2_size", "screen", lo=0, hi=24, integer=True),
+              "seed_fraction": _ga_num(sc, "seed_fraction", "screen", lo=0, hi=1)}
+    rf = _ga_block(e, "refine")
+    refine = {"enabled": _ga_flag(rf, "enabled", "refine"),
+              "steps": _ga_num(rf, "steps", "refine", lo=1, integer=True),
+              "learning_rate": _ga_num(rf, "learning_rate", "refine", lo=0, lo_open=True, hi=1),
+              "penalty": _ga_num(rf, "penalty", "refine", lo=0)}
+    v = _ga_block(e, "verify")
+    verify = {k: _ga_num(v, k, "verify", lo=1, integer=True) for k in v}
+    for k in ("n_R", "task_n_z", "rw_n_r", "rw_n_phi", "rw_n_z"):
+        if verify[k] < 2:
+            raise ConfigError(f"experiment.verify.{k} must be >= 2, got {verify[k]!r}")
+    if verify["cycle_samples"] < 5 or verify["cycle_samples"] % 2 == 0:
+        raise ConfigError(f"experiment.verify.cycle_samples must be odd and >= 5, got {verify['cycle_samples']!r}")
+    return GaReconfigSettings(resume=resume, stop_after=sa, n_R=n_R, bounds=dict(d["bounds"]), task=task, good=good,
+                    joints=joints, links=links, motor=motor, cycle=cycle, regular=regular, mode=mode,
+                    objectives=tuple(names), primary=primary, weights=weights, constraints=cons, ga=ga,
+                    pareto=pareto, recommend=recommend, verify=verify, screen=screen, refine=refine,
+                    recommend_band=band, reconfig=_operating_settings(e))
+
+
+def _v_ga_reconfig(e, cfg, robot, recon) -> None:
+    ga_reconfig_build(e, robot, recon)  # every field, the design space, the GA settings, the problem; nothing compiles
+
+
+def ga_reconfig_build(ectx: Mapping[str, Any], robot, recon, *, n_R: Optional[int] = None):
+    """(settings, design space, coarse problem, GA config, baseline design) of experiment=ga_reconfig, validated
+    (one ConfigError line naming the field and the value)."""
+    from ..optimize.workflow import SetupError, setup
+
+    s = ga_reconfig_settings(ectx)
+    try:
+        return (s,) + tuple(setup(s, robot, recon, n_R=n_R))
+    except SetupError as err:
+        raise ConfigError(str(err)) from None
+# ---- end of ga_reconfig block ----
+
