@@ -287,7 +287,7 @@ def with_drive(robot: Delta, motor: Motor, gear_ratio, payload_mass=None) -> Del
     m = robot.mass
     if m is None:
         raise ConstraintError("with_drive: the robot has no mass model (robot.mass); dynamics need one")
-    m = eqx.tree_at(lambda q: (q.gear_ratio, q.rotor_inertia), m, (_leaf(gear_ratio) + 0 * m.gear_ratio,
+    m = eqx.tree_at(lambda q: (q.gear_ratio, q.rotor_inertia), m, (float_leaf(gear_ratio) + 0 * m.gear_ratio,
                                                                    motor.rotor_inertia + 0 * m.rotor_inertia))
     if payload_mass is not None:
         m = m.with_payload(payload_mass)
