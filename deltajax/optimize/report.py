@@ -110,6 +110,7 @@ def plots(ctx, data, objs, s) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import MaxNLocator
 
     from .designer import DESIGN_UNITS
 
@@ -129,6 +130,8 @@ def plots(ctx, data, objs, s) -> None:
         ax[1].set_ylim(0, 1.02)
         ax[1].set_xlabel("generation")
         ax[1].set_ylabel("feasible fraction of the population")
+        for a in ax:  # generations are whole numbers (short toy runs drew 1.5, 2.5, ...)
+            a.xaxis.set_major_locator(MaxNLocator(integer=True))
         ctx.savefig(fig, "ga_convergence")
     V = data.get("verify")
     if V is None or len(objs) < 2:
@@ -142,7 +145,7 @@ def plots(ctx, data, objs, s) -> None:
     sy = 1e3 if DESIGN_UNITS[o1] == "m^3" else 1.0
     ux = "dm^3 (L)" if sx == 1e3 else DESIGN_UNITS[o0]
     uy = "dm^3 (L)" if sy == 1e3 else DESIGN_UNITS[o1]
-    fig, ax = plt.subplots(figsize=(6.4, 4.8))
+    fig, ax = plt.subplots(figsize=(11, 4.8))
     others = np.setdiff1d(np.arange(2, len(x)), front)
     dom, bad = others[feas[others]], others[~feas[others]]
     if len(dom):
@@ -175,7 +178,9 @@ def plots(ctx, data, objs, s) -> None:
     ax.set_ylabel(f"{o1} [{uy}]  (higher is better)" if o1 in ("picks_per_min", "regular_volume") else
                   f"{o1} [{uy}]")
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="best")
+    # beside the axes, so no marker hides behind it
+    ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.02, 1.0), borderaxespad=0)
+    fig.tight_layout()
     hv = V["attrs"].get("hypervolume", float("nan"))
     ax.set_title(f"All designs verified on the fine grids. Hypervolume of the front {hv:.3g}\n"
                  f"(objectives / baseline, reference at 0: the baseline alone spans 1)", fontsize=9)
