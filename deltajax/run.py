@@ -310,10 +310,20 @@ def _user_errors() -> tuple:
     return (ConfigError, GeometryError, RunDirError)  # RunDirError: busy, foreign or damaged run directory
 
 
+def _use_agg_backend() -> None:
+    """Select matplotlib's non-interactive Agg backend: the one place in deltajax that selects a backend, once, in
+    the CLI before any job runs (the jobs render PNGs through :meth:`RunContext.savefig`; no window, no display).
+    The library (:mod:`deltajax.plots`, :func:`run_experiment`) never selects one: a notebook keeps its own."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+
+
 @hydra.main(config_path=CONFIG_DIR, config_name="config", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     """Hydra entry point. A user error is one line on stderr (and in run.log) and exit status 2; set
     ``HYDRA_FULL_ERROR=1`` for the traceback."""
+    _use_agg_backend()
     from hydra.core.hydra_config import HydraConfig
     from hydra.types import RunMode
 

@@ -86,19 +86,16 @@ def test_rundir_checks_a_results_file_through_io_read(tmp_path):
 
 
 def test_reconfig_motion_torque_methods_stay_distinguishable_where_they_agree():
-    import types
-
     import matplotlib
     import numpy as np
 
     matplotlib.use("Agg")
+    from deltajax import plots
     from deltajax.jobs import reconfig_motion as job
 
-    figs = []
-    ctx = types.SimpleNamespace(savefig=lambda fig, name: figs.append(fig))
     t = np.linspace(0.0, 1.0, 20)
     tau = np.stack([np.sin(t), np.cos(t), t], axis=1)
-    job._plot_torques(ctx, "adept", t, {m: {"tau": tau} for m in job.METHODS})
+    figs = [plots.motion_torques("adept", t, {m: {"tau": tau} for m in job.METHODS})]
     for ax in figs[0].axes:
         styles = {(str(ln.get_linestyle()), ln.get_linewidth()) for ln in ax.get_lines()}
         assert len(ax.get_lines()) == len(job.METHODS) == len(styles)

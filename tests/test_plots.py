@@ -128,20 +128,39 @@ def test_workspace_3d_titles_give_the_volume_and_ticks_stay_inside():
 
 
 def test_reconfig_motion_landscape_legend_shows_the_white_fixed_line():
-    import types
-
     import matplotlib
     import matplotlib.colors as mcolors
 
     matplotlib.use("Agg")
-    from deltajax.jobs import reconfig_motion as job
-
-    figs = []
-    ctx = types.SimpleNamespace(savefig=lambda fig, name: figs.append(fig))
     t, Rg = np.linspace(0.0, 0.5, 6), np.linspace(0.15, 0.45, 7)
-    job._plot_landscape(ctx, "adept", t, Rg, np.full((6, 7), 0.6), {"fixed": np.full(6, 0.27)}, "k_tilde")
+    figs = [plots.motion_landscape("adept", t, Rg, np.full((6, 7), 0.6), {"fixed": np.full(6, 0.27)}, "k_tilde")]
     (ax,) = [a for a in figs[0].axes if a.get_label() != "<colorbar>"]
     frame = mcolors.to_rgb(ax.get_legend().get_frame().get_facecolor())
     line = mcolors.to_rgb(ax.get_lines()[0].get_color())
     assert np.abs(np.subtract(frame, line)).sum() > 0.5  # the legend's handle differs from its background
     matplotlib.pyplot.close(figs[0])
+
+
+def test_only_run_selects_a_matplotlib_backend():
+    """One plotting home, one backend choice: no module of the package but run.py (the CLI, before any job runs)
+    calls matplotlib.use, and importing deltajax.plots (every figure module) leaves the user's backend alone."""
+    import pathlib
+    import re
+    import subprocess
+    import sys
+
+    import deltajax
+
+    root = pathlib.Path(deltajax.__file__).parent
+    callers = sorted(str(f.relative_to(root)) for f in root.rglob("*.py")
+                     if re.search(r"matplotlib\s*\.\s*use\s*\(|\bmpl\s*\.\s*use\s*\(", f.read_text()))
+    assert callers == ["run.py"], callers
+    # a fresh interpreter: the backend a user selected (here "svg") survives importing every figure module
+    code = ("import matplotlib; matplotlib.use('svg'); import deltajax.plots, deltajax.plots.core, "
+            "deltajax.plots.workspace, deltajax.plots.bench, deltajax.plots.dynamics, deltajax.plots.motion, "
+            "deltajax.plots.designer, deltajax.optimize.report, deltajax.jobs.reconfig_motion; "
+            "import matplotlib.pyplot as plt; fig = deltajax.plots.bench_rates({'a': 1.0, 'b': 2.0}, 'a'); "
+            "print(matplotlib.get_backend()); plt.close(fig)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
+                         env={**__import__("os").environ, "MPLBACKEND": ""}).stdout.split()
+    assert out[-1].lower() == "svg", out

@@ -156,10 +156,7 @@ def run(ctx) -> None:
 
 
 def _plot(ctx, robot, p, conti, cont, step):
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from .. import plots
 
     res_c, prof_c = conti
     res_n, _ = cont
@@ -171,45 +168,10 @@ def _plot(ctx, robot, p, conti, cont, step):
     X, Z = np.meshgrid(xs, zs, indexing="xy")
     pts = np.stack([X.ravel(), np.full(X.size, centre[1]), Z.ravel()], -1)
     mask = np.asarray(jax.jit(jax.vmap(lambda q: B.test_pose(robot, q, p["half_space"])))(jnp.asarray(pts)))
-    fig, ax = plt.subplots(figsize=(7, 6))
-    ax.contourf(X, Z, mask.reshape(X.shape).astype(float), levels=[0.5, 1.5], colors=["#cde3f5"])
-    ax.contour(X, Z, mask.reshape(X.shape).astype(float), levels=[0.5], colors=["#5a8fbf"], linewidths=0.8)
-    for az_deg, sgn in ((0.0, 1.0), (180.0, -1.0)):
-        j = int(np.argmin(np.abs(np.rad2deg(azimuth) - az_deg)))
-        for res, style, label in ((res_c, "r-", "Conti bisection"), (res_n, "k--", "continuation")):
-            r = np.asarray(res.radius)[j]
-            ax.plot(centre[0] + sgn * r * np.sin(polar), centre[2] + r * np.cos(polar), style, lw=1.2,
-                    label=label if az_deg == 0.0 else None)
-        bad = np.asarray(prof_c.n_exits)[j] > 1
-        for i in np.flatnonzero(bad):
-            e = np.asarray(prof_c.last_exit)[j, i]
-            ax.plot([centre[0], centre[0] + sgn * e * np.sin(polar[i])], [centre[2], centre[2] + e * np.cos(polar[i])],
-                    color="orange", lw=0.4, alpha=0.6)
-    ax.plot(centre[0], centre[2], "k+", ms=10, label="centre C")
-    R = float(robot.base_radius)
-    ax.plot([R, -0.5 * R], [0.0, 0.0], "ks", ms=4, label="actuated joints A_i (projected)")
-    ax.invert_yaxis()
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("z (m, down)")
-    n_re = int((np.asarray(prof_c.n_exits) > 1).sum())
-    ax.set_title(f"Slice y = 0: workspace (blue), boundaries at {step:g} deg; orange: rays that re-enter ({n_re})")
-    ax.legend(loc="lower right", fontsize=8)
-    ctx.savefig(fig, "boundary_slice")
+    ctx.savefig(plots.boundary_slice(X, Z, mask, centre, float(robot.base_radius), polar, azimuth, conti, cont, step),
+                "boundary_slice")
 
     d = np.asarray(B.ray_directions(polar, azimuth))
     q = centre + np.asarray(res_n.radius)[..., None] * d
     ns = np.asarray(prof_c.n_exits) > 1
-    fig = plt.figure(figsize=(7, 6))
-    ax = fig.add_subplot(projection="3d")
-    sel = ~ns
-    sc = ax.scatter(q[sel, 0][::7], q[sel, 1][::7], q[sel, 2][::7], s=0.5, c=q[sel, 2][::7], cmap="viridis")
-    fig.colorbar(sc, ax=ax, shrink=0.6, pad=0.1, label="z (m, down)")
-    ax.scatter(q[ns, 0], q[ns, 1], q[ns, 2], s=2, c="orange", label=f"rays that leave and re-enter ({int(ns.sum())})")
-    ax.invert_zaxis()
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_zlabel("z (m, down)")
-    ax.set_title("Boundary (continuation) seen from C")
-    ax.legend(loc="upper left", fontsize=8)
-    ctx.savefig(fig, "boundary_surface")
+    ctx.savefig(plots.boundary_surface(q, ns), "boundary_surface")

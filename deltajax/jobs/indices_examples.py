@@ -88,7 +88,7 @@ def run(ctx) -> None:
     res.set_attrs("curves", note="argmax over finite values with ties to the smallest R; omega_v is "
                   "unbounded at Jx-singular R (e.g. R = 0.465 at z = 0.2, singularity type 1)")
     if ctx.cfg.get("plots", True):
-        from ..plots_core import plot_index_curves
+        from ..plots import plot_index_curves
 
         bar.set_postfix_str("plot")
         ctx.savefig(plot_index_curves(R, pts, {k: np.asarray(getattr(ind, k)) for k in SCALAR_INDICES}, ok,

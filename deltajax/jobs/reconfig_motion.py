@@ -32,6 +32,7 @@ import jax
 import numpy as np
 
 from .. import motion as mo
+from .. import plots
 from ..config import reconfig_motion_spec
 from ..cycle import Limits
 from ..motion_refine import path_report, refine_path
@@ -41,72 +42,6 @@ SUMMARY = (("mean_value", "1"), ("min_value", "1"), ("max_abs_R_dot", "m/s"), ("
            ("max_abs_force_R", "N"), ("max_abs_screw_torque", "N m"), ("max_screw_speed", "rad/s"),
            ("peak_arm_torque", "N m"), ("n_jumps", "1"), ("max_jump", "m"), ("cycle_time_arms", "s"),
            ("cycle_time_with_drive", "s"), ("within_drive_limits", "1"))
-
-
-def _plot_landscape(ctx, name, t, Rg, table, paths, crit):
-    import matplotlib.pyplot as plt
-
-    fig, ax = plt.subplots(figsize=(9, 5))
-    im = ax.pcolormesh(t, Rg, table.T, shading="nearest", cmap="viridis")
-    fig.colorbar(im, ax=ax, label=f"{crit} (NaN: unreachable)")
-    styles = {"fixed": dict(color="w", ls="--", lw=1.5), "pointwise": dict(color="r", ls="none", marker=".", ms=4),
-              "path_dp": dict(color="orange", lw=2.0), "path_refined": dict(color="k", lw=1.2)}
-    for m, R in paths.items():
-        ax.plot(t, R, label=m, **styles[m])
-    ax.set_xlabel("t (s)")
-    ax.set_ylabel("R (m)")
-    ax.set_title(f"{name}: {crit} over (t, R) and the four R(t)")
-    ax.legend(loc="upper right", fontsize=8, framealpha=0.8, facecolor="0.6")  # grey: the white "fixed" line shows
-    ctx.savefig(fig, f"{name}_landscape")
-
-
-def _plot_profiles(ctx, name, t, data, s):
-    import matplotlib.pyplot as plt
-
-    keys = (("value", s["criterion"], None), ("R", "R (m)", None), ("R_dot", "Rdot (m/s)", float(s["drive"].speed)),
-            ("force_R", "F_R (N)", float(s["drive"].force)), ("screw_torque", "screw motor torque (N m)", None))
-    fig, axes = plt.subplots(len(keys), 1, figsize=(9, 12), sharex=True)
-    colors = {"fixed": "C0", "pointwise": "C3", "path_dp": "C1", "path_refined": "k"}
-    for ax, (key, label, lim) in zip(axes, keys):
-        lo, hi = np.inf, -np.inf
-        for m, d in data.items():
-            y = np.asarray(d[key])
-            kw = dict(marker=".", ms=3, lw=0.6) if m == "pointwise" else dict(lw=1.4)
-            ax.plot(t, y, color=colors[m], label=m, **kw)
-            if m != "pointwise":
-                lo, hi = min(lo, np.nanmin(y)), max(hi, np.nanmax(y))
-        if lim is not None and math.isfinite(lim):
-            ax.axhline(lim, color="grey", ls=":", lw=1)
-            ax.axhline(-lim, color="grey", ls=":", lw=1)
-            lo, hi = min(lo, -lim), max(hi, lim)
-        if key in ("R_dot", "force_R", "screw_torque"):
-            pad = 0.15 * (hi - lo + 1e-12)
-            ax.set_ylim(lo - pad, hi + pad)   # pointwise jumps run off this scale; their peaks are in the summary
-        ax.set_ylabel(label)
-        ax.grid(alpha=0.3)
-    axes[0].legend(ncol=4, fontsize=8)
-    axes[0].set_title(f"{name}: index, R(t), Rdot, R force and screw torque (dotted: drive limits; pointwise "
-                      "off-scale where it jumps)", fontsize=9)
-    axes[-1].set_xlabel("t (s)")
-    ctx.savefig(fig, f"{name}_profiles")
-
-
-def _plot_torques(ctx, name, t, data):
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
-    # colours as in the profiles; wide solid under dashed/dotted, so methods that agree stay distinguishable
-    styles = {"fixed": dict(color="C0", ls="-", lw=2.8, alpha=0.6), "pointwise": dict(color="C3", ls=":", lw=1.2),
-              "path_dp": dict(color="C1", ls="--", lw=1.6), "path_refined": dict(color="k", ls="-.", lw=1.0)}
-    for i, ax in enumerate(axes):
-        for m, d in data.items():
-            ax.plot(t, np.asarray(d["tau"])[:, i], label=m, **styles[m])
-        ax.set_ylabel(f"tau_{i + 1} (N m)")
-        ax.grid(alpha=0.3)
-    axes[0].legend(ncol=4, fontsize=8)
-    axes[0].set_title(f"{name}: arm torques at the nominal duration")
-    axes[-1].set_xlabel("t (s)")
-    ctx.savefig(fig, f"{name}_torques")
 
 
 def run(ctx) -> None:
@@ -212,9 +147,11 @@ def run(ctx) -> None:
         # a rejected refinement repeats the DP: draw it only when it differs
         shown = {m: d for m, d in data.items() if m != "path_refined" or (rf is not None and rf.accepted)}
         paths = {m: d["R"] for m, d in shown.items()}
-        _plot_landscape(ctx, name, t, np.asarray(tab.R), np.asarray(tab.value), paths, s["criterion"])
-        _plot_profiles(ctx, name, t, shown, s)
-        _plot_torques(ctx, name, t, shown)
+        ctx.savefig(plots.motion_landscape(name, t, np.asarray(tab.R), np.asarray(tab.value), paths, s["criterion"]),
+                    f"{name}_landscape")
+        ctx.savefig(plots.motion_profiles(name, t, shown, s["criterion"], s["drive"].speed, s["drive"].force),
+                    f"{name}_profiles")
+        ctx.savefig(plots.motion_torques(name, t, shown), f"{name}_torques")
         bar.update(1)
     bar.close()
     if "mech_info" in s:

@@ -231,25 +231,6 @@ def run(ctx) -> None:
             f"(count h^3), {float(s['volume_box']):.6g} m^3 (count/N V_box); "
             f"{rate / 1e6:.2f} M points/s after the first chunk ({first_chunk_s or 0.0:.1f} s with compilation)")
     if cfg.get("plots", True) and n_shards == 1:
-        _plot(ctx, grid, reach)
+        from .. import plots
 
-
-def _plot(ctx, grid, reach) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    area = reach.sum(axis=(0, 1)) * grid.h ** 2
-    fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.6))
-    a1.plot(grid.z, area)
-    a1.set_xlabel("z (m, down)")
-    a1.set_ylabel("reachable area (m$^2$)")
-    j = int(np.argmin(np.abs(grid.y)))
-    a2.imshow(reach[:, j, :].T, origin="upper", aspect="equal",
-              extent=(grid.x[0], grid.x[-1], grid.z[-1], grid.z[0]), cmap="Greys")
-    a2.set_xlabel("x (m)")
-    a2.set_ylabel("z (m)")
-    a2.set_title(f"reachable, y = {grid.y[j]:.3f} m")
-    fig.tight_layout()
-    ctx.savefig(fig, "workspace_grid")
+        ctx.savefig(plots.workspace_grid(grid, reach), "workspace_grid")
