@@ -353,15 +353,7 @@ def min_cycle_time_bisection(robot: Delta, cycle, limits: Limits, *, T_low: floa
     def feasible(T):
         return within_limits(cycle_profile(robot, cycle, T, method=method), limits)
 
-    def body(_, lohi):
-        lo, hi = lohi
-        mid = jnp.sqrt(lo * hi)
-        f = feasible(mid)
-        return jnp.where(f, lo, mid), jnp.where(f, mid, hi)
-
-    dtype = cycle.duration.dtype
-    lo, hi = jax.lax.fori_loop(0, n_iter, body, (jnp.asarray(T_low, dtype), jnp.asarray(T_high, dtype)))
-    return jnp.where(feasible(jnp.asarray(T_high, dtype)), hi, jnp.inf)
+    return log_bisect(feasible, T_low, T_high, cycle.duration.dtype, n_iter)
 
 
 def metrics_by_forearm_model(robot: Delta, cycle, limits: Limits, *, method: str = "virtual_work", metrics=None,
