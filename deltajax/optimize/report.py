@@ -107,11 +107,12 @@ def print_summary(ctx, data) -> None:
 def plots(ctx, data, objs, s) -> None:
     """Plots drawn from the staged results only (so a resumed run draws the same figures)."""
     from .. import plots as P
+    from .designer import DESIGN_UNITS
 
     fig = P.ga_convergence(data.get("ga", {}))
     if fig is not None:
         ctx.savefig(fig, "ga_convergence")
-    fig = P.ga_pareto(data.get("verify"), objs, s)
+    fig = P.ga_pareto(data.get("verify"), objs, s, DESIGN_UNITS)
     if fig is not None:
         ctx.savefig(fig, "ga_pareto")
 

@@ -36,12 +36,11 @@ def ga_convergence(G):
     return fig
 
 
-def ga_pareto(V, objs, s):
+def ga_pareto(V, objs, s, units):
     """The main job's designs verified on the fine grids in the plane of the first two objectives: front,
     baseline, GA best, refined and recommended designs (``V``: the staged ``verify`` group; ``s``: the job's
-    settings); None without them."""
-    from ..optimize.designer import DESIGN_UNITS
-
+    settings; ``units``: each objective's unit, e.g. ``{"picks_per_min": "1/min", "regular_volume": "m^3"}``);
+    None without them."""
     plt = _plt()
     if V is None or len(objs) < 2:
         return None
@@ -50,10 +49,10 @@ def ga_pareto(V, objs, s):
     feas = np.asarray(V["feasible"]).astype(bool)
     front = np.asarray(V["front"], int).reshape(-1)
     rec = int(V["attrs"]["recommended"])
-    sx = 1e3 if DESIGN_UNITS[o0] == "m^3" else 1.0
-    sy = 1e3 if DESIGN_UNITS[o1] == "m^3" else 1.0
-    ux = "dm^3 (L)" if sx == 1e3 else DESIGN_UNITS[o0]
-    uy = "dm^3 (L)" if sy == 1e3 else DESIGN_UNITS[o1]
+    sx = 1e3 if units[o0] == "m^3" else 1.0
+    sy = 1e3 if units[o1] == "m^3" else 1.0
+    ux = "dm^3 (L)" if sx == 1e3 else units[o0]
+    uy = "dm^3 (L)" if sy == 1e3 else units[o1]
     fig, ax = plt.subplots(figsize=(11, 4.8))
     others = np.setdiff1d(np.arange(2, len(x)), front)
     dom, bad = others[feas[others]], others[~feas[others]]
