@@ -7,6 +7,13 @@ process; fitness values must agree to 1e-12.
 
 Prints, per metric term and for the whole fitness: warm CPU-s and wall per population evaluation, old and
 new, and the speed-up (CPU-s ratio). Record ``uptime`` next to the figures (shared machine).
+
+old: the frozen kernel with the per-design exact R sweep of the task points (``task_screen=False``, the
+fitness as it was); new: the core kernel with the population-level task coverage
+(:func:`deltajax.optimize.objectives.task_cover`). The middle column ("new exact") is the core kernel with the
+per-design exact sweep, to separate the kernel's share from the screen's. Exits non-zero unless the fitness
+values agree to 1e-12 (absolute; they are O(1) or 1e3 + violation), the NaN patterns are identical and the
+task coverage is identical.
 """
 
 from __future__ import annotations
@@ -26,7 +33,8 @@ from omegaconf import OmegaConf  # noqa: E402
 
 import deltajax as dj  # noqa: E402
 from deltajax import baseline_kernel as _kernel_baseline  # noqa: E402
-from deltajax.optimize import DesignSpace, Problem, evaluate_design, make_fitness  # noqa: E402
+from deltajax.optimize import DesignSpace, Problem, evaluate_design, evaluate_population, make_fitness  # noqa: E402
+from deltajax.optimize.objectives import TASK_CHUNK, task_cover  # noqa: E402
 
 #: the main job's problem before it became the designer's problem (issue 12): the kernel's baseline workload
 CONFIG = Path(__file__).resolve().parent / "bench_fitness_problem.yaml"
@@ -67,28 +75,43 @@ def main(argv=None):
     genes = jax.random.uniform(jax.random.PRNGKey(0), (a.population, space.dim), dtype=jnp.float64)
     terms = sorted(pb.needed | {"peak_torque"})
 
-    def build_fns():
-        fns = {t: jax.jit(jax.vmap(lambda g, t=t: evaluate_design(pb, space.decode(g), (t,))[t])) for t in terms}
-        fns["fitness (all terms)"] = jax.jit(lambda G: make_fitness(pb, space)(G)[0])
+    def build_fns(screen):
+        fns = {t: jax.jit(lambda G, t=t: evaluate_population(pb, space, G, (t,), task_screen=screen)[t])
+               for t in terms}
+        fns["fitness (all terms)"] = jax.jit(lambda G: make_fitness(pb, space, task_screen=screen)(G)[0])
         return fns
 
-    new = build_fns()
+    new, new_exact = build_fns(True), build_fns(False)
     with _kernel_baseline.patch_old_kernel():
-        old = build_fns()
+        old = build_fns(False)
         f_old = np.asarray(old["fitness (all terms)"](genes))  # traced inside the patch
+        cov_old = np.asarray(old["task_coverage"](genes))
         for f in old.values():
             jax.block_until_ready(f(genes))
     f_new = np.asarray(new["fitness (all terms)"](genes))
+    cov_new = np.asarray(new["task_coverage"](genes))
     both = np.isfinite(f_old) & np.isfinite(f_new)
     diff = float(np.max(np.abs(f_old[both] - f_new[both]))) if both.any() else 0.0
+    same_nan = np.array_equal(np.isnan(f_old), np.isnan(f_new))
+    same_cov = np.array_equal(cov_old, cov_new)
+    cover = jax.jit(lambda G: task_cover(pb, jax.vmap(space.decode)(G)))(genes)
     print(f"population {a.population}, terms {terms}; load {os.getloadavg()[0]:.1f}")
     print(f"fitness old vs new: max |diff| {diff:.2e} (must be <= 1e-12), NaN pattern "
-          f"{'identical' if np.array_equal(np.isnan(f_old), np.isnan(f_new)) else 'DIFFERENT'}")
-    print(f"{'term':24s} {'old CPU-s':>10s} {'new CPU-s':>10s} {'old wall':>9s} {'new wall':>9s}  speed-up (CPU)")
+          f"{'identical' if same_nan else 'DIFFERENT'}; task coverage {'identical' if same_cov else 'DIFFERENT'}")
+    print(f"task_cover: exact evaluations {int(cover.n_first)} (first pass) + {int(cover.n_rest)} (rest of the "
+          f"uncovered points) = {int(cover.n_first) + int(cover.n_rest)} of the sweep's {cover.n_sweep} "
+          f"({(int(cover.n_first) + int(cover.n_rest)) / cover.n_sweep:.1%}); chunks of {TASK_CHUNK}: "
+          f"{-(-int(cover.n_rest) // TASK_CHUNK)}")
+    print(f"{'term':24s} {'old CPU-s':>10s} {'new exact':>10s} {'new CPU-s':>10s} {'old wall':>9s} {'new wall':>9s}"
+          f"  speed-up CPU (wall)")
     for name in new:
         co, wo = _timed(old[name], genes, a.repeats)
+        ce, _ = _timed(new_exact[name], genes, a.repeats)
         cn, wn = _timed(new[name], genes, a.repeats)
-        print(f"{name:24s} {co:10.4f} {cn:10.4f} {wo:9.4f} {wn:9.4f}  x{co / max(cn, 1e-9):.2f}")
+        print(f"{name:24s} {co:10.4f} {ce:10.4f} {cn:10.4f} {wo:9.4f} {wn:9.4f}  x{co / max(cn, 1e-9):.2f} "
+              f"(x{wo / max(wn, 1e-9):.2f})")
+    if not (same_nan and same_cov):
+        raise SystemExit("NaN pattern or task coverage differ between old and new")
     if not diff <= 1e-12:
         raise SystemExit(f"fitness values differ by {diff:.2e} > 1e-12")
 

@@ -61,8 +61,9 @@ from jaxtyping import Array, Bool, Int
 
 from ..cycle import Limits, cycle_metrics
 from ..geometry import Delta, ReconfigurableDelta
-from ..jacobian import jacobian
-from ..kinematics import ik
+from ..jacobian import jq_theta, jx_det, jx_row
+from ..kinematics import (chain_local, design_ok, limit_terms, loop_closure, loop_vectors,
+                          safe_point)
 from ..trajectory import adept_cycle
 from ..indices import point_kernel
 from ..workspace import (index_fields, mirrored_point_indices, reachable_mask, reconfigurable_reachable,
@@ -271,13 +272,40 @@ def _index_at_points(pb: Problem, design, pts, differentiable: bool = False):
 
 def _ee_speed(robot: Delta, pts, motor_speed):
     """Mean over the reachable ``pts`` of the max end-effector speed with |thetadot_i| <= motor_speed (m/s);
-    0 if none is reachable."""
+    0 if none is reachable.
+
+    Per point: the core's algebraic IK (cos/sin theta, no atan2 round trip), unit forearm vectors and the Jq
+    diagonal (:func:`deltajax.kinematics.loop_vectors`, :func:`deltajax.jacobian.jq_theta`), then
+    v = Jx^-1 diag(L1 d) s for the four vertex patterns s by the adjugate of Jx (flat scalars): the classic
+    Jacobian J[:, 1:] of :func:`deltajax.jacobian.jacobian` applied to s, to rounding (kappa(Jx) eps).
+    """
+    L1, L2, lim = robot.upper_arm, robot.forearm, limit_terms(robot.theta_min, robot.theta_max)
+
     def one(p):
-        sol = ik(robot, p)
-        theta = jnp.where(sol.ok, sol.theta, 0.0)  # double-where: finite gradients at unreachable points
-        J = jacobian(robot, p, theta)[:, 1:]
-        v = jnp.asarray(speed_vertices, J.dtype) @ J.T  # (4, 3): EE velocity per vertex pattern
-        return jnp.max(jnp.sqrt(jnp.sum(v * v, axis=-1))) * motor_speed, sol.ok
+        p, usable = safe_point(robot, p)
+        rows, d, ok = [], [], design_ok(robot) & usable
+        for i in range(3):
+            x, y, z = chain_local(p[0], p[1], p[2], i)
+            dx = x + robot.platform_radius - robot.base_radius
+            lc = loop_closure(dx, y, z, L1, L2, lim)
+            ux, uy, uz = loop_vectors(dx, y, z, lc.cos, lc.sin, L1, L2)
+            rows.extend(jx_row(ux, uy, uz, i))
+            d.append(L1 * jq_theta(ux, uz, lc.cos, lc.sin))
+            ok = ok & lc.ok
+        eye = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
+        a = [jnp.where(ok, v, e) for v, e in zip(rows, eye)]  # double where: finite off the workspace
+        det = jx_det(*a)
+        det = jnp.where(det != 0.0, det, 1.0)
+        adj = (a[4] * a[8] - a[5] * a[7], a[2] * a[7] - a[1] * a[8], a[1] * a[5] - a[2] * a[4],
+               a[5] * a[6] - a[3] * a[8], a[0] * a[8] - a[2] * a[6], a[2] * a[3] - a[0] * a[5],
+               a[3] * a[7] - a[4] * a[6], a[1] * a[6] - a[0] * a[7], a[0] * a[4] - a[1] * a[3])
+        best = None
+        for sv in speed_vertices:
+            b = [d[k] * float(sv[k]) for k in range(3)]
+            w2 = sum((adj[3 * r] * b[0] + adj[3 * r + 1] * b[1] + adj[3 * r + 2] * b[2]) ** 2 for r in range(3))
+            best = w2 if best is None else jnp.maximum(best, w2)
+        return jnp.sqrt(best) / jnp.abs(det) * motor_speed, ok
+
     s, ok = jax.vmap(one)(pts)
     n = jnp.sum(ok)
     return jnp.where(n > 0, jnp.sum(jnp.where(ok, s, 0.0)) / jnp.maximum(n, 1), 0.0)
