@@ -8,8 +8,8 @@ process; fitness values must agree to 1e-12.
 Prints, per metric term and for the whole fitness: warm CPU-s and wall per population evaluation, old and
 new, and the speed-up (CPU-s ratio). Record ``uptime`` next to the figures (shared machine).
 
-old: the frozen kernel with the per-design exact R sweep of the task points (``task_screen=False``, the
-fitness as it was); new: the core kernel with the population-level task coverage
+old: the frozen kernel with the per-design exact R sweep of the task points (``task_screen=False``) and the
+frozen peak-speed term (the fitness as it was); new: the core kernel with the population-level task coverage
 (:func:`deltajax.optimize.objectives.task_cover`). The middle column ("new exact") is the core kernel with the
 per-design exact sweep, to separate the kernel's share from the screen's. Exits non-zero unless the fitness
 values agree to 1e-12 (absolute; they are O(1) or 1e3 + violation), the NaN patterns are identical and the
@@ -19,6 +19,7 @@ task coverage is identical.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import time
 from pathlib import Path
@@ -34,10 +35,42 @@ from omegaconf import OmegaConf  # noqa: E402
 import deltajax as dj  # noqa: E402
 from deltajax import baseline_kernel as _kernel_baseline  # noqa: E402
 from deltajax.optimize import DesignSpace, Problem, evaluate_design, evaluate_population, make_fitness  # noqa: E402
+from deltajax.optimize import objectives as _objectives  # noqa: E402
 from deltajax.optimize.objectives import TASK_CHUNK, task_cover  # noqa: E402
 
 #: the main job's problem before it became the designer's problem (issue 12): the kernel's baseline workload
 CONFIG = Path(__file__).resolve().parent / "bench_fitness_problem.yaml"
+
+
+def _old_ee_speed(robot, pts, motor_speed):
+    """Frozen copy of ``objectives._ee_speed`` before 2026-12-01 (ik with its atan2, cos/sin of theta again,
+    a batched LAPACK solve per point): the baseline side of the peak_speed term."""
+    from deltajax.jacobian import jacobian
+    from deltajax.kinematics import ik
+    from deltajax.optimize.objectives import speed_vertices
+
+    def one(p):
+        sol = ik(robot, p)
+        theta = jnp.where(sol.ok, sol.theta, 0.0)
+        J = jacobian(robot, p, theta)[:, 1:]
+        v = jnp.asarray(speed_vertices, J.dtype) @ J.T
+        return jnp.max(jnp.sqrt(jnp.sum(v * v, axis=-1))) * motor_speed, sol.ok
+    s, ok = jax.vmap(one)(pts)
+    n = jnp.sum(ok)
+    return jnp.where(n > 0, jnp.sum(jnp.where(ok, s, 0.0)) / jnp.maximum(n, 1), 0.0)
+
+
+@contextlib.contextmanager
+def _old_fitness():
+    """The fitness as it was: the frozen kernel (:func:`deltajax.baseline_kernel.patch_old_kernel`) and the
+    frozen peak-speed term; the task sweep is selected by ``task_screen=False``. Must wrap tracing."""
+    saved = _objectives._ee_speed
+    try:
+        _objectives._ee_speed = _old_ee_speed
+        with _kernel_baseline.patch_old_kernel():
+            yield
+    finally:
+        _objectives._ee_speed = saved
 
 
 def _timed(fn, arg, repeats):
@@ -82,7 +115,7 @@ def main(argv=None):
         return fns
 
     new, new_exact = build_fns(True), build_fns(False)
-    with _kernel_baseline.patch_old_kernel():
+    with _old_fitness():
         old = build_fns(False)
         f_old = np.asarray(old["fitness (all terms)"](genes))  # traced inside the patch
         cov_old = np.asarray(old["task_coverage"](genes))

@@ -413,7 +413,7 @@ def task_cover(pb: Problem, designs: ReconfigurableDelta, points=None, *, chunk:
         return jax.vmap(lambda q: jax.vmap(lambda R: point_kernel(d.at(R), q, sv_method="jacobi").ok)(Rs))(canon)
 
     ikok = jax.vmap(ik_ok)(designs)  # (D, N, K)
-    ks = jnp.arange(K, dtype=jnp.int32)
+    ks = jnp.arange(K, dtype=jnp.int32)[None, None, :]
     lo = jnp.min(jnp.where(ikok, ks, K), axis=-1)
     hi = jnp.max(jnp.where(ikok, ks, -1), axis=-1)
     any_ok = hi >= 0
