@@ -8,12 +8,13 @@ process; fitness values must agree to 1e-12.
 Prints, per metric term and for the whole fitness: warm CPU-s and wall per population evaluation, old and
 new, and the speed-up (CPU-s ratio). Record ``uptime`` next to the figures (shared machine).
 
-old: the frozen kernel with the per-design exact R sweep of the task points (``task_screen=False``) and the
-frozen peak-speed term (the fitness as it was); new: the core kernel with the population-level task coverage
-(:func:`deltajax.optimize.objectives.task_cover`). The middle column ("new exact") is the core kernel with the
-per-design exact sweep, to separate the kernel's share from the screen's. Exits non-zero unless the fitness
+old: the frozen kernel with the per-design R sweeps (``screen=False``) and the frozen peak-speed term
+(the fitness as it was); new: the core kernel with the population-level task coverage and reachability
+(:func:`deltajax.optimize.objectives.task_cover`, :func:`~deltajax.optimize.objectives.reach_cover`) and the
+flat peak-speed term. The middle column ("new exact") is the core kernel with the per-design sweeps
+(``screen=False``), to separate the kernel's share from the screens'. Exits non-zero unless the fitness
 values agree to 1e-12 (absolute; they are O(1) or 1e3 + violation), the NaN patterns are identical and the
-task coverage is identical.
+task coverage and volume are identical. Also prints how many exact evaluations the screens ran.
 """
 
 from __future__ import annotations
@@ -36,7 +37,7 @@ import deltajax as dj  # noqa: E402
 from deltajax import baseline_kernel as _kernel_baseline  # noqa: E402
 from deltajax.optimize import DesignSpace, Problem, evaluate_design, evaluate_population, make_fitness  # noqa: E402
 from deltajax.optimize import objectives as _objectives  # noqa: E402
-from deltajax.optimize.objectives import TASK_CHUNK, task_cover  # noqa: E402
+from deltajax.optimize.objectives import TASK_CHUNK, reach_cover, task_cover  # noqa: E402
 
 #: the main job's problem before it became the designer's problem (issue 12): the kernel's baseline workload
 CONFIG = Path(__file__).resolve().parent / "bench_fitness_problem.yaml"
@@ -63,7 +64,7 @@ def _old_ee_speed(robot, pts, motor_speed):
 @contextlib.contextmanager
 def _old_fitness():
     """The fitness as it was: the frozen kernel (:func:`deltajax.baseline_kernel.patch_old_kernel`) and the
-    frozen peak-speed term; the task sweep is selected by ``task_screen=False``. Must wrap tracing."""
+    frozen peak-speed term; the per-design sweeps are selected by ``screen=False``. Must wrap tracing."""
     saved = _objectives._ee_speed
     try:
         _objectives._ee_speed = _old_ee_speed
@@ -109,9 +110,9 @@ def main(argv=None):
     terms = sorted(pb.needed | {"peak_torque"})
 
     def build_fns(screen):
-        fns = {t: jax.jit(lambda G, t=t: evaluate_population(pb, space, G, (t,), task_screen=screen)[t])
+        fns = {t: jax.jit(lambda G, t=t: evaluate_population(pb, space, G, (t,), screen=screen)[t])
                for t in terms}
-        fns["fitness (all terms)"] = jax.jit(lambda G: make_fitness(pb, space, task_screen=screen)(G)[0])
+        fns["fitness (all terms)"] = jax.jit(lambda G: make_fitness(pb, space, screen=screen)(G)[0])
         return fns
 
     new, new_exact = build_fns(True), build_fns(False)
@@ -119,22 +120,30 @@ def main(argv=None):
         old = build_fns(False)
         f_old = np.asarray(old["fitness (all terms)"](genes))  # traced inside the patch
         cov_old = np.asarray(old["task_coverage"](genes))
+        vol_old = np.asarray(old["volume"](genes))
         for f in old.values():
             jax.block_until_ready(f(genes))
     f_new = np.asarray(new["fitness (all terms)"](genes))
     cov_new = np.asarray(new["task_coverage"](genes))
+    vol_new = np.asarray(new["volume"](genes))
     both = np.isfinite(f_old) & np.isfinite(f_new)
     diff = float(np.max(np.abs(f_old[both] - f_new[both]))) if both.any() else 0.0
     same_nan = np.array_equal(np.isnan(f_old), np.isnan(f_new))
-    same_cov = np.array_equal(cov_old, cov_new)
+    same_cov = np.array_equal(cov_old, cov_new) and np.array_equal(vol_old, vol_new)
     cover = jax.jit(lambda G: task_cover(pb, jax.vmap(space.decode)(G)))(genes)
+    reach = jax.jit(lambda G: reach_cover(jax.vmap(space.decode)(G), pb.ws_points))(genes)
     print(f"population {a.population}, terms {terms}; load {os.getloadavg()[0]:.1f}")
     print(f"fitness old vs new: max |diff| {diff:.2e} (must be <= 1e-12), NaN pattern "
-          f"{'identical' if same_nan else 'DIFFERENT'}; task coverage {'identical' if same_cov else 'DIFFERENT'}")
+          f"{'identical' if same_nan else 'DIFFERENT'}; task coverage and volume {'identical' if same_cov else 'DIFFERENT'}")
     print(f"task_cover: exact evaluations {int(cover.n_first)} (first pass) + {int(cover.n_rest)} (rest of the "
           f"uncovered points) = {int(cover.n_first) + int(cover.n_rest)} of the sweep's {cover.n_sweep} "
           f"({(int(cover.n_first) + int(cover.n_rest)) / cover.n_sweep:.1%}); chunks of {TASK_CHUNK}: "
           f"{-(-int(cover.n_rest) // TASK_CHUNK)}")
+    n_pairs = reach.reachable.size
+    print(f"reach_cover: of {n_pairs} (design, point) pairs {int(reach.n_excluded)} excluded by the closed form, "
+          f"{n_pairs - int(reach.n_excluded)} one IK sample, {int(reach.n_rest)} swept: "
+          f"{n_pairs - int(reach.n_excluded) + int(reach.n_rest) * space.n_R} IK evaluations of the sweep's "
+          f"{reach.n_sweep} ({(n_pairs - int(reach.n_excluded) + int(reach.n_rest) * space.n_R) / reach.n_sweep:.1%})")
     print(f"{'term':24s} {'old CPU-s':>10s} {'new exact':>10s} {'new CPU-s':>10s} {'old wall':>9s} {'new wall':>9s}"
           f"  speed-up CPU (wall)")
     for name in new:
@@ -144,7 +153,7 @@ def main(argv=None):
         print(f"{name:24s} {co:10.4f} {ce:10.4f} {cn:10.4f} {wo:9.4f} {wn:9.4f}  x{co / max(cn, 1e-9):.2f} "
               f"(x{wo / max(wn, 1e-9):.2f})")
     if not (same_nan and same_cov):
-        raise SystemExit("NaN pattern or task coverage differ between old and new")
+        raise SystemExit("NaN pattern, task coverage or volume differ between old and new")
     if not diff <= 1e-12:
         raise SystemExit(f"fitness values differ by {diff:.2e} > 1e-12")
 

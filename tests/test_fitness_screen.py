@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 import deltajax as dj
 from deltajax.optimize import DesignSpace, Problem, evaluate_design, evaluate_population, make_fitness
 from deltajax.optimize import objectives as O
-from deltajax.workspace import resolve_redundancy
+from deltajax.workspace import reconfigurable_reachable, resolve_redundancy
 
 BOUNDS = {"R_min": [0.10, 0.20], "R_max": [0.30, 0.55], "platform_radius": [0.04, 0.09],
           "upper_arm": [0.14, 0.30], "forearm": [0.30, 0.55]}
@@ -103,11 +103,29 @@ def test_task_cover_property_random_points_and_designs(seed, high, offsets):
 
 
 @pytest.mark.slow
+def test_reach_cover_equals_the_sweep_including_points_at_the_reach_limit():
+    """Workspace points of random and extreme designs plus points placed exactly at (and 1e-9 m either side
+    of) a chain's reach limit, where the closed-form exclusion is tightest."""
+    G = _genes(7, 24)
+    designs = jax.vmap(SPACE.decode)(G)
+    ws = O.wedge_points(1.1, 0.85, 6, 2, 6)[0]
+    d0 = SPACE.decode(G[0])  # the baseline: points straight below chain 0 at its full stretch L1 + L2
+    L = float(d0.robot.upper_arm + d0.robot.forearm)
+    edge = [[0.0, 0.0, L + e] for e in (-1e-9, 0.0, 1e-9)] + [[0.05, 0.0, L - 0.002 + e] for e in (-1e-9, 0.0, 1e-9)]
+    pts = jnp.asarray(np.concatenate([ws, edge, HARD]))
+    got = jax.jit(lambda ds: O.reach_cover(ds, pts, chunk=64))(designs)
+    want = jax.jit(jax.vmap(lambda d: reconfigurable_reachable(d, pts)))(designs)
+    np.testing.assert_array_equal(np.asarray(got.reachable), np.asarray(want))
+    assert int(got.n_excluded) > 0 and int(got.n_rest) > 64  # all three routes taken, several chunks
+    assert 0 < float(np.mean(np.asarray(want))) < 1
+
+
+@pytest.mark.slow
 def test_fitness_with_and_without_the_screen_is_identical():
     G = _genes(3, 32)
     pb = _problem()
     f_s, aux_s = jax.jit(make_fitness(pb, SPACE))(G)
-    f_e, aux_e = jax.jit(make_fitness(pb, SPACE, task_screen=False))(G)
+    f_e, aux_e = jax.jit(make_fitness(pb, SPACE, screen=False))(G)
     np.testing.assert_array_equal(np.asarray(f_s), np.asarray(f_e))
     for k in aux_s:
         np.testing.assert_array_equal(np.asarray(aux_s[k]), np.asarray(aux_e[k]), err_msg=k)

@@ -55,6 +55,7 @@ import math
 from typing import Any, Mapping, NamedTuple, Optional, Sequence
 
 import jax
+import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Bool, Int
@@ -66,14 +67,14 @@ from ..kinematics import (chain_local, design_ok, limit_terms, loop_closure, loo
                           safe_point)
 from ..trajectory import adept_cycle
 from ..indices import point_kernel
-from ..workspace import (index_fields, mirrored_point_indices, reachable_mask, reconfigurable_reachable,
-                         resolve_redundancy, sample_value)
-from ..workspace.grid import _canonical
+from ..workspace import (index_fields, mirrored_point_indices, reach_interval, reachable_mask,
+                         reconfigurable_reachable, resolve_redundancy, sample_value)
+from ..workspace.grid import _canonical, reachable_point
 
 __all__ = ["METRICS", "METRIC_UNITS", "SENSE", "Problem", "ObjectiveError", "evaluate_design",
            "evaluate_population", "make_fitness", "wedge_points", "cylinder_points", "INFEASIBLE_OFFSET",
            "fitness_from_metrics", "speed_vertices", "soft_margin", "soft_membership", "task_cover",
-           "TaskCover", "TASK_CHUNK"]
+           "TaskCover", "TASK_CHUNK", "reach_cover", "ReachCover", "REACH_INFLATE"]
 
 METRICS = ("volume", "volume_fixed", "good_volume", "task_index_mean", "task_index_min", "task_coverage",
            "peak_torque", "cycle_time", "peak_speed")
@@ -352,6 +353,24 @@ def soft_membership(design, pts, tau: float):
     return jax.nn.sigmoid(marg / tau)
 
 
+def _chunked_any(flags, chunk: int, fn, init):
+    """``init`` updated by ``fn(i, j, valid)`` for the positions j of the True entries of the flat bool array
+    ``flags``, ``chunk`` positions at a time in a ``lax.while_loop`` (ceil(n / chunk) iterations for n True
+    entries). Positions come from a binary search in the running count (no full-size ``nonzero``)."""
+    count = jnp.cumsum(flags, dtype=jnp.int32)
+    n = count[-1]
+    lane = jnp.arange(chunk, dtype=jnp.int32)
+
+    def body(c):
+        i, acc = c
+        rank = i * chunk + lane  # the rank-th True entry (0-based)
+        j = jnp.minimum(jnp.searchsorted(count, rank + 1, side="left"), flags.shape[0] - 1).astype(jnp.int32)
+        return i + 1, fn(acc, j, rank < n)
+
+    _, out = jax.lax.while_loop(lambda c: c[0] * chunk < n, body, (jnp.zeros((), jnp.int32), init))
+    return out, n
+
+
 #: Samples per exact-evaluation chunk of :func:`task_cover` (the while loop runs ceil(n / TASK_CHUNK) chunks).
 TASK_CHUNK = 256
 
@@ -427,23 +446,86 @@ def task_cover(pb: Problem, designs: ReconfigurableDelta, points=None, *, chunk:
 
     cov1 = jax.vmap(lambda d, f: jax.vmap(lambda q, k: hit(d, q, k))(pts, f))(designs, first) & any_ok
     rest = ikok & ~cov1[..., None] & (ks != first[..., None])
-    flat = rest.reshape(-1)
-    n = jnp.sum(flat, dtype=jnp.int32)
-    size = -(-flat.shape[0] // chunk) * chunk
-    idx = jnp.nonzero(flat, size=size, fill_value=0)[0].astype(jnp.int32)
-    lane = jnp.arange(chunk, dtype=jnp.int32)
 
-    def body(c):
-        i, covered = c
-        j = jax.lax.dynamic_slice(idx, (i * chunk,), (chunk,))
+    def update(covered, j, valid):
         di, pi, ki = j // (N * K), (j // K) % N, j % K
         dd = jax.tree_util.tree_map(lambda a: a[di], designs)
-        h = jax.vmap(hit)(dd, pts[pi], ki) & (i * chunk + lane < n)
-        return i + 1, covered.at[di, pi].max(h)
+        return covered.at[di, pi].max(jax.vmap(hit)(dd, pts[pi], ki) & valid)
 
-    n_chunks = (n + chunk - 1) // chunk
-    _, covered = jax.lax.while_loop(lambda c: c[0] < n_chunks, body, (jnp.zeros((), jnp.int32), cov1))
+    covered, n = _chunked_any(rest.reshape(-1), chunk, update, cov1)
     return TaskCover(covered=covered, n_first=jnp.sum(any_ok, dtype=jnp.int32), n_rest=n, n_sweep=D * N * K)
+
+
+#: Relative inflation of L1 and L2 before the closed-form reach test of :func:`reach_cover` (its certificate).
+REACH_INFLATE = 1e-6
+
+
+class ReachCover(NamedTuple):
+    """Reachability of the workspace points for a population (:func:`reach_cover`).
+
+    Attributes:
+        reachable: (D, N) bool, some R sample reaches point n of design d (IK within the joint limits).
+        n_excluded: (design, point) pairs excluded by the closed-form reach test (no IK run).
+        n_rest: pairs swept over every R sample in the second pass.
+        n_sweep: IK evaluations of the full sweep (D N n_R), for the ratio (the first pass costs D N).
+    """
+
+    reachable: Bool[Array, "d n"]
+    n_excluded: Int[Array, ""]
+    n_rest: Int[Array, ""]
+    n_sweep: int
+
+
+def reach_cover(designs: ReconfigurableDelta, points, *, chunk: int = TASK_CHUNK) -> ReachCover:
+    """:func:`deltajax.workspace.reconfigurable_reachable` for a population of designs, with the same flags
+    and a fraction of its IK evaluations.
+
+    1. Exclusion (the certificate): :func:`deltajax.workspace.reach_interval` of the design with L1 and L2
+       inflated by :data:`REACH_INFLATE` (relative). Some chain cannot close its loop at any R when that
+       interval is empty (its necessary condition, rho <= sqrt(L2^2 - p_y^2) + L1 for every chain, fails). The
+       inflation puts every excluded point at least 1e-6 L1 outside the true reach, where the IK's discriminant
+       is below -1e-10 m^2 (for L2' = sqrt(L2^2 - p_y^2) itself inflated to >= 1.4e-3 L2), five orders of
+       magnitude beyond its rounding (~1e-15 m^2): the exact IK would fail at every sample too.
+    2. First pass: the exact IK (:func:`deltajax.workspace.grid.reachable_point`, the sweep's own test) at one
+       sample per remaining pair, the middle of the interval's sample range: reachable if it passes.
+    3. Second pass: every sample of the pairs the first pass left undecided, compacted over the population and
+       evaluated in chunks of ``chunk`` pairs by a ``lax.while_loop``.
+
+    Only step 1 skips samples without running the IK on them, and only where no sample can pass.
+    """
+    dt = designs.R_min.dtype
+    pts = jnp.asarray(points, dt)
+    D, N, K = designs.R_min.shape[0], pts.shape[0], designs.n_R
+
+    def window(d):  # (none (N,), mid (N,)): certified unreachable, and the first sample to try
+        infl = eqx.tree_at(lambda r: (r.robot.upper_arm, r.robot.forearm), d,
+                           (d.robot.upper_arm * (1.0 + REACH_INFLATE), d.robot.forearm * (1.0 + REACH_INFLATE)))
+        lo, hi = jax.vmap(lambda q: reach_interval(infl, q))(pts)
+        none = lo > hi  # False for NaN: then the pair is swept
+        step_ok = d.R_step > 0.0
+        k_lo = jnp.ceil((lo - d.R_min) / jnp.where(step_ok, d.R_step, 1.0))
+        k_hi = jnp.floor((hi - d.R_min) / jnp.where(step_ok, d.R_step, 1.0))
+        k_lo = jnp.where(step_ok & jnp.isfinite(k_lo), jnp.clip(k_lo, 0, K - 1), 0)
+        k_hi = jnp.where(step_ok & jnp.isfinite(k_hi), jnp.clip(k_hi, 0, K - 1), K - 1)
+        mid = jnp.clip(jnp.floor(0.5 * (k_lo + k_hi)), 0, K - 1).astype(jnp.int32)
+        return none, mid
+
+    none, mid = jax.vmap(window)(designs)
+
+    def ok_at(d, q, k):
+        return reachable_point(d.at(d.R_min + k.astype(dt) * d.R_step), q)
+
+    ok1 = jax.vmap(lambda d, m: jax.vmap(lambda q, k: ok_at(d, q, k))(pts, m))(designs, mid) & ~none
+    ks = jnp.arange(K, dtype=jnp.int32)
+
+    def update(reach, j, valid):
+        di, pi = j // N, j % N
+        dd = jax.tree_util.tree_map(lambda a: a[di], designs)
+        h = jax.vmap(lambda d, q: jnp.any(jax.vmap(lambda k: ok_at(d, q, k))(ks)))(dd, pts[pi])
+        return reach.at[di, pi].max(h & valid)
+
+    reach, n = _chunked_any((~none & ~ok1).reshape(-1), chunk, update, ok1)
+    return ReachCover(reachable=reach, n_excluded=jnp.sum(none, dtype=jnp.int32), n_rest=n, n_sweep=D * N * K)
 
 
 def evaluate_design(pb: Problem, design, needed: Optional[Sequence[str]] = None, *,
@@ -463,10 +545,11 @@ def evaluate_design(pb: Problem, design, needed: Optional[Sequence[str]] = None,
     return _evaluate(pb, design, needed, smooth, None)
 
 
-def _evaluate(pb: Problem, design, needed, smooth, covered) -> dict[str, jax.Array]:
+def _evaluate(pb: Problem, design, needed, smooth, covered, reach=None) -> dict[str, jax.Array]:
     """:func:`evaluate_design`; ``covered`` (N_task,) bool: the task points' coverage flags computed for the
     whole population by :func:`task_cover` (then the task index terms are not computed and must not be
-    needed), or ``None``: the per-design exact sweep."""
+    needed), or ``None``: the per-design exact sweep; ``reach`` (N_ws,) bool: the workspace points'
+    reachability from :func:`reach_cover`, or ``None``: the per-design sweep."""
     need = set(METRICS if needed is None else needed)
     need.add("task_coverage")
     recon = isinstance(design, ReconfigurableDelta)
@@ -482,7 +565,8 @@ def _evaluate(pb: Problem, design, needed, smooth, covered) -> dict[str, jax.Arr
 
     if "volume" in need:
         if smooth is None:
-            reach = reconfigurable_reachable(design, pts) if recon else reachable_mask(design, pts)
+            if reach is None:
+                reach = reconfigurable_reachable(design, pts) if recon else reachable_mask(design, pts)
             out["volume"] = jnp.sum(jnp.where(reach, w, 0.0))
         else:
             out["volume"] = jnp.sum(w * soft_membership(design, pts, smooth))
@@ -565,34 +649,37 @@ def fitness_from_metrics(pb: Problem, m: Mapping[str, jax.Array]) -> jax.Array:
 
 
 def evaluate_population(pb: Problem, space, genes: jax.Array, needed: Optional[Sequence[str]] = None, *,
-                        task_screen: bool = True):
+                        screen: bool = True):
     """Metrics of a population of genes (P, d) -> {name: (P,)}; decodes with the design space.
 
-    ``task_screen=True`` (default): when the population is reconfigurable and the task index terms
-    (``task_index_mean``/``task_index_min``) are not needed, the task coverage comes from
-    :func:`task_cover` for the whole population at once (the same flags as the exact sweep, with a
-    fraction of its exact evaluations; the task index terms are then absent from the result). ``False``: every
-    design runs the exact sweep of :func:`evaluate_design`.
+    ``screen=True`` (default), for a reconfigurable population: the volume's reachability comes from
+    :func:`reach_cover` and, when the task index terms (``task_index_mean``/``task_index_min``) are not
+    needed, the task coverage from :func:`task_cover`, each for the whole population at once (the same flags
+    as the per-design sweeps with a fraction of their evaluations; the task index terms are then absent from
+    the result). ``False``: every design runs the sweeps of :func:`evaluate_design`.
     """
     need = set(METRICS if needed is None else needed) | {"task_coverage"}
     designs = jax.vmap(space.decode)(genes)
-    if task_screen and isinstance(designs, ReconfigurableDelta) and not need & {"task_index_mean",
-                                                                                 "task_index_min"}:
-        cover = task_cover(pb, designs)
-        return jax.vmap(lambda d, c: _evaluate(pb, d, needed, None, c))(designs, cover.covered)
-    return jax.vmap(lambda d: evaluate_design(pb, d, needed))(designs)
+    if not (screen and isinstance(designs, ReconfigurableDelta)):
+        return jax.vmap(lambda d: evaluate_design(pb, d, needed))(designs)
+    reach = covered = None
+    if "volume" in need:
+        reach = reach_cover(designs, pb.ws_points).reachable
+    if not need & {"task_index_mean", "task_index_min"}:
+        covered = task_cover(pb, designs).covered
+    return jax.vmap(lambda d, c, r: _evaluate(pb, d, needed, None, c, r))(designs, covered, reach)
 
 
-def make_fitness(pb: Problem, space, *, task_screen: bool = True):
+def make_fitness(pb: Problem, space, *, screen: bool = True):
     """``genes (P, d) -> (fitness (P,), aux)`` for :func:`deltajax.optimize.run_ga` (jit-able, vmapped).
 
-    ``aux`` holds the needed metrics, ``violation`` and ``feasible`` of each design. ``task_screen``: see
+    ``aux`` holds the needed metrics, ``violation`` and ``feasible`` of each design. ``screen``: see
     :func:`evaluate_population` (the fitness is the same either way; ``False`` is the exact per-design sweep).
     """
     needed = tuple(sorted(pb.needed | {"peak_torque"}))
 
     def fitness(genes):
-        m = evaluate_population(pb, space, genes, needed, task_screen=task_screen)
+        m = evaluate_population(pb, space, genes, needed, screen=screen)
         fit = jax.vmap(lambda mm: fitness_from_metrics(pb, mm))(m)
         return fit, m
 
