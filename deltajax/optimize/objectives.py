@@ -44,6 +44,13 @@ v = max(0, coverage_min - coverage) + [cycle not reachable] + max(0, L1 + L2 - m
   feasible design beats every infeasible one and infeasible ones are ranked by violation.
 * ``penalty``: objective + ``constraints.penalty`` * v.
 
+Population level (:func:`make_fitness`, :func:`evaluate_population`, ``screen=True``): the R sweeps of the volume
+and of the task coverage run for the whole population at once, skipping only samples that cannot change the
+answer (:func:`reach_cover`, :func:`task_cover`: a certified closed-form exclusion, one exact sample per point,
+then the exact sweep of the undecided points in ``lax.while_loop`` chunks); the flags, hence the fitness, are
+the per-design sweeps' bit for bit (tests/test_fitness_screen.py). :func:`evaluate_design` stays the per-design,
+vmappable form.
+
 Fitness (minimised): sum_j w_j * s_j * m_j / m_j(baseline), s_j = -1 for metrics to maximise, +1 to minimise.
 The baseline design therefore has fitness sum_j w_j s_j, and -0.1 below it means "10 % better, weighted".
 """
@@ -481,11 +488,12 @@ def reach_cover(designs: ReconfigurableDelta, points, *, chunk: int = TASK_CHUNK
     and a fraction of its IK evaluations.
 
     1. Exclusion (the certificate): :func:`deltajax.workspace.reach_interval` of the design with L1 and L2
-       inflated by :data:`REACH_INFLATE` (relative). Some chain cannot close its loop at any R when that
-       interval is empty (its necessary condition, rho <= sqrt(L2^2 - p_y^2) + L1 for every chain, fails). The
-       inflation puts every excluded point at least 1e-6 L1 outside the true reach, where the IK's discriminant
-       is below -1e-10 m^2 (for L2' = sqrt(L2^2 - p_y^2) itself inflated to >= 1.4e-3 L2), five orders of
-       magnitude beyond its rounding (~1e-15 m^2): the exact IK would fail at every sample too.
+       inflated by :data:`REACH_INFLATE` = 1e-6 (relative). When that interval is empty, at every R some chain
+       has rho = |(d_x, p_z)| > L1' + L2'' (L1' = (1 + 1e-6) L1, L2'' = sqrt((1 + 1e-6)^2 L2^2 - p_y^2)),
+       beyond the true outer reach L1 + L2' (L2' = sqrt(L2^2 - p_y^2)) by delta >= 1e-6 L1 + (L2'' - L2'), with
+       L2'' - L2' >= 1e-6 L2^2 / (2 L2''). The IK's discriminant rho^2 - m^2 is then <= -(rho + m)(delta L2' / L1
+       + delta^2 / (2 L1)) <= about -2e-6 L2^2 (and -1e-12 L1^2 in the worst corner), many orders beyond its
+       rounding (~1e-15 (L1 + L2)^2): the exact IK fails at every sample, so no sample is skipped wrongly.
     2. First pass: the exact IK (:func:`deltajax.workspace.grid.reachable_point`, the sweep's own test) at one
        sample per remaining pair, the middle of the interval's sample range: reachable if it passes.
     3. Second pass: every sample of the pairs the first pass left undecided, compacted over the population and
