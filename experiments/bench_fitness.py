@@ -134,7 +134,8 @@ def main(argv=None):
     reach = jax.jit(lambda G: reach_cover(jax.vmap(space.decode)(G), pb.ws_points))(genes)
     print(f"population {a.population}, terms {terms}; load {os.getloadavg()[0]:.1f}")
     print(f"fitness old vs new: max |diff| {diff:.2e} (must be <= 1e-12), NaN pattern "
-          f"{'identical' if same_nan else 'DIFFERENT'}; task coverage and volume {'identical' if same_cov else 'DIFFERENT'}")
+          f"{'identical' if same_nan else 'DIFFERENT'}; task coverage and volume "
+          f"{'identical' if same_cov else 'DIFFERENT'}")
     print(f"task_cover: exact evaluations {int(cover.n_first)} (first pass) + {int(cover.n_rest)} (rest of the "
           f"uncovered points) = {int(cover.n_first) + int(cover.n_rest)} of the sweep's {cover.n_sweep} "
           f"({(int(cover.n_first) + int(cover.n_rest)) / cover.n_sweep:.1%}); chunks of {TASK_CHUNK}: "
