@@ -17,7 +17,7 @@ import numba as nb
 import numpy as np
 
 from ._nb_kernel import (INV_COND, JACOBI, K_TILDE, MANIPULABILITY, OMEGA_F, OMEGA_V, OPTS, SIGMA_MIN_F,
-                         SIGMA_MIN_V, as_tuple4, ik_ok, jacobian_blocks, point_value, sigma_tilde, sv_matrix)
+                         SIGMA_MIN_V, as_tuple4, ik_ok_all, jacobian_blocks, point_value, sigma_tilde, sv_matrix)
 
 _inline = dict(inline="always", **OPTS)
 
@@ -238,6 +238,40 @@ def _verify(x, y, z, k0, n, R_min, R_step, r, L1, L2, lim, kt, crit, feas, hi, T
     return bk, bv, cnt
 
 
+#: samples tested per step of :func:`trim_window` (one vectorised block of IK tests)
+TRIM_BLOCK = 8
+
+
+@nb.njit(**_inline)
+def trim_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, tb):
+    """[k0, k1) trimmed to its first and last IK-feasible samples (k0 == k1 where none is feasible).
+
+    The IK test (:func:`._nb_kernel.ik_ok_all`, the exact kernel's loop closures) runs on blocks of
+    :data:`TRIM_BLOCK` samples from each end, branch-free inside a block (4x faster than the scalar test with
+    early exit, measured); ``tb`` is a (TRIM_BLOCK,) bool scratch array. Samples past the window's end in the
+    last block are tested but never used.
+    """
+    while k0 < k1:
+        for i in range(TRIM_BLOCK):
+            tb[i] = ik_ok_all(x, y, z, R_min + (k0 + i) * R_step, r, L1, L2, lim)
+        i = 0
+        while i < TRIM_BLOCK and k0 < k1 and not tb[i]:
+            k0 += 1
+            i += 1
+        if i < TRIM_BLOCK:
+            break
+    while k1 > k0:
+        for i in range(TRIM_BLOCK):
+            tb[i] = ik_ok_all(x, y, z, R_min + (k1 - 1 - i) * R_step, r, L1, L2, lim)
+        i = 0
+        while i < TRIM_BLOCK and k1 > k0 and not tb[i]:
+            k1 -= 1
+            i += 1
+        if i < TRIM_BLOCK:
+            break
+    return k0, k1
+
+
 @nb.njit(**_inline)
 def point_window(pts, k_start, k_stop, j):
     """Point j made mirror-canonical (y -> |y|) and its sample window [k0, k1)."""
@@ -268,17 +302,14 @@ def resolve_screened(pts, k_start, k_stop, R_min, R_step, r, L1, L2, lim, kt, cr
     """
     lim, kt = as_tuple4(lim), as_tuple4(kt)
     lo, hi, feas = window_buffers(k_start, k_stop)
+    tb = np.empty(TRIM_BLOCK, np.bool_)
     for j in range(pts.shape[0]):
         x, y, z, k0, k1 = point_window(pts, k_start, k_stop, j)
         bk = -1
         bv = -math.inf
         cnt = 0
         fb = 0
-        # trim the window to its first and last IK-feasible samples (scalar test, early exit)
-        while k0 < k1 and not ik_ok(x, y, z, R_min + k0 * R_step, r, L1, L2, lim):
-            k0 += 1
-        while k1 > k0 and not ik_ok(x, y, z, R_min + (k1 - 1) * R_step, r, L1, L2, lim):
-            k1 -= 1
+        k0, k1 = trim_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, tb)
         if k1 > k0:
             screen_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, kt, crit, tol, lo, hi, feas)
             T = -math.inf
