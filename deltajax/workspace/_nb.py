@@ -18,11 +18,11 @@ import numba as nb
 import numpy as np
 
 from ._nb_kernel import (CA0, CA1, CA2, CRITERION, CUBIC, FAST, JACOBI, N_IDX, OPTS, SA0, SA1, SA2, SV_METHODS,
-                         as_tuple4, ik_ok, kt_tuple, limits_tuple, point_indices, point_value)
+                         as_tuple4, ik_ok, ik_ok_all, kt_tuple, limits_tuple, point_indices, point_value)
 from ._nb_screen import resolve_screened, screen_audit, screen_window, tcubic, tcubic2
 
 __all__ = ["N_IDX", "CRITERION", "SV_METHODS", "JACOBI", "FAST", "limits_tuple", "kt_tuple", "fixed_fields",
-           "fields_at", "rows", "fixed_mask", "resolve", "resolve_screened", "screen_window", "screen_audit", "any_reach",
+           "fixed_fields_dense", "fields_at", "rows", "fixed_mask", "resolve", "resolve_screened", "screen_window", "screen_audit", "any_reach",
            "reach_k_range", "parallel"]
 
 # names the tests and benchmarks have used since the first round
@@ -57,7 +57,52 @@ def fixed_fields(x, y, z, R, r, L1, L2, lim, kt, out, ok, method=JACOBI):
     layouts, or a strided 2-D block, do not vectorise: measured 4x slower).
     """
     lim, kt = as_tuple4(lim), as_tuple4(kt)
+    # the whole kernel only where every loop closes within limits (a grid is mostly unreachable: 80 % of the
+    # 2 mm Table-6 grid): a vectorised IK pass, the reachable points gathered into contiguous arrays, the
+    # kernel over those, the results scattered back. The same inlined kernel on the same floats: the values
+    # are those of the kernel run on every point (tested).
+    n = x.shape[0]
+    xs, ys, zs, idx = np.empty(n), np.empty(n), np.empty(n), np.empty(n, np.int64)
+    for j in range(n):
+        ok[j] = ik_ok_all(x[j], abs(y[j]), z[j], R, r, L1, L2, lim)
+    m = 0
+    for j in range(n):
+        if ok[j]:
+            xs[m] = x[j]
+            ys[m] = abs(y[j])
+            zs[m] = z[j]
+            idx[m] = j
+            m += 1
+    nan = math.nan
+    for o in out:
+        o[:] = nan
+    cols = (np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m), np.empty(m))
+    fm = np.empty(m, np.bool_)
     # one loop per solver, the method a constant in each (LLVM does not unswitch a loop body this large)
+    if method == JACOBI:
+        _fields_loop(xs[:m], ys[:m], zs[:m], R, r, L1, L2, lim, kt, cols, fm, JACOBI)
+    else:
+        _fields_loop(xs[:m], ys[:m], zs[:m], R, r, L1, L2, lim, kt, cols, fm, FAST)
+    o0, o1, o2, o3, o4, o5, o6, o7 = out
+    c0, c1, c2, c3, c4, c5, c6, c7 = cols
+    for t in range(m):
+        j = idx[t]
+        ok[j] = fm[t]
+        o0[j] = c0[t]
+        o1[j] = c1[t]
+        o2[j] = c2[t]
+        o3[j] = c3[t]
+        o4[j] = c4[t]
+        o5[j] = c5[t]
+        o6[j] = c6[t]
+        o7[j] = c7[t]
+
+
+@nb.njit(**OPTS)
+def fixed_fields_dense(x, y, z, R, r, L1, L2, lim, kt, out, ok, method=JACOBI):
+    """:func:`fixed_fields` with the kernel run on every point (no IK pass, no gather): the reference the
+    compacted version is tested against, and the benchmark of the branch-free loop."""
+    lim, kt = as_tuple4(lim), as_tuple4(kt)
     if method == JACOBI:
         _fields_loop(x, y, z, R, r, L1, L2, lim, kt, out, ok, JACOBI)
     else:

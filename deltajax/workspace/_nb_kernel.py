@@ -188,6 +188,14 @@ def chain_ok(x, y, z, R, r, L1, L2, lim, i):
     return loop_closure(px + r - R, py, pz, L1, L2, lim)[5]
 
 
+@nb.njit(**_inline)
+def ik_ok_all(x, y, z, R, r, L1, L2, lim):
+    """:func:`ik_ok` without the early exit (all three chains, branch-free: vectorises over samples or points;
+    the same loop closures, hence the same decision)."""
+    return (chain_ok(x, y, z, R, r, L1, L2, lim, 0) & chain_ok(x, y, z, R, r, L1, L2, lim, 1)
+            & chain_ok(x, y, z, R, r, L1, L2, lim, 2))
+
+
 @nb.njit(**OPTS)
 def ik_ok(x, y, z, R, r, L1, L2, lim):
     """All three chains close within limits at canonical P (y = |y|); stops at the first failing chain."""

@@ -17,7 +17,8 @@ import numba as nb
 import numpy as np
 
 from ._nb_kernel import (INV_COND, JACOBI, K_TILDE, MANIPULABILITY, OMEGA_F, OMEGA_V, OPTS, SIGMA_MIN_F,
-                         SIGMA_MIN_V, as_tuple4, ik_ok, jacobian_blocks, point_value, sigma_tilde, sv_matrix)
+                         SIGMA_MIN_V, as_tuple4, criterion_of, ik_ok_all, jacobian_blocks, point_kernel, point_value,
+                         sigma_tilde, sv_matrix)
 
 _inline = dict(inline="always", **OPTS)
 
@@ -238,6 +239,40 @@ def _verify(x, y, z, k0, n, R_min, R_step, r, L1, L2, lim, kt, crit, feas, hi, T
     return bk, bv, cnt
 
 
+#: samples tested per step of :func:`trim_window` (one vectorised block of IK tests)
+TRIM_BLOCK = 8
+
+
+@nb.njit(**OPTS)  # a call per point, not inlined: inlined into resolve_screened it is not vectorised (measured)
+def trim_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, tb):
+    """[k0, k1) trimmed to its first and last IK-feasible samples (k0 == k1 where none is feasible).
+
+    The IK test (:func:`._nb_kernel.ik_ok_all`, the exact kernel's loop closures) runs on blocks of
+    :data:`TRIM_BLOCK` samples from each end, branch-free inside a block (4x faster than the scalar test with
+    early exit, measured); ``tb`` is a (TRIM_BLOCK,) bool scratch array. Samples past the window's end in the
+    last block are tested but never used.
+    """
+    while k0 < k1:
+        for i in range(TRIM_BLOCK):
+            tb[i] = ik_ok_all(x, y, z, R_min + (k0 + i) * R_step, r, L1, L2, lim)
+        i = 0
+        while i < TRIM_BLOCK and k0 < k1 and not tb[i]:
+            k0 += 1
+            i += 1
+        if i < TRIM_BLOCK:
+            break
+    while k1 > k0:
+        for i in range(TRIM_BLOCK):
+            tb[i] = ik_ok_all(x, y, z, R_min + (k1 - 1 - i) * R_step, r, L1, L2, lim)
+        i = 0
+        while i < TRIM_BLOCK and k1 > k0 and not tb[i]:
+            k1 -= 1
+            i += 1
+        if i < TRIM_BLOCK:
+            break
+    return k0, k1
+
+
 @nb.njit(**_inline)
 def point_window(pts, k_start, k_stop, j):
     """Point j made mirror-canonical (y -> |y|) and its sample window [k0, k1)."""
@@ -253,6 +288,22 @@ def window_buffers(k_start, k_stop):
     return np.empty(width), np.empty(width), np.empty(width, np.uint8)
 
 
+#: points per batch of :func:`resolve_screened`: their candidates are verified together in one vectorised loop
+VERIFY_BATCH = 256
+
+
+@nb.njit(**OPTS)
+def _values_at(cx, cy, cz, ck, n, R_min, R_step, r, L1, L2, lim, kt, crit, cf, cv):
+    """(feasible, criterion value) of the exact kernel at the candidates c < n (canonical point (cx, cy, cz)[c],
+    sample ck[c]): :func:`._nb_kernel.point_value` on each, in one branch-free loop over the candidates
+    (vectorised across points; the same expressions, hence the same values as the scalar call)."""
+    for c in range(n):
+        f, i0, i1, i2, i3, i4, i5, i6, i7 = point_kernel(cx[c], cy[c], cz[c], R_min + ck[c] * R_step, r, L1, L2,
+                                                         lim, kt, JACOBI)
+        cf[c] = f
+        cv[c] = criterion_of(crit, i0, i1, i2, i3, i4, i5, i6, i7)
+
+
 @nb.njit(**OPTS)
 def resolve_screened(pts, k_start, k_stop, R_min, R_step, r, L1, L2, lim, kt, crit, tol, best_k, best_v, n_full,
                      n_fallback):
@@ -261,43 +312,75 @@ def resolve_screened(pts, k_start, k_stop, R_min, R_step, r, L1, L2, lim, kt, cr
     Per point: :func:`screen_window` gives intervals [lo_k, hi_k] around the exact value v_k of every
     feasible sample; with T = max_k lo_k, a sample with hi_k < T has v_k < T <= v_m for the sample m of the
     largest lo, so it cannot be the (first) argmax. The exact kernel then runs on the candidates
-    (hi_k >= T) in increasing k with the comparison of :func:`._nb.resolve` (strict >: ties to the smallest k).
-    Certification: every non-candidate has v_k <= hi_k < T, so if the best exact candidate value is >= T the
-    result is the exact sweep's; otherwise (only possible if a bound failed, e.g. a NaN exact value at the
-    sample defining T) the point falls back to the full exact sweep of its window (counted in n_fallback).
+    (hi_k >= T) and they are compared in increasing k with the comparison of :func:`._nb.resolve` (strict >:
+    ties to the smallest k). Certification: every non-candidate has v_k <= hi_k < T, so if the best exact
+    candidate value is >= T the result is the exact sweep's; otherwise (only possible if a bound failed, e.g. a
+    NaN exact value at the sample defining T) the point falls back to the full exact sweep of its window
+    (counted in n_fallback). The candidates of :data:`VERIFY_BATCH` points are evaluated together
+    (:func:`_values_at`, a vectorised loop: 5x the scalar exact kernel) before each point's comparison.
     """
     lim, kt = as_tuple4(lim), as_tuple4(kt)
     lo, hi, feas = window_buffers(k_start, k_stop)
-    for j in range(pts.shape[0]):
-        x, y, z, k0, k1 = point_window(pts, k_start, k_stop, j)
-        bk = -1
-        bv = -math.inf
-        cnt = 0
-        fb = 0
-        # trim the window to its first and last IK-feasible samples (scalar test, early exit)
-        while k0 < k1 and not ik_ok(x, y, z, R_min + k0 * R_step, r, L1, L2, lim):
-            k0 += 1
-        while k1 > k0 and not ik_ok(x, y, z, R_min + (k1 - 1) * R_step, r, L1, L2, lim):
-            k1 -= 1
-        if k1 > k0:
-            screen_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, kt, crit, tol, lo, hi, feas)
+    width = lo.shape[0]
+    tb = np.empty(TRIM_BLOCK, np.bool_)
+    B = VERIFY_BATCH
+    cap = B * width
+    cx, cy, cz, ck = np.empty(cap), np.empty(cap), np.empty(cap), np.empty(cap, np.int64)
+    cf, cv = np.empty(cap, np.bool_), np.empty(cap)
+    cstart = np.empty(B + 1, np.int64)
+    Tb, kb0, kb1 = np.empty(B), np.empty(B, np.int64), np.empty(B, np.int64)
+    anyb = np.empty(B, np.bool_)
+    npts = pts.shape[0]
+    for base in range(0, npts, B):
+        top = min(base + B, npts)
+        nc = 0
+        for j in range(base, top):
+            x, y, z, k0, k1 = point_window(pts, k_start, k_stop, j)
+            k0, k1 = trim_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, tb)
+            cstart[j - base] = nc
             T = -math.inf
             anyf = False
-            for i in range(k1 - k0):
-                if feas[i] != 0:
-                    anyf = True
-                    T = max(T, lo[i])
-            if anyf:
-                bk, bv, cnt = _verify(x, y, z, k0, k1 - k0, R_min, R_step, r, L1, L2, lim, kt, crit, feas, hi, T)
-                if not (bv >= T):  # a bound failed: the exact sweep of the window
-                    fb = 1
-                    bk, bv, c2 = _verify(x, y, z, k0, k1 - k0, R_min, R_step, r, L1, L2, lim, kt, crit, feas, hi,
-                                         -math.inf)
-                    cnt += c2
-        best_k[j] = bk
-        best_v[j] = bv
-        n_full[j] = cnt
-        n_fallback[j] = fb
+            if k1 > k0:
+                screen_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, kt, crit, tol, lo, hi, feas)
+                for i in range(k1 - k0):
+                    if feas[i] != 0:
+                        anyf = True
+                        T = max(T, lo[i])
+                if anyf:
+                    for i in range(k1 - k0):
+                        if feas[i] != 0 and hi[i] >= T:
+                            cx[nc] = x
+                            cy[nc] = y
+                            cz[nc] = z
+                            ck[nc] = k0 + i
+                            nc += 1
+            Tb[j - base] = T
+            anyb[j - base] = anyf
+            kb0[j - base] = k0
+            kb1[j - base] = k1
+        cstart[top - base] = nc
+        _values_at(cx, cy, cz, ck, nc, R_min, R_step, r, L1, L2, lim, kt, crit, cf, cv)
+        for j in range(base, top):
+            t = j - base
+            bk = -1
+            bv = -math.inf
+            for c in range(cstart[t], cstart[t + 1]):
+                if cf[c] and cv[c] > bv:
+                    bv = cv[c]
+                    bk = ck[c]
+            cnt = cstart[t + 1] - cstart[t]
+            fb = 0
+            if anyb[t] and not (bv >= Tb[t]):  # a bound failed: the exact sweep of the window
+                fb = 1
+                x, y, z, k0, k1 = pts[j, 0], abs(pts[j, 1]), pts[j, 2], kb0[t], kb1[t]
+                screen_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, kt, crit, tol, lo, hi, feas)
+                bk, bv, c2 = _verify(x, y, z, k0, k1 - k0, R_min, R_step, r, L1, L2, lim, kt, crit, feas, hi,
+                                     -math.inf)
+                cnt += c2
+            best_k[j] = bk
+            best_v[j] = bv
+            n_full[j] = cnt
+            n_fallback[j] = fb
 
 
 @nb.njit(**OPTS)
