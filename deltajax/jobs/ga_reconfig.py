@@ -130,13 +130,14 @@ def run(ctx) -> None:
                           f"Sobol (scipy.stats.qmc), seed {seed}", grids="search grids, regular workspace skipped")
             # the screen's feasible non-dominated set on the job's objectives (regular workspace evaluated for the
             # feasible designs only) seeds NSGA-II: the GA's population crowds the primary's end of the front
-            scr_front = W.screen_front(ev, sc, objs, scale, cap=SCREEN_FRONT_EVAL)
+            scr_front = W.screen_front(ev, sc, objs, scale, cap=SCREEN_FRONT_EVAL, layers=True)
             res.put_axis("screen", "front_design", np.arange(len(scr_front)), units="1")
             res.put("screen", "front_genes", scr_front, units="1", dims=("front_design", "gene"),
-                    attrs={"meaning": "feasible non-dominated screen designs on the search grids (seed NSGA-II)"})
+                    attrs={"meaning": "feasible screen designs in non-dominated-sorting order on the search grids "
+                                      "(the first population_size/2 seed NSGA-II)"})
             ctx.log(f"screen: {len(sc['X'])} Sobol designs, {int(sc['feasible'].sum())} feasible; best {primary} "
                     f"{sc[primary][sc['order'][0]] if len(sc['order']) else float('nan'):.4g}; "
-                    f"{len(scr_front)} non-dominated on {objs} seed NSGA-II")
+                    f"its feasible designs ranked by non-dominated sorting on {objs} seed NSGA-II")
             mark("screen")
         seeds = np.concatenate([seeds, top])
 
@@ -207,7 +208,7 @@ def run(ctx) -> None:
         front = nsga2(W.pareto_eval(ev, objs, scale), space.dim, len(objs), n_constr=len(CONSTRAINT_NAMES),
                       pop_size=s.pareto["population_size"], n_gen=s.pareto["generations"], seed=seed,
                       initial=np.concatenate([base_genes[None], best[None],
-                                              W.spread_rows(scr_front, s.pareto["population_size"] // 2),
+                                              scr_front[:s.pareto["population_size"] // 2],
                                               gres.final_population]), ref=ref,
                       progress=bar.update)
         bar.close()

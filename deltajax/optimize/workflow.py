@@ -32,7 +32,7 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["SetupError", "setup", "designer_problem", "screen", "screen_front", "spread_rows", "ga_fitness", "pareto_eval", "refine_designs",
+__all__ = ["SetupError", "setup", "designer_problem", "screen", "screen_front", "ga_fitness", "pareto_eval", "refine_designs",
            "RefineOutcome", "verify", "recommend", "load_checkpoint", "put_checkpoint", "restage", "stages_done",
            "job_fingerprint", "RECOMMEND_RULES"]
 
@@ -160,12 +160,14 @@ def screen(evaluate_cheap: Callable[[np.ndarray], dict], space, primary: str, se
 
 
 def screen_front(evaluate: Callable[[np.ndarray], dict], sc: Mapping[str, Any], objs: Sequence[str],
-                 scale: np.ndarray, *, cap: int = 1024) -> np.ndarray:
+                 scale: np.ndarray, *, cap: int = 1024, layers: bool = False) -> np.ndarray:
     """Genes of the feasible non-dominated set of a :func:`screen` on the job's objectives.
 
     The screen's feasible designs (at most ``cap``, best primary first) are evaluated with ``evaluate`` (the
     search grids *with* the regular workspace); their feasible non-dominated set, sorted by the first objective,
-    is returned ((k, dim)). It seeds NSGA-II, whose other seeds (the GA's population) crowd the primary's end.
+    is returned ((k, dim)). ``layers=True``: every feasible design, in non-dominated-sorting order (the front,
+    then the front of the rest, ...; each layer sorted by the first objective). It seeds NSGA-II, whose other
+    seeds (the GA's population) crowd the primary's end.
     """
     from .pareto import non_dominated
 
@@ -174,17 +176,15 @@ def screen_front(evaluate: Callable[[np.ndarray], dict], sc: Mapping[str, Any], 
         return np.zeros((0, np.asarray(sc["X"]).shape[1]))
     m = evaluate(X)
     F = objective_matrix(m, objs, scale)
-    ok = np.flatnonzero(m["feasible"].astype(bool) & np.all(np.isfinite(F), axis=1))
-    nd = ok[non_dominated(F[ok])] if len(ok) else ok
-    return X[nd[np.argsort(F[nd, 0], kind="stable")]]
-
-
-def spread_rows(X: np.ndarray, k: int) -> np.ndarray:
-    """At most ``k`` rows of ``X`` evenly spread over its order (both ends kept): a sorted front thinned."""
-    X = np.asarray(X)
-    if len(X) <= k:
-        return X
-    return X[np.unique(np.round(np.linspace(0, len(X) - 1, k)).astype(int))]
+    rest = np.flatnonzero(m["feasible"].astype(bool) & np.all(np.isfinite(F), axis=1))
+    out = []
+    while len(rest):
+        nd = rest[non_dominated(F[rest])]
+        out.append(nd[np.argsort(F[nd, 0], kind="stable")])
+        if not layers:
+            break
+        rest = np.setdiff1d(rest, nd)
+    return X[np.concatenate(out)] if out else X[:0]
 
 
 # -- GA and NSGA-II --------------------------------------------------------------------------------------------
