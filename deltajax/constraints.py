@@ -553,9 +553,9 @@ def regular_workspace(good_fn: Callable[[Array], Array], points, r, z, hd_ratio:
 
 
 #: Samples of the unit cylinder used by :func:`refine_cylinder` (rings, angles over the 60 deg wedge, levels).
-REFINE_SAMPLES = (4, 4, 5)
+REFINE_SAMPLES = (4, 3, 5)
 #: Bisection steps on the diameter and golden-section steps on the centre height of :func:`refine_cylinder`.
-REFINE_BISECT, REFINE_GOLDEN = 14, 14
+REFINE_BISECT, REFINE_GOLDEN = 12, 14
 
 
 def cylinder_samples(hd_ratio: float, n_r: int = REFINE_SAMPLES[0], n_phi: int = REFINE_SAMPLES[1],
@@ -582,10 +582,12 @@ def refine_cylinder(good_fn: Callable[[Array], Array], start: RegularWorkspace, 
     D_hi = D_grid + 2 (2 dr + dz / hd_ratio) (dr, dz: the grid's ring and level spacing): ``n_bisect`` steps,
     error <= D_hi / 2^n_bisect, from below (0 when the centre itself is not good). The centre c maximising D*(c)
     is searched by golden section on [c_grid - 2 dz, c_grid + 2 dz] (``n_golden`` steps, final bracket
-    4 dz x 0.618^n_golden; the best of the evaluated centres and the grid's own centre is kept). With the
-    defaults (14 / 14) on the fine verification grid (dz = 15 mm): D error <= ~0.04 mm from the bisection, and
-    the centre within 0.03 mm of the bracket's optimum, which costs at most 2 x 0.03 mm / hd_ratio in D if the
-    height binds (< 0.1 % in volume for D ~ 0.4 m). The samples (4 rings x 4 angles x 5 levels by default) are
+    4 dz x 0.618^n_golden = 0.07 mm on the fine verification grid; the best of the last two centres and the
+    grid's own centre is kept). With the defaults (12 / 14) on the fine verification grid (dz = 15 mm,
+    dr = 12.9 mm, D ~ 0.4 m, hd_ratio 0.5: D_hi ~ 0.5 m): D error <= D_hi / 4096 ~ 0.12 mm from the bisection,
+    and a centre within 0.07 mm of the bracket's optimum costs at most 2 x 0.07 mm / hd_ratio = 0.3 mm in D where
+    the height binds: in all, <= ~0.1 % in D, <= ~0.3 % in volume. The samples (4 rings x 3 angles 0/30/60 deg x
+    5 levels by default) are
     what is checked: like any sampled test, a bad region thinner than the sample spacing can slip between them.
     Every step is a continuous function of the good set's boundary, so the measure moves continuously with
     the design (the grid's answer only places the brackets). Pure, vmappable; returns a
@@ -595,6 +597,7 @@ def refine_cylinder(good_fn: Callable[[Array], Array], start: RegularWorkspace, 
     z = jnp.asarray(z)
     dt = z.dtype
     unit = jnp.asarray(cylinder_samples(hd_ratio) if unit is None else unit, dt)
+    unit = jnp.concatenate([jnp.zeros((1, 3), dt), unit])         # the centre itself: D = 0 when it is not good
     dr = (r[-1] - r[0]) / max(r.shape[0] - 1, 1)
     dz = (z[-1] - z[0]) / max(z.shape[0] - 1, 1)
     d_hi = start.diameter + 2.0 * (2.0 * dr + dz / hd_ratio)
@@ -610,23 +613,30 @@ def refine_cylinder(good_fn: Callable[[Array], Array], start: RegularWorkspace, 
             return jnp.where(ok, mid, lo), jnp.where(ok, hi, mid)
 
         lo, _ = jax.lax.fori_loop(0, n_bisect, body, (jnp.zeros((), dt), d_hi))
-        return jnp.where(good_fn(centre), lo, 0.0)
+        return lo
 
     g = (math.sqrt(5.0) - 1.0) / 2.0
     a, b = c0 - 2.0 * dz, c0 + 2.0 * dz
     c, d = b - g * (b - a), a + g * (b - a)
-    fc, fd, f0 = d_at(c), d_at(d), d_at(c0)
+    nan = jnp.asarray(jnp.nan, dt)
 
-    def gold(_, st):
-        a, b, c, d, fc, fd = st
+    # one loop, one call of d_at (one compiled copy of the good test): steps 0-2 evaluate c, d and the grid's
+    # centre c0; then golden-section steps
+    def step(i, st):
+        a, b, c, d, fc, fd, f0 = st
         left = fc >= fd                                  # the maximum lies in [a, d]
         a2, b2 = jnp.where(left, a, c), jnp.where(left, d, b)
-        x = jnp.where(left, b2 - g * (b2 - a2), a2 + g * (b2 - a2))
+        xg = jnp.where(left, b2 - g * (b2 - a2), a2 + g * (b2 - a2))
+        x = jnp.where(i == 0, c, jnp.where(i == 1, d, jnp.where(i == 2, c0, xg)))
         fx = d_at(x)
-        return (a2, b2, jnp.where(left, x, d), jnp.where(left, c, x), jnp.where(left, fx, fd),
-                jnp.where(left, fc, fx))
+        gs = i >= 3
+        return (jnp.where(gs, a2, a), jnp.where(gs, b2, b),
+                jnp.where(gs, jnp.where(left, x, d), c), jnp.where(gs, jnp.where(left, c, x), d),
+                jnp.where(gs, jnp.where(left, fx, fd), jnp.where(i == 0, fx, fc)),
+                jnp.where(gs, jnp.where(left, fc, fx), jnp.where(i == 1, fx, fd)),
+                jnp.where(i == 2, fx, f0))
 
-    a, b, c, d, fc, fd = jax.lax.fori_loop(0, n_golden, gold, (a, b, c, d, fc, fd))
+    a, b, c, d, fc, fd, f0 = jax.lax.fori_loop(0, 3 + n_golden, step, (a, b, c, d, nan, nan, nan))
     cs, fs = jnp.stack([c, d, c0]), jnp.stack([fc, fd, f0])
     k = jnp.argmax(fs)
     D, cb = fs[k], cs[k]

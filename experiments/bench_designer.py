@@ -104,9 +104,10 @@ def main(argv=None):
                 continue
             cmd = [sys.executable, "-m", "deltajax.run", "experiment=ga_reconfig", f"seed={s}", "plots=false",
                    "progress=false", f"hydra.run.dir={d}", f"compilation_cache={args.cache or out / 'xla'}", *extra]
-            t1 = time.perf_counter()
+            t1, c1 = time.perf_counter(), _cpu()
             subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-            print(f"{budget} seed {s}: {time.perf_counter() - t1:.0f} s wall", flush=True)
+            print(f"{budget} seed {s}: {time.perf_counter() - t1:.0f} s wall, {_cpu() - c1:.0f} CPU-s, load "
+                  f"{os.getloadavg()[0]:.1f}", flush=True)
             runs[(budget, s)] = d / "results.h5"
     t_runs, c_runs = time.perf_counter() - t0, _cpu() - c0
 
