@@ -25,6 +25,7 @@ Load and CPU time are printed with the figures (shared 2-core machine: compare r
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
 import resource
@@ -81,6 +82,8 @@ def main(argv=None):
                     help="do not start runs: analyse the complete ones found in --out (seeds without one are skipped)")
     ap.add_argument("--scan-only", action="store_true", help="only compute the scan (saved to <out>/scan_<k>.npz)")
     ap.add_argument("--cache", default=None, help="XLA compilation cache folder for the runs (default: <out>/xla)")
+    ap.add_argument("--fine-top", type=int, default=16,
+                    help="the scan's best designs on the primary verified on the fine grids (besides its front)")
     ap.add_argument("--tol", type=float, default=0.05, help="stated stability tolerance (relative spread)")
     ap.add_argument("--large-seeds", type=int, nargs="*", default=None,
                     help="seeds also run at the larger budget (default: all of --seeds)")
@@ -101,9 +104,10 @@ def main(argv=None):
                 continue
             cmd = [sys.executable, "-m", "deltajax.run", "experiment=ga_reconfig", f"seed={s}", "plots=false",
                    "progress=false", f"hydra.run.dir={d}", f"compilation_cache={args.cache or out / 'xla'}", *extra]
-            t1 = time.perf_counter()
+            t1, c1 = time.perf_counter(), _cpu()
             subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
-            print(f"{budget} seed {s}: {time.perf_counter() - t1:.0f} s wall", flush=True)
+            print(f"{budget} seed {s}: {time.perf_counter() - t1:.0f} s wall, {_cpu() - c1:.0f} CPU-s, load "
+                  f"{os.getloadavg()[0]:.1f}", flush=True)
             runs[(budget, s)] = d / "results.h5"
     t_runs, c_runs = time.perf_counter() - t0, _cpu() - c0
 
@@ -140,7 +144,16 @@ def main(argv=None):
         Mf = {o: z[f"Mf_{o}"] for o in objs} if len(Xf) else None
         Mf = dict(Mf, feasible=np.ones(len(Xf), bool)) if Mf is not None else None
         t_scan, c_scan, c_cheap = float(z["t_scan"]), float(z["c_scan"]), float(z["c_cheap"])
-        print(f"scan: reused {cached}", flush=True)
+        # a cached scan is used only if today's coarse evaluator reproduces it (64 of its feasible designs)
+        if len(Xf):
+            chk = ev(Xf[:64])
+            dev = max(float(np.nanmax(np.abs(chk[o] - Mf[o][:64]) / np.maximum(np.abs(Mf[o][:64]), 1e-300)))
+                      for o in objs)
+            if not (np.all(chk["feasible"].astype(bool)) and dev <= 1e-9):
+                raise SystemExit(f"{cached} does not match today's evaluator (max rel. deviation {dev:.3g}); delete it")
+            print(f"scan: reused {cached} (64 designs re-evaluated: max rel. deviation {dev:.2g})", flush=True)
+        else:
+            print(f"scan: reused {cached}", flush=True)
     else:
         feas = None
     if feas is None:
@@ -170,6 +183,16 @@ def main(argv=None):
         report[f"{budget}_recommended"] = M.tolist()
         report[f"{budget}_params"] = np.stack([rec[(budget, sd)][2] for sd in seeds_b]).tolist()
         report[f"{budget}_spread"] = spread.tolist()
+        # where on its verified front (sorted by the first objective) each seed's recommendation sits: a rule that
+        # flips between the front's ends would show as positions 0 and n-1 across seeds
+        pos = []
+        for sd in seeds_b:
+            V = rec[(budget, sd)][3]["verify"]
+            fr = [int(i) for i in np.asarray(V["front"]).reshape(-1)]
+            r_ = int(V["attrs"]["recommended"])
+            pos.append([fr.index(r_) if r_ in fr else -1, len(fr)])
+        report[f"{budget}_front_position"] = pos
+        print(f"    position of the recommendation on its front (index, front size) per seed: {pos}")
         report[f"{budget}_stable_within_tol"] = bool(np.all(spread <= args.tol))
         print(f"(a) {budget}, seeds {seeds_b}: recommended {objs} per seed:\n{M}\n    spread (max-min)/median = "
               f"{spread} (tolerance {args.tol}): {'stable' if np.all(spread <= args.tol) else 'NOT stable'}")
@@ -181,10 +204,39 @@ def main(argv=None):
           f"{lost or 'none'}")
     scale = sense / np.abs(np.asarray([float(base[o]) for o in objs]))
     Ff = objective_matrix(Mf, objs, scale) if len(Xf) else np.zeros((0, len(objs)))
-    Ff = Ff[np.all(np.isfinite(Ff), axis=1)]
+    fin = np.all(np.isfinite(Ff), axis=1)
+    Ff = Ff[fin]
+    X_scan_nd = Xf[fin][non_dominated(Ff)] if len(Ff) else np.zeros((0, space.dim))
     hv_scan = hypervolume(Ff[non_dominated(Ff)], np.zeros(len(objs))) if len(Ff) else 0.0
     j = objs.index(s.primary)
     best_scan = float(np.max(-sense[j] * prim[feas])) * -sense[j] if feas.any() else float("nan")
+    # like with like: the scan's coarse non-dominated set and its best designs on the primary, verified on the
+    # job's fine grids (continuous regular workspace), normalised by the fine-grid baseline as the job's front is
+    cached_f = out / f"scan_{args.scan_log2}_fine.npz"
+    if cached_f.exists():
+        zf = np.load(cached_f)
+        mvs = {k[3:]: zf[k] for k in zf.files if k.startswith("mv_")}
+        c_fine = float(zf["c_fine"])
+    else:
+        from deltajax.optimize import workflow as W
+
+        jf = np.flatnonzero(feas)
+        top = jf[np.argsort(sense[j] * prim[jf], kind="stable")[:args.fine_top]]
+        Xv = np.concatenate([space.baseline_genes()[None], X_scan_nd, X[top]])
+        space_v = dataclasses.replace(space, n_R=s.verify["n_R"]) if space.reconfigurable else space
+        c2 = _cpu()
+        mvs = W.verify(W.designer_problem(s, fine=True), space_v, Xv)
+        c_fine = _cpu() - c2
+        np.savez(cached_f, c_fine=c_fine, **{f"mv_{k}": v for k, v in mvs.items()})
+    bvf = np.asarray([float(mvs[o][0]) for o in objs])
+    Fsv = objective_matrix(mvs, objs, sense / np.abs(bvf))
+    okv = mvs["feasible"].astype(bool) & np.all(np.isfinite(Fsv), axis=1)
+    hv_scan_fine = hypervolume(Fsv[okv][non_dominated(Fsv[okv])], np.zeros(len(objs))) if okv.any() else 0.0
+    best_scan_fine = float(np.max(-sense[j] * mvs[s.primary][okv])) * -sense[j] if okv.any() else float("nan")
+    print(f"scan verified on the fine grids: {len(Fsv)} designs ({int(okv.sum())} feasible), {c_fine:.0f} CPU-s; "
+          f"best {s.primary} {best_scan_fine:.4g}, hypervolume {hv_scan_fine:.4g}", flush=True)
+    report.update(scan_fine_designs=int(len(Fsv)), scan_fine_feasible=int(okv.sum()), scan_fine_cpu_s=c_fine,
+                  scan_fine_best_primary=best_scan_fine, scan_fine_hypervolume=hv_scan_fine)
     per_seed = []
     for budget, seeds in (("default", args.seeds), ("large", large_seeds)):
         for seed in seeds:
@@ -201,7 +253,15 @@ def main(argv=None):
             ga_best = float(mg[s.primary][0]) if bool(mg["feasible"][0]) else float("nan")
             fr = Fj[int(d["verify"]["attrs"]["recommended"])]
             dom = int(np.sum([dominates(f, fr, np.ones(len(objs))) for f in Ff]))
+            V = d["verify"]
+            okj = np.asarray(V["feasible"]).astype(bool)
+            fine_best = float(np.max(-sense[j] * np.asarray(V[s.primary])[okj])) * -sense[j]
+            hv_fine = float(V["attrs"]["hypervolume"])
+            print(f"(c, fine grids) {budget} seed {seed}: best {s.primary} {fine_best:.4g} vs scan {best_scan_fine:.4g}"
+                  f" ({'>=' if fine_best >= best_scan_fine else '<'}); hypervolume {hv_fine:.4g} vs scan "
+                  f"{hv_scan_fine:.4g} ({'>=' if hv_fine >= hv_scan_fine else '<'})", flush=True)
             per_seed.append({"budget": budget, "seed": seed, "ga_best_primary": ga_best, "job_best_primary": best_job,
+                             "job_fine_best_primary": fine_best, "hv_job_fine": hv_fine,
                              "hv_job": hv_job, "scan_designs_dominating_recommended": dom,
                              "refined_accepted": int(np.sum(d.get("refine", {}).get("accepted", [])))})
             print(f"(c) {budget} seed {seed}: {s.primary} GA best {ga_best:.4g}, best of the job's designs "

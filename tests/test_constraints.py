@@ -253,3 +253,40 @@ def test_cycle_rate_gradient_is_the_implicit_derivative_of_the_bisection():
     cd = [(float(f(x0.at[i].add(h[i]))) - float(f(x0.at[i].add(-h[i])))) / (2 * h[i]) for i in range(3)]
     assert np.all(np.isfinite(g)) and np.all(np.abs(g) > 0)
     np.testing.assert_allclose(g, cd, rtol=2e-4)
+
+
+# -- continuous regular-workspace measure (issue 12: the grid's levels quantised the recommended volume) ----------
+
+def _ball(c, rho):
+    return lambda p: jnp.sum((p - jnp.asarray([0.0, 0.0, c])) ** 2) <= rho * rho
+
+
+def test_refined_cylinder_in_a_ball_and_a_cone_against_closed_forms():
+    # independent closed forms: a ball of radius rho holds the cylinder with (D/2)^2 + (H/2)^2 = rho^2, H = lam D;
+    # the frustum r <= a + b (z - z0), z <= z2 (radius growing downward) the one touching z2 and the top rim:
+    # D / 2 = a + b (z2 - lam D - z0)
+    lam = 0.5
+    pts, r, z = C.polar_grid(0.3, 0.2, 0.7, 16, 3, 22)
+    f = jax.jit(lambda rho: C.regular_workspace(_ball(0.45, rho), pts, r, z, lam, refine=True))
+    grid = jax.jit(lambda rho: C.regular_workspace(_ball(0.45, rho), pts, r, z, lam))
+    rhos = np.linspace(0.17, 0.19, 5)
+    D = np.asarray([float(f(rho).diameter) for rho in rhos])
+    # within the stated bound, from below: bisection D_hi / 2^12 (D_hi = D_grid + 2 (2 dr + dz / lam) < 0.55 m)
+    # plus the centre's golden-section bracket 4 dz 0.618^14, which costs at most 2 x that / lam in D
+    dz = float(z[1] - z[0])
+    tol = 0.55 / 2 ** C.REFINE_BISECT + 2 * 4 * dz * 0.618 ** C.REFINE_GOLDEN / lam
+    d_exact = 2 * rhos / math.sqrt(1 + lam ** 2)
+    assert np.all(D <= d_exact + 1e-12) and np.all(D >= d_exact - tol)
+    # continuous: equal steps in rho give equal steps in D, where the grid's answer moves in level/ring steps
+    np.testing.assert_allclose(np.diff(D), np.diff(d_exact), atol=2 * tol)
+    Dg = np.asarray([float(grid(rho).diameter) for rho in rhos])
+    assert np.max(np.abs(Dg - 2 * rhos / math.sqrt(1 + lam ** 2))) > 10 * np.max(np.abs(D - 2 * rhos / math.sqrt(1 + lam ** 2)))
+    out = f(0.18)
+    np.testing.assert_allclose(float(out.z_top), 0.45 - lam * float(out.diameter) / 2, atol=2e-4)
+    np.testing.assert_allclose(float(out.volume), math.pi / 4 * float(out.diameter) ** 3 * lam, rtol=1e-12)
+    a, b, z0, z2 = 0.05, 0.5, 0.3, 0.6
+    cone = lambda p: (jnp.hypot(p[0], p[1]) <= a + b * (p[2] - z0)) & (p[2] >= z0) & (p[2] <= z2)  # noqa: E731
+    oc = C.regular_workspace(cone, pts, r, z, lam, refine=True)
+    d_cone = 2 * (a + b * (z2 - z0)) / (1 + 2 * b * lam)
+    assert d_cone - tol <= float(oc.diameter) <= d_cone + 1e-12
+    np.testing.assert_allclose(float(oc.z_top) + float(oc.height), z2, atol=tol)

@@ -29,6 +29,7 @@ from ..optimize.workflow import load_checkpoint as _load_checkpoint, put_checkpo
 __all__ = ["run", "build", "settings_from_config", "Settings", "STAGES"]
 
 STAGES = ("screen", "ga", "pareto", "refine", "verify", "results", "plots")
+SCREEN_FRONT_EVAL = 1024  # at most this many feasible screen designs (best primary first) get the regular workspace
 REFINE_MAX = 8          # winners refined: the GA's best and the front's best 7 on the primary objective
 settings_from_config = ga_reconfig_settings
 build = ga_reconfig_build
@@ -110,9 +111,11 @@ def run(ctx) -> None:
 
     # -- screen: Sobol designs without the regular workspace, the best feasible ones seed the GA ------------------
     seeds = base_genes[None]
+    scr_front = np.zeros((0, space.dim))
     if s.screen["enabled"] and not primary.startswith("regular"):
         if "screen" in done:
             top = np.asarray(stored["screen"]["top_genes"]).reshape(-1, space.dim)
+            scr_front = np.asarray(stored["screen"]["front_genes"]).reshape(-1, space.dim)
         else:
             bar = ctx.progress(total=2 ** s.screen["log2_size"], desc="screen (Sobol)")
             sc = W.screen(ev_cheap, space, primary, sense[jp], s.screen["log2_size"], seed=seed, progress=bar.update)
@@ -125,8 +128,16 @@ def run(ctx) -> None:
                     dims=("seed_design",))
             res.set_attrs("screen", designs=len(sc["X"]), feasible=int(sc["feasible"].sum()), sampler="scrambled "
                           f"Sobol (scipy.stats.qmc), seed {seed}", grids="search grids, regular workspace skipped")
+            # the screen's feasible non-dominated set on the job's objectives (regular workspace evaluated for the
+            # feasible designs only) seeds NSGA-II: the GA's population crowds the primary's end of the front
+            scr_front = W.screen_front(ev, sc, objs, scale, cap=SCREEN_FRONT_EVAL, layers=True)
+            res.put_axis("screen", "front_design", np.arange(len(scr_front)), units="1")
+            res.put("screen", "front_genes", scr_front, units="1", dims=("front_design", "gene"),
+                    attrs={"meaning": "feasible screen designs in non-dominated-sorting order on the search grids "
+                                      "(the first population_size/2 seed NSGA-II)"})
             ctx.log(f"screen: {len(sc['X'])} Sobol designs, {int(sc['feasible'].sum())} feasible; best {primary} "
-                    f"{sc[primary][sc['order'][0]] if len(sc['order']) else float('nan'):.4g}")
+                    f"{sc[primary][sc['order'][0]] if len(sc['order']) else float('nan'):.4g}; "
+                    f"its feasible designs ranked by non-dominated sorting on {objs} seed NSGA-II")
             mark("screen")
         seeds = np.concatenate([seeds, top])
 
@@ -196,7 +207,9 @@ def run(ctx) -> None:
         bar = ctx.progress(total=s.pareto["generations"], desc="NSGA-II")
         front = nsga2(W.pareto_eval(ev, objs, scale), space.dim, len(objs), n_constr=len(CONSTRAINT_NAMES),
                       pop_size=s.pareto["population_size"], n_gen=s.pareto["generations"], seed=seed,
-                      initial=np.concatenate([base_genes[None], best[None], gres.final_population]), ref=ref,
+                      initial=np.concatenate([base_genes[None], best[None],
+                                              scr_front[:s.pareto["population_size"] // 2],
+                                              gres.final_population]), ref=ref,
                       progress=bar.update)
         bar.close()
         front_X = front.X

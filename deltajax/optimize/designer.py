@@ -19,7 +19,9 @@ Metrics (:data:`DESIGN_METRICS`, units :data:`DESIGN_UNITS`, sense :data:`DESIGN
 
 * ``picks_per_min``: cycle rate at the operating R (1/min), :func:`deltajax.constraints.picks_per_minute`.
 * ``regular_volume`` / ``regular_diameter``: the largest cylinder with the configured H/D inside the good
-  workspace with R chosen per point (any R sample; for a fixed design its R) (m^3, m).
+  workspace with R chosen per point (any R sample; for a fixed design its R) (m^3, m); on the search grids the
+  grid's answer (:func:`deltajax.constraints.largest_cylinder`), on the verification grids refined to the
+  continuous measure (:func:`deltajax.constraints.refine_cylinder`, ``rw_refine``).
 * ``regular_volume_fixed``: the same with R frozen at the operating R (what the design gives without
   reconfiguring during the task).
 * ``peak_utilisation`` / ``rms_utilisation`` / ``speed_utilisation``: motor loads at the picks/min cycle time.
@@ -92,6 +94,8 @@ class DesignerProblem:
         min_picks: required cycle rate (1/min; 0: only "the cycle runs").
         max_arm_sum: size budget L1 + L2 (m) or None.
         enabled: which of :data:`CONSTRAINT_NAMES` are active (the others are reported, not enforced).
+        rw_refine: refine the grid's regular workspace to the continuous measure of
+            :func:`deltajax.constraints.refine_cylinder` (the verification stage; the search grids keep the grid's).
         mode: operating mode of a reconfigurable design, ``"per_task"`` (one R per task, the candidates above) or
             ``"path"`` (R(t) along the cycle under the R drive's limits, :mod:`deltajax.optimize.operating`).
         operating: the :class:`deltajax.optimize.operating.OperatingSpec` (drive limits, mechanism) of ``mode``.
@@ -116,6 +120,7 @@ class DesignerProblem:
     settings: Mapping[str, Any] = dataclasses.field(default_factory=dict)
     mode: str = "per_task"                          # rtmode
     operating: Optional[OP.OperatingSpec] = None    # rtmode
+    rw_refine: bool = False                         # continuous regular workspace (constraints.refine_cylinder)
 
     def __post_init__(self):  # rtmode
         if self.mode not in OP.MODES:
@@ -130,7 +135,7 @@ class DesignerProblem:
     def build(*, task: Mapping[str, float], cycle: Mapping[str, Any], motor: C.Motor, joints: C.JointModel,
               links: C.LinkModel, good: C.GoodSpec, regular: Mapping[str, float], n_R_operating: int,
               min_picks: float, max_arm_sum: Optional[float], enabled: Sequence[str],
-              operating: Optional[OP.OperatingSpec] = None) -> "DesignerProblem":
+              operating: Optional[OP.OperatingSpec] = None, rw_refine: bool = False) -> "DesignerProblem":
         """Build from validated plain values (see :mod:`deltajax.jobs.ga_reconfig` for the config)."""
         tp = cylinder_points(task["diameter"], task["height"], task["z_top"], int(task["n_r"]), int(task["n_phi"]),
                              int(task["n_z"]))
@@ -148,7 +153,8 @@ class DesignerProblem:
                                enabled=tuple(enabled),
                                settings={"task": dict(task), "cycle": dict(cycle), "regular": dict(regular),
                                          "cycle_centre": centre},
-                               mode=operating.mode if operating is not None else "per_task", operating=operating)
+                               mode=operating.mode if operating is not None else "per_task", operating=operating,
+                               rw_refine=bool(rw_refine))
 
 
 def _violations(pb: DesignerProblem, m: Mapping[str, jax.Array], arm_sum) -> jax.Array:
@@ -240,6 +246,14 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         g_any = jnp.any(g_rw[:ns], axis=0) if recon else g_rw[ns + k]
         reg = C.largest_cylinder(jnp.all(g_any, axis=2), r, z, pb.hd_ratio)
         regf = C.largest_cylinder(jnp.all(g_rw[ns + k], axis=2), r, z, pb.hd_ratio)
+        if pb.rw_refine:   # continuous measure, bracketed by the grid's answer (same good test, same R samples)
+            def good_at(R, p):
+                return C.good_point(at(R), p, pb.good, plate_radius=plate).good
+
+            good_any = ((lambda p: jnp.any(jax.vmap(lambda R: good_at(R, p))(Rs))) if recon
+                        else (lambda p: good_at(Rc[k], p)))
+            reg = C.refine_cylinder(good_any, reg, r, z, pb.hd_ratio)
+            regf = C.refine_cylinder(lambda p: good_at(Rc[k], p), regf, r, z, pb.hd_ratio)
         out.update(regular_volume=reg.volume, regular_diameter=reg.diameter, regular_height=reg.height,
                    regular_z_top=reg.z_top, regular_volume_fixed=regf.volume, regular_diameter_fixed=regf.diameter)
     else:

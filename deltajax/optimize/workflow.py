@@ -8,12 +8,15 @@ only orders them, stores their outputs in ``results.h5`` and draws the plots.
    GA settings.
 2. :func:`screen`: a scrambled-Sobol quasi-random screen of the gene box on the search grids *without* the
    regular workspace (feasibility does not depend on it; ~30x cheaper per design), whose best feasible designs
-   on the primary objective seed the GA.
+   on the primary objective seed the GA; :func:`screen_front`: its feasible non-dominated set on the job's
+   objectives (regular workspace evaluated for the feasible designs only) seeds NSGA-II (a hybrid: quasi-random
+   screen + evolutionary search).
 3. GA (:func:`ga_fitness`, run by :func:`deltajax.optimize.run_ga` with checkpoints), NSGA-II (:func:`pareto_eval`).
 4. :func:`refine_designs`: optax Adam on the primary objective plus a constraint penalty from each winner;
    an iterate replaces nothing: it is added as a candidate only if it is feasible on the search grids and no
    objective is worse than at its start while the primary improves. A non-finite gradient raises.
-5. :func:`verify`: every candidate on the fine grids (progress bar), the verified front, and
+5. :func:`verify`: every candidate on the fine grids, with the continuous regular-workspace measure
+   (:func:`deltajax.constraints.refine_cylinder`) (progress bar), the verified front, and
    :func:`recommend` (rule ``band``, ``knee`` or ``primary``).
 """
 
@@ -29,7 +32,7 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["SetupError", "setup", "designer_problem", "screen", "ga_fitness", "pareto_eval", "refine_designs",
+__all__ = ["SetupError", "setup", "designer_problem", "screen", "screen_front", "ga_fitness", "pareto_eval", "refine_designs",
            "RefineOutcome", "verify", "recommend", "load_checkpoint", "put_checkpoint", "restage", "stages_done",
            "job_fingerprint", "RECOMMEND_RULES"]
 
@@ -69,7 +72,8 @@ def designer_problem(s, *, fine: bool = False):
     return DesignerProblem.build(task=task, cycle=cycle, motor=motor, joints=joints, links=links, good=good,
                                  regular=regular, n_R_operating=n_op, min_picks=s.constraints["min_picks_per_min"],
                                  max_arm_sum=s.constraints["max_arm_sum"], enabled=enabled,
-                                 operating=operating_spec(s))  # rtmode
+                                 operating=operating_spec(s),  # rtmode
+                                 rw_refine=fine)
 
 
 def operating_spec(s):  # rtmode: the screw linkage is sized for the design space's R range
@@ -153,6 +157,34 @@ def screen(evaluate_cheap: Callable[[np.ndarray], dict], space, primary: str, se
     idx = np.flatnonzero(feas)
     order = idx[np.argsort(sense_primary * m[primary][idx], kind="stable")]
     return {"X": X, "feasible": feas, primary: m[primary], "violation": m["violation"], "order": order}
+
+
+def screen_front(evaluate: Callable[[np.ndarray], dict], sc: Mapping[str, Any], objs: Sequence[str],
+                 scale: np.ndarray, *, cap: int = 1024, layers: bool = False) -> np.ndarray:
+    """Genes of the feasible non-dominated set of a :func:`screen` on the job's objectives.
+
+    The screen's feasible designs (at most ``cap``, best primary first) are evaluated with ``evaluate`` (the
+    search grids *with* the regular workspace); their feasible non-dominated set, sorted by the first objective,
+    is returned ((k, dim)). ``layers=True``: every feasible design, in non-dominated-sorting order (the front,
+    then the front of the rest, ...; each layer sorted by the first objective). It seeds NSGA-II, whose other
+    seeds (the GA's population) crowd the primary's end.
+    """
+    from .pareto import non_dominated
+
+    X = np.asarray(sc["X"])[np.asarray(sc["order"])[:cap]]
+    if len(X) == 0:
+        return np.zeros((0, np.asarray(sc["X"]).shape[1]))
+    m = evaluate(X)
+    F = objective_matrix(m, objs, scale)
+    rest = np.flatnonzero(m["feasible"].astype(bool) & np.all(np.isfinite(F), axis=1))
+    out = []
+    while len(rest):
+        nd = rest[non_dominated(F[rest])]
+        out.append(nd[np.argsort(F[nd, 0], kind="stable")])
+        if not layers:
+            break
+        rest = np.setdiff1d(rest, nd)
+    return X[np.concatenate(out)] if out else X[:0]
 
 
 # -- GA and NSGA-II --------------------------------------------------------------------------------------------
