@@ -199,7 +199,7 @@ def singular_values_closed_form(Jx: Float[Array, "3 3"], dhat: Float[Array, "3"]
     """Stacked form of :func:`singular_values` for a (3, 3) Jx and (3,) diagonal (kept for callers)."""
     s = singular_values(tuple(Jx[i, k] for i in range(3) for k in range(3)), (dhat[0], dhat[1], dhat[2]),
                         method=method)
-    return jnp.stack(s)
+    return jnp.stack(fuse_outputs(s))  # stacked after the one fused loop (see _fused_masked)
 
 
 def indices_from_sv(s1, s2, s3, *, b_v=2.0, b_f=4.2, beta=0.5, raw_scale=1.0, inv_s1=None, omega=None,
@@ -231,6 +231,16 @@ def indices_from_singular_values(s: Float[Array, "3"], *, b_v=2.0, b_f=4.2, beta
                                  raw_scale: Float[Array, ""] | float = 1.0) -> Indices:
     """All indices from the stacked singular values ``s`` (descending); see :func:`indices_from_sv`."""
     return indices_from_sv(s[0], s[1], s[2], b_v=b_v, b_f=b_f, beta=beta, raw_scale=raw_scale)
+
+
+def _fused_masked(ok, ind: Indices, sv) -> Indices:
+    """``_nan_where_not(ok, ind)`` computed in one XLA:CPU loop (:func:`deltajax.fastmath.fuse_outputs`) from the
+    scalar indices and singular values ``sv`` = (s1, s2, s3); the stack comes after the loop (a stack inside it
+    makes XLA re-emit the shared algebra per element)."""
+    nan = jnp.asarray(jnp.nan, jnp.result_type(sv[0]))
+    scal = {k: jnp.where(ok, v, nan) for k, v in ind._asdict().items() if k != "singular_values"}
+    scal, sv = fuse_outputs((scal, tuple(jnp.where(ok, v, nan) for v in sv)))
+    return Indices(**scal, singular_values=jnp.stack(sv))
 
 
 def _nan_where_not(ok, ind: Indices) -> Indices:
@@ -338,8 +348,7 @@ def point_kernel(robot: Delta, p: Float[Array, "3"], *, sign: float = 1.0, sv_me
     nan = jnp.asarray(jnp.nan, dtype)
     masked = {k: jnp.where(ok, v, nan) for k, v in ind._asdict().items() if k != "singular_values"}
     sv = tuple(jnp.where(ok, v, nan) for v in (t.s1, t.s2, t.s3))
-    out = fuse_outputs((ok, tuple(chains), jx_det(*rows), masked, sv))
-    ok, chains, det_jx, masked, sv = out
+    ok, chains, det_jx, masked, sv = fuse_outputs((ok, tuple(chains), jx_det(*rows), masked, sv))
     return PointKernel(ok=ok, chains=chains, det_jx=det_jx, indices=Indices(**masked, singular_values=jnp.stack(sv)))
 
 
@@ -393,6 +402,7 @@ def indices(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], *, mat
                 d.append(jq_theta(ux, uz, c[i], s_[i]) * (robot.upper_arm / L))
             sv = singular_values(tuple(rows), tuple(d), method=method)
             ind = indices_from_sv(*sv, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L ** 3)
+            return _fused_masked(ok, ind, sv)
         return _nan_where_not(ok, ind)
     Jq = jnp.concatenate([u_local[:, :1], jnp.diag(dhat * L)], axis=1)
     J = jnp.linalg.solve(Jx, Jq)
