@@ -12,9 +12,127 @@ import functools
 
 import jax
 import jax.numpy as jnp
+from jax import lax
 
-__all__ = ["sym3_top2"]
+__all__ = ["sym3_top2", "recip", "rsqrt", "sqrt0", "fuse_outputs"]
 
+# -- per-point arithmetic for XLA:CPU (public face: deltajax.fastmath, which explains why) -----------------------
+# (integer type, reciprocal magic, inverse-square-root magic, cubic-order Newton steps) per float type: the
+# magic constants give a first guess within 12.5 % (1/x) / 3.5 % (1/sqrt x); each cubic step cubes the error
+_BITS = {
+    jnp.dtype(jnp.float64): (jnp.int64, 0x7FDE623822FC16E6, 0x5FE6EB50C7B537A9, 3),
+    jnp.dtype(jnp.float32): (jnp.int32, 0x7EF311C7, 0x5F375A86, 2),
+}
+
+
+def _bits(x):
+    x = jnp.asarray(x)
+    if x.dtype not in _BITS:
+        raise TypeError(f"fastmath supports float32/float64, got {x.dtype}")
+    return x, _BITS[x.dtype]
+
+
+@jax.custom_jvp
+def recip(x):
+    """1/x for positive normal x (the caller guards zero, sign and non-finite inputs), ~1 ulp."""
+    x, (it, magic, _, steps) = _bits(x)
+    y = lax.bitcast_convert_type(jnp.asarray(magic, it) - lax.bitcast_convert_type(x, it), x.dtype)
+    for _ in range(steps):
+        e = 1.0 - x * y
+        y = y + y * (e + e * e)
+    e = 1.0 - x * y
+    return y + y * e  # last step quadratic: rounding
+
+
+@recip.defjvp
+def _recip_jvp(primals, tangents):
+    (x,), (dx,) = primals, tangents
+    y = recip(x)
+    return y, -dx * y * y
+
+
+@jax.custom_jvp
+def rsqrt(x):
+    """1/sqrt(x) for positive normal x (the caller guards the rest), ~1 ulp."""
+    x, (it, _, magic, steps) = _bits(x)
+    y = lax.bitcast_convert_type(jnp.asarray(magic, it) - (lax.bitcast_convert_type(x, it) >> 1), x.dtype)
+    for _ in range(steps):
+        e = 1.0 - x * y * y
+        y = y + y * e * (0.5 + 0.375 * e)
+    e = 1.0 - x * y * y
+    return y + 0.5 * y * e
+
+
+@rsqrt.defjvp
+def _rsqrt_jvp(primals, tangents):
+    (x,), (dx,) = primals, tangents
+    y = rsqrt(x)
+    return y, -0.5 * dx * y * y * y
+
+
+@jax.custom_jvp
+def sqrt0(x):
+    """sqrt(max(x, 0)), ~1 ulp; derivative 0 at and below 0 (finite everywhere, no 0 * inf)."""
+    x = jnp.asarray(x)
+    xs = jnp.where(x > 0.0, x, 0.0)
+    y = rsqrt(jnp.maximum(xs, jnp.finfo(x.dtype).tiny))
+    s = xs * y
+    return s + 0.5 * y * (xs - s * s)
+
+
+@sqrt0.defjvp
+def _sqrt0_jvp(primals, tangents):
+    (x,), (dx,) = primals, tangents
+    x = jnp.asarray(x)
+    pos = x > 0.0
+    y = rsqrt(jnp.where(pos, x, 1.0))
+    return sqrt0(x), jnp.where(pos, 0.5 * dx * y, 0.0)
+
+
+def _sink(leaves):
+    lane0 = lax.iota(jnp.int32, 2) == 0
+    ops = tuple(jnp.where(lane0.reshape((1,) * v.ndim + (2,)), v[..., None], jnp.zeros((), v.dtype))
+                for v in leaves)
+    init = tuple(jnp.zeros((), v.dtype) for v in leaves)
+
+    def combine(a, b):
+        return tuple((u | w) if u.dtype == jnp.bool_ else u + w for u, w in zip(a, b))
+
+    return lax.reduce(ops, init, combine, (ops[0].ndim - 1,))
+
+
+@jax.custom_jvp
+def _fused(*leaves):
+    return tuple(_sink(leaves))
+
+
+@_fused.defjvp
+def _fused_jvp(primals, tangents):
+    return _fused(*primals), tuple(tangents)
+
+
+def fuse_outputs(tree):
+    """``tree`` unchanged (every leaf the same value, shape and dtype), as outputs of ONE XLA:CPU loop.
+
+    Apply it to what a per-point function returns (under ``vmap`` each leaf is a per-point array): the leaves'
+    shared intermediates are then computed once per point instead of once per output. Leaves of any (small)
+    shape and of float, integer or bool dtype, split into scalars for the one variadic reduce and stacked back
+    after it; -0.0 comes back as +0.0. Differentiable (identity tangents).
+    """
+    leaves, treedef = jax.tree_util.tree_flatten(tree)
+    if not leaves:
+        return tree
+    arrays = [jnp.asarray(v) for v in leaves]
+    scalars = [a.reshape(-1)[k] for a in arrays for k in range(a.size)]
+    fused = list(_fused(*scalars))
+    out = []
+    for a in arrays:
+        parts, fused = fused[:a.size], fused[a.size:]
+        out.append(parts[0].reshape(a.shape) if a.ndim == 0 else jnp.stack(parts).reshape(a.shape))
+    return jax.tree_util.tree_unflatten(treedef, out)
+
+
+# -- the eigenvalue solvers --------------------------------------------------------------------------------------
 #: t = u P(u), u = sqrt(c), approximates the root t in [0, 1] of t^2 (t + 3) = c (c in [0, 4]) to 3.2e-6
 #: relative (least-squares Chebyshev fit); one Halley step then gives ~3e-16 relative (measured over 4e5 c).
 _T_POLY = (0.5773484152710456, -0.055513434266994274, 0.013131880611233873, -0.0035774990190131535,
@@ -23,7 +141,7 @@ _T_POLY = (0.5773484152710456, -0.055513434266994274, 0.013131880611233873, -0.0
 
 def _cubic_root01(c):
     """The root t in [0, 1] of t^2 (t + 3) = c for c in [0, 4]: polynomial start in sqrt(c), one Halley step."""
-    u = jnp.sqrt(c)
+    u = sqrt0(c)
     poly = _T_POLY[-1]
     for a in _T_POLY[-2::-1]:
         poly = poly * u + a
@@ -32,7 +150,7 @@ def _cubic_root01(c):
     g1 = 3.0 * t * (t + 2.0)
     g2 = 6.0 * (t + 1.0)
     den = 2.0 * g1 * g1 - g * g2  # >= 0 near the root; 0 only at c = t = 0 where g = 0 too
-    return t - 2.0 * g * g1 / (den + jnp.finfo(jnp.result_type(c)).tiny)
+    return t - 2.0 * g * g1 * recip(den + jnp.finfo(jnp.result_type(c)).tiny)
 
 
 def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det):
@@ -50,11 +168,13 @@ def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det):
     q = (x00 + x11 + x22) * (1.0 / 3.0)
     b00, b11, b22 = x00 - q, x11 - q, x22 - q
     p2 = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (x01 * x01 + x02 * x02 + x12 * x12)) * (1.0 / 6.0)
-    # forward values only: derivatives come from sym3_top2's custom JVP, so no double-where guards here (each
-    # extra select of a multi-use value costs XLA:CPU a separate loop)
-    p = jnp.sqrt(p2)
+    # forward values only: derivatives come from sym3_top2's custom JVP, so no double-where guards here; cheap-op
+    # rsqrt/recip/sqrt0 (deltajax.fastmath) keep the whole kernel in one XLA:CPU loop
+    tiny = jnp.finfo(jnp.result_type(x00)).tiny
+    rp = rsqrt(jnp.maximum(p2, tiny))
+    p = p2 * rp
     det_b = b00 * (b11 * b22 - x12 * x12) - x01 * (x01 * b22 - x12 * x02) + x02 * (x01 * x12 - b11 * x02)
-    r = jnp.clip(0.5 * det_b / (p2 * p + jnp.finfo(jnp.result_type(x00)).tiny), -1.0, 1.0)
+    r = jnp.clip(((0.5 * det_b * rp) * rp) * rp, -1.0, 1.0)  # det_b / (2 p^3), in an order that cannot overflow
     t = _cubic_root01(2.0 * (1.0 + r))
     t2 = _cubic_root01(2.0 * (1.0 - r))
     l1, l2c = q + p * (1.0 + t), q + p * (t2 - t)
@@ -62,11 +182,11 @@ def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det):
     # r carries an absolute error ~eps (1 + |q| / p) (cancellation in X - q I); t moves by its square root
     tie12 = (l1 - l2c) ** 2 <= 64.0 * eps * p * (p + jnp.abs(q))
     l1 = jnp.where(tie12, 0.5 * (l1 + l2c), l1)
-    inv1 = 1.0 / (l1 + jnp.finfo(jnp.result_type(x00)).tiny)  # X is PSD: l1 >= 0
+    inv1 = recip(jnp.maximum(l1, tiny))  # X is PSD: l1 >= 0
     prod23 = det * inv1
     sum23 = (c2 - prod23) * inv1
     disc = 0.25 * sum23 * sum23 - prod23
-    root = jnp.sqrt(jnp.where(disc > 64.0 * eps * sum23 * sum23, disc, 0.0))
+    root = sqrt0(jnp.where(disc > 64.0 * eps * sum23 * sum23, disc, 0.0))
     l2 = jnp.where(tie12, l1, 0.5 * sum23 + root)
     return l1, l2
 
@@ -76,11 +196,19 @@ def _jacobi_rotate(A, p: int, q: int):
     r = 3 - p - q
     app, aqq, apq = A[(p, p)], A[(q, q)], A[(p, q)]
     arp, arq = A[(r, p)], A[(r, q)]
-    zero = apq == 0.0
+    fi = jnp.finfo(jnp.result_type(apq))
+    zero = jnp.abs(apq) < fi.tiny  # 0 or subnormal: nothing to rotate (recip needs a normal argument)
     apq_safe = jnp.where(zero, 1.0, apq)
-    tau = (aqq - app) / (2.0 * apq_safe)
-    t = jnp.where(zero, 0.0, jnp.sign(tau + (tau == 0.0)) / (jnp.abs(tau) + jnp.sqrt(1.0 + tau * tau)))
-    c = 1.0 / jnp.sqrt(1.0 + t * t)
+    # tau = (aqq - app) / (2 apq); t = sign(tau) / (|tau| + sqrt(1 + tau^2)); c = 1 / sqrt(1 + t^2): cheap-op
+    # recip/rsqrt (deltajax.fastmath), each argument positive and normal where it is used
+    atau = jnp.abs(aqq - app) * recip(2.0 * jnp.abs(apq_safe))
+    sgn = jnp.where((aqq - app) * apq_safe >= 0.0, 1.0, -1.0)
+    big = atau > 0.5 * float(fi.max) ** 0.5  # tau^2 would overflow: t = 1 / (2 |tau|) to full precision
+    tau2 = jnp.where(big, 1.0, atau * atau)
+    hyp = (1.0 + tau2) * rsqrt(1.0 + tau2)  # sqrt(1 + tau^2)
+    t = jnp.where(zero, 0.0, sgn * jnp.where(big, 0.5 * recip(jnp.where(big, atau, 1.0)),
+                                               recip(atau + hyp)))
+    c = rsqrt(1.0 + t * t)
     s = t * c
     out = dict(A)
     out[(p, p)] = app - t * apq

@@ -23,6 +23,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
 from .eigen3 import _T_POLY, sym3_top2  # noqa: F401  (_T_POLY: the Numba mirror reads it from here)
+from .fastmath import fuse_outputs, recip, sqrt0
 from .geometry import Delta
 from .jacobian import _resolve_length, homogenise, jq_diagonal, jq_theta, jx_det, jx_row
 from .kinematics import (_branch_sign, _from_chain_frames, chain_local, design_ok, forearm_units, limit_terms,
@@ -89,8 +90,9 @@ def sigma_tilde(sigma, a, b):
     """
     inside = sigma <= b  # False for NaN and +inf
     s = jnp.where(inside, sigma, a)  # double where: inf/NaN never reach the squares (finite gradients)
-    left = 1.0 - ((s - a) / a) ** 2
-    right = 1.0 - ((s - a) / (b - a)) ** 2
+    # multiply by the breakpoints' reciprocals (design scalars): a per-point divide would be its own XLA loop
+    left = 1.0 - ((s - a) * (1.0 / a)) ** 2
+    right = 1.0 - ((s - a) * (1.0 / (b - a))) ** 2
     val = jnp.where(inside, jnp.where(s <= a, left, right), 0.0)
     return jnp.where(jnp.isnan(sigma), jnp.nan, val)
 
@@ -103,10 +105,7 @@ def k_tilde(sigma_min_v, sigma_min_f, *, b_v=2.0, b_f=4.2, beta=0.5):
 SV_METHODS = ("fast", "jacobi", "svd")
 
 
-def _sqrt0(x):
-    """sqrt(max(x, 0)) with a finite (zero) derivative at and below 0."""
-    # one where: at x = 0 the chain rule sends sqrt's infinite slope into the unselected branch -> 0
-    return jnp.sqrt(jnp.where(x > 0.0, x, 0.0))
+_sqrt0 = sqrt0  # sqrt(max(x, 0)), finite (zero) derivative at and below 0: deltajax.fastmath.sqrt0
 
 
 def singular_values(jx, d=None, *, method: str = "fast", with_inverses: bool = False):
@@ -177,13 +176,15 @@ def _sv_tail(a, b, prod_d, det_jx, jx_side) -> _SvTail:
 
     Jq side (det >= prod): s1 = A / det, s2 = B / det, s3 = prod det / (A B);
     Jx side (prod > det): s1 = A B / (prod det), s2 = prod / B, s3 = prod / A. det = 0 exactly (Jx singular)
-    gives s1 = omega = inf (and s2 = inf on the Jq side); prod = 0 gives 1/omega = inf.
+    gives s1 = omega = inf (and s2 = inf on the Jq side); prod = 0 gives 1/omega = inf (a value below the smallest
+    normal number counts as 0). The reciprocals are deltajax.fastmath's cheap-op ones (one fused loop).
     """
-    det_pos, prod_pos = det_jx > 0.0, prod_d > 0.0
     ab = a * b
-    z_det = 1.0 / jnp.where(det_pos, det_jx, 1.0)  # double where: finite values and gradients at det = 0
-    z_prod = 1.0 / jnp.where(prod_pos, prod_d, 1.0)
-    z_ab = 1.0 / jnp.where(ab > 0.0, ab, 1.0)
+    tiny = jnp.finfo(jnp.result_type(ab)).tiny  # recip (deltajax.fastmath) needs a normal argument
+    det_pos, prod_pos = det_jx >= tiny, prod_d >= tiny
+    z_det = recip(jnp.where(det_pos, det_jx, 1.0))  # double where: finite values and gradients at det = 0
+    z_prod = recip(jnp.where(prod_pos, prod_d, 1.0))
+    z_ab = recip(jnp.where(ab >= tiny, ab, 1.0))
     s1 = jnp.where(det_pos, jnp.where(jx_side, ab * z_det * z_prod, a * z_det), jnp.inf)
     s2 = jnp.where(jx_side, prod_d * a * z_ab, jnp.where(det_pos, b * z_det, jnp.inf))
     s3 = jnp.where(jx_side, prod_d, prod_d * det_jx) * jnp.where(jx_side, b, 1.0) * z_ab
@@ -198,7 +199,7 @@ def singular_values_closed_form(Jx: Float[Array, "3 3"], dhat: Float[Array, "3"]
     """Stacked form of :func:`singular_values` for a (3, 3) Jx and (3,) diagonal (kept for callers)."""
     s = singular_values(tuple(Jx[i, k] for i in range(3) for k in range(3)), (dhat[0], dhat[1], dhat[2]),
                         method=method)
-    return jnp.stack(s)
+    return jnp.stack(fuse_outputs(s))  # stacked after the one fused loop (see _fused_masked)
 
 
 def indices_from_sv(s1, s2, s3, *, b_v=2.0, b_f=4.2, beta=0.5, raw_scale=1.0, inv_s1=None, omega=None,
@@ -232,33 +233,31 @@ def indices_from_singular_values(s: Float[Array, "3"], *, b_v=2.0, b_f=4.2, beta
     return indices_from_sv(s[0], s[1], s[2], b_v=b_v, b_f=b_f, beta=beta, raw_scale=raw_scale)
 
 
+def _fused_masked(ok, ind: Indices, sv) -> Indices:
+    """``_nan_where_not(ok, ind)`` computed in one XLA:CPU loop (:func:`deltajax.fastmath.fuse_outputs`) from the
+    scalar indices and singular values ``sv`` = (s1, s2, s3); the stack comes after the loop (a stack inside it
+    makes XLA re-emit the shared algebra per element)."""
+    nan = jnp.asarray(jnp.nan, jnp.result_type(sv[0]))
+    scal = {k: jnp.where(ok, v, nan) for k, v in ind._asdict().items() if k != "singular_values"}
+    scal, sv = fuse_outputs((scal, tuple(jnp.where(ok, v, nan) for v in sv)))
+    return Indices(**scal, singular_values=jnp.stack(sv))
+
+
 def _nan_where_not(ok, ind: Indices) -> Indices:
     nan = jnp.asarray(jnp.nan, ind.sigma_min_v.dtype)
     return Indices(*(jnp.where(ok if v.ndim == jnp.ndim(ok) else ok[..., None], v, nan) for v in ind))
 
 
-#: Points per block for batched kernel calls (``jax.lax.map(..., batch_size=POINT_BLOCK)``): the kernel's
-#: stored intermediates (:func:`_stored`, ~25 values per point) then stay in the CPU's L2 cache between the
-#: loops XLA makes of it instead of streaming through memory (measured 2.3x faster on CPU at N = 1e6).
-POINT_BLOCK = 4096
-
-
-def _stored(values, scale):
-    """``values`` (a pytree of per-point arrays) unchanged, as values XLA:CPU computes once and stores.
-
-    XLA:CPU fuses the kernel into loops and recomputes every cheap intermediate inside each loop that needs it
-    (it never recomputes a divide; it stores it). The Jacobian blocks feed ~30 such loops, so without this
-    each would redo the IK. Dividing by a run-time 1 (``scale / scale`` of a design length, without a
-    tangent) changes no bit (x / 1 = x exactly) and makes every value a stored one; for a design known at
-    compile time XLA folds it away (same values, recomputed).
-    """
-    one = jax.lax.stop_gradient(scale / scale)
-    return jax.tree_util.tree_map(lambda v: v / one, values)
+#: Default points per block of :func:`map_points` (0: one plain vmap). The kernel is one XLA:CPU loop
+#: (:mod:`deltajax.fastmath`) with no intermediates in memory, so blocks only add loop overhead (measured
+#: 1.1-1.6x slower at 4096); it was 4096 while the kernel was ~90 loops with stored intermediates.
+POINT_BLOCK = 0
 
 
 def map_points(fn, points, *, block: Optional[int] = None):
     """``jax.vmap(fn)(points)`` over the leading axis, evaluated in blocks of ``block`` points (``jax.lax.map``
-    with ``batch_size``): the same values, with cache-sized intermediates (see :data:`POINT_BLOCK`).
+    over blocks): the same values, with block-sized intermediates (for a function whose intermediates would not
+    fit in cache).
 
     ``block=None``: :data:`POINT_BLOCK` on the CPU backend, one block (plain vmap) on accelerators, whose
     throughput needs every point in flight; 0 means one block.
@@ -327,8 +326,9 @@ def point_kernel(robot: Delta, p: Float[Array, "3"], *, sign: float = 1.0, sv_me
     chains, rows, d = [], [], []
     for i in range(3):
         x, y, z = chain_local(p[0], p[1], p[2], i)
-        lc = loop_closure(x + robot.platform_radius - robot.base_radius, y, z, L1, L2, lim, sign)  # (x + r) - R
-        ux, uy, uz = loop_vectors(x + robot.platform_radius - robot.base_radius, y, z, lc.cos, lc.sin, L1, L2)
+        dx = x + robot.platform_radius - robot.base_radius  # (x + r) - R, as every kernel evaluates it
+        lc = loop_closure(dx, y, z, L1, L2, lim, sign)
+        ux, uy, uz = loop_vectors(dx, y, z, lc.cos, lc.sin, L1, L2)
         rows.extend(jx_row(ux, uy, uz, i))
         di = jq_theta(ux, uz, lc.cos, lc.sin)
         d.append(di if length is None else di * (L1 / L))
@@ -339,11 +339,17 @@ def point_kernel(robot: Delta, p: Float[Array, "3"], *, sign: float = 1.0, sv_me
     eye = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)
     rows = [jnp.where(ok, v, e) for v, e in zip(rows, eye)]
     d = [jnp.where(ok, v, e) for v, e in zip(d, (0.3, 0.5, 0.7))]
-    rows, d = _stored((rows, d), robot.upper_arm)
     t = singular_values(tuple(rows), tuple(d), method=sv_method, with_inverses=True)
     ind = indices_from_sv(t.s1, t.s2, t.s3, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L ** 3, inv_s1=t.inv_s1,
                           omega=t.omega, inv_omega=t.inv_omega)
-    return PointKernel(ok=ok, chains=tuple(chains), det_jx=jx_det(*rows), indices=_nan_where_not(ok, ind))
+    # every output from ONE XLA:CPU loop (deltajax.fastmath.fuse_outputs; outputs a caller drops are removed).
+    # Scalars only into the loop: the stacked singular values are stacked after it (a stack inside the fused
+    # loop makes XLA re-emit the kernel per element)
+    nan = jnp.asarray(jnp.nan, dtype)
+    masked = {k: jnp.where(ok, v, nan) for k, v in ind._asdict().items() if k != "singular_values"}
+    sv = tuple(jnp.where(ok, v, nan) for v in (t.s1, t.s2, t.s3))
+    ok, chains, det_jx, masked, sv = fuse_outputs((ok, tuple(chains), jx_det(*rows), masked, sv))
+    return PointKernel(ok=ok, chains=chains, det_jx=det_jx, indices=Indices(**masked, singular_values=jnp.stack(sv)))
 
 
 def _resolve_sv_method(sv_method: str, default: str) -> str:
@@ -396,6 +402,7 @@ def indices(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], *, mat
                 d.append(jq_theta(ux, uz, c[i], s_[i]) * (robot.upper_arm / L))
             sv = singular_values(tuple(rows), tuple(d), method=method)
             ind = indices_from_sv(*sv, b_v=b_v, b_f=b_f, beta=beta, raw_scale=L ** 3)
+            return _fused_masked(ok, ind, sv)
         return _nan_where_not(ok, ind)
     Jq = jnp.concatenate([u_local[:, :1], jnp.diag(dhat * L)], axis=1)
     J = jnp.linalg.solve(Jx, Jq)

@@ -1,9 +1,9 @@
 """Kernel benchmark: IK + Jacobian + all indices, evaluations per CPU-second and per wall-second (warm).
 
 Measured in the same process (ratios are what we report; absolute rates depend on the machine and its load):
-(a) the new core kernel ``point_indices`` vmapped in cache-sized blocks (:func:`deltajax.indices.map_points`,
-the form the index fields use; fast closed form and exact Jacobi form) and as one plain ``jit(vmap(...))``,
-f64 and f32; (b) the frozen pre-issue-9 kernel (:mod:`deltajax.baseline_kernel`, main 9f54c88) as the baseline; (c) the
+(a) the new core kernel ``point_indices`` as one plain ``jit(vmap(...))`` (the whole kernel is one XLA:CPU loop,
+:mod:`deltajax.fastmath`; fast closed form and exact Jacobi form) and in blocks
+(:func:`deltajax.indices.map_points`, the previous form), f64 and f32; (b) the frozen pre-issue-9 kernel (:mod:`deltajax.baseline_kernel`, main 9f54c88) as the baseline; (c) the
 independent NumPy reference (:mod:`deltajax.reference`); (d) Numba (exact kernel + minimal loop ceiling)
 when :mod:`deltajax.workspace` provides the hook ``bench_kernel_rates`` (the numba colleague's module).
 Every JAX result is checked against the NumPy reference before timing; XLA fusion counts are printed.
@@ -45,7 +45,7 @@ def _timed(fn, repeats: int) -> tuple[float, float]:
 
 def fusion_count(compiled) -> int:
     """Number of XLA fusions in a compiled executable's HLO text."""
-    return len(re.findall(r"^\s*(?:ROOT )?\S+ = \S+ fusion\(", compiled.as_text(), flags=re.M))
+    return len(re.findall(r"^\s*(?:ROOT )?\S+ = (?:\S+|\([^)]*\)) fusion\(", compiled.as_text(), flags=re.M))
 
 
 def _numba_rates(points: np.ndarray, geo: list, repeats: int):
@@ -97,11 +97,11 @@ def run(ctx) -> None:
         p = jnp.asarray(pts, dt)
         variants = {
             "old kernel (main 9f54c88)": lambda rb, q: jax.vmap(lambda x: _kernel_baseline.point_indices(rb, x)[1])(q),
+            "new kernel fast, one vmap": lambda rb, q: jax.vmap(lambda x: point_indices(rb, x)[1])(q),
             f"new kernel fast (blocks of {block})": lambda rb, q: map_points(lambda x: point_indices(rb, x)[1], q,
                                                                               block=block),
-            "new kernel fast, one vmap": lambda rb, q: jax.vmap(lambda x: point_indices(rb, x)[1])(q),
-            "new kernel exact (jacobi)": lambda rb, q: map_points(
-                lambda x: point_indices(rb, x, sv_method="jacobi")[1], q, block=block),
+            "new kernel exact (jacobi)": lambda rb, q: jax.vmap(lambda x: point_indices(rb, x,
+                                                                                      sv_method="jacobi")[1])(q),
         }
         base = None
         for label, fn in variants.items():
