@@ -4,6 +4,9 @@ Tiers: ``python -m pytest`` runs everything; ``python -m pytest -m "not slow"`` 
 ``@pytest.mark.slow`` (each over ~3 s on 2 cores).
 """
 
+import contextlib
+import fcntl
+import hashlib
 import os
 import subprocess
 import sys
@@ -33,13 +36,36 @@ settings.load_profile("deltajax")
 REPO = Path(__file__).resolve().parent.parent
 
 
+def _shared_root(tmp_path_factory) -> Path:
+    """The session's folder for shared toy runs: under pytest-xdist (``-n 2``, README) the workers' common parent
+    of their own base temp folders, so a job at one setting runs once per session, not once per worker."""
+    base = tmp_path_factory.getbasetemp()
+    root = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "toy_runs"
+    root.mkdir(parents=True, exist_ok=True)
+    return root
+
+
+@contextlib.contextmanager
+def _locked(path: Path):
+    """An exclusive lock on ``path`` (fcntl.flock) across the xdist workers of the session."""
+    with open(path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
 @pytest.fixture(scope="session")
 def toy_run(tmp_path_factory):
     """``toy_run(name, *extra) -> Path`` of results.h5: the job ``name`` at its toy size (tests/toy_jobs.py) plus
-    ``extra`` overrides, run once per session and shared. Treat the run directory as read-only (a rerun into it
-    with the same settings is a no-op; anything that writes must use its own ``tmp_path``)."""
+    ``extra`` overrides, run once per session and shared (also across pytest-xdist workers: the first worker to
+    ask runs it under a file lock, the others wait for it and read the same file). Treat the run directory as
+    read-only (a rerun into it with the same settings is a no-op; anything that writes must use its own
+    ``tmp_path``)."""
     from toy_jobs import CLI, overrides
 
+    root = _shared_root(tmp_path_factory)
     runs = {}
 
     def run(name, *extra):
@@ -51,12 +77,26 @@ def toy_run(tmp_path_factory):
 
             if name not in list_experiments():
                 pytest.skip(f"experiment {name} is not in this checkout")
-            d = tmp_path_factory.mktemp(name) / "run"
-            try:
-                runs[key] = _run(name, extra, d)
-            except Exception as e:
-                runs[key] = e
-                raise
+            tag = hashlib.sha1(repr(key).encode()).hexdigest()[:10]
+            d = root / f"{name}-{tag}"
+            with _locked(root / f"{name}-{tag}.lock"):
+                failed = d / "FAILED.txt"
+                if failed.exists():  # another worker's run of the same settings failed: the same error here
+                    runs[key] = RuntimeError(f"toy run {name} {list(extra)} failed in another worker:\n"
+                                             + failed.read_text())
+                    raise runs[key]
+                done = d / "DONE"
+                if done.exists():  # another worker ran it: its file, untouched
+                    runs[key] = d / "run" / "results.h5"
+                    return runs[key]
+                try:
+                    runs[key] = _run(name, extra, d / "run")
+                    done.touch()
+                except Exception as e:
+                    runs[key] = e
+                    d.mkdir(parents=True, exist_ok=True)
+                    failed.write_text(f"{type(e).__name__}: {e}"[-5000:])
+                    raise
         return runs[key]
 
     def _run(name, extra, d):

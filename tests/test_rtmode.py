@@ -20,20 +20,14 @@ from deltajax.optimize import operating as OP
 from deltajax.optimize.designer import DESIGN_UNITS, evaluate_designer
 from deltajax.run import CONFIG_DIR, run_experiment
 
+from toy_jobs import overrides
+
 # the designer's toy sizes (tests/test_ga_reconfig.py), with n_R = 7 so that the 4 per-task candidates are R samples
 SMALL = ["experiment.design.n_R=7", "experiment.task.n_r=1", "experiment.task.n_phi=3", "experiment.task.n_z=2",
          "experiment.cycle.n_samples=11", "experiment.cycle.n_R_operating=4", "experiment.reconfig.mode=path",
          "experiment.reconfig.n_R=9", "experiment.reconfig.segments=4"]
-TOY = [
-    "experiment.design.n_R=3", "experiment.task.n_r=1", "experiment.task.n_phi=3", "experiment.task.n_z=2",
-    "experiment.cycle.n_samples=11", "experiment.cycle.n_R_operating=2", "experiment.regular_workspace.n_r=6",
-    "experiment.regular_workspace.n_phi=2", "experiment.regular_workspace.n_z=6", "experiment.ga.population_size=8",
-    "experiment.ga.generations=4", "experiment.ga.checkpoint_every=2", "experiment.pareto.population_size=8",
-    "experiment.pareto.generations=3", "experiment.verify.n_R=3", "experiment.verify.n_R_operating=2",
-    "experiment.verify.task_n_r=1", "experiment.verify.task_n_phi=3", "experiment.verify.task_n_z=2",
-    "experiment.verify.cycle_samples=13", "experiment.verify.rw_n_r=7", "experiment.verify.rw_n_phi=2",
-    "experiment.verify.rw_n_z=7", "progress=false",
-]
+# the suite's one toy size of the main job (tests/toy_jobs.py: small screen and refine stage too)
+TOY = overrides("ga_reconfig")
 
 
 def _problem(overrides):
