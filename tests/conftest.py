@@ -24,7 +24,7 @@ jax.config.update("jax_numpy_rank_promotion", "raise")
 # compiles only what changed. Cached executables are keyed by the HLO, JAX version and flags, never stale;
 # DELTAJAX_TEST_JAX_CACHE=<dir> picks another folder (an empty one measures a cold start).
 from toy_jobs import JAX_CACHE  # noqa: E402
-JAX_CACHE_MIN_S = 0.2  # the tests' many small compilations too (the CLI caches those over 1 s)
+JAX_CACHE_MIN_S = 0.1  # small compilations too: the other xdist worker reuses them (the CLI: over 1 s)
 jax.config.update("jax_compilation_cache_dir", JAX_CACHE)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", JAX_CACHE_MIN_S)
 
@@ -115,3 +115,31 @@ def toy_run(tmp_path_factory):
             jax.config.update("jax_persistent_cache_min_compile_time_secs", JAX_CACHE_MIN_S)
 
     return run
+
+
+# -- pytest-xdist (README: ``python -m pytest -q -n 2``, ``--dist loadgroup`` from pyproject.toml) ------------------
+#: tests that run longest from empty caches (nodeid prefixes), handed out first so that neither worker is left
+#: with one of them at the end (the rest are short and fill in around them)
+LONG_FIRST = ("tests/test_rtmode.py", "tests/test_slurm.py", "tests/test_ga_reconfig.py", "tests/test_gpu_check.py",
+              "tests/test_packaging.py", "tests/test_jobs.py", "tests/test_faults.py", "tests/test_sweeps.py")
+
+
+def pytest_collection_modifyitems(config, items):
+    """Under xdist: every test that uses a module- or class-scoped fixture (a shared compiled function, a
+    cluster, a grid) goes to one worker with the rest of its module (``xdist_group``), so that the fixture is built
+    once, not once per worker; and the long files come first (longest-first scheduling)."""
+    if not getattr(config.option, "numprocesses", None):
+        return
+    for item in items:
+        defs = getattr(item, "_fixtureinfo", None)
+        scopes = {d.scope for fd in (defs.name2fixturedefs.values() if defs else ()) for d in fd}
+        if scopes & {"module", "class", "package"}:
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+
+    def rank(item):
+        for i, prefix in enumerate(LONG_FIRST):
+            if item.nodeid.startswith(prefix):
+                return i
+        return len(LONG_FIRST)
+
+    items.sort(key=rank)  # stable: the order inside each file is kept
