@@ -124,6 +124,11 @@ LONG_FIRST = ("tests/test_rtmode.py", "tests/test_slurm.py", "tests/test_ga_reco
               "tests/test_packaging.py", "tests/test_jobs.py", "tests/test_faults.py", "tests/test_sweeps.py")
 
 
+#: files whose tests share an in-process compile without a fixture: test_backends' two point-kernel cases each
+#: compiled the same Numba functions (~320 s wall each, cold, on both workers at once, 2026-12-01)
+SAME_WORKER = ("tests/test_backends.py",)
+
+
 def pytest_collection_modifyitems(config, items):
     """Under xdist: every test that uses a module- or class-scoped fixture (a shared compiled function, a
     cluster, a grid) goes to one worker with the rest of its module (``xdist_group``), so that the fixture is built
@@ -133,7 +138,7 @@ def pytest_collection_modifyitems(config, items):
     for item in items:
         defs = getattr(item, "_fixtureinfo", None)
         scopes = {d.scope for fd in (defs.name2fixturedefs.values() if defs else ()) for d in fd}
-        if scopes & {"module", "class", "package"}:
+        if scopes & {"module", "class", "package"} or item.nodeid.startswith(SAME_WORKER):
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
 
     def rank(item):
