@@ -4,6 +4,9 @@ Tiers: ``python -m pytest`` runs everything; ``python -m pytest -m "not slow"`` 
 ``@pytest.mark.slow`` (each over ~3 s on 2 cores).
 """
 
+import contextlib
+import fcntl
+import hashlib
 import os
 import subprocess
 import sys
@@ -21,7 +24,7 @@ jax.config.update("jax_numpy_rank_promotion", "raise")
 # compiles only what changed. Cached executables are keyed by the HLO, JAX version and flags, never stale;
 # DELTAJAX_TEST_JAX_CACHE=<dir> picks another folder (an empty one measures a cold start).
 from toy_jobs import JAX_CACHE  # noqa: E402
-JAX_CACHE_MIN_S = 0.2  # the tests' many small compilations too (the CLI caches those over 1 s)
+JAX_CACHE_MIN_S = 0.1  # small compilations too: the other xdist worker reuses them (the CLI: over 1 s)
 jax.config.update("jax_compilation_cache_dir", JAX_CACHE)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", JAX_CACHE_MIN_S)
 
@@ -33,13 +36,36 @@ settings.load_profile("deltajax")
 REPO = Path(__file__).resolve().parent.parent
 
 
+def _shared_root(tmp_path_factory) -> Path:
+    """The session's folder for shared toy runs: under pytest-xdist (``-n 2``, README) the workers' common parent
+    of their own base temp folders, so a job at one setting runs once per session, not once per worker."""
+    base = tmp_path_factory.getbasetemp()
+    root = (base.parent if os.environ.get("PYTEST_XDIST_WORKER") else base) / "toy_runs"
+    root.mkdir(parents=True, exist_ok=True)
+    return root
+
+
+@contextlib.contextmanager
+def _locked(path: Path):
+    """An exclusive lock on ``path`` (fcntl.flock) across the xdist workers of the session."""
+    with open(path, "a") as fh:
+        fcntl.flock(fh, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(fh, fcntl.LOCK_UN)
+
+
 @pytest.fixture(scope="session")
 def toy_run(tmp_path_factory):
     """``toy_run(name, *extra) -> Path`` of results.h5: the job ``name`` at its toy size (tests/toy_jobs.py) plus
-    ``extra`` overrides, run once per session and shared. Treat the run directory as read-only (a rerun into it
-    with the same settings is a no-op; anything that writes must use its own ``tmp_path``)."""
+    ``extra`` overrides, run once per session and shared (also across pytest-xdist workers: the first worker to
+    ask runs it under a file lock, the others wait for it and read the same file). Treat the run directory as
+    read-only (a rerun into it with the same settings is a no-op; anything that writes must use its own
+    ``tmp_path``)."""
     from toy_jobs import CLI, overrides
 
+    root = _shared_root(tmp_path_factory)
     runs = {}
 
     def run(name, *extra):
@@ -51,12 +77,26 @@ def toy_run(tmp_path_factory):
 
             if name not in list_experiments():
                 pytest.skip(f"experiment {name} is not in this checkout")
-            d = tmp_path_factory.mktemp(name) / "run"
-            try:
-                runs[key] = _run(name, extra, d)
-            except Exception as e:
-                runs[key] = e
-                raise
+            tag = hashlib.sha1(repr(key).encode()).hexdigest()[:10]
+            d = root / f"{name}-{tag}"
+            with _locked(root / f"{name}-{tag}.lock"):
+                failed = d / "FAILED.txt"
+                if failed.exists():  # another worker's run of the same settings failed: the same error here
+                    runs[key] = RuntimeError(f"toy run {name} {list(extra)} failed in another worker:\n"
+                                             + failed.read_text())
+                    raise runs[key]
+                done = d / "DONE"
+                if done.exists():  # another worker ran it: its file, untouched
+                    runs[key] = d / "run" / "results.h5"
+                    return runs[key]
+                try:
+                    runs[key] = _run(name, extra, d / "run")
+                    done.touch()
+                except Exception as e:
+                    runs[key] = e
+                    d.mkdir(parents=True, exist_ok=True)
+                    failed.write_text(f"{type(e).__name__}: {e}"[-5000:])
+                    raise
         return runs[key]
 
     def _run(name, extra, d):
@@ -75,3 +115,36 @@ def toy_run(tmp_path_factory):
             jax.config.update("jax_persistent_cache_min_compile_time_secs", JAX_CACHE_MIN_S)
 
     return run
+
+
+# -- pytest-xdist (README: ``python -m pytest -q -n 2``, ``--dist loadgroup`` from pyproject.toml) ------------------
+#: tests that run longest from empty caches (nodeid prefixes), handed out first so that neither worker is left
+#: with one of them at the end (the rest are short and fill in around them)
+LONG_FIRST = ("tests/test_rtmode.py", "tests/test_slurm.py", "tests/test_ga_reconfig.py", "tests/test_gpu_check.py",
+              "tests/test_packaging.py", "tests/test_jobs.py", "tests/test_faults.py", "tests/test_sweeps.py")
+
+
+#: files whose tests share an in-process compile without a fixture: test_backends' two point-kernel cases each
+#: compiled the same Numba functions (~320 s wall each, cold, on both workers at once, 2026-12-01)
+SAME_WORKER = ("tests/test_backends.py",)
+
+
+def pytest_collection_modifyitems(config, items):
+    """Under xdist: every test that uses a module- or class-scoped fixture (a shared compiled function, a
+    cluster, a grid) goes to one worker with the rest of its module (``xdist_group``), so that the fixture is built
+    once, not once per worker; and the long files come first (longest-first scheduling)."""
+    if not getattr(config.option, "numprocesses", None):
+        return
+    for item in items:
+        defs = getattr(item, "_fixtureinfo", None)
+        scopes = {d.scope for fd in (defs.name2fixturedefs.values() if defs else ()) for d in fd}
+        if scopes & {"module", "class", "package"} or item.nodeid.startswith(SAME_WORKER):
+            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+
+    def rank(item):
+        for i, prefix in enumerate(LONG_FIRST):
+            if item.nodeid.startswith(prefix):
+                return i
+        return len(LONG_FIRST)
+
+    items.sort(key=rank)  # stable: the order inside each file is kept
