@@ -24,6 +24,7 @@ import time
 import numpy as np
 
 from ..config import ConfigError, GaReconfigSettings as Settings, ga_reconfig_build, ga_reconfig_settings
+from ..rundir import CheckpointError
 from ..optimize.workflow import load_checkpoint as _load_checkpoint, put_checkpoint as _put_checkpoint
 
 __all__ = ["run", "build", "settings_from_config", "Settings", "STAGES"]
@@ -115,6 +116,10 @@ def run(ctx) -> None:
     if s.screen["enabled"] and not primary.startswith("regular"):
         if "screen" in done:
             top = np.asarray(stored["screen"]["top_genes"]).reshape(-1, space.dim)
+            if "front_genes" not in stored["screen"]:  # staged by a deltajax before the NSGA-II seeding
+                raise CheckpointError(f"{ctx.results.path}: its finished screen stage has no screen/front_genes "
+                                      "(written by an older deltajax); resume it with that version, or start a "
+                                      "new run directory")
             scr_front = np.asarray(stored["screen"]["front_genes"]).reshape(-1, space.dim)
         else:
             bar = ctx.progress(total=2 ** s.screen["log2_size"], desc="screen (Sobol)")
