@@ -92,30 +92,16 @@ def _logged(caplog):
 
 
 @pytest.mark.slow
-def test_rerun_three_times_into_one_dir(full_run, tmp_path, caplog):
-    # 1: killed after 2 generations; 2: resumed and completed; 3: a no-op that says so (the run's lines go
-    # through the "deltajax" logger: console and run.log)
+def test_rerun_three_times_into_one_dir(full_run, tmp_path, caplog, monkeypatch):
+    # 1: killed after 2 generations; 2: resumed inside the GA, then killed after the verify stage (before the
+    # summary is written); 3: resumed and completed; 4: a no-op that says so (the run's lines go through the
+    # "deltajax" logger: console and run.log). Both kills in one directory: one job run, not two (this test and
+    # test_kill_and_resume_is_bit_identical each ran the whole toy job, ~90 s cold each)
+    import deltajax.optimize.report as job
+
     caplog.set_level(logging.INFO, logger="deltajax")
     run_experiment("ga_reconfig", TOY + ["experiment.stop_after=2"], run_dir=tmp_path)
     assert "stopped after 2 generations" in _logged(caplog)
-    p = run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
-    assert "resuming the GA from generation 2" in _logged(caplog)
-    snap = tmp_path / "after_resume.h5"
-    snap.write_bytes(p.read_bytes())
-    run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
-    out = _logged(caplog)
-    assert "complete results of this ga_reconfig run; nothing to do" in out and "starting the GA" not in out
-    _assert_same(snap, p)
-    _assert_same(full_run, p)   # killed inside the GA and resumed: bit-identical to the uninterrupted run
-    assert load(p)["ga"]["checkpoint"]["attrs"]["generations_done"] == 4   # the checkpoint survives
-
-
-@pytest.mark.slow
-def test_kill_and_resume_is_bit_identical(full_run, tmp_path, monkeypatch):
-    import deltajax.optimize.report as job
-
-    # killed inside the GA: test_rerun_three_times_into_one_dir; here killed after the verify stage (before the
-    # summary is written)
     real = job.summary
 
     def killed(*args, **kw):
@@ -123,11 +109,21 @@ def test_kill_and_resume_is_bit_identical(full_run, tmp_path, monkeypatch):
 
     monkeypatch.setattr(job, "summary", killed)
     with pytest.raises(KeyboardInterrupt):
-        run_experiment("ga_reconfig", TOY, run_dir=tmp_path / "b")
-    assert load(tmp_path / "b" / "results.h5")["attrs"]["ga_reconfig_stages"] == "screen,ga,pareto,refine,verify"
+        run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
+    assert "resuming the GA from generation 2" in _logged(caplog)
+    # killed after the verify stage: every stage up to it is in the file, the summary is not
+    assert load(tmp_path / "results.h5")["attrs"]["ga_reconfig_stages"] == "screen,ga,pareto,refine,verify"
     monkeypatch.setattr(job, "summary", real)
-    b = run_experiment("ga_reconfig", TOY, run_dir=tmp_path / "b")
-    _assert_same(full_run, b)
+    p = run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
+    snap = tmp_path / "after_resume.h5"
+    snap.write_bytes(p.read_bytes())
+    run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
+    out = _logged(caplog)
+    assert "complete results of this ga_reconfig run; nothing to do" in out and "starting the GA" not in out
+    _assert_same(snap, p)
+    # killed inside the GA and after the verify stage, resumed each time: bit-identical to the uninterrupted run
+    _assert_same(full_run, p)
+    assert load(p)["ga"]["checkpoint"]["attrs"]["generations_done"] == 4   # the checkpoint survives
 
 
 #: pareto off with the refine stage on, in weighted mode: one shared run (``toy_run``) serves both
