@@ -92,30 +92,16 @@ def _logged(caplog):
 
 
 @pytest.mark.slow
-def test_rerun_three_times_into_one_dir(full_run, tmp_path, caplog):
-    # 1: killed after 2 generations; 2: resumed and completed; 3: a no-op that says so (the run's lines go
-    # through the "deltajax" logger: console and run.log)
+def test_rerun_three_times_into_one_dir(full_run, tmp_path, caplog, monkeypatch):
+    # 1: killed after 2 generations; 2: resumed inside the GA, then killed after the verify stage (before the
+    # summary is written); 3: resumed and completed; 4: a no-op that says so (the run's lines go through the
+    # "deltajax" logger: console and run.log). Both kills in one directory: one job run, not two (this test and
+    # test_kill_and_resume_is_bit_identical each ran the whole toy job, ~90 s cold each)
+    import deltajax.optimize.report as job
+
     caplog.set_level(logging.INFO, logger="deltajax")
     run_experiment("ga_reconfig", TOY + ["experiment.stop_after=2"], run_dir=tmp_path)
     assert "stopped after 2 generations" in _logged(caplog)
-    p = run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
-    assert "resuming the GA from generation 2" in _logged(caplog)
-    snap = tmp_path / "after_resume.h5"
-    snap.write_bytes(p.read_bytes())
-    run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
-    out = _logged(caplog)
-    assert "complete results of this ga_reconfig run; nothing to do" in out and "starting the GA" not in out
-    _assert_same(snap, p)
-    _assert_same(full_run, p)   # killed inside the GA and resumed: bit-identical to the uninterrupted run
-    assert load(p)["ga"]["checkpoint"]["attrs"]["generations_done"] == 4   # the checkpoint survives
-
-
-@pytest.mark.slow
-def test_kill_and_resume_is_bit_identical(full_run, tmp_path, monkeypatch):
-    import deltajax.optimize.report as job
-
-    # killed inside the GA: test_rerun_three_times_into_one_dir; here killed after the verify stage (before the
-    # summary is written)
     real = job.summary
 
     def killed(*args, **kw):
@@ -123,18 +109,34 @@ def test_kill_and_resume_is_bit_identical(full_run, tmp_path, monkeypatch):
 
     monkeypatch.setattr(job, "summary", killed)
     with pytest.raises(KeyboardInterrupt):
-        run_experiment("ga_reconfig", TOY, run_dir=tmp_path / "b")
-    assert load(tmp_path / "b" / "results.h5")["attrs"]["ga_reconfig_stages"] == "screen,ga,pareto,refine,verify"
+        run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
+    assert "resuming the GA from generation 2" in _logged(caplog)
+    # killed after the verify stage: every stage up to it is in the file, the summary is not
+    assert load(tmp_path / "results.h5")["attrs"]["ga_reconfig_stages"] == "screen,ga,pareto,refine,verify"
     monkeypatch.setattr(job, "summary", real)
-    b = run_experiment("ga_reconfig", TOY, run_dir=tmp_path / "b")
-    _assert_same(full_run, b)
+    p = run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
+    snap = tmp_path / "after_resume.h5"
+    snap.write_bytes(p.read_bytes())
+    run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
+    out = _logged(caplog)
+    assert "complete results of this ga_reconfig run; nothing to do" in out and "starting the GA" not in out
+    _assert_same(snap, p)
+    # killed inside the GA and after the verify stage, resumed each time: bit-identical to the uninterrupted run
+    _assert_same(full_run, p)
+    assert load(p)["ga"]["checkpoint"]["attrs"]["generations_done"] == 4   # the checkpoint survives
+
+
+#: pareto off with the refine stage on, in weighted mode: one shared run (``toy_run``) serves both
+#: test_pareto_disabled_runs_end_to_end[True] and test_weighted_mode_runs_and_says_so (each was its own run,
+#: ~125 s cold each); pareto off in the default mode is the GA_STAGES_OFF run
+WEIGHTED_NO_PARETO = ("experiment.objectives.mode=weighted", "experiment.pareto.enabled=false")
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize("refine", [True, False])
-def test_pareto_disabled_runs_end_to_end(toy_run, tmp_path, refine):
+def test_pareto_disabled_runs_end_to_end(toy_run, refine):
     if refine:
-        p = run_experiment("ga_reconfig", TOY + ["experiment.pareto.enabled=false"], run_dir=tmp_path)
+        p = toy_run("ga_reconfig", *WEIGHTED_NO_PARETO)
     else:
         p = toy_run("ga_reconfig", *GA_STAGES_OFF)  # the session's one run with the optional stages off
     data = load(p)
@@ -200,9 +202,8 @@ def test_knee_point_of_a_convex_front():
 
 
 @pytest.mark.slow
-def test_weighted_mode_runs_and_says_so(tmp_path, caplog):
-    caplog.set_level(logging.INFO, logger="deltajax")
-    p = run_experiment("ga_reconfig", TOY + ["experiment.objectives.mode=weighted", "experiment.pareto.enabled=false"],
-                       run_dir=tmp_path)
-    assert "weighted sum 1 x picks_per_min + 1 x regular_volume" in caplog.text
+def test_weighted_mode_runs_and_says_so(toy_run):
+    p = toy_run("ga_reconfig", *WEIGHTED_NO_PARETO)  # shared with test_pareto_disabled_runs_end_to_end[True]
+    # the run's lines (the "deltajax" logger) are in its run.log, whichever test ran it
+    assert "weighted sum 1 x picks_per_min + 1 x regular_volume" in (p.parent / "run.log").read_text()
     assert "weighted sum" in load(p)["ga"]["attrs"]["objective"]
