@@ -10,7 +10,7 @@ new, and the speed-up (CPU-s ratio). Record ``uptime`` next to the figures (shar
 
 old: the frozen kernel with the per-design R sweeps (``screen=False``) and the frozen peak-speed term
 (the fitness as it was); new: the core kernel with the population-level task coverage and reachability
-(:func:`deltajax.optimize.objectives.task_cover`, :func:`~deltajax.optimize.objectives.reach_cover`) and the
+(:func:`deltajax.optimize.screens.task_cover`, :func:`~deltajax.optimize.screens.reach_cover`) and the
 flat peak-speed term. The middle column ("new exact") is the core kernel with the per-design sweeps
 (``screen=False``), to separate the kernel's share from the screens'. Exits non-zero unless the fitness
 values agree to 1e-12 (absolute; they are O(1) or 1e3 + violation), the NaN patterns are identical and the
@@ -37,7 +37,7 @@ import deltajax as dj  # noqa: E402
 from deltajax import baseline_kernel as _kernel_baseline  # noqa: E402
 from deltajax.optimize import DesignSpace, Problem, evaluate_design, evaluate_population, make_fitness  # noqa: E402
 from deltajax.optimize import objectives as _objectives  # noqa: E402
-from deltajax.optimize.objectives import TASK_CHUNK, reach_cover, task_cover  # noqa: E402
+from deltajax.optimize.screens import TASK_CHUNK, reach_cover, task_cover  # noqa: E402
 
 #: the main job's problem before it became the designer's problem (issue 12): the kernel's baseline workload
 CONFIG = Path(__file__).resolve().parent / "bench_fitness_problem.yaml"

@@ -1,5 +1,5 @@
 """GA fitness speed-ups (issue 9) keep the exact answer: the population-level task coverage
-(:func:`deltajax.optimize.objectives.task_cover`) gives the exact sweep's flags, the fitness with and without
+(:func:`deltajax.optimize.screens.task_cover`) gives the exact sweep's flags, the fitness with and without
 it is identical, and the flat peak-speed term equals the Jacobian-solve formulation.
 
 Tiny sizes: populations of 16-48 designs, 44 task points, n_R 16 (the bench's), chunks of 8 so that the
@@ -19,6 +19,7 @@ from hypothesis import strategies as st
 import deltajax as dj
 from deltajax.optimize import DesignSpace, Problem, evaluate_design, evaluate_population
 from deltajax.optimize import objectives as O
+from deltajax.optimize import screens as S
 from deltajax.workspace import reconfigurable_reachable, resolve_redundancy
 
 BOUNDS = {"R_min": [0.10, 0.20], "R_max": [0.30, 0.55], "platform_radius": [0.04, 0.09],
@@ -54,7 +55,7 @@ def _exact_covered(pb, designs, pts):
 
 def _cover_fns(pb):
     exact = jax.jit(lambda G, P: _exact_covered(pb, jax.vmap(SPACE.decode)(G), P))
-    screened = jax.jit(lambda G, P: O.task_cover(pb, jax.vmap(SPACE.decode)(G), P, chunk=8))
+    screened = jax.jit(lambda G, P: S.task_cover(pb, jax.vmap(SPACE.decode)(G), P, chunk=8))
     return exact, screened
 
 
@@ -113,7 +114,7 @@ def test_reach_cover_equals_the_sweep_including_points_at_the_reach_limit():
     L = float(d0.robot.upper_arm + d0.robot.forearm)
     edge = [[0.0, 0.0, L + e] for e in (-1e-9, 0.0, 1e-9)] + [[0.05, 0.0, L - 0.002 + e] for e in (-1e-9, 0.0, 1e-9)]
     pts = jnp.asarray(np.concatenate([ws, edge, HARD]))
-    got = jax.jit(lambda ds: O.reach_cover(ds, pts, chunk=64))(designs)
+    got = jax.jit(lambda ds: S.reach_cover(ds, pts, chunk=64))(designs)
     want = jax.jit(jax.vmap(lambda d: reconfigurable_reachable(d, pts)))(designs)
     np.testing.assert_array_equal(np.asarray(got.reachable), np.asarray(want))
     assert int(got.n_excluded) > 0 and int(got.n_rest) > 64  # all three routes taken, several chunks

@@ -16,7 +16,7 @@ from .objectives import (INFEASIBLE_OFFSET, METRIC_UNITS, METRICS, SENSE, Object
                          evaluate_population, fitness_from_metrics, make_fitness, soft_margin, soft_membership)
 from .designer import (CONSTRAINT_NAMES, DESIGN_METRICS, DESIGN_SENSE, DESIGN_UNITS, OBJECTIVES, DesignerProblem,
                        evaluate_designer, knee_point)
-from .objectives import reach_cover, task_cover  # population-level screens of make_fitness (issue 9)
+from .screens import reach_cover, task_cover  # population-level screens of make_fitness (issue 9)
 from .pareto import ParetoResult, hypervolume, non_dominated, nsga2, zdt, zdt_front
 from .refine import RefineResult, refine
 

@@ -44,6 +44,7 @@ __all__ = [
     "make_grid",
     "franco2026_grid",
     "reachable_mask",
+    "canonical_point",
     "reachable_fraction",
     "point_indices",
     "mirrored_point_indices",
@@ -177,14 +178,14 @@ def franco2026_grid(h: float = 0.002, *, paper_box: bool = True) -> Grid:
 
 # -- kernels (pure) ------------------------------------------------------------------------------------------
 
-def _canonical(p: Float[Array, "3"]) -> Float[Array, "3"]:
+def canonical_point(p: Float[Array, "3"]) -> Float[Array, "3"]:
     """The mirror image (x, |y|, z): exact for the y -> -y symmetric robot, see the module docstring."""
     return jnp.stack([p[0], jnp.abs(p[1]), p[2]])
 
 
 def reachable_point(robot: Delta, p: Float[Array, "3"]) -> Bool[Array, ""]:
     """IK solvable for all chains with every theta inside the joint limits (one point)."""
-    return jnp.all(ik_cos_sin(robot, _canonical(jnp.asarray(p))).ok)
+    return jnp.all(ik_cos_sin(robot, canonical_point(jnp.asarray(p))).ok)
 
 
 def reachable_mask(robot: Delta, points: Float[Array, "n 3"]) -> Bool[Array, "n"]:
@@ -219,7 +220,7 @@ def mirrored_point_indices(robot: Delta, p: Float[Array, "3"], *, b_v: float = 2
     Returns:
         (ok, indices): ``ok`` is reachability within joint limits; the indices are NaN where not ok.
     """
-    out = point_kernel(robot, _canonical(jnp.asarray(p)), sv_method=sv_method, b_v=b_v, b_f=b_f, beta=beta)
+    out = point_kernel(robot, canonical_point(jnp.asarray(p)), sv_method=sv_method, b_v=b_v, b_f=b_f, beta=beta)
     return out.ok, out.indices
 
 

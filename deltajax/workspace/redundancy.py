@@ -71,7 +71,7 @@ from jaxtyping import Array, Bool, Float, Int
 from ..geometry import ReconfigurableDelta
 from ..indices import INDEX_NAMES, Indices, point_kernel
 from ..kinematics import ik_cos_sin, to_chain_frames
-from .grid import _canonical
+from .grid import canonical_point
 
 #: default extra absolute margin of the fast mode's screen (on top of its per-sample error bound)
 SCREEN_MARGIN = 1e-6
@@ -129,7 +129,7 @@ def sample_value(recon: ReconfigurableDelta, p: Float[Array, "3"], k: Int[Array,
                  ) -> tuple[Bool[Array, ""], Float[Array, ""]]:
     """(feasible, criterion value) of one point at R sample ``k``; the value is -inf where not feasible."""
     _check_criterion(criterion)
-    feas, ind = _kernel(recon, _canonical(jnp.asarray(p)), k, b_v, b_f, beta)
+    feas, ind = _kernel(recon, canonical_point(jnp.asarray(p)), k, b_v, b_f, beta)
     v = getattr(ind, criterion)
     feas = feas & ~jnp.isnan(v)
     return feas, jnp.where(feas, v, -jnp.inf)
@@ -142,7 +142,7 @@ def _nan_indices(ind: Indices, ok) -> Indices:
 def _finish(recon, pts, best_k, best_v, b_v, b_f, beta) -> Redundancy:
     ok = best_k >= 0
     k_safe = jnp.where(ok, best_k, 0)
-    _, ind = jax.vmap(lambda q, kk: _kernel(recon, _canonical(q), kk, b_v, b_f, beta))(pts, k_safe)
+    _, ind = jax.vmap(lambda q, kk: _kernel(recon, canonical_point(q), kk, b_v, b_f, beta))(pts, k_safe)
     R = jnp.where(ok, _sample_R(recon, k_safe), jnp.nan)
     return Redundancy(k=best_k, R=R, value=jnp.where(ok, best_v, jnp.nan), ok=ok, indices=_nan_indices(ind, ok))
 
@@ -185,7 +185,7 @@ def reconfigurable_reachable(recon: ReconfigurableDelta, points: Float[Array, "n
     Vmap over designs: ``jax.vmap(reconfigurable_reachable, in_axes=(0, None))``.
     """
     pts = jnp.asarray(points)
-    canon = jax.vmap(_canonical)(pts)
+    canon = jax.vmap(canonical_point)(pts)
 
     def step(acc, k):
         robot = recon.at(_sample_R(recon, k))
@@ -205,7 +205,7 @@ def reach_interval(recon: ReconfigurableDelta, p: Float[Array, "3"]) -> tuple[Fl
     used); empty (R_lo > R_hi) when no R reaches the point.
     """
     robot = recon.robot
-    loc = to_chain_frames(_canonical(jnp.asarray(p)))
+    loc = to_chain_frames(canonical_point(jnp.asarray(p)))
     L1, L2, r = robot.upper_arm, robot.forearm, robot.platform_radius
     py2 = loc[:, 1] ** 2
     l2p2 = L2 * L2 - py2
