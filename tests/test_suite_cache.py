@@ -1,0 +1,46 @@
+"""The tests' CLI subprocesses share the session's persistent XLA cache (tests/conftest.py exports it):
+configs/config.yaml's ``compilation_cache`` reads ``DELTAJAX_JAX_CACHE`` and ``deltajax.run`` the threshold
+``DELTAJAX_JAX_CACHE_MIN_S``."""
+
+import os
+
+import jax
+import pytest
+from omegaconf import OmegaConf
+
+from toy_jobs import JAX_CACHE
+
+
+def _compose(*overrides):
+    from hydra import compose, initialize_config_dir
+
+    from deltajax.run import CONFIG_DIR
+
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        return compose(config_name="config", overrides=["experiment=workspace_grid", *overrides])
+
+
+def test_compilation_cache_follows_the_environment(monkeypatch, tmp_path):
+    assert os.environ["DELTAJAX_JAX_CACHE"] == JAX_CACHE  # what every CLI subprocess of the session inherits
+    monkeypatch.setenv("DELTAJAX_JAX_CACHE", str(tmp_path / "xla"))
+    assert OmegaConf.to_container(_compose(), resolve=True)["compilation_cache"] == str(tmp_path / "xla")
+    assert _compose("compilation_cache=null").compilation_cache is None  # an explicit value still wins
+    monkeypatch.delenv("DELTAJAX_JAX_CACHE")
+    assert _compose().compilation_cache == "~/.cache/deltajax/jax"  # the documented default
+
+
+def test_run_sets_the_cache_and_its_threshold_from_the_environment(monkeypatch, tmp_path):
+    from deltajax.config import ConfigError
+    from deltajax.run import execute
+
+    monkeypatch.setenv("DELTAJAX_JAX_CACHE_MIN_S", "0.25")
+    cfg = _compose(f"compilation_cache={tmp_path / 'xla'}", "experiment.grid.h=0")  # refused after the cache is set
+    before = (jax.config.jax_compilation_cache_dir, jax.config.jax_persistent_cache_min_compile_time_secs)
+    try:
+        with pytest.raises(ConfigError, match="experiment.grid.h must be > 0"):
+            execute(cfg, tmp_path / "run")
+        assert jax.config.jax_compilation_cache_dir == str(tmp_path / "xla")
+        assert jax.config.jax_persistent_cache_min_compile_time_secs == 0.25
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before[0])
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", before[1])
