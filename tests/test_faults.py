@@ -318,6 +318,9 @@ def _progress(run_dir):
     return ()
 
 
+KILL_WAIT_S = 900  # per kill: a run reaches its target in seconds on a quiet machine
+
+
 def _kill_then_finish(args, run_dir, seed, targets):
     """Start the CLI and SIGKILL it at a seeded random moment once its checkpoint has reached each of
     ``targets`` (finished x-planes or chunks; plus a random 0-0.2 s so the kill lands anywhere inside the next
@@ -328,13 +331,20 @@ def _kill_then_finish(args, run_dir, seed, targets):
     for target in targets:
         p = subprocess.Popen([sys.executable, "-m", "deltajax.run", *args, f"hydra.run.dir={run_dir}"], cwd=REPO,
                              env=env, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-        t_end = time.monotonic() + 240
-        while p.poll() is None and time.monotonic() < t_end:
+        # wait for the target, or fail saying so: a 240 s cap used to SIGKILL a slow run (heavy load, cold
+        # caches) wherever it was, e.g. before the RDR stage, and the test then failed on its kill count
+        t0 = time.monotonic()
+        while p.poll() is None:
             try:
                 if sum(_progress(run_dir)) >= target:
                     break
             except (OSError, KeyError, ValueError):  # a file being replaced right now: look again
                 pass
+            if time.monotonic() - t0 > KILL_WAIT_S:
+                p.kill()
+                p.wait()
+                pytest.fail(f"{args[0]} did not reach {target} chunks/planes in {KILL_WAIT_S} s (progress "
+                            f"{_progress(run_dir)}, load {os.getloadavg()}); kills so far {seen}")
             time.sleep(0.01)
         time.sleep(rng.uniform(0.0, 0.2))
         if p.poll() is None:
