@@ -174,9 +174,7 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
     cache = cfg.get("compilation_cache")
     if cache:  # persistent XLA cache: reruns, resumes and sweep jobs skip most compilation
         jax.config.update("jax_compilation_cache_dir", os.path.expanduser(str(cache)))
-        # programs compiled in over 1 s; DELTAJAX_JAX_CACHE_MIN_S=<s> another threshold (the tests: 0.1 s)
-        jax.config.update("jax_persistent_cache_min_compile_time_secs",
-                          float(os.environ.get("DELTAJAX_JAX_CACHE_MIN_S", "1.0")))
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     check_keys(cfg)  # unknown keys (also +key=value ones), before anything else reads the config
     robot, recon = robot_from_config(cfg.robot)  # validated before anything compiles
     validate_config(cfg, robot, recon)  # every experiment field, before the run directory is touched

@@ -28,10 +28,9 @@ JAX_CACHE_MIN_S = 0.1  # small compilations too: the other xdist worker reuses t
 jax.config.update("jax_compilation_cache_dir", JAX_CACHE)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", JAX_CACHE_MIN_S)
 # every CLI run the tests start (toy runs, SLURM and joblib sweep jobs, kill/resume, the wheel's CLI) inherits
-# these: configs/config.yaml's compilation_cache reads DELTAJAX_JAX_CACHE and deltajax.run the threshold, so the
-# subprocesses reuse the programs the session (and earlier sessions) compiled, and a cold measurement is cold
+# it: configs/config.yaml's compilation_cache reads DELTAJAX_JAX_CACHE, so the subprocesses reuse the programs the
+# session (and earlier sessions) compiled, and a cold measurement (an empty DELTAJAX_TEST_JAX_CACHE) is cold
 os.environ["DELTAJAX_JAX_CACHE"] = JAX_CACHE
-os.environ["DELTAJAX_JAX_CACHE_MIN_S"] = str(JAX_CACHE_MIN_S)
 
 from hypothesis import settings  # noqa: E402
 
