@@ -215,11 +215,15 @@ def test_recommendation_rules_on_a_front():
 
 @pytest.mark.slow
 def test_refine_designs_accepts_only_feasible_improvements_and_fails_loudly(designer_small):
-    from deltajax.optimize.workflow import refine_designs
+    from deltajax.optimize.workflow import batch_evaluator, refine_designs
 
     pb, space, scale, objs = designer_small
     g0 = np.stack([space.baseline_genes(), np.full(space.dim, 0.5)])
-    ro = refine_designs(pb, space, g0, objs, scale, "picks_per_min", steps=3, learning_rate=0.02)
+    # the toy ga_reconfig job's evaluators (batch: its NSGA-II population; 256 without the regular workspace),
+    # so that their compiled programs are shared through the persistent XLA cache
+    ev, ev_cheap = batch_evaluator(pb, space, 8), batch_evaluator(pb, space, 256, regular=False)
+    ro = refine_designs(pb, space, g0, objs, scale, "picks_per_min", steps=3, learning_rate=0.02, evaluate=ev,
+                        evaluate_cheap=ev_cheap)
     assert np.all(ro.F_after[ro.accepted] <= ro.F_before[ro.accepted] + 1e-12)
     assert np.all(ro.F_after[ro.accepted, 0] < ro.F_before[ro.accepted, 0])
     np.testing.assert_array_equal(ro.genes_after[~ro.accepted], ro.genes_before[~ro.accepted])
@@ -238,7 +242,8 @@ def test_refine_designs_accepts_only_feasible_improvements_and_fails_loudly(desi
     try:
         D.evaluate_designer = broken
         with pytest.raises(FloatingPointError, match="non-finite gradient"):
-            refine_designs(pb, space, g0[:1], objs, scale, "picks_per_min", steps=3, learning_rate=0.02)
+            refine_designs(pb, space, g0[:1], objs, scale, "picks_per_min", steps=3, learning_rate=0.02,
+                           evaluate=ev, evaluate_cheap=ev_cheap)
     finally:
         D.evaluate_designer = real
         W._DESCENT.clear()
@@ -260,5 +265,5 @@ def designer_small():
     robot, recon = robot_from_config(cfg.robot)
     s, space, pb, _ = ga_reconfig_build(cfg.experiment, robot, recon)
     objs = ["picks_per_min", "regular_volume"]
-    b = batch_evaluator(pb, space, 2)(space.baseline_genes()[None])
+    b = batch_evaluator(pb, space, 8)(space.baseline_genes()[None])  # the toy job's batch: one compiled program
     return pb, space, -1.0 / np.abs(np.asarray([b[o][0] for o in objs])), objs
