@@ -228,8 +228,8 @@ def test_mem_gb_is_enforced_and_reported(cluster):
 # -- (c) a GA job cancelled mid-way, resubmitted into its run directory -----------------------------------
 def _ga_overrides():
     """A toy GA: population, generations, seed; a checkpoint every 100 generations (one compiled chunk each:
-    a checkpoint rewrites results.h5 atomically, ~50-90 CPU-ms and an fsync, so one after each of the 3000
-    generations cost minutes); the other stages off or at the suite's toy sizes (tests/toy_jobs.py, so their
+    a checkpoint rewrites results.h5 atomically, tens of CPU-ms and an fsync, so one after each of the 3000
+    generations cost minutes: the GA stage took 1067 s wall against 154 s, side by side under load); the other stages off or at the suite's toy sizes (tests/toy_jobs.py, so their
     compiled programs are the session's), for whichever of those keys the ga_reconfig config has."""
     from hydra import compose, initialize_config_dir
 
