@@ -5,8 +5,11 @@
 
 The grid (inclusive end points, :func:`deltajax.workspace.make_grid`) is cut into chunks of whole x-planes
 (``experiment.chunk_points`` points each, padded to a fixed shape so that one compilation serves all of
-them). Each chunk is split over this process's JAX devices (``jax.sharding``; on a CPU node the
-:class:`deltajax.sweeps.WorkerEnv` callback exposes one host device per CPU). With ``n_shards=N`` the chunks
+them). Each chunk is split over this process's JAX devices by x-planes (``jax.shard_map``; on a CPU node the
+:class:`deltajax.sweeps.WorkerEnv` callback exposes one host device per CPU); each device evaluates the y >= 0
+half of its planes on a mirror-symmetric grid and runs the full kernel only where a cheap reach pre-test passes,
+compacted into fixed-size blocks (:func:`deltajax.workspace.driver.make_grid_evaluator`; the kernel's values bit
+for bit). With ``n_shards=N`` the chunks
 are divided among N jobs; ``shard=i`` computes the i-th contiguous block of x-planes. Because the shard
 boundaries fall on chunk boundaries, every point is computed in the same chunk position with the same
 compiled code as in a single run, and the per-plane partial statistics are reduced by the same NumPy code
