@@ -3,7 +3,7 @@
     python experiments/bench_workspace.py --h 0.01 --exact-fraction 0.2   # 10 mm grid, exact on 20 % of points
     python experiments/bench_workspace.py                 # 2 mm paper grid, fast mode; baselines on a subset
     python experiments/bench_workspace.py --audit         # also check the screen's error bound on the subset
-    python experiments/bench_workspace.py --backends 0.004 0.002   # workspace_grid job: JAX path vs Numba path
+    python experiments/bench_workspace.py --backends 0.004 0.002   # workspace_grid job: JAX (new, old) vs Numba path
     python experiments/bench_workspace.py --versus 6b6bd19         # Numba kernel + Table-6 parts: old vs new
 
 The job: (1) fixed robot R = 0.200 over the whole grid (mask + every index), (2) the reconfigurable robot's
@@ -46,18 +46,41 @@ class _Clock:
         return out
 
 
-def compare_backends(hs) -> None:
-    """The ``workspace_grid`` job (reachability + every index + statistics, results.h5) through the JAX path and
-    the Numba path, in this process, on the same grid: CPU s (all threads), wall s, their ratio, and the load.
+def old_jax_evaluator(grid, n_devices: int, *, planes: int, b_v: float, b_f: float, beta: float, dtype=np.float64):
+    """The ``workspace_grid`` JAX path before stop 20, kept as this benchmark's baseline: every point of every
+    chunk (built on the host) through :func:`deltajax.workspace.driver.make_evaluator`, no mirror half, no
+    compaction. Same call as :func:`deltajax.workspace.driver.make_grid_evaluator`."""
+    from deltajax.workspace.driver import make_evaluator
 
-    JAX runs twice (the first run includes compilation; the second is the warm figure); Numba's machine code
-    is cached on disk (warmed on a tiny grid first). The two results must agree: the same reachable set and
-    index statistics to rounding."""
+    evaluate_points = make_evaluator(n_devices, b_v=b_v, b_f=b_f, beta=beta)
+    plane = grid.shape[1] * grid.shape[2]
+    chunk_len = -(-planes * plane // n_devices) * n_devices
+
+    def evaluate(robot, a: int, b: int):
+        idx = np.arange(a * plane, b * plane, dtype=np.int64)
+        pad = np.full(chunk_len - idx.size, idx[0], np.int64)
+        return evaluate_points(robot, grid.points_at(np.concatenate([idx, pad])).astype(dtype))
+
+    return evaluate
+
+
+def compare_backends(hs, old_jax: bool = True) -> None:
+    """The ``workspace_grid`` job (reachability + every index + statistics, results.h5) through the JAX path, the
+    old JAX path (:func:`old_jax_evaluator`, with ``old_jax``) and the Numba path, in this process, on the same
+    grid: CPU s (all threads), wall s, their ratios, and the load.
+
+    Each JAX path runs twice (the first run includes compilation; the second is the warm figure); Numba's
+    machine code is cached on disk (warmed on a tiny grid first). The results must agree: the same reachable
+    set and index statistics to rounding (JAX's fast singular values vs Numba's Jacobi ones), and the new JAX
+    path's stored k~ field equal to the old one's to the old path's own rounding (its in-jit stack of the
+    outputs compiles the kernel differently; tests/test_jaxws_compact.py checks the new path bit for bit
+    against the kernel)."""
     import tempfile
     from pathlib import Path
 
     import h5py
 
+    from deltajax.jobs import workspace_grid as wg
     from deltajax.run import run_experiment
 
     tmp = Path(tempfile.mkdtemp(prefix="bench_ws_"))
@@ -67,16 +90,25 @@ def compare_backends(hs) -> None:
         return [f"experiment.grid.h={h}", f"experiment.grid.z=[0.0,{round(round(0.6 / h - 1) * h, 9)}]"]
 
     run_experiment("workspace_grid", [*common, *grid(0.05), "experiment.backend=numba"], tmp / "warm")
+    runs = [("jax (cold)", "jax"), ("jax", "jax"), ("numba", "numba")]
+    if old_jax:
+        runs = [("old jax (cold)", "old"), ("old jax", "old")] + runs
+    new_evaluator = wg.make_grid_evaluator
     for h in hs:
         over = [*common, *grid(h)]
         res = {}
-        for label, backend in (("jax (cold)", "jax"), ("jax", "jax"), ("numba", "numba")):
-            load = os.getloadavg()[0]
-            clk = _Clock()
-            path = run_experiment("workspace_grid", [*over, f"experiment.backend={backend}"], tmp / f"{h}_{label}")
-            wall, cpu = clk.lap()
+        for label, backend in runs:
+            wg.make_grid_evaluator = old_jax_evaluator if backend == "old" else new_evaluator
+            try:
+                load = os.getloadavg()[0]
+                clk = _Clock()
+                path = run_experiment("workspace_grid", [*over, f"experiment.backend={backend.replace('old', 'jax')}"],
+                                      tmp / f"{h}_{label}")
+                wall, cpu = clk.lap()
+            finally:
+                wg.make_grid_evaluator = new_evaluator
             res[label] = (wall, cpu, path, load)
-            print(f"h = {h} m  {label:10s}: {cpu:8.2f} CPU s  {wall:8.2f} s wall  (load {load:.1f})", flush=True)
+            print(f"h = {h} m  {label:14s}: {cpu:8.2f} CPU s  {wall:8.2f} s wall  (load {load:.1f})", flush=True)
         with h5py.File(res["jax"][2], "r") as a, h5py.File(res["numba"][2], "r") as b:
             same = bool(np.array_equal(a["workspace/reachable"][()], b["workspace/reachable"][()]))
             n = int(b["workspace/count"][()])
@@ -86,6 +118,20 @@ def compare_backends(hs) -> None:
               f"{res['jax'][0] / res['numba'][0]:.2f}x wall "
               f"(cold jax {res['jax (cold)'][1] / res['numba'][1]:.2f}x CPU); "
               f"reachable sets identical: {same} ({n} points), index means agree to {d:.1e}")
+        if old_jax:
+            with h5py.File(res["jax"][2], "r") as a, h5py.File(res["old jax"][2], "r") as b:
+                same_old = bool(np.array_equal(a["workspace/reachable"][()], b["workspace/reachable"][()]))
+                ka, kb = a["workspace/k_tilde"][()], b["workspace/k_tilde"][()]
+                nan_same = bool(np.array_equal(np.isnan(ka), np.isnan(kb)))
+                fin = np.isfinite(kb)
+                bits = int(np.count_nonzero(ka[fin].view(np.uint64) == kb[fin].view(np.uint64)))
+                rel = float(np.max(np.abs(ka[fin] - kb[fin]) / np.maximum(np.abs(kb[fin]), np.finfo(kb.dtype).tiny),
+                                   initial=0.0))
+            print(f"h = {h} m  RATIO old jax/numba: {res['old jax'][1] / res['numba'][1]:.2f}x CPU s, "
+                  f"{res['old jax'][0] / res['numba'][0]:.2f}x wall; new/old jax {res['jax'][1] / res['old jax'][1]:.2f}x "
+                  f"CPU s, {res['jax'][0] / res['old jax'][0]:.2f}x wall; reachable sets identical: {same_old}, NaN "
+                  f"pattern of k~ identical: {nan_same}, k~ bit-equal on {bits} of {int(fin.sum())} points, "
+                  f"max relative difference {rel:.1e}")
 
 
 def import_baseline(rev: str):
@@ -180,6 +226,7 @@ def main() -> None:
     ap.add_argument("--audit", action="store_true", help="check the screen's bound on every subset sample")
     ap.add_argument("--backends", type=float, nargs="+", metavar="H",
                     help="only compare the workspace_grid job's JAX and Numba paths on grids of these spacings (m)")
+    ap.add_argument("--no-old-jax", action="store_true", help="--backends: leave out the old JAX path (baseline)")
     ap.add_argument("--versus", metavar="REV", help="old (git REV) vs new Numba code: kernel rates and the "
                     "Table-6 job's ODR/RDR parts on the --h grid, in this process")
     ap.add_argument("--points", type=int, default=400_000, help="--versus: random points of the kernel rates")
@@ -189,7 +236,7 @@ def main() -> None:
         versus(args.versus, args.points, args.h, args.repeats)
         return
     if args.backends:
-        compare_backends(args.backends)
+        compare_backends(args.backends, old_jax=not args.no_old_jax)
         return
     import deltajax as dj
     from deltajax import workspace as ws

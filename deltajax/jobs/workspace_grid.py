@@ -5,8 +5,11 @@
 
 The grid (inclusive end points, :func:`deltajax.workspace.make_grid`) is cut into chunks of whole x-planes
 (``experiment.chunk_points`` points each, padded to a fixed shape so that one compilation serves all of
-them). Each chunk is split over this process's JAX devices (``jax.sharding``; on a CPU node the
-:class:`deltajax.sweeps.WorkerEnv` callback exposes one host device per CPU). With ``n_shards=N`` the chunks
+them). Each chunk is split over this process's JAX devices by x-planes (``jax.shard_map``; on a CPU node the
+:class:`deltajax.sweeps.WorkerEnv` callback exposes one host device per CPU); each device evaluates the y >= 0
+half of its planes on a mirror-symmetric grid and runs the full kernel only where a cheap reach pre-test passes,
+compacted into fixed-size blocks (:func:`deltajax.workspace.driver.make_grid_evaluator`; the kernel's values bit
+for bit). With ``n_shards=N`` the chunks
 are divided among N jobs; ``shard=i`` computes the i-th contiguous block of x-planes. Because the shard
 boundaries fall on chunk boundaries, every point is computed in the same chunk position with the same
 compiled code as in a single run, and the per-plane partial statistics are reduced by the same NumPy code
@@ -35,7 +38,8 @@ import numpy as np
 from ..config import ConfigError, workspace_grid_from_config
 from ..rundir import CheckpointError, RunDirError
 
-from ..workspace.driver import make_evaluator, make_numba_evaluator  # (the job's kernels; also benchmarked)
+from ..workspace.driver import (make_evaluator, make_grid_evaluator,  # (the job's kernels; also benchmarked)
+                                make_numba_evaluator)
 from ..workspace.chunks import (CheckpointMismatch, ResultsCheckpoint, ShardPlan, plane_statistics, plane_summary,
                                run_chunks, seal)
 
@@ -43,7 +47,7 @@ GROUP = "workspace"
 #: the registered shard reducer (deltajax.sweeps.reducers) of group ``workspace``
 REDUCER = "workspace_planes"
 
-__all__ = ["run", "GridPlan", "make_evaluator", "make_numba_evaluator"]
+__all__ = ["run", "GridPlan", "make_evaluator", "make_grid_evaluator", "make_numba_evaluator"]
 
 
 # ---------------------------------------------------------------------------------------------------------
@@ -160,7 +164,7 @@ def run(ctx) -> None:
                                    done_attr="planes_done",
                                    remedy="move it away to keep it, or add fresh=true to start over")
     if backend == "jax":
-        evaluate = make_evaluator(n_dev, **params)
+        evaluate = make_grid_evaluator(grid, n_dev, planes=plan.planes_per_chunk, dtype=dtype, **params)
     else:
         evaluate = make_numba_evaluator(grid, **params)
     robot = ctx.robot
@@ -173,18 +177,13 @@ def run(ctx) -> None:
 
     def compute(la: int, lb: int) -> dict:
         a, b = plan.x_start + la, plan.x_start + lb  # global x-planes of this chunk
-        idx = np.arange(a * plan.plane, b * plan.plane, dtype=np.int64)
-        if backend == "jax":
-            pad = np.full(plan.chunk_len - idx.size, idx[0], np.int64)
-            pts = grid.points_at(np.concatenate([idx, pad])).astype(dtype)
-            ok, vals = evaluate(robot, pts)
-        else:
-            ok, vals = evaluate(robot, a, b)
-        ok = np.asarray(ok)[: idx.size].reshape(b - a, plan.plane)
-        vals = np.asarray(vals)[: idx.size].reshape(b - a, plan.plane, n_idx).astype(dtype, copy=False)
-        timing["n_eval"] += idx.size
+        n = (b - a) * plan.plane
+        ok, vals = evaluate(robot, a, b)  # both backends: the planes' rows first (the JAX path pads after them)
+        ok = np.asarray(ok)[:n].reshape(b - a, plan.plane)
+        vals = np.asarray(vals)[:n].reshape(b - a, plan.plane, n_idx).astype(dtype, copy=False)
+        timing["n_eval"] += n
         if timing["first_s"] is None:
-            timing["first_s"], timing["n_first"] = time.perf_counter() - t0, idx.size
+            timing["first_s"], timing["n_first"] = time.perf_counter() - t0, n
         okp = ok.reshape(b - a, ny, nz)
         out = {"reachable": okp, **plane_statistics(ok, vals)}
         out.update({name: vals[..., FIELD_NAMES.index(name)].reshape(b - a, ny, nz) for name in store})

@@ -37,7 +37,7 @@ from jaxtyping import Array, Bool, Float
 
 from ..geometry import Delta
 from ..indices import INDEX_NAMES, Indices, map_points, point_indices, point_kernel
-from ..kinematics import ik_cos_sin
+from ..kinematics import chain_local, design_ok, ik_cos_sin, limit_terms, loop_closure, safe_point
 
 __all__ = [
     "Grid",
@@ -49,7 +49,10 @@ __all__ = [
     "point_indices",
     "mirrored_point_indices",
     "index_fields",
+    "reach_candidate",
+    "box_fields",
     "FIELD_NAMES",
+    "CANDIDATE_SLACK",
 ]
 
 #: Scalar index fields produced by :func:`index_fields` (the core's :data:`deltajax.INDEX_NAMES`).
@@ -237,3 +240,91 @@ def index_fields(robot: Delta, points: Float[Array, "n 3"], *, b_v: float = 2.0,
     ok, ind = map_points(lambda q: mirrored_point_indices(robot, q, b_v=b_v, b_f=b_f, beta=beta,
                                                           sv_method=sv_method), points)
     return ok, {name: getattr(ind, name) for name in FIELD_NAMES}
+
+
+# -- compacted evaluation (the workspace_grid JAX path) --------------------------------------------------------
+
+#: slacks of :func:`reach_candidate`: (discriminant, relative to (L1 + L2)^2; joint-limit margin; distance from
+#: the motor axis, relative to L1 + L2, below which the margin is not tested). See its docstring.
+CANDIDATE_SLACK = (1e-12, 1e-3, 1e-2)
+
+
+def reach_candidate(robot: Delta, p: Float[Array, "3"]) -> Bool[Array, ""]:
+    """Conservative pre-test of :func:`mirrored_point_indices`' ``ok`` at one point: False only where ``ok`` is
+    False, also when the two are compiled into different XLA programs (so that skipping the points where it is
+    False cannot change a result).
+
+    The same pieces as the kernel (:func:`deltajax.kinematics.safe_point`, ``design_ok``, ``chain_local``,
+    ``loop_closure`` of each chain at the mirror image (x, |y|, z)), with slack instead of the kernel's exact
+    tests ``disc >= 0`` and ``margin >= 0``: a chain passes when disc >= -1e-12 (L1 + L2)^2 and the joint-limit
+    margin is >= -1e-3 (or the point is within 0.01 (L1 + L2) of the chain's motor axis, where the margin is
+    sensitive to the discriminant). Why these suffice: two compilations of the same formulas differ by a few
+    ulps, ~1e-16 (L1 + L2)^2 in disc (10^4 below the slack); a disc changed by d changes sqrt(disc) by at most
+    sqrt(|d|) <= 1e-6 (L1 + L2) and cos/sin theta, hence the margin, by at most 2 sqrt(|d|) / rho <= 2e-4 for
+    rho >= 0.01 (L1 + L2). Points in the slack layer run the full kernel, whose ``ok`` decides.
+    """
+    tol_d, tol_m, tol_r = CANDIDATE_SLACK
+    p, usable = safe_point(robot, canonical_point(jnp.asarray(p)))
+    L1, L2 = robot.upper_arm, robot.forearm
+    scale = (L1 + L2) * (L1 + L2)
+    lim = limit_terms(robot.theta_min, robot.theta_max)
+    cand = usable & design_ok(robot)
+    for i in range(3):
+        x, y, z = chain_local(p[0], p[1], p[2], i)
+        dx = x + robot.platform_radius - robot.base_radius  # as every kernel evaluates it
+        lc = loop_closure(dx, y, z, L1, L2, lim)
+        near_axis = dx * dx + z * z < (tol_r * tol_r) * scale
+        cand = cand & (lc.disc >= -tol_d * scale) & ((lc.margin >= -tol_m) | near_axis)
+    return cand
+
+
+def box_fields(robot: Delta, xs: Float[Array, "nx"], ys: Float[Array, "ny"], zs: Float[Array, "nz"], *,
+               block: int = 4096, b_v: float = 2.0, b_f: float = 4.2, beta: float = 0.5, sv_method: str = "fast"
+               ) -> tuple[Bool[Array, "nx ny nz"], Float[Array, "nx ny nz n_index"]]:
+    """Reachable mask and every index on the box grid xs x ys x zs, with the kernel run only where it can
+    succeed; pure, jit-able, static shapes (unchanged on a GPU). Equal bit for bit to :func:`index_fields` of
+    its points run in whole vector-width batches (XLA:CPU compiles a batch's remainder as scalar code, which
+    rounds differently by ~1e-14 relative; ok and NaN patterns are identical either way).
+
+    A cheap pass of :func:`reach_candidate` over the box; the candidates' flat indices compacted
+    (``jnp.nonzero`` with a static size); the kernel (:func:`mirrored_point_indices`) over them in blocks of
+    ``block`` points in a ``lax.fori_loop`` whose trip count is the number of candidate blocks (the last block
+    padded with out-of-range indices, whose results are dropped); its results scattered into arrays that are
+    ``ok=False`` and NaN everywhere else -- exactly the kernel's output at a point that is not ``ok``.
+
+    Args:
+        robot: the robot (concrete or traced).
+        xs, ys, zs: the box's axes (m, base frame).
+        block: points per kernel block (static).
+        b_v, b_f, beta, sv_method: as in :func:`index_fields`.
+
+    Returns:
+        (ok[nx, ny, nz], values[nx, ny, nz, len(FIELD_NAMES)]) in :data:`FIELD_NAMES` order.
+    """
+    xs, ys, zs = jnp.asarray(xs), jnp.asarray(ys), jnp.asarray(zs)
+    shape = (xs.shape[0], ys.shape[0], zs.shape[0])
+    n = shape[0] * shape[1] * shape[2]
+    n_pad = -(-n // block) * block
+    X = jnp.broadcast_to(xs[:, None, None], shape).reshape(-1)
+    Y = jnp.broadcast_to(ys[None, :, None], shape).reshape(-1)
+    Z = jnp.broadcast_to(zs[None, None, :], shape).reshape(-1)
+    cand = jax.vmap(reach_candidate, in_axes=(None, 0))(robot, jnp.stack([X, Y, Z], axis=-1))
+    count = jnp.sum(cand, dtype=jnp.int32)
+    (idx,) = jnp.nonzero(cand, size=n_pad, fill_value=n)  # sorted candidates, then n (out of range: dropped)
+    dtype = jnp.result_type(xs.dtype, robot.upper_arm.dtype)
+    nyz = shape[1] * shape[2]
+
+    def body(b, carry):
+        ok, vals = carry
+        ids = jax.lax.dynamic_slice(idx, (b * block,), (block,))
+        i, rem = jnp.divmod(ids, nyz)
+        j, k = jnp.divmod(rem, shape[2])
+        pts = jnp.stack([xs.at[i].get(mode="clip"), ys.at[j].get(mode="clip"), zs.at[k].get(mode="clip")], axis=-1)
+        ok_b, ind = jax.vmap(lambda q: mirrored_point_indices(robot, q, b_v=b_v, b_f=b_f, beta=beta,
+                                                              sv_method=sv_method))(pts)
+        vals_b = jnp.stack([getattr(ind, name) for name in FIELD_NAMES], axis=-1)
+        return ok.at[ids].set(ok_b, mode="drop"), vals.at[ids].set(vals_b, mode="drop")
+
+    init = (jnp.zeros(n, bool), jnp.full((n, len(FIELD_NAMES)), jnp.nan, dtype))
+    ok, vals = jax.lax.fori_loop(0, (count + block - 1) // block, body, init)
+    return ok.reshape(shape), vals.reshape(shape + (len(FIELD_NAMES),))
