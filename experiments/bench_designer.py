@@ -80,6 +80,8 @@ def main(argv=None):
     ap.add_argument("--scan-log2", type=int, default=17, help="Sobol scan of 2^k designs (>= 17 for 1e5)")
     ap.add_argument("--skip-runs", action="store_true",
                     help="do not start runs: analyse the complete ones found in --out (seeds without one are skipped)")
+    ap.add_argument("--no-scan", action="store_true",
+                    help="skip the scan: (a), (b) and each run's fine-grid front figures only")
     ap.add_argument("--scan-only", action="store_true", help="only compute the scan (saved to <out>/scan_<k>.npz)")
     ap.add_argument("--cache", default=None, help="XLA compilation cache folder for the runs (default: <out>/xla)")
     ap.add_argument("--fine-top", type=int, default=16,
@@ -106,8 +108,9 @@ def main(argv=None):
                    "progress=false", f"hydra.run.dir={d}", f"compilation_cache={args.cache or out / 'xla'}", *extra]
             t1, c1 = time.perf_counter(), _cpu()
             subprocess.run(cmd, check=True, stdout=subprocess.DEVNULL)
+            rss = resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 2 ** 20
             print(f"{budget} seed {s}: {time.perf_counter() - t1:.0f} s wall, {_cpu() - c1:.0f} CPU-s, load "
-                  f"{os.getloadavg()[0]:.1f}", flush=True)
+                  f"{os.getloadavg()[0]:.1f}; largest child RSS so far {rss:.2f} GB", flush=True)
             runs[(budget, s)] = d / "results.h5"
     t_runs, c_runs = time.perf_counter() - t0, _cpu() - c0
 
@@ -132,44 +135,71 @@ def main(argv=None):
     objs = list(s.objectives)
     sense = np.asarray([DESIGN_SENSE[o] for o in objs], float)
     report = {"objectives": objs, "seeds": args.seeds, "large": args.large, "load_before": load0}
-    ev = batch_evaluator(pb, space, 64)
-    ev_cheap = batch_evaluator(pb, space, 1024, regular=False)
-    X = qmc.Sobol(d=space.dim, scramble=True, seed=12345).random_base2(args.scan_log2)
-    t1, c1 = time.perf_counter(), _cpu()
-    base = {k: v[0] for k, v in ev(space.baseline_genes()[None, :]).items()}
-    cached = out / f"scan_{args.scan_log2}.npz"
-    if cached.exists() and not args.scan_only:
-        z = np.load(cached)
-        feas, prim, Xf = z["feas"], z["prim"], z["Xf"]
-        Mf = {o: z[f"Mf_{o}"] for o in objs} if len(Xf) else None
-        Mf = dict(Mf, feasible=np.ones(len(Xf), bool)) if Mf is not None else None
-        t_scan, c_scan, c_cheap = float(z["t_scan"]), float(z["c_scan"]), float(z["c_cheap"])
-        # a cached scan is used only if today's coarse evaluator reproduces it (64 of its feasible designs)
-        if len(Xf):
-            chk = ev(Xf[:64])
-            dev = max(float(np.nanmax(np.abs(chk[o] - Mf[o][:64]) / np.maximum(np.abs(Mf[o][:64]), 1e-300)))
-                      for o in objs)
-            if not (np.all(chk["feasible"].astype(bool)) and dev <= 1e-9):
-                raise SystemExit(f"{cached} does not match today's evaluator (max rel. deviation {dev:.3g}); delete it")
-            print(f"scan: reused {cached} (64 designs re-evaluated: max rel. deviation {dev:.2g})", flush=True)
+    if not args.no_scan:   # the scan (c); --no-scan: only (a), (b) and the runs' own fine-grid figures
+        ev = batch_evaluator(pb, space, 64)
+        ev_cheap = batch_evaluator(pb, space, 1024, regular=False)
+        X = qmc.Sobol(d=space.dim, scramble=True, seed=12345).random_base2(args.scan_log2)
+        t1, c1 = time.perf_counter(), _cpu()
+        base = {k: v[0] for k, v in ev(space.baseline_genes()[None, :]).items()}
+        cached = out / f"scan_{args.scan_log2}.npz"
+        if cached.exists() and not args.scan_only:
+            z = np.load(cached)
+            feas, prim, Xf = z["feas"], z["prim"], z["Xf"]
+            Mf = {o: z[f"Mf_{o}"] for o in objs} if len(Xf) else None
+            Mf = dict(Mf, feasible=np.ones(len(Xf), bool)) if Mf is not None else None
+            t_scan, c_scan, c_cheap = float(z["t_scan"]), float(z["c_scan"]), float(z["c_cheap"])
+            # a cached scan is used only as far as today's evaluator reproduces it: the cheap pass (feasibility and the
+            # primary objective, no regular workspace) on 64 designs; the regular pass on 64 of its feasible designs, and
+            # when that does not match (the search's regular-workspace measure changed) it is recomputed for every
+            # feasible design and the cache rewritten
+            idx = np.linspace(0, len(X) - 1, 64).astype(int)
+            chk0 = ev_cheap(X[idx])
+            dev0 = float(np.nanmax(np.abs(chk0[s.primary] - prim[idx]) / np.maximum(np.abs(prim[idx]), 1e-300)))
+            if not (np.array_equal(chk0["feasible"].astype(bool), feas[idx]) and dev0 <= 1e-9):
+                raise SystemExit(f"{cached}: its cheap pass does not match today's evaluator (max rel. deviation "
+                                 f"{dev0:.3g}); delete it")
+            if len(Xf):
+                chk = ev(Xf[:64])
+                dev = max(float(np.nanmax(np.abs(chk[o] - Mf[o][:64]) / np.maximum(np.abs(Mf[o][:64]), 1e-300)))
+                          for o in objs)
+                if not np.all(chk["feasible"].astype(bool)):
+                    raise SystemExit(f"{cached}: feasible designs of its regular pass are not feasible today; delete it")
+                if dev > 1e-9:
+                    print(f"scan: {cached}'s cheap pass reproduced (64 designs); its regular pass is not (max rel. "
+                          f"deviation {dev:.3g}: the regular-workspace measure changed): recomputing it for its "
+                          f"{len(Xf)} feasible designs", flush=True)
+                    c2, t2 = _cpu(), time.perf_counter()
+                    parts = [ev(Xf[i:i + 1024]) for i in range(0, len(Xf), 1024)]
+                    Mf = {k: np.concatenate([p_[k] for p_ in parts]) for k in parts[0]}
+                    c_scan = c_cheap + _cpu() - c2
+                    t_scan = float(z["t_cheap"]) + time.perf_counter() - t2 if "t_cheap" in z.files else float("nan")
+                    np.savez(cached, feas=feas, prim=prim, Xf=Xf, t_scan=t_scan, c_scan=c_scan, c_cheap=c_cheap,
+                             t_cheap=float(z["t_cheap"]) if "t_cheap" in z.files else float("nan"),
+                             **{f"Mf_{o}": Mf[o] for o in objs})
+                    cf = out / f"scan_{args.scan_log2}_fine.npz"
+                    if cf.exists():
+                        cf.unlink()                      # its coarse non-dominated set changed with the measure
+                    print(f"scan: regular pass {_cpu() - c2:.0f} CPU-s / {time.perf_counter() - t2:.0f} s wall", flush=True)
+                else:
+                    print(f"scan: reused {cached} (64 designs re-evaluated: max rel. deviation {dev:.2g})", flush=True)
+            else:
+                print(f"scan: reused {cached}", flush=True)
         else:
-            print(f"scan: reused {cached}", flush=True)
-    else:
-        feas = None
-    if feas is None:
-        parts = [ev_cheap(X[i:i + 8192]) for i in range(0, len(X), 8192)]
-        feas = np.concatenate([p["feasible"] for p in parts]).astype(bool)
-        prim = np.concatenate([p[s.primary] for p in parts])
-        t_cheap, c_cheap = time.perf_counter() - t1, _cpu() - c1
-        Xf = X[feas]
-        Mf = ev(Xf) if len(Xf) else None
-        t_scan, c_scan = time.perf_counter() - t1, _cpu() - c1
-        np.savez(out / f"scan_{args.scan_log2}.npz", feas=feas, prim=prim, Xf=Xf, t_scan=t_scan, c_scan=c_scan,
-                 c_cheap=c_cheap, t_cheap=t_cheap, **{f"Mf_{o}": Mf[o] for o in objs} if len(Xf) else {})
-        print(f"scan: {len(X)} Sobol designs, {int(feas.sum())} feasible, {t_scan:.0f} s wall / {c_scan:.0f} CPU-s "
-              f"(cheap pass {c_cheap:.0f} CPU-s); load {os.getloadavg()}", flush=True)
-    if args.scan_only:
-        return
+            feas = None
+        if feas is None:
+            parts = [ev_cheap(X[i:i + 8192]) for i in range(0, len(X), 8192)]
+            feas = np.concatenate([p["feasible"] for p in parts]).astype(bool)
+            prim = np.concatenate([p[s.primary] for p in parts])
+            t_cheap, c_cheap = time.perf_counter() - t1, _cpu() - c1
+            Xf = X[feas]
+            Mf = ev(Xf) if len(Xf) else None
+            t_scan, c_scan = time.perf_counter() - t1, _cpu() - c1
+            np.savez(out / f"scan_{args.scan_log2}.npz", feas=feas, prim=prim, Xf=Xf, t_scan=t_scan, c_scan=c_scan,
+                     c_cheap=c_cheap, t_cheap=t_cheap, **{f"Mf_{o}": Mf[o] for o in objs} if len(Xf) else {})
+            print(f"scan: {len(X)} Sobol designs, {int(feas.sum())} feasible, {t_scan:.0f} s wall / {c_scan:.0f} CPU-s "
+                  f"(cheap pass {c_cheap:.0f} CPU-s); load {os.getloadavg()}", flush=True)
+        if args.scan_only:
+            return
     # (a) stability and (b) budget, over the seeds with a complete run
     rec = {k: _objectives(p, "recommended") for k, p in runs.items()}
     for budget in ("default", "large"):
@@ -202,6 +232,22 @@ def main(argv=None):
     report["larger_budget_dominated_by_smaller"] = lost
     print(f"(b) seeds {both}: those where the larger budget's recommendation is dominated by the smaller run's: "
           f"{lost or 'none'}")
+    if args.no_scan:
+        j = objs.index(s.primary)
+        per_seed = []
+        for (budget, seed), p_ in sorted(runs.items()):
+            V = load(p_)["verify"]
+            okj = np.asarray(V["feasible"]).astype(bool)
+            fine_best = float(np.max(-sense[j] * np.asarray(V[s.primary])[okj])) * -sense[j]
+            per_seed.append({"budget": budget, "seed": seed, "job_fine_best_primary": fine_best,
+                             "hv_job_fine": float(V["attrs"]["hypervolume"]),
+                             "front_size": int(np.asarray(V["front"]).size)})
+            print(f"(c, fine grids, no scan) {budget} seed {seed}: best {s.primary} {fine_best:.4g}, hypervolume "
+                  f"{per_seed[-1]['hv_job_fine']:.4g}, verified front {per_seed[-1]['front_size']} points", flush=True)
+        report.update(per_seed=per_seed, runs_wall_s=t_runs, runs_cpu_s=c_runs, load_after=os.getloadavg())
+        (out / "bench_designer.json").write_text(json.dumps(report, indent=1, default=float))
+        print(f"wrote {out / 'bench_designer.json'}")
+        return
     scale = sense / np.abs(np.asarray([float(base[o]) for o in objs]))
     Ff = objective_matrix(Mf, objs, scale) if len(Xf) else np.zeros((0, len(objs)))
     fin = np.all(np.isfinite(Ff), axis=1)

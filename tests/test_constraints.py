@@ -290,3 +290,34 @@ def test_refined_cylinder_in_a_ball_and_a_cone_against_closed_forms():
     d_cone = 2 * (a + b * (z2 - z0)) / (1 + 2 * b * lam)
     assert d_cone - tol <= float(oc.diameter) <= d_cone + 1e-12
     np.testing.assert_allclose(float(oc.z_top) + float(oc.height), z2, atol=tol)
+
+
+def test_search_settings_of_the_refined_cylinder_against_closed_forms():
+    # the main job's search uses the continuous measure with fewer steps and samples (experiment.regular_workspace.
+    # search_refine: 10 bisection / 8 golden-section steps, 3 x 2 x 3 samples) on the search grid; checked against
+    # the ball's closed form like the verification settings: from below, within the stated bound, and moving in
+    # equal steps where the grid's answer jumps between levels
+    lam = 0.5
+    pts, r, z = C.polar_grid(0.40, 0.15, 0.78, 16, 3, 22)            # the job's search grid
+    unit = C.cylinder_samples(lam, 3, 2, 3)
+
+    @jax.jit
+    def f(rho):
+        good = _ball(0.45, rho)
+        g = jax.vmap(good)(jnp.asarray(pts).reshape(-1, 3)).reshape(pts.shape[:3])
+        start = C.largest_cylinder(jnp.all(g, axis=2), r, z, lam)
+        return C.refine_cylinder(good, start, r, z, lam, unit=unit, n_bisect=10, n_golden=8), start
+
+    rhos = np.linspace(0.17, 0.19, 5)
+    outs = [f(rho) for rho in rhos]
+    D = np.asarray([float(o[0].diameter) for o in outs])
+    Dg = np.asarray([float(o[1].diameter) for o in outs])
+    dz, dr = float(z[1] - z[0]), float(r[1] - r[0])
+    d_hi = Dg.max() + 2 * (2 * dr + dz / lam)
+    tol = d_hi / 2 ** 10 + 2 * 4 * dz * 0.618 ** 8 / lam            # stated bound (the centre's bracket dominates)
+    d_exact = 2 * rhos / math.sqrt(1 + lam ** 2)
+    assert np.all(D <= d_exact + 1e-12) and np.all(D >= d_exact - tol)
+    err = d_exact - D
+    assert np.max(err) < 2e-3                                        # measured: well inside the bound (~1 mm)
+    np.testing.assert_allclose(np.diff(D), np.diff(d_exact), atol=2e-3)
+    assert np.max(np.abs(Dg - d_exact)) > 5 * np.max(err)           # the grid's answer alone is much coarser

@@ -16,7 +16,7 @@ from ._readers import ConfigError, _choice, _field
 _GA_KEYS = {
     "": {"name", "resume", "stop_after", "design", "task", "good_workspace", "joints", "links", "motor", "cycle",
          "regular_workspace", "objectives", "constraints", "screen", "ga", "pareto", "refine", "recommend",
-         "recommend_band", "verify",
+         "recommend_band", "recommend_floor", "verify",
          "reconfig"},  # rtmode: experiment.reconfig is checked by deltajax.optimize.operating
     "screen": {"enabled", "log2_size", "seed_fraction"},
     "refine": {"enabled", "steps", "learning_rate", "penalty"},
@@ -28,7 +28,8 @@ _GA_KEYS = {
     "motor": {"peak_torque", "rated_torque", "max_speed", "corner_speed", "rotor_inertia", "efficiency",
               "gear_ratio"},
     "cycle": {"payload", "dwell", "duration", "n_samples", "law", "n_R_operating"},
-    "regular_workspace": {"hd_ratio", "r_max", "z_min", "z_max", "n_r", "n_phi", "n_z"},
+    "regular_workspace": {"hd_ratio", "r_max", "z_min", "z_max", "n_r", "n_phi", "n_z", "search_refine",
+                          "search_refine_steps", "search_refine_samples"},
     "objectives": {"mode", "names", "primary", "weights"},
     "constraints": {"task_in_good_workspace", "passive_joints", "interference", "min_picks_per_min",
                     "max_arm_sum"},
@@ -36,6 +37,11 @@ _GA_KEYS = {
     "verify": {"n_R", "n_R_operating", "task_n_r", "task_n_phi", "task_n_z", "cycle_samples", "rw_n_r", "rw_n_phi",
                "rw_n_z"},
 }
+
+# keys a config may omit (their defaults are applied where they are read)
+_GA_OPTIONAL = {"regular_workspace": {"search_refine", "search_refine_steps", "search_refine_samples"}}
+
+RECOMMEND_RULES = ("floor", "band", "knee", "primary")   # deltajax.optimize.workflow.recommend
 
 
 def _ga_plain(x: Any) -> Any:
@@ -55,7 +61,7 @@ def _ga_block(e: Mapping[str, Any], name: str) -> dict:
     if extra:
         raise ConfigError(f"{where}: unknown keys {', '.join(sorted(extra))}; valid keys: "
                           f"{', '.join(sorted(_GA_KEYS[name]))}")
-    missing = _GA_KEYS[name] - set(v)
+    missing = _GA_KEYS[name] - set(v) - _GA_OPTIONAL.get(name, set())
     if missing and name not in ("",):
         raise ConfigError(f"{where}: missing keys {', '.join(sorted(missing))}")
     return dict(v)
@@ -104,6 +110,10 @@ class GaReconfigSettings:
     refine: dict = dataclasses.field(default_factory=lambda: {"enabled": False, "steps": 0, "learning_rate": 0.0,
                                                                "penalty": 0.0})
     recommend_band: float = 0.02
+    recommend_floor: float = 1.2
+    # continuous regular workspace in the search: () off, else ((bisection, golden-section steps), (rings, angles,
+    # levels) of the unit cylinder) for deltajax.constraints.refine_cylinder (the verification keeps its defaults)
+    search_refine: tuple = ()
     reconfig: dict = dataclasses.field(default_factory=dict)  # rtmode: operating.settings_from_block
 
 
@@ -176,6 +186,15 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
                "n_r": _ga_num(rw, "n_r", "regular_workspace", lo=2, integer=True),
                "n_phi": _ga_num(rw, "n_phi", "regular_workspace", lo=2, integer=True),
                "n_z": _ga_num(rw, "n_z", "regular_workspace", lo=2, integer=True)}
+    search_refine = ()
+    if _field("experiment.regular_workspace.search_refine", rw.get("search_refine", False), kind="bool"):
+        steps, samples = rw.get("search_refine_steps", [10, 8]), rw.get("search_refine_samples", [3, 2, 3])
+        for key, v, n, lo in (("search_refine_steps", steps, 2, 1), ("search_refine_samples", samples, 3, 2)):
+            if not (isinstance(v, (list, tuple)) and len(v) == n and all(isinstance(x, int) and not
+                                                                         isinstance(x, bool) and x >= lo for x in v)):
+                raise ConfigError(f"experiment.regular_workspace.{key} must be a list of {n} integers >= {lo}, "
+                                  f"got {v!r}")
+        search_refine = (tuple(steps), tuple(samples))
     if not regular["z_min"] < regular["z_max"]:
         raise ConfigError(f"experiment.regular_workspace.z_min={regular['z_min']!r} m must be < "
                           f"z_max={regular['z_max']!r} m")
@@ -223,9 +242,10 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
               "generations": _ga_num(p, "generations", "pareto", lo=1, integer=True),
               "ref_min_factor": _ga_num(p, "ref_min_factor", "pareto", lo=1, lo_open=True)}
     recommend = e.get("recommend")
-    if recommend not in ("band", "knee", "primary"):
-        raise ConfigError(f"experiment.recommend must be band, knee or primary, got {recommend!r}")
+    if recommend not in RECOMMEND_RULES:
+        raise ConfigError(f"experiment.recommend must be one of {', '.join(RECOMMEND_RULES)}, got {recommend!r}")
     band = _ga_num(e, "recommend_band", "", lo=0, hi=1) if "recommend_band" in e else 0.02
+    floor = _ga_num(e, "recommend_floor", "", lo=0, lo_open=True) if "recommend_floor" in e else 1.2
     sc = _ga_block(e, "screen")
     screen = {"enabled": _ga_flag(sc, "enabled", "screen"),
               "log2_size": _ga_num(sc, "log2_size", "screen", lo=0, hi=24, integer=True),
@@ -246,7 +266,7 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
                     joints=joints, links=links, motor=motor, cycle=cycle, regular=regular, mode=mode,
                     objectives=tuple(names), primary=primary, weights=weights, constraints=cons, ga=ga,
                     pareto=pareto, recommend=recommend, verify=verify, screen=screen, refine=refine,
-                    recommend_band=band, reconfig=_operating_settings(e))
+                    recommend_band=band, recommend_floor=floor, search_refine=search_refine, reconfig=_operating_settings(e))
 
 
 def _v_ga_reconfig(e, cfg, robot, recon) -> None:

@@ -282,7 +282,7 @@ def run(ctx) -> None:
         ok = np.flatnonzero(mv["feasible"].astype(bool) & np.all(np.isfinite(Fv), axis=1))
         nd = ok[non_dominated(Fv[ok])] if len(ok) else np.zeros((0,), int)
         nd = nd[np.lexsort(Fv[nd].T[::-1])] if len(nd) else nd
-        rec = W.recommend(Fv, nd, s.recommend, jp, band=s.recommend_band)
+        rec = W.recommend(Fv, nd, s.recommend, jp, band=s.recommend_band, floor=s.recommend_floor, sense=sense)
         hv = hypervolume(Fv[nd], ref) if len(nd) else 0.0
         # -- write ----------------------------------------------------------------------------------------------
         R.store_verify(res, space, cand, names, mv, Fv, nd, rec, hv, hypervolume(Fv[:1], ref), ref, objs, s)

@@ -121,6 +121,8 @@ class DesignerProblem:
     mode: str = "per_task"                          # rtmode
     operating: Optional[OP.OperatingSpec] = None    # rtmode
     rw_refine: bool = False                         # continuous regular workspace (constraints.refine_cylinder)
+    rw_refine_steps: tuple = (C.REFINE_BISECT, C.REFINE_GOLDEN)   # (bisection, golden-section) steps
+    rw_refine_samples: tuple = C.REFINE_SAMPLES     # (rings, angles, levels) of the unit cylinder
 
     def __post_init__(self):  # rtmode
         if self.mode not in OP.MODES:
@@ -135,7 +137,9 @@ class DesignerProblem:
     def build(*, task: Mapping[str, float], cycle: Mapping[str, Any], motor: C.Motor, joints: C.JointModel,
               links: C.LinkModel, good: C.GoodSpec, regular: Mapping[str, float], n_R_operating: int,
               min_picks: float, max_arm_sum: Optional[float], enabled: Sequence[str],
-              operating: Optional[OP.OperatingSpec] = None, rw_refine: bool = False) -> "DesignerProblem":
+              operating: Optional[OP.OperatingSpec] = None, rw_refine: bool = False,
+              rw_refine_steps: Sequence[int] = (C.REFINE_BISECT, C.REFINE_GOLDEN),
+              rw_refine_samples: Sequence[int] = C.REFINE_SAMPLES) -> "DesignerProblem":
         """Build from validated plain values (see :mod:`deltajax.jobs.ga_reconfig` for the config)."""
         tp = cylinder_points(task["diameter"], task["height"], task["z_top"], int(task["n_r"]), int(task["n_phi"]),
                              int(task["n_z"]))
@@ -154,7 +158,9 @@ class DesignerProblem:
                                settings={"task": dict(task), "cycle": dict(cycle), "regular": dict(regular),
                                          "cycle_centre": centre},
                                mode=operating.mode if operating is not None else "per_task", operating=operating,
-                               rw_refine=bool(rw_refine))
+                               rw_refine=bool(rw_refine),
+                               rw_refine_steps=tuple(int(n) for n in rw_refine_steps),
+                               rw_refine_samples=tuple(int(n) for n in rw_refine_samples))
 
 
 def _violations(pb: DesignerProblem, m: Mapping[str, jax.Array], arm_sum) -> jax.Array:
@@ -252,8 +258,11 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
 
             good_any = ((lambda p: jnp.any(jax.vmap(lambda R: good_at(R, p))(Rs))) if recon
                         else (lambda p: good_at(Rc[k], p)))
-            reg = C.refine_cylinder(good_any, reg, r, z, pb.hd_ratio)
-            regf = C.refine_cylinder(lambda p: good_at(Rc[k], p), regf, r, z, pb.hd_ratio)
+            nb, ng = pb.rw_refine_steps
+            unit = C.cylinder_samples(pb.hd_ratio, *pb.rw_refine_samples)
+            reg = C.refine_cylinder(good_any, reg, r, z, pb.hd_ratio, unit=unit, n_bisect=nb, n_golden=ng)
+            regf = C.refine_cylinder(lambda p: good_at(Rc[k], p), regf, r, z, pb.hd_ratio, unit=unit, n_bisect=nb,
+                                     n_golden=ng)
         out.update(regular_volume=reg.volume, regular_diameter=reg.diameter, regular_height=reg.height,
                    regular_z_top=reg.z_top, regular_volume_fixed=regf.volume, regular_diameter_fixed=regf.diameter)
     else:

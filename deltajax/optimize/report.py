@@ -119,6 +119,10 @@ def plots(ctx, data, objs, s) -> None:
 
 def rule_text(s) -> str:
     """The recommendation rule in words (stored and printed with the recommendation)."""
+    if s.recommend == "floor":
+        others = [o for o in s.objectives if o != s.primary]
+        return (f"floor: the best {s.primary} among verified front points with {', '.join(others)} at least "
+                f"{s.recommend_floor:g} x the verified baseline's (none: the point closest to that floor)")
     if s.recommend == "band":
         return (f"band: among verified front points whose {s.primary} is within {100 * s.recommend_band:g} % of "
                 f"the front's best, the best on {', '.join(o for o in s.objectives if o != s.primary)}")
@@ -159,7 +163,10 @@ def store_verify(res, space, cand, names, mv, Fv, nd, rec, hv, hv_base, ref, obj
             attrs={"meaning": "minimised objectives: sense x metric / |verified baseline metric|"})
     v = s.verify
     res.set_attrs("verify", recommended=int(rec), recommend_rule=s.recommend, recommend_rule_text=rule_text(s),
-                  recommend_band=s.recommend_band, hypervolume=hv, hypervolume_baseline_only=hv_base,
+                  recommend_band=s.recommend_band, recommend_floor=getattr(s, "recommend_floor", float("nan")),
+                  search_regular_measure=(f"refine_cylinder, {s.search_refine[0]} steps, samples {s.search_refine[1]}"
+                                          if getattr(s, "search_refine", ()) else "polar grid"),
+                  hypervolume=hv, hypervolume_baseline_only=hv_base,
                   hypervolume_reference="objectives normalised by the baseline verified on the fine grids "
                                         "(sense x metric / |baseline|); reference point 0 for maximised objectives "
                                         f"(zero picks/min, zero volume), {s.pareto['ref_min_factor']} x baseline for "

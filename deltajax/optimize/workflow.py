@@ -59,6 +59,11 @@ def designer_problem(s, *, fine: bool = False):
     motor = C.Motor(**{k: v for k, v in s.motor.items() if k != "gear_ratio"})
     task, cycle, regular = dict(s.task), dict(s.cycle), dict(s.regular)
     n_op = s.cycle["n_R_operating"]
+    # the continuous regular-workspace measure: full settings on the fine grids, the lighter search settings
+    # (experiment.regular_workspace.search_refine) on the search grids, or the grid's measure there
+    refine = {"rw_refine": True} if fine else (
+        {"rw_refine": True, "rw_refine_steps": s.search_refine[0], "rw_refine_samples": s.search_refine[1]}
+        if getattr(s, "search_refine", ()) else {"rw_refine": False})
     if fine:
         v = s.verify
         task.update(n_r=v["task_n_r"], n_phi=v["task_n_phi"], n_z=v["task_n_z"])
@@ -73,7 +78,7 @@ def designer_problem(s, *, fine: bool = False):
                                  regular=regular, n_R_operating=n_op, min_picks=s.constraints["min_picks_per_min"],
                                  max_arm_sum=s.constraints["max_arm_sum"], enabled=enabled,
                                  operating=operating_spec(s),  # rtmode
-                                 rw_refine=fine)
+                                 **refine)
 
 
 def operating_spec(s):  # rtmode: the screw linkage is sized for the design space's R range
@@ -347,13 +352,21 @@ def verify(pb_fine, space, cand: np.ndarray, *, batch: int = 8,
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
-def recommend(F: np.ndarray, front: np.ndarray, rule: str, j_primary: int, *, band: float = 0.02) -> int:
+def recommend(F: np.ndarray, front: np.ndarray, rule: str, j_primary: int, *, band: float = 0.02,
+              floor: float = 1.2, sense: Optional[Sequence[float]] = None) -> int:
     """Index (into ``F``'s rows) of the recommended design on a verified front (``front``: row indices).
 
-    ``F``: minimised objectives normalised by the baseline (sense x metric / |baseline|).
+    ``F``: minimised objectives normalised by the baseline (sense x metric / |baseline|), so a maximised
+    objective's baseline is -1 and a minimised one's +1.
+    * ``floor``: the best primary objective among front points at least ``floor`` times as good as the baseline
+      on every other objective (maximised: metric >= floor x baseline; minimised: metric <= baseline / floor);
+      when no point reaches the floors, the point closest to them (smallest largest shortfall, ties: the better
+      primary). ``sense``: -1 (maximised) / +1 (minimised) per objective (default: all maximised, the job's
+      objectives). A fixed threshold, not one set by the front itself: adding or moving a far point of the front
+      never changes which point is chosen, so two runs whose fronts agree near the floor agree.
     * ``band``: among front points whose primary objective is within ``band`` (relative) of the front's best,
-      the best on the other objectives in order (lexicographic; ties: the better primary). Well-defined on any
-      front and continuous in it except where a point crosses the band's edge.
+      the best on the other objectives in order (lexicographic; ties: the better primary). Its edge moves with
+      the front's best: a faster far point can move the choice a long way.
     * ``knee``: :func:`deltajax.optimize.designer.knee_point` (front normalised over itself; falls back to
       ``primary`` with fewer than 3 points).
     * ``primary``: the best primary objective.
@@ -368,11 +381,22 @@ def recommend(F: np.ndarray, front: np.ndarray, rule: str, j_primary: int, *, ba
     if rule == "knee" and len(front) >= 3:
         return int(front[knee_point(Ff)])
     best = Ff[:, j_primary].min()
+    others = [j for j in range(F.shape[1]) if j != j_primary]
+    if rule == "floor":
+        # floor on a normalised minimised objective f (baseline -1 or +1): f <= -floor (maximised), <= 1/floor
+        sg = np.full(F.shape[1], -1.0) if sense is None else np.asarray(sense, float)
+        lim = np.asarray([-floor if sg[j] < 0 else 1.0 / floor for j in others])
+        short = np.max(Ff[:, others] - lim[None, :], axis=1, initial=-np.inf) if others else np.zeros(len(Ff))
+        ok = short <= 0
+        if ok.any():
+            i = np.flatnonzero(ok)[np.argmin(Ff[ok, j_primary])]
+        else:
+            i = np.lexsort((Ff[:, j_primary], short))[0]
+        return int(front[i])
     if rule == "band":
         # objectives are minimised and normalised: -1 is the baseline for a maximised one; "within band of the
         # best" means primary <= best + band x |best|
         inside = Ff[:, j_primary] <= best + band * abs(best)
-        others = [j for j in range(F.shape[1]) if j != j_primary]
         keys = [Ff[:, j_primary]] + [Ff[:, j] for j in reversed(others)]
         order = np.lexsort(keys)                             # last key first: objectives in order, then primary
         return int(front[[i for i in order if inside[i]][0]])
