@@ -48,9 +48,9 @@ class _Clock:
 
 def old_jax_evaluator(grid, n_devices: int, *, planes: int, b_v: float, b_f: float, beta: float, dtype=np.float64):
     """The ``workspace_grid`` JAX path before stop 20, kept as this benchmark's baseline: every point of every
-    chunk (built on the host) through :func:`deltajax.workspace.driver.make_evaluator`, no mirror half, no
-    compaction. Same call as :func:`deltajax.workspace.driver.make_grid_evaluator`."""
-    from deltajax.workspace.driver import make_evaluator
+    chunk (built on the host) through :func:`deltajax.workspace.evaluators.make_evaluator`, no mirror half, no
+    compaction. Same call as :func:`deltajax.workspace.evaluators.make_grid_evaluator`."""
+    from deltajax.workspace.evaluators import make_evaluator
 
     evaluate_points = make_evaluator(n_devices, b_v=b_v, b_f=b_f, beta=beta)
     plane = grid.shape[1] * grid.shape[2]
@@ -166,7 +166,6 @@ def versus(rev: str, n_points: int, h: float, repeats: int) -> None:
     import importlib
 
     import deltajax as dj
-    from deltajax import workspace as ws
 
     old, rev = import_baseline(rev)
     nb_old = importlib.import_module(f"{old.__name__}.workspace._nb_bench")

@@ -1,7 +1,7 @@
 """The workspace_grid JAX path (issue 9): mirror half + kernel only on reach candidates, compacted into blocks.
 
 Every result must be the kernel's own, bit for bit: :func:`deltajax.workspace.grid.box_fields` and
-:func:`deltajax.workspace.driver.make_grid_evaluator` against :func:`deltajax.workspace.index_fields` (the
+:func:`deltajax.workspace.evaluators.make_grid_evaluator` against :func:`deltajax.workspace.index_fields` (the
 kernel jitted on its own over every point), including NaN patterns; and the pre-test
 :func:`deltajax.workspace.grid.reach_candidate` never rejects a point the kernel accepts.
 
@@ -21,14 +21,13 @@ import sys
 from pathlib import Path
 
 import jax
-import jax.numpy as jnp
 import numpy as np
 import pytest
 from hypothesis import given, settings, strategies as st
 
 import deltajax as dj
 from deltajax.workspace import FIELD_NAMES, index_fields, make_grid
-from deltajax.workspace.driver import make_grid_evaluator
+from deltajax.workspace.evaluators import make_grid_evaluator
 from deltajax.workspace.grid import box_fields, mirrored_point_indices, reach_candidate
 
 ROBOT = dj.presets.franco2026(fixed_R=0.2)

@@ -8,7 +8,7 @@ The grid (inclusive end points, :func:`deltajax.workspace.make_grid`) is cut int
 them). Each chunk is split over this process's JAX devices by x-planes (``jax.shard_map``; on a CPU node the
 :class:`deltajax.sweeps.WorkerEnv` callback exposes one host device per CPU); each device evaluates the y >= 0
 half of its planes on a mirror-symmetric grid and runs the full kernel only where a cheap reach pre-test passes,
-compacted into fixed-size blocks (:func:`deltajax.workspace.driver.make_grid_evaluator`; the kernel's values bit
+compacted into fixed-size blocks (:func:`deltajax.workspace.evaluators.make_grid_evaluator`; the kernel's values bit
 for bit). With ``n_shards=N`` the chunks
 are divided among N jobs; ``shard=i`` computes the i-th contiguous block of x-planes. Because the shard
 boundaries fall on chunk boundaries, every point is computed in the same chunk position with the same
@@ -38,7 +38,7 @@ import numpy as np
 from ..config import ConfigError, workspace_grid_from_config
 from ..rundir import CheckpointError, RunDirError
 
-from ..workspace.driver import (make_evaluator, make_grid_evaluator,  # (the job's kernels; also benchmarked)
+from ..workspace.evaluators import (make_evaluator, make_grid_evaluator,  # (the job's kernels; also benchmarked)
                                 make_numba_evaluator)
 from ..workspace.chunks import (CheckpointMismatch, ResultsCheckpoint, ShardPlan, plane_statistics, plane_summary,
                                run_chunks, seal)
