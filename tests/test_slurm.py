@@ -227,10 +227,11 @@ def test_mem_gb_is_enforced_and_reported(cluster):
 
 # -- (c) a GA job cancelled mid-way, resubmitted into its run directory -----------------------------------
 def _ga_overrides():
-    """A toy GA: population, generations, seed; a checkpoint every 100 generations (one compiled chunk each:
-    a checkpoint rewrites results.h5 atomically, tens of CPU-ms and an fsync, so one after each of the 3000
-    generations cost minutes: the GA stage took 1067 s wall against 154 s, side by side under load); the other stages off or at the suite's toy sizes (tests/toy_jobs.py, so their
-    compiled programs are the session's), for whichever of those keys the ga_reconfig config has."""
+    """A toy GA: population, generations, seed; a checkpoint every 10 generations (a checkpoint rewrites
+    results.h5 atomically, tens of CPU-ms and an fsync: one after each of the 3000 generations cost minutes
+    under load; one every 100 made the GA so quick on an idle machine with a warm cache that it finished before
+    scancel landed, CI 2026-12-01); the other stages off or at the suite's toy sizes (tests/toy_jobs.py, so
+    their compiled programs are the session's), for whichever of those keys the ga_reconfig config has."""
     from hydra import compose, initialize_config_dir
 
     from deltajax.run import CONFIG_DIR
@@ -239,7 +240,7 @@ def _ga_overrides():
         cfg = compose(config_name="config", overrides=["experiment=ga_reconfig"])
     over = ["experiment=ga_reconfig", "plots=false", "progress=false", "seed=0",
             "experiment.ga.population_size=8", "experiment.ga.generations=3000"]  # ~5 ms each: time to cancel
-    optional = {"experiment.ga.checkpoint_every": 100, "experiment.pareto.enabled": "false",
+    optional = {"experiment.ga.checkpoint_every": 10, "experiment.pareto.enabled": "false",
                 "experiment.screen.log2_size": 6, "experiment.refine.steps": 3,
                 # the main job's toy sizes (tests/test_ga_reconfig.py): search and verification grids
                 "experiment.design.n_R": 3, "experiment.task.n_r": 1, "experiment.task.n_phi": 3,
