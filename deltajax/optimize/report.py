@@ -163,9 +163,9 @@ def store_verify(res, space, cand, names, mv, Fv, nd, rec, hv, hv_base, ref, obj
             attrs={"meaning": "minimised objectives: sense x metric / |verified baseline metric|"})
     v = s.verify
     res.set_attrs("verify", recommended=int(rec), recommend_rule=s.recommend, recommend_rule_text=rule_text(s),
-                  recommend_band=s.recommend_band, recommend_floor=getattr(s, "recommend_floor", float("nan")),
+                  recommend_band=s.recommend_band, recommend_floor=s.recommend_floor,
                   search_regular_measure=(f"refine_cylinder, {s.search_refine[0]} steps, samples {s.search_refine[1]}"
-                                          if getattr(s, "search_refine", ()) else "polar grid"),
+                                          if s.search_refine else "polar grid"),
                   hypervolume=hv, hypervolume_baseline_only=hv_base,
                   hypervolume_reference="objectives normalised by the baseline verified on the fine grids "
                                         "(sense x metric / |baseline|); reference point 0 for maximised objectives "

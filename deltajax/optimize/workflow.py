@@ -63,7 +63,7 @@ def designer_problem(s, *, fine: bool = False):
     # (experiment.regular_workspace.search_refine) on the search grids, or the grid's measure there
     refine = {"rw_refine": True} if fine else (
         {"rw_refine": True, "rw_refine_steps": s.search_refine[0], "rw_refine_samples": s.search_refine[1]}
-        if getattr(s, "search_refine", ()) else {"rw_refine": False})
+        if s.search_refine else {"rw_refine": False})
     if fine:
         v = s.verify
         task.update(n_r=v["task_n_r"], n_phi=v["task_n_phi"], n_z=v["task_n_z"])
