@@ -54,13 +54,11 @@ def _nb_fields(pts, method):
 @pytest.mark.parametrize("i", [0, 1, 2])
 def test_chain_local_and_jx_row(i):
     a = RNG.normal(size=(50, 3))
-    for px, py, pz in a:
-        got = nbk.chain_local(px, py, pz, i)
-        want = [float(v) for v in chain_local(px, py, pz, i)]
-        np.testing.assert_allclose(got, want, rtol=1e-15, atol=1e-16)
-        got = nbk.jx_row(px, py, pz, i)
-        want = [float(v) for v in jx_row(px, py, pz, i)]
-        np.testing.assert_allclose(got, want, rtol=1e-15, atol=1e-16)
+    cl = np.asarray(jax.jit(jax.vmap(lambda p: jnp.stack(chain_local(*p, i))))(a))  # the JAX twins, one call each
+    jr = np.asarray(jax.jit(jax.vmap(lambda p: jnp.stack(jx_row(*p, i))))(a))
+    for (px, py, pz), cl_k, jr_k in zip(a, cl, jr):
+        np.testing.assert_allclose(nbk.chain_local(px, py, pz, i), cl_k, rtol=1e-15, atol=1e-16)
+        np.testing.assert_allclose(nbk.jx_row(px, py, pz, i), jr_k, rtol=1e-15, atol=1e-16)
     # the reference's rotation (independent: a (n, 3) form)
     x, y, z = ref.chain_local(a)
     for k, (px, py, pz) in enumerate(a):
@@ -102,11 +100,14 @@ def test_loop_closure_and_loop_vectors():
 
 
 def test_jq_theta_and_jx_det():
-    for row in RNG.normal(size=(100, 13)):
+    rows = RNG.normal(size=(100, 13))
+    jq = np.asarray(jax.jit(jax.vmap(lambda a: jq_theta(*a)))(rows[:, :4]))  # the JAX twins, one call each
+    det = np.asarray(jax.jit(jax.vmap(lambda a: jx_det(*a)))(rows[:, 4:]))
+    for row, jq_k, det_k in zip(rows, jq, det):
         ux, uz, c, s = row[:4]
-        assert nbk.jq_theta(ux, uz, c, s) == pytest.approx(float(jq_theta(ux, uz, c, s)), rel=1e-15, abs=1e-16)
+        assert nbk.jq_theta(ux, uz, c, s) == pytest.approx(float(jq_k), rel=1e-15, abs=1e-16)
         j = row[4:]
-        assert nbk.jx_det(*j) == pytest.approx(float(jx_det(*j)), rel=1e-13, abs=1e-15)
+        assert nbk.jx_det(*j) == pytest.approx(float(det_k), rel=1e-13, abs=1e-15)
         assert nbk.jx_det(*j) == pytest.approx(np.linalg.det(j.reshape(3, 3)), rel=1e-12, abs=1e-14)
 
 
@@ -121,12 +122,13 @@ def test_sym3_top2(method, code):
         if k % 4 == 0:
             lam[1] = lam[0]
         mats.append(Q @ np.diag(lam) @ Q.T)
-    for A in mats:
-        x = (A[0, 0], A[1, 1], A[2, 2], A[0, 1], A[0, 2], A[1, 2])
-        c2 = A[1, 1] * A[2, 2] - A[1, 2] ** 2 + A[0, 0] * A[2, 2] - A[0, 2] ** 2 + A[0, 0] * A[1, 1] - A[0, 1] ** 2
-        det = float(np.linalg.det(A))
-        got = nbk.sym3_top2(*x, c2, det, code)
-        want = [float(v) for v in sym3_top2(*x, c2, det, method)]
+    args = np.array([(A[0, 0], A[1, 1], A[2, 2], A[0, 1], A[0, 2], A[1, 2],
+                      A[1, 1] * A[2, 2] - A[1, 2] ** 2 + A[0, 0] * A[2, 2] - A[0, 2] ** 2 + A[0, 0] * A[1, 1]
+                      - A[0, 1] ** 2, float(np.linalg.det(A))) for A in mats])
+    # the JAX twin over all matrices in one compiled call (120 eager calls cost ~40 s of op-by-op dispatch)
+    jax_top2 = np.asarray(jax.jit(jax.vmap(lambda a: jnp.stack(sym3_top2(*a, method))))(args))
+    for A, a, want in zip(mats, args, jax_top2):
+        got = nbk.sym3_top2(*a, code)
         np.testing.assert_allclose(got, want, rtol=1e-12)
         ev = np.linalg.eigvalsh(A)[::-1]
         tol = 1e-12 if method == "jacobi" else 1e-7  # the cubic splits a repeated pair by ~sqrt(eps)

@@ -17,8 +17,8 @@ import math
 import numba as nb
 import numpy as np
 
-from ._nb_kernel import (CA0, CA1, CA2, CRITERION, CUBIC, FAST, JACOBI, N_IDX, OPTS, SA0, SA1, SA2, SV_METHODS,
-                         as_tuple4, ik_ok, ik_ok_all, kt_tuple, limits_tuple, point_indices, point_value)
+from ._nb_kernel import (CA0, CA1, CA2, CRITERION, CUBIC, FAST, INLINE, JACOBI, N_IDX, OPTS, SA0, SA1, SA2,
+                         SV_METHODS, as_tuple4, ik_ok, ik_ok_all, kt_tuple, limits_tuple, point_indices, point_value)
 from ._nb_screen import resolve_screened, screen_audit, screen_window, tcubic, tcubic2
 
 __all__ = ["N_IDX", "CRITERION", "SV_METHODS", "JACOBI", "FAST", "limits_tuple", "kt_tuple", "fixed_fields",
@@ -29,7 +29,7 @@ __all__ = ["N_IDX", "CRITERION", "SV_METHODS", "JACOBI", "FAST", "limits_tuple",
 _ik_ok = ik_ok
 _tcubic = tcubic
 _tcubic2 = tcubic2
-_inline = dict(inline="always", **OPTS)
+_inline = INLINE
 
 
 @nb.njit(**_inline)

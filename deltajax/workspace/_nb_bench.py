@@ -21,12 +21,12 @@ import time
 import numba as nb
 import numpy as np
 
-from ._nb_kernel import (FAST, JACOBI, N_IDX, OPTS, _T_POLY, as_tuple4, chain_local, jx_row, kt_tuple, limits_tuple,
-                         sv_matrix)
+from ._nb_kernel import (FAST, INLINE, JACOBI, N_IDX, OPTS, _T_POLY, as_tuple4, chain_local, jx_row, kt_tuple,
+                         limits_tuple, sv_matrix)
 
 __all__ = ["bench_kernel_rates", "bench_numba", "minimal_loop"]
 
-_inline = dict(inline="always", **OPTS)
+_inline = INLINE
 
 
 @nb.njit(**_inline)

@@ -3,9 +3,10 @@
 One small scalar function per step of the core's decomposition (:mod:`deltajax.kinematics`,
 :mod:`deltajax.jacobian`, :mod:`deltajax.indices`), name for name, each tested against its JAX twin on random
 inputs (``tests/test_backends.py``). Every function takes and returns plain floats (no arrays, no allocation),
-is ``inline="always"`` and branch-free (selects, no early exit), so that a loop over points or R samples that
-calls them compiles to one straight-line body LLVM can vectorise. The drivers (:mod:`._nb`) and the screen
-(:mod:`._nb_screen`) are built from these functions only: the loop-closure algebra exists once in Numba.
+is inlined into its caller by LLVM (:data:`INLINE`) and branch-free (selects, no early exit), so that a loop over
+points or R samples that calls them compiles to one straight-line body LLVM can vectorise. The drivers
+(:mod:`._nb`) and the screen (:mod:`._nb_screen`) are built from these functions only: the loop-closure algebra
+exists once in Numba.
 
 Conventions (SPEC §1): point P = (x, y, z) in the base frame (z down); chain i lies at angle alpha_i about z
 (its frame rotation is passed as ``ca, sa`` = cos, sin alpha_i); the joint range is passed as
@@ -53,7 +54,12 @@ _drop_stale_cache()
 
 # error_model="numpy": x / 0 gives inf/nan like NumPy and JAX instead of raising (Python semantics)
 OPTS = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
-_inline = dict(inline="always", **OPTS)
+#: the small functions every kernel is built from: LLVM ``alwaysinline`` (``forceinline``), so a loop that calls them
+#: is one straight-line body LLVM can vectorise. Not Numba's ``inline="always"`` (inlining at the Numba IR level,
+#: which re-runs type inference for every call site): the same machine-code speed (bench_workspace --versus), but
+#: a cold compile of ``fixed_fields`` + ``fixed_fields_dense`` took 210 CPU-s with it and 15 CPU-s without.
+INLINE = dict(forceinline=True, **OPTS)
+_inline = INLINE
 
 #: cos, sin of the chain angles (the core's constants; compile-time constants inside the kernels)
 _COS_A = tuple(math.cos(a) for a in CHAIN_ANGLES)

@@ -16,11 +16,11 @@ import math
 import numba as nb
 import numpy as np
 
-from ._nb_kernel import (INV_COND, JACOBI, K_TILDE, MANIPULABILITY, OMEGA_F, OMEGA_V, OPTS, SIGMA_MIN_F,
+from ._nb_kernel import (INLINE, INV_COND, JACOBI, K_TILDE, MANIPULABILITY, OMEGA_F, OMEGA_V, OPTS, SIGMA_MIN_F,
                          SIGMA_MIN_V, as_tuple4, criterion_of, ik_ok_all, jacobian_blocks, point_kernel, point_value,
                          sigma_tilde, sv_matrix)
 
-_inline = dict(inline="always", **OPTS)
+_inline = INLINE
 
 _EPS = 2.220446049250313e-16
 #: eigenvalue rounding of both solvers (Jacobi: backward stable, ~eps ||A|| per rotation, 12 rotations; the
