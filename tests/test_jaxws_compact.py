@@ -214,3 +214,34 @@ def test_grid_evaluator_on_two_devices_is_the_kernel_bit_for_bit(tmp_path):
     out = subprocess.run([sys.executable, "-c", _TWO_DEVICES], env=env, capture_output=True, text=True, timeout=600)
     assert out.returncode == 0, out.stderr[-3000:]
     assert "SAME" in out.stdout
+
+
+def _float32(robot):
+    """The robot as ``precision=float32`` builds it (every float leaf float32)."""
+    return jax.tree.map(lambda a: np.float32(a) if np.issubdtype(np.asarray(a).dtype, np.floating) else a, robot)
+
+
+@pytest.mark.parametrize("forearm, tmax", [(0.4, 1.92), (0.3, 0.8), (0.5, 1.9)])
+def test_reach_candidate_is_a_superset_in_float32(forearm, tmax):
+    """precision=float32 (the throughput mode): roundings 1e9 x larger than in float64, so its own slacks
+    (CANDIDATE_SLACK_F32); superset on both sides of the boundary (bisected in float32) and on a random cloud."""
+    robot = _float32(dj.Delta(base_radius=0.2, platform_radius=0.065, upper_arm=0.2, forearm=forearm,
+                              theta_min=-0.698, theta_max=tmax))
+    rng = np.random.default_rng(7)
+    d = rng.normal(size=(2048, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    c, lo, hi = np.array([0.0, 0.0, 0.35]), np.zeros(len(d)), np.full(len(d), 0.8)
+    for _ in range(30):
+        mid = 0.5 * (lo + hi)
+        inside = np.asarray(_kernel_ok(robot, (c + mid[:, None] * d).astype(np.float32)))
+        lo, hi = np.where(inside, mid, lo), np.where(inside, hi, mid)
+    cloud = rng.uniform([-0.45, -0.45, -0.1], [0.45, 0.45, 0.65], (50_000, 3))
+    pts = np.concatenate([c + lo[:, None] * d, c + hi[:, None] * d, cloud]).astype(np.float32)
+    ok = np.asarray(_kernel_ok(robot, pts))
+    cand = np.asarray(_candidate(robot, pts))
+    assert ok.dtype == bool and 0 < ok.sum() < len(pts)
+    assert not (ok & ~cand).any()
+    # reach only (joint limits not pre-tested in float32): 2.3x the reachable points of the preset design (more
+    # where the joint limits exclude most of the reach), still not the whole box
+    n_ok, n_cand = ok[-len(cloud):].sum(), cand[-len(cloud):].sum()
+    assert n_cand < 0.6 * len(cloud), (n_ok, n_cand)

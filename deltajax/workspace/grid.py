@@ -53,6 +53,7 @@ __all__ = [
     "box_fields",
     "FIELD_NAMES",
     "CANDIDATE_SLACK",
+    "CANDIDATE_SLACK_F32",
 ]
 
 #: Scalar index fields produced by :func:`index_fields` (the core's :data:`deltajax.INDEX_NAMES`).
@@ -244,9 +245,13 @@ def index_fields(robot: Delta, points: Float[Array, "n 3"], *, b_v: float = 2.0,
 
 # -- compacted evaluation (the workspace_grid JAX path) --------------------------------------------------------
 
-#: slacks of :func:`reach_candidate`: (discriminant, relative to (L1 + L2)^2; joint-limit margin; distance from
-#: the motor axis, relative to L1 + L2, below which the margin is not tested). See its docstring.
+#: slacks of :func:`reach_candidate` in float64: (discriminant, relative to (L1 + L2)^2; joint-limit margin;
+#: distance from the motor axis, relative to L1 + L2, below which the margin is not tested). See its docstring.
 CANDIDATE_SLACK = (1e-12, 1e-3, 1e-2)
+#: the same in float32 (``precision=float32``): roundings ~1e-7 (L1 + L2)^2 in disc need the disc slack 1e4 x
+#: eps32 ~ 1.2e-3; its square root, 0.035 (L1 + L2), can move the margin by more than its whole range [-2, 2]
+#: near the motor axis, so in float32 the margin is not tested (4 > 2): a reach-only pre-test.
+CANDIDATE_SLACK_F32 = (1.2e-3, 4.0, 1e-2)
 
 
 def reach_candidate(robot: Delta, p: Float[Array, "3"]) -> Bool[Array, ""]:
@@ -261,10 +266,12 @@ def reach_candidate(robot: Delta, p: Float[Array, "3"]) -> Bool[Array, ""]:
     sensitive to the discriminant). Why these suffice: two compilations of the same formulas differ by a few
     ulps, ~1e-16 (L1 + L2)^2 in disc (10^4 below the slack); a disc changed by d changes sqrt(disc) by at most
     sqrt(|d|) <= 1e-6 (L1 + L2) and cos/sin theta, hence the margin, by at most 2 sqrt(|d|) / rho <= 2e-4 for
-    rho >= 0.01 (L1 + L2). Points in the slack layer run the full kernel, whose ``ok`` decides.
+    rho >= 0.01 (L1 + L2). Points in the slack layer run the full kernel, whose ``ok`` decides. In float32
+    the roundings are ~1e-7 (L1 + L2)^2, and the slacks are :data:`CANDIDATE_SLACK_F32` (reach only).
     """
-    tol_d, tol_m, tol_r = CANDIDATE_SLACK
-    p, usable = safe_point(robot, canonical_point(jnp.asarray(p)))
+    p = canonical_point(jnp.asarray(p))
+    tol_d, tol_m, tol_r = CANDIDATE_SLACK_F32 if p.dtype == jnp.float32 else CANDIDATE_SLACK
+    p, usable = safe_point(robot, p)
     L1, L2 = robot.upper_arm, robot.forearm
     scale = (L1 + L2) * (L1 + L2)
     lim = limit_terms(robot.theta_min, robot.theta_max)
