@@ -4,8 +4,8 @@ Measured in the same process (ratios are what we report; absolute rates depend o
 (a) the new core kernel ``point_indices`` as one plain ``jit(vmap(...))`` (the whole kernel is one XLA:CPU loop,
 :mod:`deltajax.fastmath`; fast closed form and exact Jacobi form) and in blocks
 (:func:`deltajax.indices.map_points`, the previous form), f64 and f32; (b) the frozen pre-issue-9 kernel (:mod:`deltajax.baseline_kernel`, main 9f54c88) as the baseline; (c) the
-independent NumPy reference (:mod:`deltajax.reference`); (d) Numba (exact kernel + minimal loop ceiling)
-when :mod:`deltajax.workspace` provides the hook ``bench_kernel_rates`` (the numba colleague's module).
+independent NumPy reference (:mod:`deltajax.reference`); (d) Numba (exact kernel + minimal loop ceiling),
+:func:`deltajax.workspace.bench_kernel_rates`.
 Every JAX result is checked against the NumPy reference before timing; XLA fusion counts are printed.
 """
 
@@ -49,12 +49,9 @@ def fusion_count(compiled) -> int:
 
 
 def _numba_rates(points: np.ndarray, geo: list, repeats: int):
-    """Numba figures from the hook ``deltajax.workspace.bench_kernel_rates(points, geo, repeats)`` -> {label: (
-    n, wall s, CPU s)}, or None when the Numba mirror does not provide it yet."""
-    try:
-        from ..workspace import bench_kernel_rates  # provided by the Numba mirror (issue 9 item 3)
-    except ImportError:
-        return None
+    """Numba figures, ``deltajax.workspace.bench_kernel_rates(points, geo, repeats)`` -> {label: (n, wall s, CPU s)}."""
+    from ..workspace import bench_kernel_rates
+
     return bench_kernel_rates(points, geo, repeats)
 
 
@@ -125,12 +122,8 @@ def run(ctx) -> None:
             res.put(g, "compile_time", t_compile, units="s")
             res.put(g, "fusions", nf, units="1")
             res.put(g, "max_rel_err_sigma_min_v_vs_numpy", err, units="1")
-    nbr = _numba_rates(pts, geo, reps)
-    if nbr is None:
-        lines.append("numba                             : hook deltajax.workspace.bench_kernel_rates not provided yet")
-    else:
-        for label, (n_eval, wall, cpu) in nbr.items():
-            row(f"numba {label}", n_eval, wall, cpu)
+    for label, (n_eval, wall, cpu) in _numba_rates(pts, geo, reps).items():
+        row(f"numba {label}", n_eval, wall, cpu)
     res.put("bench", "n_points", n, units="1")
     res.set_attrs("bench", device=str(jax.devices()[0]), report="\n".join(lines))
     for line in lines:

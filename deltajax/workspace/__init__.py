@@ -26,7 +26,16 @@ from .redundancy import (Redundancy, indices_at_host, reach_interval, reach_k_ra
                          reconfigurable_reachable, resolve_redundancy, resolve_redundancy_host, sample_value)
 from .driver import CheckpointMismatch, GridJob, fixed_workspace, reconfigurable_workspace, redundancy_grid, run_chunks
 from .stats import index_stats
-from ._nb_bench import bench_kernel_rates, bench_numba
 from . import boundary
 
 from .measure import WorkspaceVolume, reach_box, volume  # one-call volume of any robot
+
+
+def __getattr__(name):
+    """The Numba benchmark hooks, imported on first use: importing numba costs ~0.5 s, paid by every CLI process
+    (and every test subprocess) whether or not it runs a Numba kernel."""
+    if name in ("bench_kernel_rates", "bench_numba"):
+        from . import _nb_bench
+
+        return getattr(_nb_bench, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
