@@ -286,6 +286,9 @@ def pareto_eval(evaluate: Callable[[np.ndarray], dict], objs: Sequence[str], sca
 
 # -- optax refinement --------------------------------------------------------------------------------------------
 
+DESCENT_ROWS = 8   # rows of one compiled refine descent (the job's REFINE_MAX winners)
+
+
 @dataclasses.dataclass
 class RefineOutcome:
     """Refinement of each winner (rows): ``genes_before/after``, ``F_before/after`` (normalised minimised
@@ -319,6 +322,7 @@ def refine_designs(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.
     from optax import projections
 
     from .designer import FEASIBILITY_TOL, evaluate_designer
+    from .pareto import padded_batch
 
     genes = np.clip(np.asarray(genes, float).reshape(-1, space.dim), 0.0, 1.0)
     n, d = genes.shape
@@ -351,7 +355,9 @@ def refine_designs(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.
 
     descend = _shared("refine_descent", pb, space, (primary, repr(sp), reg, int(steps), repr(float(learning_rate)),
                                                     repr(float(penalty))), build)
-    hist, path, fin = (np.asarray(x) for x in descend(jnp.asarray(genes)))
+    # in batches of DESCENT_ROWS rows (padded): one compiled descent for any number of winners (the job refines
+    # at most 8; a stage with fewer, e.g. without a Pareto front, reuses it)
+    hist, path, fin = padded_batch(descend, DESCENT_ROWS)(genes)
     if not fin.all():
         i, k = (int(v[0]) for v in np.nonzero(~fin))
         raise FloatingPointError(f"refine: non-finite gradient of the designer's loss for design {i} at step {k} "
