@@ -124,7 +124,7 @@ def toy_run(tmp_path_factory):
 # -- pytest-xdist (README: ``python -m pytest -q -n 2``, ``--dist loadgroup`` from pyproject.toml) ------------------
 #: tests that run longest from empty caches (nodeid prefixes), handed out first so that neither worker is left
 #: with one of them at the end (the rest are short and fill in around them)
-LONG_FIRST = ("tests/test_rtmode.py", "tests/test_slurm.py", "tests/test_ga_reconfig.py", "tests/test_gpu_check.py",
+LONG_FIRST = ("tests/test_ga_reconfig.py", "tests/test_rtmode.py", "tests/test_slurm.py", "tests/test_gpu_check.py",
               "tests/test_packaging.py", "tests/test_jobs.py", "tests/test_faults.py", "tests/test_sweeps.py")
 
 
@@ -133,16 +133,27 @@ LONG_FIRST = ("tests/test_rtmode.py", "tests/test_slurm.py", "tests/test_ga_reco
 SAME_WORKER = ("tests/test_backends.py",)
 
 
+#: tests that run the main job in-process on the toy size's search and verification grids (tests/toy_jobs.py), or
+#: its refine descent: one worker, so that the job's compiled programs, which deltajax.optimize.workflow keeps by
+#: the content of the problem, are traced and compiled once per session rather than once per worker
+GA_TOY = ("tests/test_ga_reconfig.py", "tests/test_ga_resume_compat.py", "tests/test_jobs.py::test_ga_reconfig_",
+          "tests/test_jobs.py::test_every_job_end_to_end_at_toy_size[ga_reconfig]",
+          "tests/test_optimize.py::test_refine_designs_")
+
+
 def pytest_collection_modifyitems(config, items):
     """Under xdist: every test that uses a module- or class-scoped fixture (a shared compiled function, a
     cluster, a grid) goes to one worker with the rest of its module (``xdist_group``), so that the fixture is built
-    once, not once per worker; and the long files come first (longest-first scheduling)."""
+    once, not once per worker; the main job's toy runs (``GA_TOY``) go to one worker together; and the long files
+    come first (longest-first scheduling)."""
     if not getattr(config.option, "numprocesses", None):
         return
     for item in items:
         defs = getattr(item, "_fixtureinfo", None)
         scopes = {d.scope for fd in (defs.name2fixturedefs.values() if defs else ()) for d in fd}
-        if scopes & {"module", "class", "package"} or item.nodeid.startswith(SAME_WORKER):
+        if item.nodeid.startswith(GA_TOY):
+            item.add_marker(pytest.mark.xdist_group("ga_reconfig_toy"))
+        elif scopes & {"module", "class", "package"} or item.nodeid.startswith(SAME_WORKER):
             item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
 
     def rank(item):

@@ -121,16 +121,67 @@ def setup(s, robot, recon, *, n_R: Optional[int] = None):
     return space, pb, ga
 
 
+# -- compiled per-design programs, shared by value -----------------------------------------------------------------
+# Every run builds its problem and design space afresh, and a jitted closure over a fresh object is traced and
+# compiled again (a toy run traces its stages for ~40 CPU-s before any compile). The stages' programs are kept
+# here under the *content* of the problem and space they close over, so a resumed run, a rerun or another run
+# with the same grids in the same process reuses them: the same content gives the same program, hence the same
+# numbers as compiling it afresh.
+_PROGRAMS: dict = {}
+_PROGRAMS_MAX = 16
+
+
+def _content_key(x) -> Any:
+    """A hashable value of everything ``x`` holds (dataclasses and equinox modules field by field, arrays by
+    dtype, shape and bytes); an object it cannot see into is keyed by identity (never a false match: the cached
+    program keeps it alive)."""
+    if isinstance(x, (np.ndarray, np.generic)) or type(x).__module__.startswith("jax"):
+        try:
+            a = np.asarray(x)
+        except Exception:  # noqa: BLE001 - not an array after all (e.g. a tracer): identity
+            return ("id", id(x))
+        if a.dtype != object:
+            return ("array", a.dtype.str, a.shape, a.tobytes())
+        return ("objects", a.shape, tuple(_content_key(v) for v in a.reshape(-1)))
+    if x is None or isinstance(x, (bool, int, float, complex, str, bytes)):
+        return (type(x).__name__, repr(x))
+    if dataclasses.is_dataclass(x) and not isinstance(x, type):
+        return (type(x).__module__, type(x).__qualname__,
+                tuple((f.name, _content_key(getattr(x, f.name))) for f in dataclasses.fields(x)))
+    if isinstance(x, (tuple, list)):
+        return (type(x).__qualname__, tuple(_content_key(v) for v in x))
+    if isinstance(x, Mapping):
+        return ("mapping", tuple(sorted((repr(k), _content_key(v)) for k, v in x.items())))
+    return ("id", id(x))
+
+
+def _shared(kind: str, pb, space, settings: tuple, build: Callable[[], Any]) -> Any:
+    """The program ``build()`` for (``kind``, the content of ``pb`` and ``space``, ``settings``), built once per
+    process (least recently used dropped beyond ``_PROGRAMS_MAX``)."""
+    key = (kind, _content_key(pb), _content_key(space), settings)
+    if key in _PROGRAMS:
+        _PROGRAMS[key] = _PROGRAMS.pop(key)          # most recently used last
+    else:
+        _PROGRAMS[key] = build()
+        while len(_PROGRAMS) > _PROGRAMS_MAX:
+            _PROGRAMS.pop(next(iter(_PROGRAMS)))
+    return _PROGRAMS[key]
+
+
 def batch_evaluator(pb, space, batch: int, *, regular: bool = True) -> Callable[[np.ndarray], dict]:
-    """``genes (n, d) -> {metric: (n,)}`` host arrays, compiled once for ``batch`` rows."""
-    import jax
+    """``genes (n, d) -> {metric: (n,)}`` host arrays, compiled once for ``batch`` rows (and shared by every
+    evaluator of the same problem, space and settings in this process)."""
+    def build():
+        import jax
 
-    from .designer import evaluate_designer
-    from .pareto import padded_batch
+        from .designer import evaluate_designer
+        from .pareto import padded_batch
 
-    f = jax.jit(jax.vmap(lambda g: evaluate_designer(pb, space.decode(g), regular=regular)))
-    call = padded_batch(f, batch)
-    return lambda X: {k: np.asarray(v) for k, v in call(np.asarray(X)).items()}
+        f = jax.jit(jax.vmap(lambda g: evaluate_designer(pb, space.decode(g), regular=regular)))
+        call = padded_batch(f, batch)
+        return lambda X: {k: np.asarray(v) for k, v in call(np.asarray(X)).items()}
+
+    return _shared("batch_evaluator", pb, space, (int(batch), bool(regular)), build)
 
 
 def objective_matrix(m: Mapping[str, np.ndarray], objs: Sequence[str], scale: np.ndarray) -> np.ndarray:
@@ -203,17 +254,23 @@ def ga_fitness(pb, space, objs: Sequence[str], wvec: np.ndarray):
 
     from .designer import evaluate_designer
 
+    objs, wvec = tuple(objs), np.asarray(wvec, float)
     regular = any(o.startswith("regular") and w != 0 for o, w in zip(objs, wvec))
-    wj = jnp.asarray(wvec)
 
-    def fitness(genes):
-        m = jax.vmap(lambda g: evaluate_designer(pb, space.decode(g), regular=regular))(genes)
-        f = sum(wj[i] * m[o] for i, o in enumerate(objs) if wvec[i] != 0)
-        f = jnp.where(jnp.isfinite(f), jnp.clip(f, -1e2, 1e2), 1e2)
-        fit = jnp.where(m["violation"] > 0, 1e3 + m["violation"], f)
-        return fit, {"feasible": m["feasible"], "violation": m["violation"], "picks_per_min": m["picks_per_min"]}
+    def build():
+        wj = jnp.asarray(wvec)
 
-    return fitness
+        def fitness(genes):
+            m = jax.vmap(lambda g: evaluate_designer(pb, space.decode(g), regular=regular))(genes)
+            f = sum(wj[i] * m[o] for i, o in enumerate(objs) if wvec[i] != 0)
+            f = jnp.where(jnp.isfinite(f), jnp.clip(f, -1e2, 1e2), 1e2)
+            fit = jnp.where(m["violation"] > 0, 1e3 + m["violation"], f)
+            return fit, {"feasible": m["feasible"], "violation": m["violation"], "picks_per_min": m["picks_per_min"]}
+
+        return fitness
+
+    # one function object per content: run_ga's compiled engine is cached per fitness function
+    return _shared("ga_fitness", pb, space, (objs, _content_key(wvec)), build)
 
 
 def pareto_eval(evaluate: Callable[[np.ndarray], dict], objs: Sequence[str], scale: np.ndarray):
@@ -229,7 +286,8 @@ def pareto_eval(evaluate: Callable[[np.ndarray], dict], objs: Sequence[str], sca
 
 # -- optax refinement --------------------------------------------------------------------------------------------
 
-_DESCENT: dict = {}   # the last compiled descent (problem identity, settings) -> jitted function
+DESCENT_ROWS = 8   # rows of one compiled refine descent (the job's REFINE_MAX winners)
+
 
 @dataclasses.dataclass
 class RefineOutcome:
@@ -264,6 +322,7 @@ def refine_designs(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.
     from optax import projections
 
     from .designer import FEASIBILITY_TOL, evaluate_designer
+    from .pareto import padded_batch
 
     genes = np.clip(np.asarray(genes, float).reshape(-1, space.dim), 0.0, 1.0)
     n, d = genes.shape
@@ -275,8 +334,7 @@ def refine_designs(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.
         m = evaluate_designer(pb, space.decode(g), regular=reg)
         return sp * m[primary] + penalty * jnp.sum(jnp.maximum(m["g"] - FEASIBILITY_TOL, 0.0))
 
-    key = (id(pb), id(space), primary, sp, reg, steps, learning_rate, penalty)
-    if key not in _DESCENT or _DESCENT[key][0] is not pb:
+    def build():
         opt = optax.adam(learning_rate)
         # forward mode: 6 genes, and it compiles faster than reverse mode through the kernel (26 vs 34 CPU-s)
         vg = jax.jacfwd(lambda g: (loss(g), loss(g)), has_aux=True)
@@ -293,10 +351,13 @@ def refine_designs(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.
                 _, (hist, path, fin) = jax.lax.scan(body, (g0, opt.init(g0)), None, length=steps)
                 return hist, path, fin
             return jax.vmap(one)(G0)
-        _DESCENT.clear()
-        _DESCENT[key] = (pb, descend)
-    descend = _DESCENT[key][1]
-    hist, path, fin = (np.asarray(x) for x in descend(jnp.asarray(genes)))
+        return descend
+
+    descend = _shared("refine_descent", pb, space, (primary, repr(sp), reg, int(steps), repr(float(learning_rate)),
+                                                    repr(float(penalty))), build)
+    # in batches of DESCENT_ROWS rows (padded): one compiled descent for any number of winners (the job refines
+    # at most 8; a stage with fewer, e.g. without a Pareto front, reuses it)
+    hist, path, fin = padded_batch(descend, DESCENT_ROWS)(genes)
     if not fin.all():
         i, k = (int(v[0]) for v in np.nonzero(~fin))
         raise FloatingPointError(f"refine: non-finite gradient of the designer's loss for design {i} at step {k} "
