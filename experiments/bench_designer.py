@@ -230,6 +230,14 @@ def main(argv=None):
     lost = [sd for sd in both if dominates(rec[("default", sd)][1], rec[("large", sd)][1], sense)]
     report["larger_budget_seeds"] = both
     report["larger_budget_dominated_by_smaller"] = lost
+    relation = {}
+    for sd in both:   # per seed: how the larger run's recommendation stands against the smaller run's
+        a, b = rec[("default", sd)][1], rec[("large", sd)][1]
+        relation[sd] = ("equal" if np.array_equal(a, b) else "dominated by the default run's" if dominates(a, b, sense)
+                        else "dominates the default run's" if dominates(b, a, sense) else "trade-off (neither dominates)")
+        print(f"(b) seed {sd}: default {dict(zip(objs, a.round(5)))} -> large {dict(zip(objs, b.round(5)))}: "
+              f"{relation[sd]}")
+    report["larger_budget_relation"] = {str(k): v for k, v in relation.items()}
     print(f"(b) seeds {both}: those where the larger budget's recommendation is dominated by the smaller run's: "
           f"{lost or 'none'}")
     if args.no_scan:
