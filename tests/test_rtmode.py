@@ -227,15 +227,24 @@ def test_per_task_mode_reports_path_metrics_as_nan_and_fixed_equal(small):
 
 # -- the job end to end -----------------------------------------------------------------------------------------
 
+#: the verification grids and continuous regular-workspace settings of the path-mode run equal its search
+#: grids' (the toy's search grids, the verification's default refine settings), so the verify stage's problem is
+#: the search problem and reuses its compiled evaluation (deltajax.optimize.workflow keeps programs by content):
+#: one compile of the path mode's evaluation with the regular workspace instead of two
+VERIFY_AS_SEARCH = ["experiment.verify.cycle_samples=11", "experiment.verify.rw_n_r=6", "experiment.verify.rw_n_z=6",
+                    "experiment.regular_workspace.search_refine_steps=[12,14]",
+                    "experiment.regular_workspace.search_refine_samples=[4,3,5]"]
+
+
 @pytest.mark.slow
 def test_job_runs_with_mode_path_and_reports_both_variants(tmp_path):
     # The screen and the refine stage are off: each compiles the path mode once more (the screen's evaluation
     # without the regular workspace, refine its gradient): from an empty XLA cache, under load ~9, the stages took
     # screen 259 s, GA 354 s, refine 646 s wall (2026-12-01). Nothing below reads the screen or refine; the GA,
     # NSGA-II, verification and summary in path mode are what is checked.
-    p = run_experiment("ga_reconfig", TOY + ["experiment.reconfig.mode=path", "experiment.reconfig.n_R=9",
-                                             "experiment.reconfig.segments=4", "experiment.screen.enabled=false",
-                                             "experiment.refine.enabled=false"], run_dir=tmp_path)
+    p = run_experiment("ga_reconfig", TOY + VERIFY_AS_SEARCH + [
+        "experiment.reconfig.mode=path", "experiment.reconfig.n_R=9", "experiment.reconfig.segments=4",
+        "experiment.screen.enabled=false", "experiment.refine.enabled=false"], run_dir=tmp_path)
     with h5py.File(p, "r") as f:
         V, S = f["verify"], f["summary"]
         for k, u in (("R_speed_margin", "m/s"), ("R_accel_margin", "m/s^2"), ("R_force_margin", "N"),
