@@ -29,10 +29,9 @@ __all__ = ["N_IDX", "CRITERION", "SV_METHODS", "JACOBI", "FAST", "limits_tuple",
 _ik_ok = ik_ok
 _tcubic = tcubic
 _tcubic2 = tcubic2
-_inline = INLINE
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def store_masked(out, j, f, i0, i1, i2, i3, i4, i5, i6, i7):
     """Write the 8 indices of point ``j`` into the rows ``out`` (:func:`rows`), NaN where not ``f``."""
     nan = math.nan
@@ -109,7 +108,7 @@ def fixed_fields_dense(x, y, z, R, r, L1, L2, lim, kt, out, ok, method=JACOBI):
         _fields_loop(x, y, z, R, r, L1, L2, lim, kt, out, ok, FAST)
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def _fields_loop(x, y, z, R, r, L1, L2, lim, kt, out, ok, method):
     for j in range(x.shape[0]):
         f, i0, i1, i2, i3, i4, i5, i6, i7 = point_indices(x[j], abs(y[j]), z[j], R, r, L1, L2, lim, kt, method)

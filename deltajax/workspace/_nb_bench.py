@@ -26,10 +26,8 @@ from ._nb_kernel import (FAST, INLINE, JACOBI, N_IDX, OPTS, _T_POLY, as_tuple4, 
 
 __all__ = ["bench_kernel_rates", "bench_numba", "minimal_loop"]
 
-_inline = INLINE
 
-
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def _min_chain(x, y, z, R, r, L1, h1, iL2, c0, lim, i):
     px, py, pz = chain_local(x, y, z, i)
     dx = px + r - R
@@ -48,7 +46,7 @@ def _min_chain(x, y, z, R, r, L1, h1, iL2, c0, lim, i):
     return ok, j0, j1, j2, uz * c - ux * s
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def _root01(cc):
     u = math.sqrt(cc)
     t = u * (((((_T_POLY[5] * u + _T_POLY[4]) * u + _T_POLY[3]) * u + _T_POLY[2]) * u + _T_POLY[1]) * u + _T_POLY[0])

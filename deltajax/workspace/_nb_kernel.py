@@ -59,7 +59,6 @@ OPTS = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
 #: which re-runs type inference for every call site): the same machine-code speed (bench_workspace --versus), but
 #: a cold compile of ``fixed_fields`` + ``fixed_fields_dense`` took 210 CPU-s with it and 15 CPU-s without.
 INLINE = dict(forceinline=True, **OPTS)
-_inline = INLINE
 
 #: cos, sin of the chain angles (the core's constants; compile-time constants inside the kernels)
 _COS_A = tuple(math.cos(a) for a in CHAIN_ANGLES)
@@ -95,14 +94,14 @@ def kt_tuple(b_v: float, b_f: float, beta: float) -> np.ndarray:
     return np.array([beta * b_v, b_v, (1.0 - beta) * b_f, b_f], dtype=np.float64)
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def as_tuple4(a):
     """(a[0], a[1], a[2], a[3]) of a parameter array: loop-invariant scalars (an array read inside a loop that
     also stores to arrays blocks LLVM's vectoriser, which cannot prove that they do not alias)."""
     return a[0], a[1], a[2], a[3]
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def _rotate_z(a, b, c, i, sign):
     """(a, b, c) rotated about z by -sign alpha_i (sign +1: base -> chain frame, -1: back); chain 0 unchanged."""
     if i == 0:
@@ -113,13 +112,13 @@ def _rotate_z(a, b, c, i, sign):
 
 
 # -- kinematics (twins of deltajax.kinematics) ------------------------------------------------------------------
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def chain_local(px, py, pz, i):
     """P in the local frame of chain ``i`` (0, 1, 2; a constant after inlining); chain 0 is the base frame."""
     return _rotate_z(px, py, pz, i, 1.0)
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def loop_closure(dx, py, pz, L1, L2, lim):
     """Algebraic IK of one chain (outer elbow): twin of :func:`deltajax.kinematics.loop_closure`.
 
@@ -146,7 +145,7 @@ def loop_closure(dx, py, pz, L1, L2, lim):
     return c, s, (disc if inside else -(box * box)), reach, margin, reach & (margin >= 0.0), dx, py, pz
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def loop_vectors(dx, py, pz, c, s, L1, L2):
     """Unit forearm vector u = (C - B) / L2 of one chain in its local frame (sanitised loop inputs)."""
     inv = 1.0 / L2
@@ -154,19 +153,19 @@ def loop_vectors(dx, py, pz, c, s, L1, L2):
 
 
 # -- Jacobian blocks (twins of deltajax.jacobian) ----------------------------------------------------------------
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def jx_row(ux, uy, uz, i):
     """Row i of Jx in the base frame: the unit forearm vector of chain ``i`` rotated back."""
     return _rotate_z(ux, uy, uz, i, -1.0)
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def jq_theta(ux, uz, c, s):
     """Homogenised Jq diagonal entry d = uz cos theta - ux sin theta = sin theta2 sin theta3 (chain frame)."""
     return uz * c - ux * s
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def jx_det(j00, j01, j02, j10, j11, j12, j20, j21, j22):
     """Signed det Jx by cofactor expansion along the first row (0 exactly: the sample is skipped)."""
     return (j00 * (j11 * j22 - j12 * j21)
@@ -174,7 +173,7 @@ def jx_det(j00, j01, j02, j10, j11, j12, j20, j21, j22):
             + j02 * (j10 * j21 - j11 * j20))
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def chain(x, y, z, R, r, L1, L2, lim, i):
     """One chain of :func:`point_kernel`: (ok, Jx row i (3 floats, base frame), d_i).
 
@@ -187,14 +186,14 @@ def chain(x, y, z, R, r, L1, L2, lim, i):
     return ok, j0, j1, j2, jq_theta(ux, uz, c, s)
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def chain_ok(x, y, z, R, r, L1, L2, lim, i):
     """``ok`` of :func:`chain` alone (the same loop closure, hence the same decision)."""
     px, py, pz = chain_local(x, y, z, i)
     return loop_closure(px + r - R, py, pz, L1, L2, lim)[5]
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def ik_ok_all(x, y, z, R, r, L1, L2, lim):
     """:func:`ik_ok` without the early exit (all three chains, branch-free: vectorises over samples or points;
     the same loop closures, hence the same decision)."""
@@ -212,7 +211,7 @@ def ik_ok(x, y, z, R, r, L1, L2, lim):
     return chain_ok(x, y, z, R, r, L1, L2, lim, 2)
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def jacobian_blocks(x, y, z, R, r, L1, L2, lim):
     """The three chains at P (canonical, y = |y|): (ok, det Jx signed, Jx (9 floats, rows), d (3 floats))."""
     ok0, j00, j01, j02, d0 = chain(x, y, z, R, r, L1, L2, lim, 0)
@@ -223,7 +222,7 @@ def jacobian_blocks(x, y, z, R, r, L1, L2, lim):
 
 
 # -- singular values (twins of deltajax.indices) ---------------------------------------------------------------
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def sv_matrix(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2):
     """The symmetric matrix X whose two largest eigenvalues give the singular values of M = Jx^-1 diag(d).
 
@@ -268,7 +267,7 @@ def sv_matrix(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2):
             x1 * (g12 if jx_side else c12) * x2)
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def _jacobi_rotate(app, aqq, apq, arp, arq):
     """One Jacobi rotation zeroing a_pq: (a_pp, a_qq, a_rp, a_rq) after it (r the third index).
 
@@ -287,7 +286,7 @@ def _jacobi_rotate(app, aqq, apq, arp, arq):
     return app - t * apq, aqq + t * apq, c * arp - s * arq, s * arp + c * arq
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def _jacobi_sweep(a00, a11, a22, a01, a02, a12):
     a00, a11, a02, a12 = _jacobi_rotate(a00, a11, a01, a02, a12)  # (0, 1)
     a01 = 0.0
@@ -298,7 +297,7 @@ def _jacobi_sweep(a00, a11, a22, a01, a02, a12):
     return a00, a11, a22, a01, a02, a12
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def _eig_top2_jacobi(x00, x11, x22, x01, x02, x12):
     """The two largest eigenvalues by 4 cyclic Jacobi sweeps (unrolled; sqrt only)."""
     x00, x11, x22, x01, x02, x12 = _jacobi_sweep(x00, x11, x22, x01, x02, x12)
@@ -314,7 +313,7 @@ _T_POLY = _CORE_T_POLY
 _EPS = 2.220446049250313e-16
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def _cubic_root01(c):
     """The root t in [0, 1] of t^2 (t + 3) = c, c in [0, 4]: polynomial start in sqrt(c), one Halley step."""
     u = math.sqrt(c)
@@ -327,7 +326,7 @@ def _cubic_root01(c):
     return t - (2.0 * g * g1 / (den if den > 0.0 else 1.0) if den > 0.0 else 0.0)
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det):
     """The two largest eigenvalues: lambda_1 by the closed-form cubic without inverse trig (q + p x,
     x^3 - 3x = 2r); lambda_2 from the invariants (lambda_2 lambda_3 = det / lambda_1, lambda_2 + lambda_3 =
@@ -358,7 +357,7 @@ def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det):
     return l1, l2
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def sym3_top2(x00, x11, x22, x01, x02, x12, c2, det, method):
     """(lambda_1, lambda_2), the two largest eigenvalues of a symmetric PSD 3x3 with principal-minor sum ``c2``
     and determinant ``det``; ``method`` :data:`FAST` or :data:`JACOBI` (which ignores c2, det; a constant
@@ -368,7 +367,7 @@ def sym3_top2(x00, x11, x22, x01, x02, x12, c2, det, method):
     return _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det)
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def singular_values_from_eig(e1, e2, jx_side, prod_d, det_jx):
     """(s1, s2, s3) from the two largest eigenvalues of :func:`sv_matrix`'s X (the second half of the core's
     singular_values): the third from the exact determinant s1 s2 s3 = |prod d| / |det Jx|. Three divisions
@@ -390,7 +389,7 @@ def singular_values_from_eig(e1, e2, jx_side, prod_d, det_jx):
     return (x3 if jx_side else x1), x2, (x1 if jx_side else x3)
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def singular_values(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2, method):
     """Singular values (s1 >= s2 >= s3) of M = Jx^-1 diag(d): twin of the core's ``singular_values(jx, d)``."""
     jx_side, prod_d, det_jx, c2, det_x, x00, x11, x22, x01, x02, x12 = sv_matrix(j00, j01, j02, j10, j11, j12, j20,
@@ -400,7 +399,7 @@ def singular_values(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2, met
 
 
 # -- indices (twins of deltajax.indices) -------------------------------------------------------------------------
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def sigma_tilde(sig, a, b):
     """The paper's piecewise quadratic: 1 - ((sig - a) / a)^2 up to a, 1 - ((sig - a) / (b - a))^2 up to b,
     0 above; NaN stays NaN."""
@@ -409,7 +408,7 @@ def sigma_tilde(sig, a, b):
     return 0.0 if sig > b else v
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def indices_from_sv(s1, s2, s3, raw_scale, kt):
     """All indices from the singular values, in :data:`deltajax.INDEX_NAMES` order (8 floats); ``kt`` =
     (a_v, b_v, a_f, b_f); ``raw_scale`` = L1^3 (homogenised -> raw manipulability)."""
@@ -422,7 +421,7 @@ def indices_from_sv(s1, s2, s3, raw_scale, kt):
             omega_f * (1.0 / raw_scale))
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def point_kernel(x, y, z, R, r, L1, L2, lim, kt, method):
     """The whole kernel at one point (twin of :func:`deltajax.indices.point_kernel`, theta3x3 homogenised by
     L1): (feasible, 8 indices). Feasible = every loop closes within the joint limits and det Jx != 0
@@ -436,7 +435,7 @@ def point_kernel(x, y, z, R, r, L1, L2, lim, kt, method):
 point_indices = point_kernel  # the drivers' name
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def criterion_of(crit, i0, i1, i2, i3, i4, i5, i6, i7):
     """The index with criterion code ``crit`` (:data:`CRITERION`) among the 8."""
     v = i0

@@ -20,7 +20,6 @@ from ._nb_kernel import (INLINE, INV_COND, JACOBI, K_TILDE, MANIPULABILITY, OMEG
                          SIGMA_MIN_V, as_tuple4, criterion_of, ik_ok_all, jacobian_blocks, point_kernel, point_value,
                          sigma_tilde, sv_matrix)
 
-_inline = INLINE
 
 _EPS = 2.220446049250313e-16
 #: eigenvalue rounding of both solvers (Jacobi: backward stable, ~eps ||A|| per rotation, 12 rotations; the
@@ -43,13 +42,13 @@ _TC4, _TC3, _TC2, _TC1, _TC0 = (0.004862740934509117, -0.02386905831264214, 0.06
                                 -0.16573685947992756, 0.9999539697770844)
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def _guess(w):
     s = math.sqrt(w * (1.0 / 3.0))
     return s * ((((_TC4 * s + _TC3) * s + _TC2) * s + _TC1) * s + _TC0)
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def tcubic(w):
     """Root t in [0, 1] of t^2 (t + 3) = w, w in [0, 4]; branch-free, one sqrt and one division.
 
@@ -64,7 +63,7 @@ def tcubic(w):
     return t - 2.0 * f * fp / max(den, 1e-300)
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def tcubic2(wp, wm):
     """:func:`tcubic` of two arguments with one shared division (x / a, y / b = x b / (a b), y a / (a b))."""
     tp = _guess(wp)
@@ -81,7 +80,7 @@ def tcubic2(wp, wm):
     return tp - np_ * em_ * inv, tm - nm_ * ep_ * inv
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def eig_cubic_parts(a00, a11, a22, a01, a02, a12):
     """Trigonometric Cardano form of the eigenvalues: (q, p, tp, tm, ip) with lambda_max = q + p (1 + tp),
     lambda_mid = q + p (tm - tp), lambda_min = q - p (1 + tm); ip = 1 / p (0 where p = 0).
@@ -108,7 +107,7 @@ def eig_cubic_parts(a00, a11, a22, a01, a02, a12):
     return q, p, tp, tm, ip
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def _dt_bound2(tp, tm, a, dw):
     """Bound on |t(w + e) - t(w)| for |e| <= dw (a = sqrt(dw / 3)), for the roots tp and tm (summed): a always
     (t^2 (t + 3) >= 3 t^2 and t increasing), dw / f'(t - a) where the root is away from 0 (t is concave in
@@ -121,7 +120,7 @@ def _dt_bound2(tp, tm, a, dw):
     return min(min(a, fm_ * inv), 1.0) + min(min(a, fp_ * inv), 1.0) + 2.0 * _T_NEWTON
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def eig_with_bound(a00, a11, a22, a01, a02, a12):
     """:func:`eig_cubic_parts` (q, p, tp, tm) and e_lam, a bound on the distance of each of the three
     eigenvalues so obtained from the exact kernel's (Jacobi) eigenvalue of the same floating-point matrix:
@@ -132,7 +131,7 @@ def eig_with_bound(a00, a11, a22, a01, a02, a12):
     return q, p, tp, tm, _C_LAMBDA * _EPS * (abs(q) + 2.0 * p) + p * _dt_bound2(tp, tm, dt_a, dw)
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def _criterion_bound(crit, sv3, inv1, er1, er3, prod_d, det_jx, L13, kt):
     """(approximate value, absolute error bound, bound unavailable) of criterion ``crit`` from the screened
     s3, 1/s1 and their relative error bounds er3, er1.
@@ -273,7 +272,7 @@ def trim_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, tb):
     return k0, k1
 
 
-@nb.njit(**_inline)
+@nb.njit(**INLINE)
 def point_window(pts, k_start, k_stop, j):
     """Point j made mirror-canonical (y -> |y|) and its sample window [k0, k1)."""
     return pts[j, 0], abs(pts[j, 1]), pts[j, 2], k_start[j], k_stop[j]
