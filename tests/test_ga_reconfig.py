@@ -207,3 +207,37 @@ def test_weighted_mode_runs_and_says_so(toy_run):
     # the run's lines (the "deltajax" logger) are in its run.log, whichever test ran it
     assert "weighted sum 1 x picks_per_min + 1 x regular_volume" in (p.parent / "run.log").read_text()
     assert "weighted sum" in load(p)["ga"]["attrs"]["objective"]
+
+
+@pytest.mark.slow
+def test_floor_step_designs_are_verified_and_can_only_improve_the_recommendation(full_run):
+    """The floor step (experiment.floor_solve, on by default): its designs are verified like every candidate,
+    each descended from a verified front point that meets the floor, and the recommendation over all verified
+    designs is at least as good on the rule's terms as over the designs before the step."""
+    from deltajax.optimize.designer import DESIGN_SENSE
+    from deltajax.optimize.pareto import non_dominated
+    from deltajax.optimize.workflow import floor_limits, recommend
+
+    data = load(full_run)
+    V, Fl = data["verify"], data["floor"]
+    names = list(V["design_name"])
+    rows = np.asarray(Fl["verify_row"]).reshape(-1)
+    assert len(rows) >= 1 and [names[i] for i in rows] == [f"floor_{i}" for i in range(len(rows))]
+    assert rows[0] == len(names) - len(rows)                        # appended after every other candidate
+    objs = list(V["attrs"]["objectives"].split(","))
+    sense = np.asarray([DESIGN_SENSE[o] for o in objs])
+    F, feas = np.asarray(V["F"]), np.asarray(V["feasible"]).astype(bool)
+    floor = float(V["attrs"]["recommend_floor"])
+    lim = floor_limits(len(objs), 0, floor, sense)
+    for st in Fl["start"]:                                            # each start met the floor on the fine grids
+        assert np.all(F[names.index(st)] <= lim)
+    assert np.all(np.asarray(Fl["step"]) >= 1)
+
+    def rule(n):                                                      # the floor rule over the first n designs
+        ok = np.flatnonzero(feas[:n] & np.all(np.isfinite(F[:n]), axis=1))
+        return recommend(F, ok[non_dominated(F[ok])], "floor", 0, floor=floor, sense=sense)
+
+    rec, before = rule(len(names)), rule(rows[0])
+    assert rec == int(V["attrs"]["recommended"])
+    if np.all(F[before] <= lim):                                     # the rule's answer before the step met the floor
+        assert np.all(F[rec] <= lim) and F[rec, 0] <= F[before, 0]

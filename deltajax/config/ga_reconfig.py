@@ -16,10 +16,11 @@ from ._readers import ConfigError, _choice, _field
 _GA_KEYS = {
     "": {"name", "resume", "stop_after", "design", "task", "good_workspace", "joints", "links", "motor", "cycle",
          "regular_workspace", "objectives", "constraints", "screen", "ga", "pareto", "refine", "recommend",
-         "recommend_band", "recommend_floor", "verify",
+         "recommend_band", "recommend_floor", "floor_solve", "verify",
          "reconfig"},  # rtmode: experiment.reconfig is checked by deltajax.optimize.operating
     "screen": {"enabled", "log2_size", "seed_fraction"},
     "refine": {"enabled", "steps", "learning_rate", "penalty"},
+    "floor_solve": {"enabled", "rounds", "candidates"},
     "design": {"n_R", "bounds"},
     "task": {"diameter", "height", "z_top", "n_r", "n_phi", "n_z"},
     "good_workspace": {"index", "threshold", "beta"},
@@ -111,6 +112,8 @@ class GaReconfigSettings:
                                                                "penalty": 0.0})
     recommend_band: float = 0.02
     recommend_floor: float = 1.2
+    # recommend=floor: the epsilon-constraint step (deltajax.optimize.floor.solve_floor); absent: off
+    floor_solve: dict = dataclasses.field(default_factory=lambda: {"enabled": False, "rounds": 0, "candidates": 0})
     # continuous regular workspace in the search: () off, else ((bisection, golden-section steps), (rings, angles,
     # levels) of the unit cylinder) for deltajax.constraints.refine_cylinder (the verification keeps its defaults)
     search_refine: tuple = ()
@@ -255,6 +258,15 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
               "steps": _ga_num(rf, "steps", "refine", lo=1, integer=True),
               "learning_rate": _ga_num(rf, "learning_rate", "refine", lo=0, lo_open=True, hi=1),
               "penalty": _ga_num(rf, "penalty", "refine", lo=0)}
+    floor_solve = {"enabled": False, "rounds": 0, "candidates": 0}
+    if "floor_solve" in e:
+        fs = _ga_block(e, "floor_solve")
+        floor_solve = {"enabled": _ga_flag(fs, "enabled", "floor_solve"),
+                       "rounds": _ga_num(fs, "rounds", "floor_solve", lo=1, integer=True),
+                       "candidates": _ga_num(fs, "candidates", "floor_solve", lo=1, integer=True)}
+        if floor_solve["enabled"] and recommend != "floor":
+            raise ConfigError(f"experiment.floor_solve.enabled=true needs experiment.recommend=floor, got "
+                              f"{recommend!r} (the step solves for the floor rule's answer)")
     v = _ga_block(e, "verify")
     verify = {k: _ga_num(v, k, "verify", lo=1, integer=True) for k in v}
     for k in ("n_R", "task_n_z", "rw_n_r", "rw_n_phi", "rw_n_z"):
@@ -266,7 +278,8 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
                     joints=joints, links=links, motor=motor, cycle=cycle, regular=regular, mode=mode,
                     objectives=tuple(names), primary=primary, weights=weights, constraints=cons, ga=ga,
                     pareto=pareto, recommend=recommend, verify=verify, screen=screen, refine=refine,
-                    recommend_band=band, recommend_floor=floor, search_refine=search_refine, reconfig=_operating_settings(e))
+                    recommend_band=band, recommend_floor=floor, floor_solve=floor_solve, search_refine=search_refine,
+                    reconfig=_operating_settings(e))
 
 
 def _v_ga_reconfig(e, cfg, robot, recon) -> None:

@@ -267,21 +267,44 @@ def run(ctx) -> None:
                 f"+{np.max(gain) if len(gain) else 0.0:.2f} % at most, every constraint kept)")
         mark("refine")
 
-    # -- compute: verification on the fine grids, recommendation ---------------------------------------------------
+    # -- compute: verification on the fine grids, the floor step, recommendation --------------------------------------
     if "verify" not in done:
         space_v = dataclasses.replace(space, n_R=s.verify["n_R"]) if space.reconfigurable else space
+        pb_fine = W.designer_problem(s, fine=True)
         cand = np.concatenate([base_genes[None], best[None], front_X, refined, extra_X])
         names = (["baseline", "ga_best"] + [f"pareto_{i}" for i in range(len(front_X))]
                  + [f"refined_{i}" for i in range(len(refined))] + [f"population_{i}" for i in range(len(extra_X))])
         bar = ctx.progress(total=len(cand), desc="verify (fine grids)")
-        mv = W.verify(W.designer_problem(s, fine=True), space_v, cand, progress=bar.update)
+        mv = W.verify(pb_fine, space_v, cand, progress=bar.update)
         bar.close()
         bv = np.asarray([float(mv[o][0]) for o in objs])           # normalised by the *verified* baseline
-        Fv = W.objective_matrix(mv, objs, np.where(np.isfinite(bv) & (bv != 0), sense / np.abs(np.where(bv != 0, bv, 1)),
-                                                   scale))
-        ok = np.flatnonzero(mv["feasible"].astype(bool) & np.all(np.isfinite(Fv), axis=1))
-        nd = ok[non_dominated(Fv[ok])] if len(ok) else np.zeros((0,), int)
-        nd = nd[np.lexsort(Fv[nd].T[::-1])] if len(nd) else nd
+        scale_v = np.where(np.isfinite(bv) & (bv != 0), sense / np.abs(np.where(bv != 0, bv, 1)), scale)
+
+        def front_of(mv):
+            Fv = W.objective_matrix(mv, objs, scale_v)
+            ok = np.flatnonzero(mv["feasible"].astype(bool) & np.all(np.isfinite(Fv), axis=1))
+            nd = ok[non_dominated(Fv[ok])] if len(ok) else np.zeros((0,), int)
+            return Fv, ok, (nd[np.lexsort(Fv[nd].T[::-1])] if len(nd) else nd)
+
+        Fv, ok, nd = front_of(mv)
+        fo = None
+        if s.recommend == "floor" and s.floor_solve["enabled"]:
+            from ..optimize.floor import solve_floor
+            fo = solve_floor(pb, space, cand, Fv, nd, objs, scale, primary,
+                             W.floor_limits(len(objs), jp, s.recommend_floor, sense), evaluate=ev,
+                             evaluate_cheap=ev_cheap, evaluate_fine=W.batch_evaluator(pb_fine, space_v, 8),
+                             steps=s.refine["steps"], learning_rate=s.refine["learning_rate"],
+                             penalty=s.refine["penalty"], rounds=s.floor_solve["rounds"],
+                             n_fine=s.floor_solve["candidates"])
+            if len(fo.genes):
+                first = len(cand)
+                cand = np.concatenate([cand, fo.genes])
+                names += [f"floor_{i}" for i in range(len(fo.genes))]
+                mv = {k: np.concatenate([mv[k], fo.metrics[k]]) for k in mv}
+                Fv, ok, nd = front_of(mv)
+                R.store_floor(res, fo, names, first, objs, s)
+            ctx.log(f"floor step: descents from {len(fo.starts)} verified front points that meet the floor, "
+                    f"{fo.n_predicted} iterates predicted to meet it, {len(fo.genes)} verified on the fine grids")
         rec = W.recommend(Fv, nd, s.recommend, jp, band=s.recommend_band, floor=s.recommend_floor, sense=sense)
         hv = hypervolume(Fv[nd], ref) if len(nd) else 0.0
         # -- write ----------------------------------------------------------------------------------------------

@@ -122,13 +122,35 @@ def rule_text(s) -> str:
     if s.recommend == "floor":
         others = [o for o in s.objectives if o != s.primary]
         return (f"floor: the best {s.primary} among verified front points with {', '.join(others)} at least "
-                f"{s.recommend_floor:g} x the verified baseline's (none: the point closest to that floor)")
+                f"{s.recommend_floor:g} x the verified baseline's (none: the point closest to that floor)"
+                + ("; the floor step's designs included" if s.floor_solve["enabled"] else ""))
     if s.recommend == "band":
         return (f"band: among verified front points whose {s.primary} is within {100 * s.recommend_band:g} % of "
                 f"the front's best, the best on {', '.join(o for o in s.objectives if o != s.primary)}")
     if s.recommend == "knee":
         return "knee of the verified front (objectives normalised over the front)"
     return f"best {s.primary} on the verified front"
+
+
+def store_floor(res, fo, names, first: int, objs, s) -> None:
+    """Group ``floor``: what the floor step (:func:`deltajax.optimize.floor.solve_floor`) verified: each design's
+    row in ``verify`` (``first`` onward), the verified design it descended from, its iterate and the predicted
+    objectives."""
+    res.put_axis("floor", "design", np.arange(len(fo.genes)), units="1")
+    res.put_axis("floor", "objective", np.arange(len(objs)), units="1")
+    res.put("floor", "verify_row", np.arange(first, first + len(fo.genes)), units="1", dims=("design",),
+            attrs={"meaning": "row of each floor-step design on verify's design axis"})
+    res.put("floor", "start", np.asarray([names[i] for i in fo.start], dtype=object), units="1", dims=("design",),
+            attrs={"meaning": "the verified front point its descent started from"})
+    res.put("floor", "step", fo.step, units="1", dims=("design",),
+            attrs={"meaning": f"descent iterate (steps of experiment.refine.steps={s.refine['steps']} per round)"})
+    res.put("floor", "F_predicted", fo.predicted, units="1", dims=("design", "objective"),
+            attrs={"meaning": "predicted fine-grid objectives (search-grid values x the start's fine/search "
+                              "ratio), normalised like verify/F"})
+    res.set_attrs("floor", starts=",".join(names[i] for i in fo.starts), predicted_to_meet_floor=fo.n_predicted,
+                  rounds=s.floor_solve["rounds"], candidates=s.floor_solve["candidates"],
+                  method="epsilon-constraint: projected Adam on the primary objective + constraint penalty from each "
+                         "verified front point that meets the floor; iterates predicted to meet it verified")
 
 
 def store_verify(res, space, cand, names, mv, Fv, nd, rec, hv, hv_base, ref, objs, s) -> None:

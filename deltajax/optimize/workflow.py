@@ -33,7 +33,7 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 import numpy as np
 
 __all__ = ["SetupError", "setup", "designer_problem", "screen", "screen_front", "ga_fitness", "pareto_eval", "refine_designs",
-           "RefineOutcome", "verify", "recommend", "load_checkpoint", "put_checkpoint", "restage", "stages_done",
+           "RefineOutcome", "descent_paths", "verify", "floor_limits", "recommend", "load_checkpoint", "put_checkpoint", "restage", "stages_done",
            "job_fingerprint", "RECOMMEND_RULES"]
 
 RECOMMEND_RULES = ("band", "knee", "primary")
@@ -304,18 +304,14 @@ class RefineOutcome:
     loss_history: np.ndarray
 
 
-def refine_designs(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.ndarray, primary: str, *,
-                   steps: int = 20, learning_rate: float = 0.01, penalty: float = 10.0, top: int = 3,
-                   evaluate: Optional[Callable] = None, evaluate_cheap: Optional[Callable] = None,
-                   progress: Optional[Callable[[int], Any]] = None) -> RefineOutcome:
-    """Projected Adam (optax) on ``scale_primary x primary + penalty x sum(max(g, 0))`` from each row of ``genes``.
+def descent_paths(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.ndarray, primary: str, *,
+                  steps: int = 20, learning_rate: float = 0.01, penalty: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
+    """Projected Adam (optax) on ``scale_primary x primary + penalty x sum(max(g, 0))`` from each row of ``genes``
+    (the gene box [0, 1]^d): ``(loss history (n, steps), iterates (n, steps + 1, d), the start first)``.
 
-    The cycle rate carries implicit-function derivatives (:func:`deltajax.constraints.cycle_rate`); the task
-    coverage is a step function (zero derivative), so the true constraints decide: every iterate is evaluated
-    without the regular workspace, the ``top`` best feasible iterates that improve the primary are evaluated
-    with it, and the best of those with no objective worse than the start is kept. Raises
-    ``FloatingPointError`` on any non-finite gradient (never zeroed).
-    """
+    One compiled program per (problem, space, settings), run in padded batches of :data:`DESCENT_ROWS` rows (the
+    refinement and :func:`deltajax.optimize.floor.solve_floor` share it). Raises ``FloatingPointError`` on any
+    non-finite gradient (never zeroed)."""
     import jax
     import jax.numpy as jnp
     import optax
@@ -325,9 +321,7 @@ def refine_designs(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.
     from .pareto import padded_batch
 
     genes = np.clip(np.asarray(genes, float).reshape(-1, space.dim), 0.0, 1.0)
-    n, d = genes.shape
-    jp = list(objs).index(primary)
-    sp = float(scale[jp])
+    sp = float(scale[list(objs).index(primary)])
     reg = primary.startswith("regular")
 
     def loss(g):
@@ -355,7 +349,7 @@ def refine_designs(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.
 
     descend = _shared("refine_descent", pb, space, (primary, repr(sp), reg, int(steps), repr(float(learning_rate)),
                                                     repr(float(penalty))), build)
-    # in batches of DESCENT_ROWS rows (padded): one compiled descent for any number of winners (the job refines
+    # in batches of DESCENT_ROWS rows (padded): one compiled descent for any number of starts (the job refines
     # at most 8; a stage with fewer, e.g. without a Pareto front, reuses it)
     hist, path, fin = padded_batch(descend, DESCENT_ROWS)(genes)
     if not fin.all():
@@ -363,9 +357,29 @@ def refine_designs(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.
         raise FloatingPointError(f"refine: non-finite gradient of the designer's loss for design {i} at step {k} "
                                  f"(genes {path[i, max(k - 1, 0)].tolist() if k else genes[i].tolist()}); "
                                  "the refinement never zeroes a broken gradient")
+    return np.asarray(hist), np.concatenate([genes[:, None, :], np.asarray(path)], axis=1)
+
+
+def refine_designs(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.ndarray, primary: str, *,
+                   steps: int = 20, learning_rate: float = 0.01, penalty: float = 10.0, top: int = 3,
+                   evaluate: Optional[Callable] = None, evaluate_cheap: Optional[Callable] = None,
+                   progress: Optional[Callable[[int], Any]] = None) -> RefineOutcome:
+    """:func:`descent_paths` from each row of ``genes``, then an acceptance rule on the true constraints.
+
+    The cycle rate carries implicit-function derivatives (:func:`deltajax.constraints.cycle_rate`); the task
+    coverage is a step function (zero derivative), so the true constraints decide: every iterate is evaluated
+    without the regular workspace, the ``top`` best feasible iterates that improve the primary are evaluated
+    with it, and the best of those with no objective worse than the start is kept. Raises
+    ``FloatingPointError`` on any non-finite gradient (never zeroed).
+    """
+    genes = np.clip(np.asarray(genes, float).reshape(-1, space.dim), 0.0, 1.0)
+    n, d = genes.shape
+    jp = list(objs).index(primary)
+    sp = float(scale[jp])
+    hist, cand = descent_paths(pb, space, genes, objs, scale, primary, steps=steps, learning_rate=learning_rate,
+                               penalty=penalty)
     if progress is not None:
         progress(1)
-    cand = np.concatenate([genes[:, None, :], path], axis=1)                      # (n, steps + 1, d)
     evaluate_cheap = evaluate_cheap or batch_evaluator(pb, space, 64, regular=False)
     evaluate = evaluate or batch_evaluator(pb, space, 16)
     cheap = evaluate_cheap(cand.reshape(-1, d))
@@ -413,6 +427,15 @@ def verify(pb_fine, space, cand: np.ndarray, *, batch: int = 8,
     return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
+def floor_limits(n_obj: int, j_primary: int, floor: float, sense: Sequence[float]) -> np.ndarray:
+    """The floor on each non-primary normalised minimised objective (baseline -1 for a maximised one, +1 for a
+    minimised one): ``<= -floor`` (maximised), ``<= 1 / floor`` (minimised); the primary's entry is +inf."""
+    sg = np.asarray(sense, float)
+    lim = np.where(sg < 0, -float(floor), 1.0 / float(floor))
+    lim[j_primary] = np.inf
+    return lim
+
+
 def recommend(F: np.ndarray, front: np.ndarray, rule: str, j_primary: int, *, band: float = 0.02,
               floor: float = 1.2, sense: Optional[Sequence[float]] = None) -> int:
     """Index (into ``F``'s rows) of the recommended design on a verified front (``front``: row indices).
@@ -445,8 +468,7 @@ def recommend(F: np.ndarray, front: np.ndarray, rule: str, j_primary: int, *, ba
     others = [j for j in range(F.shape[1]) if j != j_primary]
     if rule == "floor":
         # floor on a normalised minimised objective f (baseline -1 or +1): f <= -floor (maximised), <= 1/floor
-        sg = np.full(F.shape[1], -1.0) if sense is None else np.asarray(sense, float)
-        lim = np.asarray([-floor if sg[j] < 0 else 1.0 / floor for j in others])
+        lim = floor_limits(F.shape[1], j_primary, floor, np.full(F.shape[1], -1.0) if sense is None else sense)[others]
         short = np.max(Ff[:, others] - lim[None, :], axis=1, initial=-np.inf) if others else np.zeros(len(Ff))
         ok = short <= 0
         if ok.any():
