@@ -15,6 +15,7 @@ optimiser's population never leaves the box.
 from __future__ import annotations
 
 import dataclasses
+import functools
 import hashlib
 import json
 from typing import Any, Callable, Mapping, Optional
@@ -187,15 +188,10 @@ def fingerprint(cfg: GAConfig, num_dims: int, extra: Optional[Mapping[str, Any]]
     return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
-_ENGINES: dict[Any, tuple[Callable, Callable]] = {}
-
-
+@functools.lru_cache(maxsize=16)   # like deltajax.optimize.workflow's programs: bounded in a long process
 def _engine(fitness_fn, d: int, cfg: GAConfig):
     """Compiled init and chunk functions, cached per (fitness function, settings) so that repeated runs
     (resume, tests, sweeps in one process) reuse compilations. Seed and seed genes are arguments."""
-    cache_key = (fitness_fn, d, cfg)
-    if cache_key in _ENGINES:
-        return _ENGINES[cache_key]
     strat, params = make_strategy(cfg, d)
     P = cfg.population_size
 
@@ -252,7 +248,6 @@ def _engine(fitness_fn, d: int, cfg: GAConfig):
             chunk_cache[n] = run_chunk
         return chunk_cache[n]
 
-    _ENGINES[cache_key] = (init_fn, chunk)
     return init_fn, chunk
 
 
