@@ -53,7 +53,8 @@ def solve_floor(pb, space, cand: np.ndarray, Fv: np.ndarray, front: np.ndarray, 
     iterates on the fine grids.
 
     A path whose last iterate is still predicted to meet the floor (feasible, primary better than at its start)
-    is continued from there, up to ``rounds`` descents of ``steps`` steps, so a path far above the floor reaches it.
+    is continued from there (Adam restarted), up to ``rounds`` descents of ``steps`` steps, so a path far above
+    the floor reaches it.
     ``Fv``: normalised minimised objectives on the fine grids (by the verified baseline); ``scale``: the search
     grids' normalisation (sense / |search baseline|); ``evaluate`` / ``evaluate_cheap``: search-grid batch
     evaluators with / without the regular workspace; ``evaluate_fine``: the verification's evaluator. Returns an
@@ -104,8 +105,8 @@ def solve_floor(pb, space, cand: np.ndarray, Fv: np.ndarray, front: np.ndarray, 
             genes[a].append(path[r, 1:])
             pred[a].append(Fp[r])
             ok[a].append(good[r])
-            # continue while the path's last iterate still meets the floor and is its best so far
-            active[a] = bool(good[r, -1]) and Fp[r, -1, jp] <= np.nanmin(np.where(good[r], Fp[r, :, jp], np.inf))
+            # continue while the path's last iterate still meets the floor (and beats the start)
+            active[a] = bool(good[r, -1])
             cur[a] = path[r, -1]
     tiers = []
     for a in range(n):
