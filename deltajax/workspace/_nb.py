@@ -23,7 +23,7 @@ from ._nb_screen import resolve_screened, screen_audit, screen_window, tcubic, t
 
 __all__ = ["N_IDX", "CRITERION", "SV_METHODS", "JACOBI", "FAST", "limits_tuple", "kt_tuple", "fixed_fields",
            "fixed_fields_dense", "fields_at", "rows", "fixed_mask", "resolve", "resolve_screened", "screen_window", "screen_audit", "any_reach",
-           "reach_k_range", "parallel"]
+           "reach_k_range", "parallel", "plane_stats"]
 
 # names the tests and benchmarks have used since the first round
 _ik_ok = ik_ok
@@ -288,3 +288,34 @@ def partial_stats(vals, start, nz, nyh, w_row0, w_other, out):
         out[a, 1] = hi
         out[a, 2] = s
         out[a, 3] = c
+
+
+@nb.njit(**OPTS)
+def plane_stats(ok, values, count, n, s, lo, hi):
+    """Per-x-plane count, finite count, sum, min, max of ``values`` (k, m, c) over ``ok`` (k, m) in one pass
+    (:func:`deltajax.workspace.chunks.plane_statistics` allocates the outputs; NumPy's sums bit for bit)."""
+    k, m, c = values.shape
+    for p in range(k):
+        for j in range(c):
+            n[p, j] = 0
+            lo[p, j] = math.inf
+            hi[p, j] = -math.inf
+        cnt = 0
+        for t in range(m):
+            o = ok[p, t]
+            cnt += o
+            for j in range(c):
+                v = values[p, t, j]
+                f = o and math.isfinite(v)
+                w = v if f else 0.0  # NumPy's np.where(finite, values, 0.0); float32: the f64 sum of two
+                if t == 0:           # f32 rounded to f32 is the f32 sum (53 >= 2 * 24 + 2 bits)
+                    s[p, j] = w      # NumPy's reduction starts from the first element
+                else:
+                    s[p, j] += w
+                if f:
+                    n[p, j] += 1
+                    if v < lo[p, j]:
+                        lo[p, j] = v
+                    if v > hi[p, j]:
+                        hi[p, j] = v
+        count[p] = cnt

@@ -21,7 +21,6 @@
 
 from __future__ import annotations
 
-import functools
 import hashlib
 import json
 import math
@@ -325,7 +324,7 @@ def plane_statistics(ok: np.ndarray, values: np.ndarray) -> dict[str, np.ndarray
         [k, n_index] over the reachable points whose value is finite (min/max are +inf/-inf for none), in the
         dtype of ``values``.
 
-    One pass over the values (:func:`_plane_stats_kernel`, Numba) instead of NumPy's five full-size
+    One pass over the values (:func:`deltajax.workspace._nb.plane_stats`, Numba) instead of NumPy's five full-size
     temporaries, which took half of a 2 mm ``workspace_grid`` run; the same numbers bit for bit (the sums in
     NumPy's order for this layout: each plane's points one after the other, masked entries as +0.0; tested
     against the NumPy form in tests/test_jaxws_stats.py).
@@ -338,45 +337,11 @@ def plane_statistics(ok: np.ndarray, values: np.ndarray) -> dict[str, np.ndarray
     out = {"plane_count": np.empty(k, np.int64), "plane_n": np.empty((k, c), np.int64),
            "plane_sum": np.empty((k, c), values.dtype), "plane_min": np.empty((k, c), values.dtype),
            "plane_max": np.empty((k, c), values.dtype)}
-    _plane_stats_kernel()(ok, values, out["plane_count"], out["plane_n"], out["plane_sum"], out["plane_min"],
+    from . import _nb                                  # Numba on first use: importing this module stays cheap
+
+    _nb.plane_stats(ok, values, out["plane_count"], out["plane_n"], out["plane_sum"], out["plane_min"],
                           out["plane_max"])
     return out
-
-
-@functools.lru_cache(maxsize=None)
-def _plane_stats_kernel():
-    """The compiled loop of :func:`plane_statistics` (built on first use: importing this module stays cheap)."""
-    import numba as nb
-
-    @nb.njit(nogil=True, cache=True)
-    def kernel(ok, values, count, n, s, lo, hi):
-        k, m, c = values.shape
-        for p in range(k):
-            for j in range(c):
-                n[p, j] = 0
-                lo[p, j] = math.inf
-                hi[p, j] = -math.inf
-            cnt = 0
-            for t in range(m):
-                o = ok[p, t]
-                cnt += o
-                for j in range(c):
-                    v = values[p, t, j]
-                    f = o and math.isfinite(v)
-                    w = v if f else 0.0  # NumPy's np.where(finite, values, 0.0); float32: the f64 sum of two
-                    if t == 0:           # f32 rounded to f32 is the f32 sum (53 >= 2 * 24 + 2 bits)
-                        s[p, j] = w      # NumPy's reduction starts from the first element
-                    else:
-                        s[p, j] += w
-                    if f:
-                        n[p, j] += 1
-                        if v < lo[p, j]:
-                            lo[p, j] = v
-                        if v > hi[p, j]:
-                            hi[p, j] = v
-            count[p] = cnt
-
-    return kernel
 
 
 def _face_count(planes: Mapping[str, np.ndarray], x_faces: tuple[bool, bool]) -> np.int64:
