@@ -270,7 +270,9 @@ def reach_candidate(robot: Delta, p: Float[Array, "3"]) -> Bool[Array, ""]:
     the roundings are ~1e-7 (L1 + L2)^2, and the slacks are :data:`CANDIDATE_SLACK_F32` (reach only).
     """
     p = canonical_point(jnp.asarray(p))
-    tol_d, tol_m, tol_r = CANDIDATE_SLACK_F32 if p.dtype == jnp.float32 else CANDIDATE_SLACK
+    # the kernel computes in the promoted dtype of the point and the design: float32 slacks when that is float32
+    f32 = jnp.result_type(p, robot.upper_arm, robot.forearm, robot.base_radius) == jnp.float32
+    tol_d, tol_m, tol_r = CANDIDATE_SLACK_F32 if f32 else CANDIDATE_SLACK
     p, usable = safe_point(robot, p)
     L1, L2 = robot.upper_arm, robot.forearm
     scale = (L1 + L2) * (L1 + L2)
