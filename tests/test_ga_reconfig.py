@@ -143,7 +143,10 @@ def test_pareto_disabled_runs_end_to_end(toy_run, refine):
     assert "pareto" not in data and ("refine" in data) == refine
     names = list(data["verify"]["design_name"])
     n_ref = int(np.sum(data["refine"]["accepted"])) if refine else 0
-    assert names == ["baseline", "ga_best"] + [f"refined_{i}" for i in range(n_ref)]
+    n_floor = sum(n.startswith("floor_") for n in names)      # the floor step is off in the GA_STAGES_OFF run
+    assert names == (["baseline", "ga_best"] + [f"refined_{i}" for i in range(n_ref)]
+                     + [f"floor_{i}" for i in range(n_floor)])
+    assert ("floor" in data) == (n_floor > 0) and (n_floor == 0 or refine)
     assert data["summary"]["attrs"]["recommended"] in names + ["none"]
     stages = data["attrs"]["ga_reconfig_stages"].split(",")
     assert ("refine" in stages) == refine and "pareto" not in stages
@@ -151,8 +154,8 @@ def test_pareto_disabled_runs_end_to_end(toy_run, refine):
 
 @pytest.mark.slow
 def test_pareto_on_refine_and_screen_off(tmp_path):
-    p = run_experiment("ga_reconfig", TOY + ["experiment.refine.enabled=false", "experiment.screen.enabled=false"],
-                       run_dir=tmp_path)
+    p = run_experiment("ga_reconfig", TOY + ["experiment.refine.enabled=false", "experiment.screen.enabled=false",
+                                             "experiment.floor_solve.enabled=false"], run_dir=tmp_path)
     data = load(p)
     assert "refine" not in data and "screen" not in data and "pareto" in data
     V = data["verify"]

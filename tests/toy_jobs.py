@@ -52,6 +52,18 @@ def overrides(name, *extra):
     return [*COMMON, *TOY[name], *extra]
 
 
+def _has_block(name: str) -> bool:
+    """Whether this checkout's ga_reconfig config has ``experiment.<name>`` with an ``enabled`` switch."""
+    from pathlib import Path
+
+    import yaml
+
+    cfg = yaml.safe_load((Path(__file__).resolve().parent.parent / "configs" / "experiment" / "ga_reconfig.yaml")
+                         .read_text())
+    block = cfg.get(name) or cfg.get("experiment", {}).get(name)
+    return isinstance(block, dict) and "enabled" in block
+
+
 def _has_refine_stage() -> bool:
     """Whether this checkout's ga_reconfig has the optax refine stage (issue 12) with its on/off switch."""
     from pathlib import Path
@@ -65,7 +77,9 @@ def _has_refine_stage() -> bool:
 
 
 HAS_REFINE = _has_refine_stage()
+HAS_FLOOR_STEP = _has_block("floor_solve")
 if HAS_REFINE:  # the toy run has every optional stage on
     TOY["ga_reconfig"].append("experiment.refine.enabled=true")
 #: ga_reconfig with its optional stages off: one extra run, shared by every test that needs it
-GA_STAGES_OFF = ("experiment.pareto.enabled=false",) + (("experiment.refine.enabled=false",) if HAS_REFINE else ())
+GA_STAGES_OFF = (("experiment.pareto.enabled=false",) + (("experiment.refine.enabled=false",) if HAS_REFINE else ())
+                 + (("experiment.floor_solve.enabled=false",) if HAS_FLOOR_STEP else ()))

@@ -47,7 +47,7 @@ class FloorOutcome:
 def solve_floor(pb, space, cand: np.ndarray, Fv: np.ndarray, front: np.ndarray, objs: Sequence[str],
                 scale: np.ndarray, primary: str, lim: np.ndarray, *, evaluate: Callable, evaluate_cheap: Callable,
                 evaluate_fine: Callable, steps: int = 16, learning_rate: float = 0.01, penalty: float = 10.0,
-                rounds: int = 4, n_fine: int = 8) -> FloorOutcome:
+                rounds: int = 4, n_fine: int = 8, max_starts: int = DESCENT_ROWS) -> FloorOutcome:
     """Descend on ``primary`` from the verified front points (rows ``front`` of ``cand`` / ``Fv``) that meet the
     floor ``lim`` (:func:`deltajax.optimize.workflow.floor_limits`) and verify the ``n_fine`` most promising
     iterates on the fine grids.
@@ -67,7 +67,7 @@ def solve_floor(pb, space, cand: np.ndarray, Fv: np.ndarray, front: np.ndarray, 
     lim = np.asarray(lim, float)
     meets = np.all(Fv[front] <= lim[None, :], axis=1) if len(front) else np.zeros(0, bool)
     starts = front[meets]
-    starts = starts[np.argsort(Fv[starts, jp], kind="stable")][:DESCENT_ROWS]
+    starts = starts[np.argsort(Fv[starts, jp], kind="stable")][:max_starts]
     n = len(starts)
     empty = FloorOutcome(np.zeros((0, d)), {}, np.zeros(0, int), np.zeros(0, int), np.zeros((0, k_obj)), starts, 0)
     if not n:
