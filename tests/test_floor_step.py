@@ -63,7 +63,9 @@ def test_floor_limits_and_the_rule_use_the_same_floor():
 
 def test_solve_floor_reaches_the_floor_from_every_start_that_meets_it(problem):
     # fine volume 0.98 (0.04 - 0.02 g0) >= 0.81 x the fine baseline's 0.98 x 0.04  <=>  g0 <= 0.38
-    fo = _solve(problem, 0.81, rounds=4, n_fine=4)
+    ticks = []
+    fo = _solve(problem, 0.81, rounds=4, n_fine=4, progress=ticks.append)
+    assert sum(ticks) == 5                      # 4 rounds + the fine verification (the bar ends full)
     np.testing.assert_array_equal(np.sort(fo.starts), [1, 2])          # the front points at or above the floor
     # each path continued past its first round (4 steps) until it crossed the floor at g0 = 0.38: the best
     # iterate is the last one below 0.38, then that path's previous one (the margin)
@@ -83,12 +85,15 @@ def test_solve_floor_reaches_the_floor_from_every_start_that_meets_it(problem):
 
 
 def test_solve_floor_stops_after_its_rounds_and_finds_nothing_without_a_start(problem):
-    fo = _solve(problem, 0.81, rounds=1, n_fine=8)
+    ticks = []
+    fo = _solve(problem, 0.81, rounds=1, n_fine=8, progress=ticks.append)
     assert len(problem.calls) == 1 and max(fo.step) == 4                 # one round: the paths' ends
+    assert sum(ticks) == 2                                               # the round and the fine verification
     assert fo.genes[:, 0].max() == pytest.approx(0.30)
     problem.calls.clear()
-    fo = _solve(problem, 1.5, rounds=4, n_fine=8)                        # no front point meets this floor
-    assert len(fo.starts) == 0 and len(fo.genes) == 0 and problem.calls == []
+    ticks.clear()
+    fo = _solve(problem, 1.5, rounds=4, n_fine=8, progress=ticks.append)  # no front point meets this floor
+    assert len(fo.starts) == 0 and len(fo.genes) == 0 and problem.calls == [] and sum(ticks) == 5
 
 
 def test_floor_solve_config_is_checked_before_anything_runs():

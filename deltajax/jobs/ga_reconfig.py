@@ -287,15 +287,16 @@ def run(ctx) -> None:
             return Fv, ok, (nd[np.lexsort(Fv[nd].T[::-1])] if len(nd) else nd)
 
         Fv, ok, nd = front_of(mv)
-        fo = None
         if s.recommend == "floor" and s.floor_solve["enabled"]:
             from ..optimize.floor import solve_floor
+            bar = ctx.progress(total=s.floor_solve["rounds"] + 1, desc="floor step")
             fo = solve_floor(pb, space, cand, Fv, nd, objs, scale, primary,
                              W.floor_limits(len(objs), jp, s.recommend_floor, sense), evaluate=ev,
                              evaluate_cheap=ev_cheap, evaluate_fine=W.batch_evaluator(pb_fine, space_v, 8),
                              steps=s.refine["steps"], learning_rate=s.refine["learning_rate"],
                              penalty=s.refine["penalty"], rounds=s.floor_solve["rounds"],
-                             n_fine=s.floor_solve["candidates"])
+                             n_fine=s.floor_solve["candidates"], progress=bar.update)
+            bar.close()
             if len(fo.genes):
                 first = len(cand)
                 cand = np.concatenate([cand, fo.genes])

@@ -18,7 +18,7 @@ the floor with a better primary, or the same one as before).
 from __future__ import annotations
 
 import dataclasses
-from typing import Callable, Sequence
+from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
@@ -47,14 +47,15 @@ class FloorOutcome:
 def solve_floor(pb, space, cand: np.ndarray, Fv: np.ndarray, front: np.ndarray, objs: Sequence[str],
                 scale: np.ndarray, primary: str, lim: np.ndarray, *, evaluate: Callable, evaluate_cheap: Callable,
                 evaluate_fine: Callable, steps: int = 16, learning_rate: float = 0.01, penalty: float = 10.0,
-                rounds: int = 4, n_fine: int = 8, max_starts: int = DESCENT_ROWS) -> FloorOutcome:
+                rounds: int = 4, n_fine: int = 8, max_starts: int = DESCENT_ROWS,
+                progress: Optional[Callable[[int], Any]] = None) -> FloorOutcome:
     """Descend on ``primary`` from the verified front points (rows ``front`` of ``cand`` / ``Fv``) that meet the
     floor ``lim`` (:func:`deltajax.optimize.workflow.floor_limits`) and verify the ``n_fine`` most promising
     iterates on the fine grids.
 
     A path whose last iterate is still predicted to meet the floor (feasible, primary better than at its start)
     is continued from there (Adam restarted), up to ``rounds`` descents of ``steps`` steps, so a path far above
-    the floor reaches it.
+    the floor reaches it. ``progress`` gets 1 after each round and after the fine verification.
     ``Fv``: normalised minimised objectives on the fine grids (by the verified baseline); ``scale``: the search
     grids' normalisation (sense / |search baseline|); ``evaluate`` / ``evaluate_cheap``: search-grid batch
     evaluators with / without the regular workspace; ``evaluate_fine``: the verification's evaluator. Returns an
@@ -71,6 +72,8 @@ def solve_floor(pb, space, cand: np.ndarray, Fv: np.ndarray, front: np.ndarray, 
     n = len(starts)
     empty = FloorOutcome(np.zeros((0, d)), {}, np.zeros(0, int), np.zeros(0, int), np.zeros((0, k_obj)), starts, 0)
     if not n:
+        if progress is not None:
+            progress(int(rounds) + 1)
         return empty
     # calibration: each start's fine / search ratio per objective (the start evaluated on the search grids)
     s0 = evaluate(cand[starts])
@@ -82,10 +85,12 @@ def solve_floor(pb, space, cand: np.ndarray, Fv: np.ndarray, front: np.ndarray, 
     pred = [[] for _ in range(n)]
     ok = [[] for _ in range(n)]
     cur, active = cand[starts].copy(), np.isfinite(ratio).all(axis=1)
+    done = 0
     for _ in range(int(rounds)):
         live = np.flatnonzero(active)
         if not len(live):
             break
+        done += 1
         _, path = descent_paths(pb, space, cur[live], objs, scale, primary, steps=steps,
                                 learning_rate=learning_rate, penalty=penalty)
         X = path[:, 1:].reshape(-1, d)
@@ -108,6 +113,10 @@ def solve_floor(pb, space, cand: np.ndarray, Fv: np.ndarray, front: np.ndarray, 
             # continue while the path's last iterate still meets the floor (and beats the start)
             active[a] = bool(good[r, -1])
             cur[a] = path[r, -1]
+        if progress is not None:
+            progress(1)
+    if progress is not None and done < int(rounds):
+        progress(int(rounds) - done)                        # the rounds no path needed
     tiers = []
     for a in range(n):
         if not genes[a]:
@@ -128,10 +137,15 @@ def solve_floor(pb, space, cand: np.ndarray, Fv: np.ndarray, front: np.ndarray, 
         tiers += [(2, p_a[k, jp], a, k) for k in ks if k not in (kb, margin)]
     n_pred = len(tiers)
     if not tiers:
+        if progress is not None:
+            progress(1)
         return empty
     tiers.sort(key=lambda t: (t[0], t[1]))
     pick = [(a, k) for _, _, a, k in tiers[:n_fine]]
     G = np.stack([genes[a][k] for a, k in pick])
-    return FloorOutcome(genes=G, metrics=evaluate_fine(G), start=np.asarray([starts[a] for a, _ in pick], int),
+    mv = evaluate_fine(G)
+    if progress is not None:
+        progress(1)
+    return FloorOutcome(genes=G, metrics=mv, start=np.asarray([starts[a] for a, _ in pick], int),
                         step=np.asarray([k + 1 for _, k in pick], int),
                         predicted=np.stack([pred[a][k] for a, k in pick]), starts=starts, n_predicted=n_pred)
