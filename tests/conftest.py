@@ -153,7 +153,8 @@ SAME_WORKER = ("tests/test_backends.py", "tests/test_fitness_screen.py", "tests/
 #: the content of the problem, are traced and compiled once per session rather than once per worker
 GA_TOY = ("tests/test_ga_reconfig.py", "tests/test_ga_resume_compat.py", "tests/test_jobs.py::test_ga_reconfig_",
           "tests/test_jobs.py::test_every_job_end_to_end_at_toy_size[ga_reconfig]",
-          "tests/test_optimize.py::test_refine_designs_")
+          "tests/test_optimize.py::test_refine_designs_",
+          "tests/test_results_files.py::test_xarray_opens_every_group_with_units[ga_reconfig]")
 
 
 #: where the workers tell the scheduler their groups ({nodeid: group} per worker, JSON): set by the controller
