@@ -231,12 +231,15 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.xdist_group(groups[item.nodeid]))
 
     def rank(item):
+        slow = item.get_closest_marker("slow") is None  # within a rank, the slow tests (over ~3 s) first
         for i, prefix in enumerate(LONG_FIRST):
             if item.nodeid.startswith(prefix):
-                return i
-        return len(LONG_FIRST)
+                return i, slow
+        # then the other groups (a file's tests in one unit, up to ~30 s), then the single tests: the end of the
+        # run is made of short units, so the two workers finish together
+        return len(LONG_FIRST) + (item.nodeid not in groups), slow
 
-    items.sort(key=rank)  # stable: the order inside each file is kept
+    items.sort(key=rank)  # stable: otherwise the order inside each file is kept
     folder = os.environ.get(_GROUPS_ENV)
     if folder:
         import json
