@@ -120,7 +120,7 @@ def toy_run(tmp_path_factory):
             return d / "results.h5"
         try:
             return run_experiment(name, overrides(name, *extra), run_dir=d)
-        finally:  # the job sets the CLI's threshold (1 s); the tests keep theirs
+        finally:  # the job sets the CLI's threshold (1 s) if JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS is unset
             jax.config.update("jax_persistent_cache_min_compile_time_secs", JAX_CACHE_MIN_S)
 
     return run
@@ -129,8 +129,8 @@ def toy_run(tmp_path_factory):
 # -- pytest-xdist (README: ``python -m pytest -q -n 2``, ``--dist loadgroup`` from pyproject.toml) ------------------
 #: the long units of work (nodeid prefixes; a group goes where its first test goes), handed out first, longest
 #: first, so that neither worker is left with one of them at the end (the rest are short and fill in around them).
-#: Order from the CI durations of 2026-12-02 01:23 (warm XLA cache): the SLURM tests (one worker, ~150 s, mostly
-#: waiting for the cluster's jobs), the main job's toy runs (GA_TOY), the R(t) job, the sweeps, the kill/resume
+#: Order from the CI durations of 2026-12-02 01:23 (warm XLA cache): the SLURM tests (one worker, ~190 s alone,
+#: mostly waiting for the cluster's jobs), the main job's toy runs (GA_TOY), the R(t) job, the sweeps, the kill/resume
 #: tests, the population screens, the other jobs end to end, the GPU check script, ...
 LONG_FIRST = ("tests/test_slurm.py", "tests/test_ga_reconfig.py", "tests/test_rtmode.py", "tests/test_sweeps.py",
               "tests/test_faults.py", "tests/test_fitness_screen.py", "tests/test_jobs.py", "tests/test_gpu_check.py",
