@@ -174,7 +174,8 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
     cache = cfg.get("compilation_cache")
     if cache:  # persistent XLA cache: reruns, resumes and sweep jobs skip most compilation
         jax.config.update("jax_compilation_cache_dir", os.path.expanduser(str(cache)))
-        jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+        if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ:  # JAX's own setting wins if given
+            jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     check_keys(cfg)  # unknown keys (also +key=value ones), before anything else reads the config
     robot, recon = robot_from_config(cfg.robot)  # validated before anything compiles
     validate_config(cfg, robot, recon)  # every experiment field, before the run directory is touched

@@ -31,6 +31,11 @@ jax.config.update("jax_persistent_cache_min_compile_time_secs", JAX_CACHE_MIN_S)
 # it: configs/config.yaml's compilation_cache reads DELTAJAX_JAX_CACHE, so the subprocesses reuse the programs the
 # session (and earlier sessions) compiled, and a cold measurement (an empty DELTAJAX_TEST_JAX_CACHE) is cold
 os.environ["DELTAJAX_JAX_CACHE"] = JAX_CACHE
+# ... and the tests' threshold too (JAX's own variable, which deltajax.run leaves alone when it is set; the CLI's
+# default is 1 s): a toy CLI run compiles many programs under 1 s, and each CLI process compiled them again.
+# A warm toy ga_reconfig CLI run (screen, Pareto, refine off: the SLURM test's job): 45.0, 39.7 -> 36.9, 38.4
+# CPU-s (load 3-4, 2026-12-02)
+os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = str(JAX_CACHE_MIN_S)
 
 from hypothesis import settings  # noqa: E402
 
@@ -115,22 +120,32 @@ def toy_run(tmp_path_factory):
             return d / "results.h5"
         try:
             return run_experiment(name, overrides(name, *extra), run_dir=d)
-        finally:  # the job sets the CLI's threshold (1 s); the tests keep theirs
+        finally:  # the job sets the CLI's threshold (1 s) if JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS is unset
             jax.config.update("jax_persistent_cache_min_compile_time_secs", JAX_CACHE_MIN_S)
 
     return run
 
 
 # -- pytest-xdist (README: ``python -m pytest -q -n 2``, ``--dist loadgroup`` from pyproject.toml) ------------------
-#: tests that run longest from empty caches (nodeid prefixes), handed out first so that neither worker is left
-#: with one of them at the end (the rest are short and fill in around them)
-LONG_FIRST = ("tests/test_ga_reconfig.py", "tests/test_rtmode.py", "tests/test_slurm.py", "tests/test_gpu_check.py",
-              "tests/test_packaging.py", "tests/test_jobs.py", "tests/test_faults.py", "tests/test_sweeps.py")
+#: the long units of work (nodeid prefixes; a group goes where its first test goes), handed out first, longest
+#: first, so that neither worker is left with one of them at the end (the rest are short and fill in around them).
+#: Order from the CI durations of 2026-12-02 01:23 (warm XLA cache): the SLURM tests (one worker, ~190 s alone,
+#: mostly waiting for the cluster's jobs), the main job's toy runs (GA_TOY), the R(t) job, the sweeps, the kill/resume
+#: tests, the population screens, the other jobs end to end, the GPU check script, ...
+LONG_FIRST = ("tests/test_slurm.py", "tests/test_ga_reconfig.py", "tests/test_rtmode.py", "tests/test_sweeps.py",
+              "tests/test_faults.py", "tests/test_fitness_screen.py", "tests/test_jobs.py", "tests/test_gpu_check.py",
+              "tests/test_optimize.py", "tests/test_dynamics.py", "tests/test_kernel.py", "tests/test_packaging.py",
+              "tests/test_motion.py", "tests/test_backends.py")
 
 
-#: files whose tests share an in-process compile without a fixture: test_backends' two point-kernel cases each
-#: compiled the same Numba functions (~320 s wall each, cold, on both workers at once, 2026-12-01)
-SAME_WORKER = ("tests/test_backends.py",)
+#: files whose tests share in-process compiles without a fixture (module-level jitted functions or lru_cache'd
+#: compiled functions): one worker each, so that each is traced and compiled once per session, not once per
+#: worker. test_backends' two point-kernel cases each compiled the same Numba functions (~320 s wall each, cold,
+#: on both workers at once, 2026-12-01); test_fitness_screen's exact and screened population covers (per k_min)
+#: serve three tests
+SAME_WORKER = ("tests/test_backends.py", "tests/test_fitness_screen.py", "tests/test_jaxws_compact.py",
+               "tests/test_dynamics.py", "tests/test_kernel.py", "tests/test_kinematics.py",
+               "tests/test_trajectory.py", "tests/test_indices.py")
 
 
 #: tests that run the main job in-process on the toy size's search and verification grids (tests/toy_jobs.py), or
@@ -138,28 +153,98 @@ SAME_WORKER = ("tests/test_backends.py",)
 #: the content of the problem, are traced and compiled once per session rather than once per worker
 GA_TOY = ("tests/test_ga_reconfig.py", "tests/test_ga_resume_compat.py", "tests/test_jobs.py::test_ga_reconfig_",
           "tests/test_jobs.py::test_every_job_end_to_end_at_toy_size[ga_reconfig]",
-          "tests/test_optimize.py::test_refine_designs_")
+          "tests/test_optimize.py::test_refine_designs_",
+          "tests/test_results_files.py::test_xarray_opens_every_group_with_units[ga_reconfig]")
 
 
+#: where the workers tell the scheduler their groups ({nodeid: group} per worker, JSON): set by the controller
+_GROUPS_ENV = "DELTAJAX_TEST_XDIST_GROUPS"
+
+
+def pytest_configure(config):
+    """Under xdist, in the controller: a folder for the workers' groups (``_GROUPS_ENV``, inherited by the workers,
+    which start after this), and the work queue in the order of the collection (``LONG_FIRST`` below), not
+    xdist's default reordering of groups by their number of tests (a group of 27 quick tests is not a long one)."""
+    if getattr(config.option, "numprocesses", None) and not hasattr(config, "workerinput"):
+        import tempfile
+
+        os.environ[_GROUPS_ENV] = tempfile.mkdtemp(prefix="deltajax-xdist-groups-")
+        config.option.loadscopereorder = False
+
+
+def pytest_unconfigure(config):
+    d = os.environ.get(_GROUPS_ENV)
+    if d and not hasattr(config, "workerinput"):
+        import shutil
+
+        shutil.rmtree(d, ignore_errors=True)
+
+
+def pytest_xdist_make_scheduler(config, log):
+    """``--dist loadgroup`` with the groups this conftest assigns. pytest-xdist (3.8) groups by a ``@group``
+    suffix that its worker hook writes into ``item._nodeid``; since pytest 9 ``item.nodeid`` no longer reads
+    ``_nodeid``, so no group reached the scheduler and every test was its own unit (until 2026-12-02: the main
+    job's toy runs, module fixtures and shared compiles ran on both workers). The workers write their groups to
+    ``_GROUPS_ENV`` instead (``pytest_collection_modifyitems`` below), and this scheduler reads them."""
+    if config.getvalue("dist") != "loadgroup" or not os.environ.get(_GROUPS_ENV):
+        return None
+    import json
+
+    from xdist.scheduler import LoadGroupScheduling
+
+    folder = Path(os.environ[_GROUPS_ENV])
+
+    class Scheduling(LoadGroupScheduling):
+        _groups = None
+
+        def _split_scope(self, nodeid):
+            if self._groups is None:  # read once all workers have collected (schedule() comes after that)
+                self._groups = {}
+                for f in sorted(folder.glob("*.json")):
+                    self._groups.update(json.loads(f.read_text()))
+            return self._groups.get(nodeid) or super()._split_scope(nodeid)
+
+    return Scheduling(config, log)
+
+
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's worker hook (which reads the marks, see above)
 def pytest_collection_modifyitems(config, items):
     """Under xdist: every test that uses a module- or class-scoped fixture (a shared compiled function, a
     cluster, a grid) goes to one worker with the rest of its module (``xdist_group``), so that the fixture is built
-    once, not once per worker; the main job's toy runs (``GA_TOY``) go to one worker together; and the long files
-    come first (longest-first scheduling)."""
-    if not getattr(config.option, "numprocesses", None):
+    once, not once per worker; so do the files of ``SAME_WORKER``; the main job's toy runs (``GA_TOY``) go to one
+    worker together; and the long units come first (longest-first scheduling).
+
+    Collection happens in the workers, where pytest-xdist resets ``numprocesses`` to None (and ``dist`` to "no"):
+    a worker is recognised by its ``workerinput``. Until 2026-12-02 this hook asked for ``numprocesses`` and so
+    did nothing in the workers. The groups go to the scheduler through a file (``pytest_xdist_make_scheduler``)."""
+    if not hasattr(config, "workerinput"):
         return
+    groups = {}
     for item in items:
         defs = getattr(item, "_fixtureinfo", None)
         scopes = {d.scope for fd in (defs.name2fixturedefs.values() if defs else ()) for d in fd}
         if item.nodeid.startswith(GA_TOY):
-            item.add_marker(pytest.mark.xdist_group("ga_reconfig_toy"))
+            groups[item.nodeid] = "ga_reconfig_toy"
         elif scopes & {"module", "class", "package"} or item.nodeid.startswith(SAME_WORKER):
-            item.add_marker(pytest.mark.xdist_group(item.nodeid.split("::")[0]))
+            groups[item.nodeid] = item.nodeid.split("::")[0]
+        if item.nodeid in groups:
+            item.add_marker(pytest.mark.xdist_group(groups[item.nodeid]))
 
     def rank(item):
+        slow = item.get_closest_marker("slow") is None  # within a rank, the slow tests (over ~3 s) first
         for i, prefix in enumerate(LONG_FIRST):
             if item.nodeid.startswith(prefix):
-                return i
-        return len(LONG_FIRST)
+                return i, slow
+        # then the other groups (a file's tests in one unit, up to ~30 s), then the single tests: the end of the
+        # run is made of short units, so the two workers finish together
+        return len(LONG_FIRST) + (item.nodeid not in groups), slow
 
-    items.sort(key=rank)  # stable: the order inside each file is kept
+    items.sort(key=rank)  # stable: otherwise the order inside each file is kept
+    folder = os.environ.get(_GROUPS_ENV)
+    if folder:
+        import json
+
+        name = Path(folder) / f"{config.workerinput['workerid']}.json"
+        tmp = name.with_suffix(".tmp")
+        tmp.write_text(json.dumps(groups))
+        tmp.replace(name)

@@ -43,3 +43,29 @@ def test_run_uses_the_cache_the_environment_names(monkeypatch, tmp_path):
     finally:
         jax.config.update("jax_compilation_cache_dir", before[0])
         jax.config.update("jax_persistent_cache_min_compile_time_secs", before[1])
+
+
+def test_run_keeps_jaxs_own_cache_threshold_when_set(monkeypatch, tmp_path):
+    """The CLI's persistent-cache threshold (1 s) applies unless JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS is set
+    (JAX reads it at import; the tests set it for their CLI subprocesses: tests/conftest.py)."""
+    import jax
+    import pytest
+
+    from deltajax.config import ConfigError
+    from deltajax.run import execute
+
+    assert os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] == "0.1"  # what the CLI subprocesses inherit
+    cfg = _compose("experiment.grid.h=0", f"compilation_cache={tmp_path / 'xla'}")
+    before = (jax.config.jax_compilation_cache_dir, jax.config.jax_persistent_cache_min_compile_time_secs)
+    try:
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.25)
+        with pytest.raises(ConfigError, match="experiment.grid.h must be > 0"):
+            execute(cfg, tmp_path / "run")
+        assert jax.config.jax_persistent_cache_min_compile_time_secs == 0.25  # left as JAX has it
+        monkeypatch.delenv("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS")
+        with pytest.raises(ConfigError, match="experiment.grid.h must be > 0"):
+            execute(cfg, tmp_path / "run")
+        assert jax.config.jax_persistent_cache_min_compile_time_secs == 1.0  # the CLI's default
+    finally:
+        jax.config.update("jax_compilation_cache_dir", before[0])
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", before[1])
