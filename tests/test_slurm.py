@@ -230,7 +230,7 @@ def _ga_overrides():
     """A toy GA: population, generations, seed; a checkpoint every 10 generations (a checkpoint rewrites
     results.h5 atomically, tens of CPU-ms and an fsync: one after each of the 3000 generations cost minutes
     under load; one every 100 made the GA so quick on an idle machine with a warm cache that it finished before
-    scancel landed, CI 2026-12-01); the screen, Pareto and refine stages off (what is checked is the GA's
+    scancel landed, CI 2026-12-01); the screen, Pareto, refine and floor stages off (what is checked is the GA's
     cancel, resubmit and bit-identical finish; with the screen and refine on, each of the three SLURM processes
     compiled them: ~33 s of each job on its one CPU), the search and verification grids at the suite's toy sizes
     (tests/toy_jobs.py), for whichever of those keys the ga_reconfig config has."""
@@ -246,6 +246,7 @@ def _ga_overrides():
                 # the screen and refine stages are not what this test checks (tests/test_ga_reconfig.py and
                 # tests/test_jobs.py run them, resumed and not): off, so the SLURM job compiles the GA and verify only
                 "experiment.screen.enabled": "false", "experiment.refine.enabled": "false",
+                "experiment.floor_solve.enabled": "false",   # it would compile the refine descent in the job
                 # the main job's toy sizes (tests/test_ga_reconfig.py): search and verification grids
                 "experiment.design.n_R": 3, "experiment.task.n_r": 1, "experiment.task.n_phi": 3,
                 "experiment.task.n_z": 2, "experiment.cycle.n_samples": 11, "experiment.cycle.n_R_operating": 2,
