@@ -106,8 +106,10 @@ def test_floor_solve_config_is_checked_before_anything_runs():
         cfg = compose(config_name="config", overrides=["experiment=ga_reconfig"])
         s = ga_reconfig_settings(cfg.experiment)
         assert s.floor_solve == {"enabled": True, "rounds": 4, "candidates": 8}
-        for ov, msg in [(["experiment.recommend=knee"], "floor_solve.enabled=true needs experiment.recommend=floor"),
-                        (["experiment.floor_solve.rounds=0"], "experiment.floor_solve.rounds"),
+        # another rule with the step on is valid (the job skips the step and says so): a rule override alone works
+        assert ga_reconfig_settings(compose(config_name="config", overrides=[
+            "experiment=ga_reconfig", "experiment.recommend=knee"]).experiment).recommend == "knee"
+        for ov, msg in [(["experiment.floor_solve.rounds=0"], "experiment.floor_solve.rounds"),
                         (["+experiment.floor_solve.steps=3"], "experiment.floor_solve: unknown keys steps")]:
             bad = compose(config_name="config", overrides=["experiment=ga_reconfig", *ov])
             with pytest.raises(ConfigError, match=msg):

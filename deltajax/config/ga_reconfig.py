@@ -264,9 +264,6 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
         floor_solve = {"enabled": _ga_flag(fs, "enabled", "floor_solve"),
                        "rounds": _ga_num(fs, "rounds", "floor_solve", lo=1, integer=True),
                        "candidates": _ga_num(fs, "candidates", "floor_solve", lo=1, integer=True)}
-        if floor_solve["enabled"] and recommend != "floor":
-            raise ConfigError(f"experiment.floor_solve.enabled=true needs experiment.recommend=floor, got "
-                              f"{recommend!r} (the step solves for the floor rule's answer)")
     v = _ga_block(e, "verify")
     verify = {k: _ga_num(v, k, "verify", lo=1, integer=True) for k in v}
     for k in ("n_R", "task_n_z", "rw_n_r", "rw_n_phi", "rw_n_z"):

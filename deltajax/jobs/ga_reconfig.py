@@ -306,6 +306,8 @@ def run(ctx) -> None:
                 R.store_floor(res, fo, names, first, objs, s)
             ctx.log(f"floor step: descents from {len(fo.starts)} verified front points that meet the floor, "
                     f"{fo.n_predicted} iterates predicted to meet it, {len(fo.genes)} verified on the fine grids")
+        elif s.floor_solve["enabled"]:
+            ctx.log(f"floor step: skipped (it solves for the floor rule's answer; experiment.recommend={s.recommend})")
         rec = W.recommend(Fv, nd, s.recommend, jp, band=s.recommend_band, floor=s.recommend_floor, sense=sense)
         hv = hypervolume(Fv[nd], ref) if len(nd) else 0.0
         # -- write ----------------------------------------------------------------------------------------------
