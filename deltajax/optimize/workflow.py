@@ -16,8 +16,9 @@ only orders them, stores their outputs in ``results.h5`` and draws the plots.
    an iterate replaces nothing: it is added as a candidate only if it is feasible on the search grids and no
    objective is worse than at its start while the primary improves. A non-finite gradient raises.
 5. :func:`verify`: every candidate on the fine grids, with the continuous regular-workspace measure
-   (:func:`deltajax.constraints.refine_cylinder`) (progress bar), the verified front, and
-   :func:`recommend` (rule ``band``, ``knee`` or ``primary``).
+   (:func:`deltajax.constraints.refine_cylinder`) (progress bar), the verified front, the floor step
+   (:func:`deltajax.optimize.floor.solve_floor`, rule ``floor``: the rule's answer solved for from the verified
+   front with :func:`descent_paths`), and :func:`recommend` (rule ``floor``, ``band``, ``knee`` or ``primary``).
 """
 
 from __future__ import annotations
@@ -32,9 +33,9 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["SetupError", "setup", "designer_problem", "screen", "screen_front", "ga_fitness", "pareto_eval", "refine_designs",
-           "RefineOutcome", "descent_paths", "verify", "floor_limits", "recommend", "load_checkpoint", "put_checkpoint", "restage", "stages_done",
-           "job_fingerprint", "RECOMMEND_RULES"]
+__all__ = ["SetupError", "setup", "designer_problem", "screen", "screen_front", "ga_fitness", "pareto_eval",
+           "refine_designs", "RefineOutcome", "descent_paths", "verify", "floor_limits", "recommend",
+           "load_checkpoint", "put_checkpoint", "restage", "stages_done", "job_fingerprint", "RECOMMEND_RULES"]
 
 RECOMMEND_RULES = ("band", "knee", "primary")
 
