@@ -52,32 +52,22 @@ def overrides(name, *extra):
     return [*COMMON, *TOY[name], *extra]
 
 
-def _has_block(name: str) -> bool:
-    """Whether this checkout's ga_reconfig config has ``experiment.<name>`` with an ``enabled`` switch."""
+def _optional_stages() -> set:
+    """The ``experiment.<stage>`` blocks with an ``enabled`` switch in this checkout's ga_reconfig config (the
+    optax refine stage and the floor step came with issue 12; tests switch them off where they cost)."""
     from pathlib import Path
 
     import yaml
 
     cfg = yaml.safe_load((Path(__file__).resolve().parent.parent / "configs" / "experiment" / "ga_reconfig.yaml")
                          .read_text())
-    block = cfg.get(name) or cfg.get("experiment", {}).get(name)
-    return isinstance(block, dict) and "enabled" in block
+    exp = cfg.get("experiment", cfg)
+    return {k for k, v in exp.items() if isinstance(v, dict) and "enabled" in v}
 
 
-def _has_refine_stage() -> bool:
-    """Whether this checkout's ga_reconfig has the optax refine stage (issue 12) with its on/off switch."""
-    from pathlib import Path
-
-    import yaml
-
-    cfg = yaml.safe_load((Path(__file__).resolve().parent.parent / "configs" / "experiment" / "ga_reconfig.yaml")
-                         .read_text())
-    block = cfg.get("refine") or cfg.get("experiment", {}).get("refine")
-    return isinstance(block, dict) and "enabled" in block
-
-
-HAS_REFINE = _has_refine_stage()
-HAS_FLOOR_STEP = _has_block("floor_solve")
+_OPTIONAL = _optional_stages()
+HAS_REFINE = "refine" in _OPTIONAL
+HAS_FLOOR_STEP = "floor_solve" in _OPTIONAL
 if HAS_REFINE:  # the toy run has every optional stage on
     TOY["ga_reconfig"].append("experiment.refine.enabled=true")
 #: ga_reconfig with its optional stages off: one extra run, shared by every test that needs it
