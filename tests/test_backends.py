@@ -207,7 +207,7 @@ def test_workspace_fields_fast_method_matches_exact():
 
 def test_benchmark_hook_and_minimal_loop():
     from deltajax.workspace import bench_kernel_rates, bench_numba
-    from deltajax.workspace._nb_bench import minimal_loop
+    from deltajax.workspace._nb_bench import minimal_loop, minimal_loop_newton
 
     pts = _points(3000)
     pts[:, 1] = np.abs(pts[:, 1])
@@ -217,8 +217,13 @@ def test_benchmark_hook_and_minimal_loop():
     minimal_loop(x, y, z, R, r, L1, L2, np.array(LIM_NB), np.array(KT), o2, k2)
     assert k2.all()  # the ceiling computes the same thing (to the cubic's accuracy)
     np.testing.assert_allclose(o2, out[:, ok], rtol=1e-6)
+    o3, k3 = np.empty_like(o2), np.empty_like(k2)  # the same loop with FMA-only divides / square roots
+    minimal_loop_newton(x, y, z, R, r, L1, L2, np.array(LIM_NB), np.array(KT), o3, k3)
+    np.testing.assert_array_equal(k3, k2)
+    np.testing.assert_allclose(o3, o2, rtol=1e-6)  # ~1 ulp per operation, amplified near the cubic's ties
     rates = bench_kernel_rates(pts, [R, r, L1, L2, TH_MIN, TH_MAX], 1)
-    assert {"exact (jacobi)", "fast (cubic)", "exact on reachable", "minimal loop ceiling (reachable)"} <= set(rates)
+    assert {"exact (jacobi)", "fast (cubic)", "exact on reachable", "minimal loop ceiling (reachable)",
+            "minimal loop, FMA-only divide/sqrt (reachable)"} <= set(rates)
     assert rates["exact on reachable"][0] == ok.sum() and all(v[2] >= 0 for v in rates.values())
     assert bench_numba(pts[:100], ROBOT)["fast (cubic)"]["n"] == 100
 
