@@ -37,6 +37,7 @@ import numpy as np  # noqa: E402
 import deltajax as dj  # noqa: E402
 from deltajax import cycle as cy  # noqa: E402
 from deltajax import dynamics as dyn  # noqa: E402
+from deltajax import reference as ref  # noqa: E402
 from deltajax import trajectory as tr  # noqa: E402
 
 CHAIN = [2.0 * math.pi * i / 3.0 for i in range(3)]
@@ -85,12 +86,8 @@ def numpy_torques(d, mm, p, pd, pdd):
         vx, vy, vz = (x[None, :] for x in rot(pd))
         ax, ay, az = (x[None, :] for x in rot(pdd))
         dx = px + r - R
-        rho2 = dx * dx + pz * pz
-        m = (rho2 + py * py + L1 * L1 - L2 * L2) / (2 * L1)
-        w = np.sqrt(rho2 - m * m)
-        c = (dx * m + pz * w) / rho2
-        s = (pz * m - dx * w) / rho2
-        ux, uy, uz = (dx - L1 * c) / L2, py / L2, (pz - L1 * s) / L2
+        c, s = ref.loop_closure(dx, py, pz, L1, L2)[:2]       # the one NumPy loop closure (deltajax.reference)
+        ux, uy, uz = ref.loop_vectors(dx, py, pz, c, s, L1, L2)
         dd = L1 * (uz * c - ux * s)
         thd = (ux * vx + uy * vy + uz * vz) / dd
         wx, wy, wz = vx + L1 * s * thd, vy, vz - L1 * c * thd
