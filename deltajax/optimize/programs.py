@@ -76,7 +76,7 @@ def design_metrics(pb, space, *, regular: bool = True) -> Callable:
 
         from .designer import evaluate_designer
 
-        return jax.jit(lambda g: evaluate_designer(pb, space.decode(g), regular=regular))
+        return jax.jit(lambda g: evaluate_designer(pb, space.decode(g), regular=regular), inline=True)
 
     return _shared("design_metrics", pb, space, (bool(regular),), build)
 

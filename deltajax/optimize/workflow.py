@@ -192,18 +192,16 @@ def ga_fitness(pb, space, objs: Sequence[str], wvec: np.ndarray):
     import jax
     import jax.numpy as jnp
 
-    from .designer import evaluate_designer
-
     objs, wvec = tuple(objs), np.asarray(wvec, float)
     regular = any(o.startswith("regular") and w != 0 for o, w in zip(objs, wvec))
 
     def build():
         wj = jnp.asarray(wvec)
 
+        one = design_metrics(pb, space, regular=regular)   # traced once for the GA's init and its chunks
+
         def fitness(genes):
-            # evaluate_designer inline, not design_metrics: inside the GA's scan the nested program changed the
-            # fitness history in the last bit (2026-12-02); the GA traces it twice (init, chunk: ~1 CPU-s each)
-            m = jax.vmap(lambda g: evaluate_designer(pb, space.decode(g), regular=regular))(genes)
+            m = jax.vmap(one)(genes)
             f = sum(wj[i] * m[o] for i, o in enumerate(objs) if wvec[i] != 0)
             f = jnp.where(jnp.isfinite(f), jnp.clip(f, -1e2, 1e2), 1e2)
             fit = jnp.where(m["violation"] > 0, 1e3 + m["violation"], f)
