@@ -70,7 +70,9 @@ def design_metrics(pb, space, *, regular: bool = True) -> Callable:
     """``genes (d,) -> {metric: ()}`` of one design (:func:`deltajax.optimize.designer.evaluate_designer`), jitted,
     one function per (content of ``pb`` and ``space``, ``regular``) in this process. Called inside another
     program (vmapped, differentiated), JAX reuses its traced jaxpr and only transforms it, so the evaluators, the
-    GA's fitness and the refine descent trace the designer once."""
+    GA's fitness and the refine descent trace the designer once. ``inline=True``: the jaxpr is inlined into each
+    caller, so every compiled program computes exactly what it did with the designer traced in place (a nested,
+    not inlined call inside the GA's scan changed its fitness history in the last bit)."""
     def build():
         import jax
 
