@@ -153,11 +153,17 @@ def test_pareto_disabled_runs_end_to_end(toy_run, refine):
 
 
 @pytest.mark.slow
-def test_pareto_on_refine_and_screen_off(tmp_path):
+def test_pareto_on_refine_and_screen_off(tmp_path, caplog):
+    # the same run covers the floor step's skip path at no extra cost: on, but another recommend rule (knee), so
+    # the job skips it with a log line (the floor step off is the GA_STAGES_OFF run)
+    caplog.set_level(logging.INFO, logger="deltajax")
     p = run_experiment("ga_reconfig", TOY + ["experiment.refine.enabled=false", "experiment.screen.enabled=false",
-                                             "experiment.floor_solve.enabled=false"], run_dir=tmp_path)
+                                             "experiment.floor_solve.enabled=true", "experiment.recommend=knee"],
+                       run_dir=tmp_path)
     data = load(p)
     assert "refine" not in data and "screen" not in data and "pareto" in data
+    assert "floor step: skipped (it solves for the floor rule's answer; experiment.recommend=knee)" in caplog.text
+    assert "floor" not in data and not any(str(n).startswith("floor_") for n in data["verify"]["design_name"])
     V = data["verify"]
     front = np.asarray(V["front"]).reshape(-1)
     assert np.all(V["feasible"][front] == 1) and np.all(V["constraint_values"][front] <= 1e-9)

@@ -6,7 +6,7 @@ regular workspace near the floor), reading the answer off the first sampled poin
 recommendation's other objectives depend on where that run's front happens to have gaps (docs/REPRODUCTION.md
 §5.2). :func:`solve_floor` therefore solves for it: from every verified front point that meets the floor it runs
 the refinement's descent on the primary objective (projected Adam with the constraint penalty, on the search
-grids, the same compiled program as :func:`deltajax.optimize.workflow.refine_designs`); along each path the
+grids, the same compiled program as :func:`deltajax.optimize.descent.refine_designs`); along each path the
 primary improves and the other objectives fall toward the floor. Each iterate's fine-grid objectives are
 predicted from its search-grid ones times its start's fine/search ratio; the feasible iterates predicted to meet
 the floor, best predicted primary first (each path's best, then each path's last-but-one as a margin, then the
@@ -22,7 +22,8 @@ from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
-from .workflow import DESCENT_ROWS, descent_paths, objective_matrix
+from .descent import DESCENT_ROWS, descent_paths
+from .programs import objective_matrix
 
 __all__ = ["FloorOutcome", "solve_floor"]
 

@@ -23,7 +23,6 @@ only orders them, stores their outputs in ``results.h5`` and draws the plots.
 
 from __future__ import annotations
 
-import dataclasses
 import hashlib
 import json
 import math
@@ -33,9 +32,17 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
+# the compiled programs and the refine descent live in their own modules; these names stay importable from here
+from . import programs as _programs
+from .descent import DESCENT_ROWS, RefineOutcome, descent_paths, refine_designs
+from .programs import _content_key, _shared, batch_evaluator, design_metrics, objective_matrix
+
+_PROGRAMS = _programs._PROGRAMS   # the same dict (tests clear it to retrace)
+
 __all__ = ["SetupError", "setup", "designer_problem", "screen", "screen_front", "ga_fitness", "pareto_eval",
            "refine_designs", "RefineOutcome", "descent_paths", "verify", "floor_limits", "recommend",
-           "load_checkpoint", "put_checkpoint", "restage", "stages_done", "job_fingerprint", "RECOMMEND_RULES"]
+           "load_checkpoint", "put_checkpoint", "restage", "stages_done", "job_fingerprint", "RECOMMEND_RULES",
+           "DESCENT_ROWS", "design_metrics", "batch_evaluator", "objective_matrix"]
 
 RECOMMEND_RULES = ("band", "knee", "primary")
 
@@ -122,74 +129,6 @@ def setup(s, robot, recon, *, n_R: Optional[int] = None):
     return space, pb, ga
 
 
-# -- compiled per-design programs, shared by value -----------------------------------------------------------------
-# Every run builds its problem and design space afresh, and a jitted closure over a fresh object is traced and
-# compiled again (a toy run traces its stages for ~40 CPU-s before any compile). The stages' programs are kept
-# here under the *content* of the problem and space they close over, so a resumed run, a rerun or another run
-# with the same grids in the same process reuses them: the same content gives the same program, hence the same
-# numbers as compiling it afresh.
-_PROGRAMS: dict = {}
-_PROGRAMS_MAX = 16
-
-
-def _content_key(x) -> Any:
-    """A hashable value of everything ``x`` holds (dataclasses and equinox modules field by field, arrays by
-    dtype, shape and bytes); an object it cannot see into is keyed by identity (never a false match: the cached
-    program keeps it alive)."""
-    if isinstance(x, (np.ndarray, np.generic)) or type(x).__module__.startswith("jax"):
-        try:
-            a = np.asarray(x)
-        except Exception:  # noqa: BLE001 - not an array after all (e.g. a tracer): identity
-            return ("id", id(x))
-        if a.dtype != object:
-            return ("array", a.dtype.str, a.shape, a.tobytes())
-        return ("objects", a.shape, tuple(_content_key(v) for v in a.reshape(-1)))
-    if x is None or isinstance(x, (bool, int, float, complex, str, bytes)):
-        return (type(x).__name__, repr(x))
-    if dataclasses.is_dataclass(x) and not isinstance(x, type):
-        return (type(x).__module__, type(x).__qualname__,
-                tuple((f.name, _content_key(getattr(x, f.name))) for f in dataclasses.fields(x)))
-    if isinstance(x, (tuple, list)):
-        return (type(x).__qualname__, tuple(_content_key(v) for v in x))
-    if isinstance(x, Mapping):
-        return ("mapping", tuple(sorted((repr(k), _content_key(v)) for k, v in x.items())))
-    return ("id", id(x))
-
-
-def _shared(kind: str, pb, space, settings: tuple, build: Callable[[], Any]) -> Any:
-    """The program ``build()`` for (``kind``, the content of ``pb`` and ``space``, ``settings``), built once per
-    process (least recently used dropped beyond ``_PROGRAMS_MAX``)."""
-    key = (kind, _content_key(pb), _content_key(space), settings)
-    if key in _PROGRAMS:
-        _PROGRAMS[key] = _PROGRAMS.pop(key)          # most recently used last
-    else:
-        _PROGRAMS[key] = build()
-        while len(_PROGRAMS) > _PROGRAMS_MAX:
-            _PROGRAMS.pop(next(iter(_PROGRAMS)))
-    return _PROGRAMS[key]
-
-
-def batch_evaluator(pb, space, batch: int, *, regular: bool = True) -> Callable[[np.ndarray], dict]:
-    """``genes (n, d) -> {metric: (n,)}`` host arrays, compiled once for ``batch`` rows (and shared by every
-    evaluator of the same problem, space and settings in this process)."""
-    def build():
-        import jax
-
-        from .designer import evaluate_designer
-        from .pareto import padded_batch
-
-        f = jax.jit(jax.vmap(lambda g: evaluate_designer(pb, space.decode(g), regular=regular)))
-        call = padded_batch(f, batch)
-        return lambda X: {k: np.asarray(v) for k, v in call(np.asarray(X)).items()}
-
-    return _shared("batch_evaluator", pb, space, (int(batch), bool(regular)), build)
-
-
-def objective_matrix(m: Mapping[str, np.ndarray], objs: Sequence[str], scale: np.ndarray) -> np.ndarray:
-    """Minimised, normalised objectives (n, k): sense x metric / |baseline metric|."""
-    return np.stack([np.asarray(m[o], float) for o in objs], axis=1) * scale
-
-
 # -- screen ----------------------------------------------------------------------------------------------------
 
 def screen(evaluate_cheap: Callable[[np.ndarray], dict], space, primary: str, sense_primary: float, log2_size: int,
@@ -253,16 +192,16 @@ def ga_fitness(pb, space, objs: Sequence[str], wvec: np.ndarray):
     import jax
     import jax.numpy as jnp
 
-    from .designer import evaluate_designer
-
     objs, wvec = tuple(objs), np.asarray(wvec, float)
     regular = any(o.startswith("regular") and w != 0 for o, w in zip(objs, wvec))
 
     def build():
         wj = jnp.asarray(wvec)
 
+        one = design_metrics(pb, space, regular=regular)   # traced once for the GA's init and its chunks
+
         def fitness(genes):
-            m = jax.vmap(lambda g: evaluate_designer(pb, space.decode(g), regular=regular))(genes)
+            m = jax.vmap(one)(genes)
             f = sum(wj[i] * m[o] for i, o in enumerate(objs) if wvec[i] != 0)
             f = jnp.where(jnp.isfinite(f), jnp.clip(f, -1e2, 1e2), 1e2)
             fit = jnp.where(m["violation"] > 0, 1e3 + m["violation"], f)
@@ -285,136 +224,6 @@ def pareto_eval(evaluate: Callable[[np.ndarray], dict], objs: Sequence[str], sca
     return f
 
 
-# -- optax refinement --------------------------------------------------------------------------------------------
-
-DESCENT_ROWS = 8   # rows of one compiled refine descent (the job's REFINE_MAX winners)
-
-
-@dataclasses.dataclass
-class RefineOutcome:
-    """Refinement of each winner (rows): ``genes_before/after``, ``F_before/after`` (normalised minimised
-    objectives on the search grids), ``accepted`` (an iterate was feasible, no objective worse and the primary
-    strictly better), ``step`` (which iterate, 0 = the start), ``loss_history`` (steps, n)."""
-
-    genes_before: np.ndarray
-    genes_after: np.ndarray
-    F_before: np.ndarray
-    F_after: np.ndarray
-    accepted: np.ndarray
-    step: np.ndarray
-    loss_history: np.ndarray
-
-
-def descent_paths(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.ndarray, primary: str, *,
-                  steps: int = 20, learning_rate: float = 0.01, penalty: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
-    """Projected Adam (optax) on ``scale_primary x primary + penalty x sum(max(g, 0))`` from each row of ``genes``
-    (the gene box [0, 1]^d): ``(loss history (n, steps), iterates (n, steps + 1, d), the start first)``.
-
-    One compiled program per (problem, space, settings), run in padded batches of :data:`DESCENT_ROWS` rows (the
-    refinement and :func:`deltajax.optimize.floor.solve_floor` share it). Raises ``FloatingPointError`` on any
-    non-finite gradient (never zeroed)."""
-    import jax
-    import jax.numpy as jnp
-    import optax
-    from optax import projections
-
-    from .designer import FEASIBILITY_TOL, evaluate_designer
-    from .pareto import padded_batch
-
-    genes = np.clip(np.asarray(genes, float).reshape(-1, space.dim), 0.0, 1.0)
-    sp = float(scale[list(objs).index(primary)])
-    reg = primary.startswith("regular")
-
-    def loss(g):
-        m = evaluate_designer(pb, space.decode(g), regular=reg)
-        return sp * m[primary] + penalty * jnp.sum(jnp.maximum(m["g"] - FEASIBILITY_TOL, 0.0))
-
-    def build():
-        opt = optax.adam(learning_rate)
-        # forward mode: 6 genes, and it compiles faster than reverse mode through the kernel (26 vs 34 CPU-s)
-        vg = jax.jacfwd(lambda g: (loss(g), loss(g)), has_aux=True)
-
-        @jax.jit
-        def descend(G0):
-            def one(g0):
-                def body(carry, _):
-                    g, st = carry
-                    grad, val = vg(g)
-                    upd, st = opt.update(grad, st, g)
-                    g = projections.projection_box(optax.apply_updates(g, upd), 0.0, 1.0)
-                    return (g, st), (val, g, jnp.all(jnp.isfinite(grad)))
-                _, (hist, path, fin) = jax.lax.scan(body, (g0, opt.init(g0)), None, length=steps)
-                return hist, path, fin
-            return jax.vmap(one)(G0)
-        return descend
-
-    descend = _shared("refine_descent", pb, space, (primary, repr(sp), reg, int(steps), repr(float(learning_rate)),
-                                                    repr(float(penalty))), build)
-    # in batches of DESCENT_ROWS rows (padded): one compiled descent for any number of starts (the job refines
-    # at most 8; a stage with fewer, e.g. without a Pareto front, reuses it)
-    hist, path, fin = padded_batch(descend, DESCENT_ROWS)(genes)
-    if not fin.all():
-        i, k = (int(v[0]) for v in np.nonzero(~fin))
-        raise FloatingPointError(f"refine: non-finite gradient of the designer's loss for design {i} at step {k} "
-                                 f"(genes {path[i, max(k - 1, 0)].tolist() if k else genes[i].tolist()}); "
-                                 "the refinement never zeroes a broken gradient")
-    return np.asarray(hist), np.concatenate([genes[:, None, :], np.asarray(path)], axis=1)
-
-
-def refine_designs(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.ndarray, primary: str, *,
-                   steps: int = 20, learning_rate: float = 0.01, penalty: float = 10.0, top: int = 3,
-                   evaluate: Optional[Callable] = None, evaluate_cheap: Optional[Callable] = None,
-                   progress: Optional[Callable[[int], Any]] = None) -> RefineOutcome:
-    """:func:`descent_paths` from each row of ``genes``, then an acceptance rule on the true constraints.
-
-    The cycle rate carries implicit-function derivatives (:func:`deltajax.constraints.cycle_rate`); the task
-    coverage is a step function (zero derivative), so the true constraints decide: every iterate is evaluated
-    without the regular workspace, the ``top`` best feasible iterates that improve the primary are evaluated
-    with it, and the best of those with no objective worse than the start is kept. Raises
-    ``FloatingPointError`` on any non-finite gradient (never zeroed).
-    """
-    genes = np.clip(np.asarray(genes, float).reshape(-1, space.dim), 0.0, 1.0)
-    n, d = genes.shape
-    jp = list(objs).index(primary)
-    sp = float(scale[jp])
-    hist, cand = descent_paths(pb, space, genes, objs, scale, primary, steps=steps, learning_rate=learning_rate,
-                               penalty=penalty)
-    if progress is not None:
-        progress(1)
-    evaluate_cheap = evaluate_cheap or batch_evaluator(pb, space, 64, regular=False)
-    evaluate = evaluate or batch_evaluator(pb, space, 16)
-    cheap = evaluate_cheap(cand.reshape(-1, d))
-    P = np.asarray(cheap[primary], float).reshape(n, steps + 1) * sp                # minimised
-    ok = cheap["feasible"].astype(bool).reshape(n, steps + 1) & np.isfinite(P)
-    better = ok & (P < P[:, :1])
-    better[:, 0] = False
-    picks = []
-    for i in range(n):
-        idx = np.flatnonzero(better[i])
-        picks.append([0] + list(idx[np.argsort(P[i, idx], kind="stable")][:top]))
-    rows = [(i, k) for i in range(n) for k in picks[i]]
-    full = evaluate(np.stack([cand[i, k] for i, k in rows]))
-    F = objective_matrix(full, objs, scale)
-    feas = full["feasible"].astype(bool)
-    if progress is not None:
-        progress(1)
-    F_before, F_after = np.zeros((n, len(objs))), np.zeros((n, len(objs)))
-    after, step, acc = genes.copy(), np.zeros(n, int), np.zeros(n, bool)
-    r = 0
-    for i in range(n):
-        k_rows = list(range(r, r + len(picks[i])))
-        r += len(picks[i])
-        F0 = F[k_rows[0]]
-        F_before[i] = F_after[i] = F0
-        for j, k in zip(k_rows[1:], picks[i][1:]):          # best primary first
-            if feas[j] and np.all(F[j] <= F0 + 1e-12) and F[j][jp] < F0[jp]:
-                after[i], step[i], acc[i], F_after[i] = cand[i, k], k, True, F[j]
-                break
-    return RefineOutcome(genes_before=genes, genes_after=after, F_before=F_before, F_after=F_after, accepted=acc,
-                         step=step, loss_history=hist.T)
-
-
-# -- verification and recommendation ------------------------------------------------------------------------------
 
 def verify(pb_fine, space, cand: np.ndarray, *, batch: int = 8,
            progress: Optional[Callable[[int], Any]] = None) -> dict:
