@@ -35,7 +35,6 @@ import dataclasses
 import math
 from typing import Any, Mapping, Optional, Sequence, Union
 
-import jax
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
