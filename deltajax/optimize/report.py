@@ -122,7 +122,7 @@ def rule_text(s) -> str:
     if s.recommend == "floor":
         others = [o for o in s.objectives if o != s.primary]
         return (f"floor: the best {s.primary} among verified front points with {', '.join(others)} at least "
-                f"{s.recommend_floor:g} x the verified baseline's (none: the point closest to that floor)"
+                f"{s.recommend_floor:g} x the verified baseline's (if none has: the point closest to that floor)"
                 + ("; the floor step's designs included" if s.floor_solve["enabled"] else ""))
     if s.recommend == "band":
         return (f"band: among verified front points whose {s.primary} is within {100 * s.recommend_band:g} % of "
