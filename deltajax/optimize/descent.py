@@ -10,7 +10,7 @@ from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
-from .programs import _shared, batch_evaluator, design_metrics, objective_matrix
+from .programs import batch_evaluator, design_metrics, objective_matrix, shared_program
 
 __all__ = ["DESCENT_ROWS", "RefineOutcome", "descent_paths", "refine_designs"]
 
@@ -84,8 +84,8 @@ def descent_paths(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.n
             return jax.vmap(one)(G0)
         return descend
 
-    descend = _shared("refine_descent", pb, space, (primary, repr(sp), reg, int(steps), repr(float(learning_rate)),
-                                                    repr(float(penalty))), build)
+    settings = (primary, repr(sp), reg, int(steps), repr(float(learning_rate)), repr(float(penalty)))
+    descend = shared_program("refine_descent", pb, space, settings, build)
     # in batches of DESCENT_ROWS rows (padded): one compiled descent for any number of starts (the job refines
     # at most 8; a stage with fewer, e.g. without a Pareto front, reuses it)
     hist, path, fin = padded_batch(descend, DESCENT_ROWS)(genes)

@@ -16,7 +16,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["design_metrics", "batch_evaluator", "objective_matrix"]
+__all__ = ["design_metrics", "batch_evaluator", "objective_matrix", "shared_program", "content_key"]
 
 
 # -- compiled per-design programs, shared by value -----------------------------------------------------------------
@@ -29,7 +29,7 @@ _PROGRAMS: dict = {}
 _PROGRAMS_MAX = 24
 
 
-def _content_key(x) -> Any:
+def content_key(x) -> Any:
     """A hashable value of everything ``x`` holds (dataclasses and equinox modules field by field, arrays by
     dtype, shape and bytes); an object it cannot see into is keyed by identity (never a false match: the cached
     program keeps it alive)."""
@@ -40,23 +40,23 @@ def _content_key(x) -> Any:
             return ("id", id(x))
         if a.dtype != object:
             return ("array", a.dtype.str, a.shape, a.tobytes())
-        return ("objects", a.shape, tuple(_content_key(v) for v in a.reshape(-1)))
+        return ("objects", a.shape, tuple(content_key(v) for v in a.reshape(-1)))
     if x is None or isinstance(x, (bool, int, float, complex, str, bytes)):
         return (type(x).__name__, repr(x))
     if dataclasses.is_dataclass(x) and not isinstance(x, type):
         return (type(x).__module__, type(x).__qualname__,
-                tuple((f.name, _content_key(getattr(x, f.name))) for f in dataclasses.fields(x)))
+                tuple((f.name, content_key(getattr(x, f.name))) for f in dataclasses.fields(x)))
     if isinstance(x, (tuple, list)):
-        return (type(x).__qualname__, tuple(_content_key(v) for v in x))
+        return (type(x).__qualname__, tuple(content_key(v) for v in x))
     if isinstance(x, Mapping):
-        return ("mapping", tuple(sorted((repr(k), _content_key(v)) for k, v in x.items())))
+        return ("mapping", tuple(sorted((repr(k), content_key(v)) for k, v in x.items())))
     return ("id", id(x))
 
 
-def _shared(kind: str, pb, space, settings: tuple, build: Callable[[], Any]) -> Any:
+def shared_program(kind: str, pb, space, settings: tuple, build: Callable[[], Any]) -> Any:
     """The program ``build()`` for (``kind``, the content of ``pb`` and ``space``, ``settings``), built once per
     process (least recently used dropped beyond ``_PROGRAMS_MAX``)."""
-    key = (kind, _content_key(pb), _content_key(space), settings)
+    key = (kind, content_key(pb), content_key(space), settings)
     if key in _PROGRAMS:
         _PROGRAMS[key] = _PROGRAMS.pop(key)          # most recently used last
     else:
@@ -80,7 +80,7 @@ def design_metrics(pb, space, *, regular: bool = True) -> Callable:
 
         return jax.jit(lambda g: evaluate_designer(pb, space.decode(g), regular=regular), inline=True)
 
-    return _shared("design_metrics", pb, space, (bool(regular),), build)
+    return shared_program("design_metrics", pb, space, (bool(regular),), build)
 
 
 def batch_evaluator(pb, space, batch: int, *, regular: bool = True) -> Callable[[np.ndarray], dict]:
@@ -95,7 +95,7 @@ def batch_evaluator(pb, space, batch: int, *, regular: bool = True) -> Callable[
         call = padded_batch(f, batch)
         return lambda X: {k: np.asarray(v) for k, v in call(np.asarray(X)).items()}
 
-    return _shared("batch_evaluator", pb, space, (int(batch), bool(regular)), build)
+    return shared_program("batch_evaluator", pb, space, (int(batch), bool(regular)), build)
 
 
 def objective_matrix(m: Mapping[str, np.ndarray], objs: Sequence[str], scale: np.ndarray) -> np.ndarray:

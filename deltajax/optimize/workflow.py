@@ -35,7 +35,7 @@ import numpy as np
 # the compiled programs and the refine descent live in their own modules; these names stay importable from here
 from . import programs as _programs
 from .descent import DESCENT_ROWS, RefineOutcome, descent_paths, refine_designs
-from .programs import _content_key, _shared, batch_evaluator, design_metrics, objective_matrix
+from .programs import batch_evaluator, content_key, design_metrics, objective_matrix, shared_program
 
 _PROGRAMS = _programs._PROGRAMS   # the same dict (tests clear it to retrace)
 
@@ -210,7 +210,7 @@ def ga_fitness(pb, space, objs: Sequence[str], wvec: np.ndarray):
         return fitness
 
     # one function object per content: run_ga's compiled engine is cached per fitness function
-    return _shared("ga_fitness", pb, space, (objs, _content_key(wvec)), build)
+    return shared_program("ga_fitness", pb, space, (objs, content_key(wvec)), build)
 
 
 def pareto_eval(evaluate: Callable[[np.ndarray], dict], objs: Sequence[str], scale: np.ndarray):
