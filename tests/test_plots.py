@@ -164,3 +164,29 @@ def test_only_run_selects_a_matplotlib_backend():
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
                          env={**__import__("os").environ, "MPLBACKEND": ""}).stdout.split()
     assert out[-1].lower() == "svg", out
+
+
+def test_ga_pareto_draws_the_floor_and_the_floor_step_designs():
+    # the floor rule's line (1.2 x the baseline's regular volume, maximised) and the floor step's verified designs
+    # are what a reader needs to see why the recommendation is where it is
+    from types import SimpleNamespace
+
+    from deltajax.plots.designer import ga_pareto
+
+    names = ["baseline", "ga_best", "pareto_0", "pareto_1", "pareto_2", "floor_0", "floor_1"]
+    pk = np.array([195.0, 210.0, 217.0, 216.0, 214.0, 216.5, 205.0])
+    vol = np.array([0.0265, 0.025, 0.030, 0.032, 0.035, 0.0322, 0.033])
+    V = {"picks_per_min": pk, "regular_volume": vol, "regular_volume_fixed": vol / 4,
+         "feasible": np.ones(len(names), np.int8), "front": np.array([2, 5, 4]), "design_name": names,
+         "F": np.stack([-pk / pk[0], -vol / vol[0]], axis=1), "attrs": {"recommended": 5, "hypervolume": 1.6}}
+    s = SimpleNamespace(primary="picks_per_min", recommend="floor", recommend_floor=1.2, recommend_band=0.02)
+    fig = ga_pareto(V, ["picks_per_min", "regular_volume"], s, {"picks_per_min": "1/min", "regular_volume": "m^3"})
+    ax = fig.axes[0]
+    labels = {ln.get_label(): ln for ln in ax.get_lines()}
+    floor = labels["floor: 1.2 x the baseline's regular_volume"]
+    assert np.allclose(floor.get_ydata(), 1.2 * 0.0265 * 1e3)              # plotted in litres
+    steps = labels["floor step (descents at the floor, verified)"]
+    np.testing.assert_allclose(steps.get_xdata(), pk[5:])
+    s.recommend = "knee"                                                     # another rule: no floor line
+    fig = ga_pareto(V, ["picks_per_min", "regular_volume"], s, {"picks_per_min": "1/min", "regular_volume": "m^3"})
+    assert not any(str(ln.get_label()).startswith("floor:") for ln in fig.axes[0].get_lines())

@@ -72,6 +72,20 @@ def ga_pareto(V, objs, s, units):
     if ref_i:
         ax.plot(x[ref_i] * sx, y[ref_i] * sy, "^", color="C1", ms=7, mfc="none", mew=1.5,
                 label="refined by optax (accepted: feasible, no objective worse)")
+    fl_i = [i for i, n in enumerate(V["design_name"]) if str(n).startswith("floor_")]
+    if fl_i:
+        ax.plot(x[fl_i] * sx, y[fl_i] * sy, "+", color="C4", ms=9, mew=1.5,
+                label="floor step (descents at the floor, verified)")
+    if s.recommend == "floor" and s.primary in (o0, o1):
+        # the floor on the other objective: floor x the baseline's (maximised), the baseline's / floor (minimised);
+        # the sense from the baseline's normalised objective (-1 maximised, +1 minimised)
+        j = 1 if s.primary == o0 else 0
+        base = (y if j == 1 else x)[0]
+        maximised = float(np.asarray(V["F"])[0, j]) < 0
+        lim = base * s.recommend_floor if maximised else base / s.recommend_floor
+        line = ax.axhline if j == 1 else ax.axvline
+        line(lim * (sy if j == 1 else sx), color="C3", ls="--", lw=1, alpha=0.7,
+             label=f"floor: {s.recommend_floor:g} x the baseline's {(o1 if j == 1 else o0)}")
     if rec >= 0:
         what = (f"band: {s.primary} within {100 * s.recommend_band:g} % of the best, then the most {o1}"
                 if s.recommend == "band" else s.recommend)
