@@ -258,12 +258,12 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
               "steps": _ga_num(rf, "steps", "refine", lo=1, integer=True),
               "learning_rate": _ga_num(rf, "learning_rate", "refine", lo=0, lo_open=True, hi=1),
               "penalty": _ga_num(rf, "penalty", "refine", lo=0)}
-    floor_solve = {"enabled": False, "rounds": 0, "candidates": 0}
+    optional = {}                       # absent blocks keep GaReconfigSettings' defaults (the step off)
     if "floor_solve" in e:
         fs = _ga_block(e, "floor_solve")
-        floor_solve = {"enabled": _ga_flag(fs, "enabled", "floor_solve"),
-                       "rounds": _ga_num(fs, "rounds", "floor_solve", lo=1, integer=True),
-                       "candidates": _ga_num(fs, "candidates", "floor_solve", lo=1, integer=True)}
+        optional["floor_solve"] = {"enabled": _ga_flag(fs, "enabled", "floor_solve"),
+                                   "rounds": _ga_num(fs, "rounds", "floor_solve", lo=1, integer=True),
+                                   "candidates": _ga_num(fs, "candidates", "floor_solve", lo=1, integer=True)}
     v = _ga_block(e, "verify")
     verify = {k: _ga_num(v, k, "verify", lo=1, integer=True) for k in v}
     for k in ("n_R", "task_n_z", "rw_n_r", "rw_n_phi", "rw_n_z"):
@@ -275,8 +275,8 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
                     joints=joints, links=links, motor=motor, cycle=cycle, regular=regular, mode=mode,
                     objectives=tuple(names), primary=primary, weights=weights, constraints=cons, ga=ga,
                     pareto=pareto, recommend=recommend, verify=verify, screen=screen, refine=refine,
-                    recommend_band=band, recommend_floor=floor, floor_solve=floor_solve, search_refine=search_refine,
-                    reconfig=_operating_settings(e))
+                    recommend_band=band, recommend_floor=floor, search_refine=search_refine,
+                    reconfig=_operating_settings(e), **optional)
 
 
 def _v_ga_reconfig(e, cfg, robot, recon) -> None:
