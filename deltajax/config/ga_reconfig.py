@@ -147,7 +147,8 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
         raise ConfigError(f"experiment.design.bounds must be a non-empty mapping, got {d.get('bounds')!r}")
     t = _ga_block(e, "task")
     task = {k: _ga_num(t, k, "task", lo=0, lo_open=True) for k in ("diameter", "height", "z_top")}
-    task.update({k: _ga_num(t, k, "task", lo=1, integer=True) for k in ("n_r", "n_phi")})
+    task["n_r"] = _ga_num(t, "n_r", "task", lo=1, integer=True)
+    task["n_phi"] = _ga_num(t, "n_phi", "task", lo=2, integer=True)   # both ends of the 60 deg wedge
     task["n_z"] = _ga_num(t, "n_z", "task", lo=2, integer=True)
     gw = _ga_block(e, "good_workspace")
     good = {"index": _ga_choice(gw, "index", "good_workspace", INDEX_NAMES),
@@ -266,7 +267,7 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
                                    "candidates": _ga_num(fs, "candidates", "floor_solve", lo=1, integer=True)}
     v = _ga_block(e, "verify")
     verify = {k: _ga_num(v, k, "verify", lo=1, integer=True) for k in v}
-    for k in ("n_R", "task_n_z", "rw_n_r", "rw_n_phi", "rw_n_z"):
+    for k in ("n_R", "task_n_phi", "task_n_z", "rw_n_r", "rw_n_phi", "rw_n_z"):
         if verify[k] < 2:
             raise ConfigError(f"experiment.verify.{k} must be >= 2, got {verify[k]!r}")
     if verify["cycle_samples"] < 5 or verify["cycle_samples"] % 2 == 0:
