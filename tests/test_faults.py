@@ -427,6 +427,8 @@ BAD = [
     ("ga_reconfig", "experiment.motor.rated_torque=nan", "experiment.motor.rated_torque must be a finite number"),
     ("ga_reconfig", "experiment.pareto.population_size=0", "experiment.pareto.population_size must be >= 4, got 0"),
     ("ga_reconfig", "experiment.verify.task_n_r=0", "experiment.verify.task_n_r must be >= 1, got 0"),
+    ("ga_reconfig", "experiment.task.n_phi=1", "experiment.task.n_phi must be >= 2, got 1"),   # both wedge ends
+    ("ga_reconfig", "experiment.verify.task_n_phi=1", "experiment.verify.task_n_phi must be >= 2, got 1"),
     ("ga_reconfig", "experiment.ga.sigma=inf", r"experiment.ga.sigma \(gene units, genes in \[0,1\]\) must be in"),
     ("ga_reconfig", "+experiment.foo=1", r"experiment: unknown keys foo; valid keys: constraints, "),
     ("reconfig_indices", "robot.R_range.max=10", r"robot.R_range.max=10.0 m: at R = 10 m the geometry can reach nothing"),

@@ -66,7 +66,7 @@ def run(ctx) -> None:
     from ..optimize import GAError, run_ga
     from ..optimize import report as R
     from ..optimize import workflow as W
-    from ..optimize.designer import CONSTRAINT_NAMES, DESIGN_SENSE, DESIGN_UNITS
+    from ..optimize.designer import CONSTRAINT_NAMES, DESIGN_SENSE, DESIGN_UNITS, FEASIBILITY_TOL
     from ..optimize.pareto import hypervolume, non_dominated, nsga2
 
     # -- spec ---------------------------------------------------------------------------------------------------
@@ -108,7 +108,8 @@ def run(ctx) -> None:
                               "cannot normalise it; loosen the constraints or move the task")
     scale = sense / np.abs(np.asarray([float(base[o]) for o in objs]))
     if not bool(base["feasible"]):
-        ctx.log(f"warning: the baseline violates {[n for n, g in zip(CONSTRAINT_NAMES, base['g']) if g > 0]}")
+        bad = [n for n, g in zip(CONSTRAINT_NAMES, base["g"]) if g > FEASIBILITY_TOL]
+        ctx.log(f"warning: the baseline violates {bad} on the search grids")
 
     # -- screen: Sobol designs without the regular workspace, the best feasible ones seed the GA ------------------
     seeds = base_genes[None]
