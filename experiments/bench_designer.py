@@ -316,12 +316,34 @@ def main(argv=None):
           f"best {s.primary} {best_scan_fine:.4g}, hypervolume {hv_scan_fine:.4g}", flush=True)
     report.update(scan_fine_designs=int(len(Fsv)), scan_fine_feasible=int(okv.sum()), scan_fine_cpu_s=c_fine,
                   scan_fine_best_primary=best_scan_fine, scan_fine_hypervolume=hv_scan_fine)
+    # the rule's own question on the fine grids (recommend: floor): the scan's best primary objective among its
+    # verified feasible designs that meet the floor, to compare with each run's recommendation
+    from deltajax.optimize.workflow import floor_limits
+
+    lim = floor_limits(len(objs), j, s.recommend_floor, sense)
+    at_floor = okv & np.all(Fsv <= lim[None, :], axis=1)
+    best_scan_floor = (float(np.max(-sense[j] * mvs[s.primary][at_floor])) * -sense[j] if at_floor.any()
+                       else float("nan"))
+    if s.recommend == "floor":
+        print(f"scan, fine grids, the floor rule's question: best {s.primary} among its {int(at_floor.sum())} verified "
+              f"designs at the floor ({s.recommend_floor} x the baseline): {best_scan_floor:.5g}", flush=True)
+    report.update(scan_fine_best_primary_at_floor=best_scan_floor)
     per_seed = []
     for budget, seeds in (("default", args.seeds), ("large", large_seeds)):
         for seed in seeds:
             if (budget, seed) not in runs:
                 continue
             d = load(runs[(budget, seed)])
+            Vr = d["verify"]
+            ir = int(Vr["attrs"]["recommended"])
+            rec_fine = np.asarray([float(Vr[o][ir]) for o in objs])
+            dom_fine = int(sum(dominates(np.asarray([float(mvs[o][i]) for o in objs]), rec_fine, sense)
+                               for i in np.flatnonzero(okv)))
+            if s.recommend == "floor":
+                print(f"(c, fine grids, the rule's question) {budget} seed {seed}: recommended {s.primary} "
+                      f"{rec_fine[j]:.5g} vs the scan's best at the floor {best_scan_floor:.5g} "
+                      f"({'>=' if -sense[j] * rec_fine[j] >= -sense[j] * best_scan_floor else '<'}); verified scan "
+                      f"designs dominating the recommendation: {dom_fine}", flush=True)
             mg = ev(np.asarray(d["ga"]["best_genes"])[None, :])
             G = np.asarray(d["verify"]["genes"])
             mj = ev(G)                                          # every design the job verified, on the coarse grids
@@ -342,6 +364,7 @@ def main(argv=None):
             per_seed.append({"budget": budget, "seed": seed, "ga_best_primary": ga_best, "job_best_primary": best_job,
                              "job_fine_best_primary": fine_best, "hv_job_fine": hv_fine,
                              "hv_job": hv_job, "scan_designs_dominating_recommended": dom,
+                             "recommended_fine": rec_fine.tolist(), "scan_fine_designs_dominating_recommended": dom_fine,
                              "refined_accepted": int(np.sum(d.get("refine", {}).get("accepted", [])))})
             print(f"(c) {budget} seed {seed}: {s.primary} GA best {ga_best:.4g}, best of the job's designs "
                   f"{best_job:.4g} vs best of the scan {best_scan:.4g} ({'>=' if best_job >= best_scan else '<'}); "
