@@ -108,8 +108,8 @@ def small():
     def path(g, R_op, T_plan):
         return OP.path_operating(pb, space.decode(g), R_op, T_plan, jnp.nan, jnp.nan, return_profile=True)
 
-    # two designs feasible at these sizes: the baseline with a 0.39 m forearm (at 0.40 its arm sum sits on the size
-    # budget and its task samples on the mirror planes fail at the 4 per-task R candidates) and a faster one
+    # two designs feasible at these sizes: the baseline with a 0.39 m forearm (with its 0.40 m one, the task samples
+    # on the mirror planes fail -- task and interference -- at all 4 per-task R candidates) and a faster design
     genes = np.stack([space.from_params([0.138, 0.495, 0.065, 0.2, 0.39, 20.0]),
                       space.from_params([0.15, 0.40, 0.06, 0.20, 0.39, 25.0])])
     out = []
