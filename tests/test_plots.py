@@ -171,6 +171,7 @@ def test_ga_pareto_draws_the_floor_and_the_floor_step_designs():
     # are what a reader needs to see why the recommendation is where it is
     from types import SimpleNamespace
 
+    from deltajax.optimize.report import floor_line
     from deltajax.plots.designer import ga_pareto
 
     names = ["baseline", "ga_best", "pareto_0", "pareto_1", "pareto_2", "floor_0", "floor_1"]
@@ -180,7 +181,8 @@ def test_ga_pareto_draws_the_floor_and_the_floor_step_designs():
          "feasible": np.ones(len(names), np.int8), "front": np.array([2, 5, 4]), "design_name": names,
          "F": np.stack([-pk / pk[0], -vol / vol[0]], axis=1), "attrs": {"recommended": 5, "hypervolume": 1.6}}
     s = SimpleNamespace(primary="picks_per_min", recommend="floor", recommend_floor=1.2, recommend_band=0.02)
-    fig = ga_pareto(V, ["picks_per_min", "regular_volume"], s, {"picks_per_min": "1/min", "regular_volume": "m^3"})
+    objs, units = ["picks_per_min", "regular_volume"], {"picks_per_min": "1/min", "regular_volume": "m^3"}
+    fig = ga_pareto(V, objs, s, units, floor=floor_line(V, objs, s))
     ax = fig.axes[0]
     labels = {ln.get_label(): ln for ln in ax.get_lines()}
     floor = labels["floor: 1.2 x the baseline's regular_volume"]
@@ -188,5 +190,6 @@ def test_ga_pareto_draws_the_floor_and_the_floor_step_designs():
     steps = labels["floor step (descents at the floor, verified)"]
     np.testing.assert_allclose(steps.get_xdata(), pk[5:])
     s.recommend = "knee"                                                     # another rule: no floor line
-    fig = ga_pareto(V, ["picks_per_min", "regular_volume"], s, {"picks_per_min": "1/min", "regular_volume": "m^3"})
+    assert floor_line(V, objs, s) is None
+    fig = ga_pareto(V, objs, s, units, floor=floor_line(V, objs, s))
     assert not any(str(ln.get_label()).startswith("floor:") for ln in fig.axes[0].get_lines())

@@ -112,9 +112,25 @@ def plots(ctx, data, objs, s) -> None:
     fig = P.ga_convergence(data.get("ga", {}))
     if fig is not None:
         ctx.savefig(fig, "ga_convergence")
-    fig = P.ga_pareto(data.get("verify"), objs, s, DESIGN_UNITS)
+    V = data.get("verify")
+    fig = P.ga_pareto(V, objs, s, DESIGN_UNITS, floor=floor_line(V, objs, s) if V is not None else None)
     if fig is not None:
         ctx.savefig(fig, "ga_pareto")
+
+
+def floor_line(V, objs, s):
+    """``(objective, value)``: the floor rule's threshold on the plotted objective that is not the primary, in
+    its own units (the verified baseline's value times ``recommend_floor`` if maximised, divided if minimised: the
+    rule's :func:`deltajax.optimize.workflow.floor_limits` in the objective's units); None for another rule or when
+    the primary is not one of the two plotted objectives."""
+    from .designer import DESIGN_SENSE
+    from .workflow import floor_limits
+
+    if s.recommend != "floor" or s.primary not in objs[:2] or len(objs) < 2:
+        return None
+    o = objs[1] if s.primary == objs[0] else objs[0]
+    lim = floor_limits(len(objs), list(objs).index(s.primary), s.recommend_floor, [DESIGN_SENSE[k] for k in objs])
+    return o, abs(float(lim[list(objs).index(o)])) * abs(float(np.asarray(V[o], float)[0]))
 
 
 def rule_text(s) -> str:

@@ -36,11 +36,12 @@ def ga_convergence(G):
     return fig
 
 
-def ga_pareto(V, objs, s, units):
+def ga_pareto(V, objs, s, units, floor=None):
     """The main job's designs verified on the fine grids in the plane of the first two objectives: front,
     baseline, GA best, refined and recommended designs (``V``: the staged ``verify`` group; ``s``: the job's
-    settings; ``units``: each objective's unit, e.g. ``{"picks_per_min": "1/min", "regular_volume": "m^3"}``);
-    None without them."""
+    settings; ``units``: each objective's unit, e.g. ``{"picks_per_min": "1/min", "regular_volume": "m^3"}``;
+    ``floor``: ``(objective, value)`` of the recommendation rule's floor in that objective's units, drawn as a line
+    (:func:`deltajax.optimize.report.floor_line`), or None); None without them."""
     plt = _plt()
     if V is None or len(objs) < 2:
         return None
@@ -76,16 +77,10 @@ def ga_pareto(V, objs, s, units):
     if fl_i:
         ax.plot(x[fl_i] * sx, y[fl_i] * sy, "+", color="C4", ms=9, mew=1.5,
                 label="floor step (descents at the floor, verified)")
-    if s.recommend == "floor" and s.primary in (o0, o1):
-        # the floor on the other objective: floor x the baseline's (maximised), the baseline's / floor (minimised);
-        # the sense from the baseline's normalised objective (-1 maximised, +1 minimised)
-        j = 1 if s.primary == o0 else 0
-        base = (y if j == 1 else x)[0]
-        maximised = float(np.asarray(V["F"])[0, j]) < 0
-        lim = base * s.recommend_floor if maximised else base / s.recommend_floor
-        line = ax.axhline if j == 1 else ax.axvline
-        line(lim * (sy if j == 1 else sx), color="C3", ls="--", lw=1, alpha=0.7,
-             label=f"floor: {s.recommend_floor:g} x the baseline's {(o1 if j == 1 else o0)}")
+    if floor is not None and floor[0] in (o0, o1):
+        on_y = floor[0] == o1
+        (ax.axhline if on_y else ax.axvline)(floor[1] * (sy if on_y else sx), color="C3", ls="--", lw=1, alpha=0.7,
+                                             label=f"floor: {s.recommend_floor:g} x the baseline's {floor[0]}")
     if rec >= 0:
         what = (f"band: {s.primary} within {100 * s.recommend_band:g} % of the best, then the most {o1}"
                 if s.recommend == "band" else s.recommend)
