@@ -232,7 +232,7 @@ def test_refine_designs_accepts_only_feasible_improvements_and_fails_loudly(desi
     # a loss whose gradient is NaN (sqrt of a negative gene combination) must stop the refinement, never be zeroed;
     # the loss reads only the primary and g, so a stand-in evaluation (compiles in seconds) tests the same guard
     import deltajax.optimize.designer as D
-    import deltajax.optimize.workflow as W
+    from deltajax.optimize import programs as PR
 
     real = D.evaluate_designer
 
@@ -240,8 +240,8 @@ def test_refine_designs_accepts_only_feasible_improvements_and_fails_loudly(desi
         L1 = design.robot.upper_arm
         return {"picks_per_min": jnp.sqrt(L1 - 10.0), "g": jnp.zeros(len(D.CONSTRAINT_NAMES), L1.dtype)}
 
-    kept = dict(W._PROGRAMS)
-    W._PROGRAMS.clear()  # the descent is kept by the problem's content: trace it afresh with the broken loss
+    kept = dict(PR._PROGRAMS)
+    PR._PROGRAMS.clear()  # the descent is kept by the problem's content: trace it afresh with the broken loss
     try:
         D.evaluate_designer = broken
         with pytest.raises(FloatingPointError, match="non-finite gradient of the designer's loss for design 0"):
@@ -249,8 +249,8 @@ def test_refine_designs_accepts_only_feasible_improvements_and_fails_loudly(desi
                            penalty=10.0, evaluate=ev, evaluate_cheap=ev_cheap)
     finally:
         D.evaluate_designer = real
-        W._PROGRAMS.clear()
-        W._PROGRAMS.update(kept)
+        PR._PROGRAMS.clear()
+        PR._PROGRAMS.update(kept)
 
 
 @pytest.fixture(scope="module")

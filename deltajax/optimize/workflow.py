@@ -33,11 +33,9 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 import numpy as np
 
 # the compiled programs and the refine descent live in their own modules; these names stay importable from here
-from . import programs as _programs
 from .descent import DESCENT_ROWS, RefineOutcome, descent_paths, refine_designs
 from .programs import batch_evaluator, content_key, design_metrics, objective_matrix, shared_program
 
-_PROGRAMS = _programs._PROGRAMS   # the same dict (tests clear it to retrace)
 
 __all__ = ["SetupError", "setup", "designer_problem", "screen", "screen_front", "ga_fitness", "pareto_eval",
            "refine_designs", "RefineOutcome", "descent_paths", "verify", "floor_limits", "recommend",
