@@ -178,7 +178,7 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
             jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     check_keys(cfg)  # unknown keys (also +key=value ones), before anything else reads the config
     robot, recon = robot_from_config(cfg.robot)  # validated before anything compiles
-    validate_config(cfg, robot, recon)  # every experiment field, before the run directory is touched
+    validate_config(cfg, robot, recon, run_dir=run_dir)  # every experiment field, before the run dir is touched
     from . import __version__
     from .io import ResultsFile, git_commit
     from .rundir import claim

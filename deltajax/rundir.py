@@ -34,7 +34,8 @@ import shutil
 from pathlib import Path
 from typing import Any, Mapping
 
-__all__ = ["RunDirError", "CheckpointError", "RunDirectory", "claim", "config_differences", "MANIFEST", "LOCK", "NEUTRAL"]
+__all__ = ["RunDirError", "CheckpointError", "RunDirectory", "claim", "config_differences", "describe_differences",
+           "MANIFEST", "LOCK", "NEUTRAL"]
 
 MANIFEST = "deltajax_run.json"
 LOCK = ".deltajax.lock"
@@ -94,7 +95,7 @@ def config_differences(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[t
     return out
 
 
-def _describe(diffs: list[tuple[str, Any, Any]], limit: int = 4) -> str:
+def describe_differences(diffs: list[tuple[str, Any, Any]], limit: int = 4) -> str:
     parts = [f"{k}={_short(old)} there, {_short(new)} now" for k, old, new in diffs[:limit]]
     more = f" and {len(diffs) - limit} more" if len(diffs) > limit else ""
     return "; ".join(parts) + more
@@ -230,7 +231,8 @@ def claim(path: os.PathLike, experiment: str, config: Mapping[str, Any], *, fres
             diffs = config_differences(old_cfg, config)
             if diffs:
                 raise RunDirError(f"run directory {path} holds a {experiment} run with other settings: "
-                                  f"{_describe(diffs)}; choose another hydra.run.dir, or add fresh=true to replace it")
+                                  f"{describe_differences(diffs)}; choose another hydra.run.dir, or add fresh=true to "
+                                  "replace it")
             state = "complete" if status == "complete" else "resume"
             if state == "resume":
                 _check_readable(path / "results.h5")

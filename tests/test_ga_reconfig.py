@@ -250,3 +250,58 @@ def test_floor_step_designs_are_verified_and_can_only_improve_the_recommendation
     assert rec == int(V["attrs"]["recommended"])
     if np.all(F[before] <= lim):                                     # the rule's answer before the step met the floor
         assert np.all(F[rec] <= lim) and F[rec, 0] <= F[before, 0]
+
+
+@pytest.mark.slow
+def test_a_continued_run_keeps_the_earlier_answer_and_can_only_improve_it(full_run, tmp_path, caplog):
+    """experiment.continue_from (more budget for a finished run): the earlier run's verified front joins the
+    candidates with its stored metrics (bit for bit), so the recommendation is never one the earlier run's
+    recommendation dominates and the verified front's hypervolume never drops — here with another seed and a
+    *smaller* GA, where an independent run would land anywhere."""
+    from deltajax.optimize.designer import DESIGN_SENSE
+
+    with caplog.at_level(logging.INFO, logger="deltajax"):
+        p = run_experiment("ga_reconfig", TOY + [f"experiment.continue_from={full_run.parent}", "seed=1",
+                                                 "experiment.ga.generations=2"], run_dir=tmp_path / "more")
+    old, new = load(full_run)["verify"], load(p)["verify"]
+    assert new["attrs"]["continued_from"] == str(full_run)
+    names, old_names = list(new["design_name"]), list(old["design_name"])
+    objs = old["attrs"]["objectives"].split(",")
+    for r in np.asarray(old["front"]).reshape(-1):                     # every earlier front point, as verified there
+        i = names.index(f"earlier_{old_names[r]}")
+        np.testing.assert_array_equal(new["genes"][i], old["genes"][r])
+        for k in objs + ["feasible", "constraint_values", "R_operating"]:
+            np.testing.assert_array_equal(new[k][i], old[k][r], err_msg=k)
+    sense = np.asarray([DESIGN_SENSE[o] for o in objs])
+    a = np.asarray([old[o][int(old["attrs"]["recommended"])] for o in objs]) * -sense   # larger is better
+    b = np.asarray([new[o][int(new["attrs"]["recommended"])] for o in objs]) * -sense
+    assert not (np.all(a >= b) and np.any(a > b)), (a, b)
+    assert new["attrs"]["hypervolume"] >= old["attrs"]["hypervolume"]
+    assert "continued run: the earlier recommendation earlier_" in caplog.text
+
+
+@pytest.mark.slow
+def test_continue_from_refuses_another_problem_an_unfinished_run_and_its_own_dir(full_run, tmp_path):
+    """One line naming experiment.continue_from (and the differing setting), before anything is computed."""
+    cases = [([f"experiment.continue_from={full_run.parent}", "experiment.cycle.payload=1.0"],
+              r"experiment.continue_from: .* is a run of another problem \(experiment.cycle.payload=0.5 there, "
+              r"1.0 now\)"),
+             ([f"experiment.continue_from={tmp_path / 'nowhere'}"], "is neither a run directory"),
+             ([f"experiment.continue_from={tmp_path / 'own'}", "fresh=true"], "is this run's own directory")]
+    unfinished = tmp_path / "unfinished.h5"
+    unfinished.write_bytes(full_run.read_bytes())
+    with h5py.File(unfinished, "a") as f:
+        f.attrs["ga_reconfig_stages"] = "screen,ga"
+    cases.append(([f"experiment.continue_from={unfinished}"], r"has not finished its verification \(stages done: "
+                                                               r"screen,ga\)"))
+    own = tmp_path / "own"
+    own.mkdir()
+    (own / "results.h5").write_bytes(full_run.read_bytes())
+    for n, (extra, match) in enumerate(cases):
+        run_dir = own if "own" in extra[0] else tmp_path / f"run{n}"
+        before = (own / "results.h5").read_bytes()
+        with pytest.raises((ConfigError, RunDirError), match=match) as ei:
+            run_experiment("ga_reconfig", TOY + extra, run_dir=run_dir)
+        assert "\n" not in str(ei.value)
+        assert (own / "results.h5").read_bytes() == before
+        assert not run_dir.exists() or run_dir == own                 # refused before the directory is claimed

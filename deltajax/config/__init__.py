@@ -19,8 +19,8 @@ __all__ = ["ConfigError", "robot_from_config", "mass_from_config", "validate_con
 
 
 from ._readers import ConfigError, _choice, _field, _names, _vector  # noqa: E402,F401  the one set of readers
-from .ga_reconfig import (GaReconfigSettings, _v_ga_reconfig, ga_reconfig_build,  # noqa: E402,F401
-                          ga_reconfig_settings)
+from .ga_reconfig import (GaReconfigSettings, _v_ga_reconfig, _v_ga_reconfig_run_dir,  # noqa: E402,F401
+                          ga_reconfig_build, ga_reconfig_settings)
 
 def robot_from_config(cfg: Mapping[str, Any], prefix: str = "robot") -> Tuple[Delta, Optional[ReconfigurableDelta]]:
     """Build the robot described by a ``configs/robot/*.yaml`` entry.
@@ -391,7 +391,11 @@ EXPERIMENT_VALIDATORS = {
 }
 
 
-def validate_config(cfg: Mapping[str, Any], robot=None, recon=None) -> None:
+#: experiment name -> a check of its settings against the run directory (``run_dir``), where a setting can name it
+RUN_DIR_CHECKS = {"ga_reconfig": _v_ga_reconfig_run_dir}
+
+
+def validate_config(cfg: Mapping[str, Any], robot=None, recon=None, *, run_dir=None) -> None:
     """Check every field of the composed config before anything is computed.
 
     Top-level keys (unknown ones rejected, types and ranges), then the experiment block with its validator
@@ -405,6 +409,8 @@ def validate_config(cfg: Mapping[str, Any], robot=None, recon=None) -> None:
     e = cfg.get("experiment") or {}
     if recon is not None and e.get("name") in R_RANGE_EXPERIMENTS:
         check_reach_over_range(cfg.get("robot"), recon)
+    if run_dir is not None and e.get("name") in RUN_DIR_CHECKS:
+        RUN_DIR_CHECKS[e.get("name")](e, run_dir)
     check = EXPERIMENT_VALIDATORS.get(e.get("name"))
     if check is not None:
         check(e, cfg, robot, recon)

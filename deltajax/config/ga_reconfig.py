@@ -14,7 +14,7 @@ from ._readers import ConfigError, _choice, _field
 # GA settings and problem are then built by deltajax.optimize.workflow.setup (errors there become ConfigError here).
 
 _GA_KEYS = {
-    "": {"name", "resume", "stop_after", "design", "task", "good_workspace", "joints", "links", "motor", "cycle",
+    "": {"name", "resume", "stop_after", "continue_from", "design", "task", "good_workspace", "joints", "links", "motor", "cycle",
          "regular_workspace", "objectives", "constraints", "screen", "ga", "pareto", "refine", "recommend",
          "recommend_band", "recommend_floor", "floor_solve", "verify",
          "reconfig"},  # rtmode: experiment.reconfig is checked by deltajax.optimize.operating
@@ -118,6 +118,8 @@ class GaReconfigSettings:
     # levels) of the unit cylinder) for deltajax.constraints.refine_cylinder (the verification keeps its defaults)
     search_refine: tuple = ()
     reconfig: dict = dataclasses.field(default_factory=dict)  # rtmode: operating.settings_from_block
+    # a finished run (its directory or results.h5) this run continues with more budget; None: a new search
+    continue_from: Optional[str] = None
 
 
 def _operating_settings(e: Mapping[str, Any]) -> dict:  # rtmode
@@ -141,6 +143,10 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
     sa = e.get("stop_after")
     if sa is not None and (isinstance(sa, bool) or not isinstance(sa, int) or sa < 1):
         raise ConfigError(f"experiment.stop_after must be null or an integer >= 1, got {sa!r}")
+    cont = e.get("continue_from")
+    if cont is not None and (not isinstance(cont, str) or not cont.strip()):
+        raise ConfigError(f"experiment.continue_from must be null or the path of a finished ga_reconfig run "
+                          f"(its directory or results.h5), got {cont!r}")
     d = _ga_block(e, "design")
     n_R = _ga_num(d, "n_R", "design", lo=2, integer=True)
     if not isinstance(d.get("bounds"), Mapping) or not d["bounds"]:
@@ -277,11 +283,31 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
                     objectives=tuple(names), primary=primary, weights=weights, constraints=cons, ga=ga,
                     pareto=pareto, recommend=recommend, verify=verify, screen=screen, refine=refine,
                     recommend_band=band, recommend_floor=floor, search_refine=search_refine,
-                    reconfig=_operating_settings(e), **optional)
+                    reconfig=_operating_settings(e), continue_from=cont, **optional)
 
 
 def _v_ga_reconfig(e, cfg, robot, recon) -> None:
-    ga_reconfig_build(e, robot, recon)  # every field, the design space, the GA settings, the problem; nothing compiles
+    s = ga_reconfig_build(e, robot, recon)[0]  # every field, the design space, the GA settings, the problem
+    if s.continue_from is not None:           # the earlier run: finished, of the same problem (its file only)
+        from ..optimize.workflow import SetupError, earlier_run
+
+        try:
+            earlier_run(s.continue_from, cfg)
+        except SetupError as err:
+            raise ConfigError(str(err)) from None
+
+
+def _v_ga_reconfig_run_dir(e, run_dir) -> None:
+    """The run directory is not the run that ``experiment.continue_from`` reads (with fresh=true its claim would
+    delete what this run continues)."""
+    from pathlib import Path
+
+    from ..optimize.workflow import continued_file
+
+    cont = e.get("continue_from")
+    if cont is not None and continued_file(cont).resolve() == (Path(run_dir) / "results.h5").resolve():
+        raise ConfigError(f"experiment.continue_from={cont} is this run's own directory; continue into another "
+                          "hydra.run.dir (to resume a run, rerun into its directory without continue_from)")
 
 
 def ga_reconfig_build(ectx: Mapping[str, Any], robot, recon, *, n_R: Optional[int] = None):

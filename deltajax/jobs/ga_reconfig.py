@@ -73,6 +73,10 @@ def run(ctx) -> None:
     s, space, pb, ga_cfg = build(ctx.cfg.experiment, ctx.robot, ctx.recon)    # validated before anything compiles
     ga_cfg = dataclasses.replace(ga_cfg, seed=int(ctx.cfg.seed))
     res, path, seed = ctx.results, ctx.run_dir / "results.h5", int(ctx.cfg.seed)
+    try:   # more budget for a finished run: its verified front seeds the searches and joins the candidates
+        earlier = None if s.continue_from is None else W.earlier_run(s.continue_from, ctx.cfg)
+    except W.SetupError as err:
+        raise ConfigError(str(err)) from None
     fp = W.job_fingerprint(ctx.cfg)
     done = _claim(ctx, s, path, fp, W)
     res.set_attrs(ga_reconfig_fingerprint=fp)
@@ -96,6 +100,11 @@ def run(ctx) -> None:
     ev = W.batch_evaluator(pb, space, max(s.pareto["population_size"], 2))
     ev_cheap = W.batch_evaluator(pb, space, 256, regular=False)       # screen and refinement (no regular workspace)
     base_genes = space.baseline_genes()
+    carried = earlier.genes if earlier is not None else np.zeros((0, space.dim))
+    if earlier is not None:
+        ctx.log(f"continuing {earlier.path}: its {len(carried)} verified front designs seed the GA and NSGA-II and "
+                "join the verified candidates with their verified metrics (so this run's recommendation is never "
+                "one that the earlier run's recommendation dominates)")
     ctx.log(f"design space: {dict(zip(space.names, zip(space.lower, space.upper)))} ({space.dim} genes, n_R="
             f"{space.n_R}); {len(pb.task_points)} task samples, {pb.cycle.n_samples} cycle samples, regular grid "
             f"{pb.rw_points.shape[:3]}")
@@ -112,7 +121,7 @@ def run(ctx) -> None:
         ctx.log(f"warning: the baseline violates {bad} on the search grids")
 
     # -- screen: Sobol designs without the regular workspace, the best feasible ones seed the GA ------------------
-    seeds = base_genes[None]
+    seeds = np.concatenate([base_genes[None], carried])
     scr_front = np.zeros((0, space.dim))
     if s.screen["enabled"] and not primary.startswith("regular"):
         if "screen" in done:
@@ -213,7 +222,7 @@ def run(ctx) -> None:
         bar = ctx.progress(total=s.pareto["generations"], desc="NSGA-II")
         front = nsga2(W.pareto_eval(ev, objs, scale), space.dim, len(objs), n_constr=len(CONSTRAINT_NAMES),
                       pop_size=s.pareto["population_size"], n_gen=s.pareto["generations"], seed=seed,
-                      initial=np.concatenate([base_genes[None], best[None],
+                      initial=np.concatenate([base_genes[None], best[None], carried,
                                               scr_front[:s.pareto["population_size"] // 2],
                                               gres.final_population]), ref=ref,
                       progress=bar.update)
@@ -278,6 +287,13 @@ def run(ctx) -> None:
         bar = ctx.progress(total=len(cand), desc="verify (fine grids)")
         mv = W.verify(pb_fine, space_v, cand, progress=bar.update)
         bar.close()
+        if earlier is not None:                                     # the earlier run's front, as it verified it
+            try:
+                mv = W.carry_earlier(mv, earlier, objs)
+            except W.SetupError as err:
+                raise ConfigError(str(err)) from None
+            cand, names = np.concatenate([cand, carried]), names + list(earlier.names)
+        n_before_floor = len(cand)
         bv = np.asarray([float(mv[o][0]) for o in objs])           # normalised by the *verified* baseline
         scale_v = np.where(np.isfinite(bv) & (bv != 0), sense / np.abs(np.where(bv != 0, bv, 1)), scale)
 
@@ -313,6 +329,14 @@ def run(ctx) -> None:
         hv = hypervolume(Fv[nd], ref) if len(nd) else 0.0
         # -- write ----------------------------------------------------------------------------------------------
         R.store_verify(res, space, cand, names, mv, Fv, nd, rec, hv, hypervolume(Fv[:1], ref), ref, objs, s)
+        if earlier is not None:
+            res.set_attrs("verify", continued_from=str(earlier.path), continued_from_fingerprint=earlier.fingerprint,
+                          carried_designs=",".join(earlier.names))
+            if earlier.recommended >= 0 and rec >= 0:
+                e_rec = n_before_floor - len(carried) + earlier.recommended
+                ctx.log(f"continued run: the earlier recommendation {names[e_rec]} ("
+                        + ", ".join(f"{o} {float(mv[o][e_rec]):.5g}" for o in objs) + f") -> {names[rec]} ("
+                        + ", ".join(f"{o} {float(mv[o][rec]):.5g}" for o in objs) + ")")
         ctx.log(f"verified on the fine grids: {len(cand)} candidates, {len(ok)} feasible; front {len(nd)} points, "
                 f"hypervolume {hv:.4g}; recommended: {names[rec] if rec >= 0 else 'none'} ({R.rule_text(s)})")
         mark("verify")

@@ -23,6 +23,7 @@ only orders them, stores their outputs in ``results.h5`` and draws the plots.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -40,7 +41,8 @@ from .programs import batch_evaluator, content_key, design_metrics, objective_ma
 __all__ = ["SetupError", "setup", "designer_problem", "screen", "screen_front", "ga_fitness", "pareto_eval",
            "refine_designs", "RefineOutcome", "descent_paths", "verify", "floor_limits", "recommend",
            "load_checkpoint", "put_checkpoint", "restage", "stages_done", "job_fingerprint", "RECOMMEND_RULES",
-           "DESCENT_ROWS", "design_metrics", "batch_evaluator", "objective_matrix"]
+           "DESCENT_ROWS", "design_metrics", "batch_evaluator", "objective_matrix", "BUDGET_SETTINGS", "EarlierRun",
+           "continued_file", "earlier_run", "carry_earlier"]
 
 RECOMMEND_RULES = ("band", "knee", "primary")
 
@@ -403,3 +405,97 @@ def stages_done(path: Path) -> tuple[Optional[str], list]:
         fp = _attr(f.attrs.get("ga_reconfig_fingerprint", ""))
         st = _attr(f.attrs.get("ga_reconfig_stages", ""))
     return (fp or None), [x for x in str(st).split(",") if x]
+
+
+# -- continuing a finished run with more budget (experiment.continue_from) --------------------------------------------
+
+#: Settings a continued run may change: the search's budget. Everything else (robot, precision, the problem, the
+#: verification grids, the recommendation rule) must equal the earlier run's, so that its verified metrics hold here.
+BUDGET_SETTINGS = ("seed", "plots", "progress", "compilation_cache", "fresh", "experiment.resume",
+                   "experiment.stop_after", "experiment.continue_from", "experiment.screen", "experiment.ga",
+                   "experiment.pareto.enabled", "experiment.pareto.population_size", "experiment.pareto.generations",
+                   "experiment.refine", "experiment.floor_solve")
+
+
+@dataclasses.dataclass(frozen=True)
+class EarlierRun:
+    """The verified front of a finished ``ga_reconfig`` run that a run continues (:func:`earlier_run`)."""
+
+    path: Path                 # its results.h5
+    fingerprint: str           # its ga_reconfig_fingerprint
+    names: tuple               # its front points' names there, prefixed "earlier_"
+    genes: np.ndarray          # (k, d) their genes
+    rows: np.ndarray           # (k,) their rows on its verify group's design axis
+    verify: Mapping[str, Any]  # its verify group as loaded (metrics on the fine grids)
+    recommended: int           # index into names/genes of its recommendation (-1: none)
+
+
+def continued_file(where: str) -> Path:
+    """The results file that ``experiment.continue_from`` names (a run directory or a results.h5)."""
+    p = Path(str(where)).expanduser()
+    return p / "results.h5" if p.is_dir() or not p.suffix else p
+
+
+def earlier_run(where: str, cfg) -> EarlierRun:
+    """The finished run ``where`` (its run directory or results.h5) that this run (config ``cfg``) continues with
+    more budget. Raises :class:`SetupError` (one line naming ``experiment.continue_from``) when it is missing,
+    unfinished, or a run of another problem: only :data:`BUDGET_SETTINGS` may differ. Reads the file only
+    (nothing compiles)."""
+    import yaml
+    from omegaconf import OmegaConf
+
+    from ..io import load
+    from ..rundir import config_differences, describe_differences
+
+    key = "experiment.continue_from"
+    p = continued_file(where)
+    if not p.is_file():
+        raise SetupError(f"{key}: {where} is neither a run directory holding a results.h5 nor a results file")
+    try:
+        fp, done = stages_done(p)
+        data = load(p)
+        old = yaml.safe_load(data["attrs"]["config"])
+    except (OSError, KeyError, ValueError, yaml.YAMLError) as err:
+        raise SetupError(f"{key}: {p} cannot be read as a ga_reconfig run ({type(err).__name__}: {err})") from None
+    if not fp or not isinstance(old, Mapping) or old.get("experiment", {}).get("name") != "ga_reconfig":
+        raise SetupError(f"{key}: {p} holds no ga_reconfig run")
+    if "verify" not in done:
+        raise SetupError(f"{key}: the run in {p} has not finished its verification (stages done: "
+                         f"{','.join(done) or 'none'}); resume it first (rerun with hydra.run.dir={p.parent})")
+    new = OmegaConf.to_container(cfg, resolve=True)
+    diffs = [d for d in config_differences(old, new)
+             if not any(d[0] == b or d[0].startswith(b + ".") for b in BUDGET_SETTINGS)]
+    if diffs:
+        raise SetupError(f"{key}: {p} is a run of another problem ({describe_differences(diffs)}); a continued run "
+                         "may change only the search budget (seed, experiment.screen, .ga, .pareto population_size "
+                         "and generations, .refine, .floor_solve)")
+    V = data["verify"]
+    rows = np.asarray(V["front"], int).reshape(-1)
+    names = [str(n) for n in np.asarray(V["design_name"])[rows]]
+    rec = int(V["attrs"]["recommended"])
+    return EarlierRun(path=p, fingerprint=fp, names=tuple(n if n.startswith("earlier_") else f"earlier_{n}"
+                                                             for n in names),
+                      genes=np.asarray(V["genes"], float)[rows].reshape(len(rows), -1), rows=rows, verify=V,
+                      recommended=int(np.flatnonzero(rows == rec)[0]) if rec in rows else -1)
+
+
+def carry_earlier(mv: Mapping[str, np.ndarray], earlier: EarlierRun, objs: Sequence[str]) -> dict:
+    """This run's fine-grid metrics ``mv`` (row 0: the baseline) followed by the earlier run's front points with
+    the metrics *it* verified (stored, not recomputed: its recommendation keeps its exact numbers). Raises
+    :class:`SetupError` when the earlier run's verified baseline differs from this run's (another deltajax
+    computed it) or its file lacks a metric this run has."""
+    V = earlier.verify
+    missing = [k for k in mv if ("constraint_values" if k == "g" else k) not in V]
+    if missing:
+        raise SetupError(f"experiment.continue_from: {earlier.path} lacks the metrics {', '.join(sorted(missing))} "
+                         "(written by an older deltajax); start a new run")
+    for o in objs:
+        a, b = float(np.asarray(V[o])[0]), float(mv[o][0])
+        if not math.isclose(a, b, rel_tol=1e-9, abs_tol=1e-12):
+            raise SetupError(f"experiment.continue_from: the baseline's {o} verifies to {b!r} here but {a!r} in "
+                             f"{earlier.path} (computed by another deltajax); start a new run")
+    out = {}
+    for k, v in mv.items():
+        old = np.asarray(V["constraint_values" if k == "g" else k])[earlier.rows]
+        out[k] = np.concatenate([np.asarray(v), old.astype(np.asarray(v).dtype)])
+    return out
