@@ -9,7 +9,10 @@ For each seed the default ``experiment=ga_reconfig`` runs twice: at its default 
 (a) **stability**: the recommended design's objectives across seeds (spread = (max - min) / median per
     objective, stated against ``--tol``);
 (b) **more budget never loses**: for each seed, the large run's recommendation is not dominated by the small
-    run's recommendation (fine-grid objectives);
+    run's recommendation (fine-grid objectives). Two ways to spend the larger budget: an independent run
+    (``large_seed*``: a new random search, which can land elsewhere on a flat stretch of the front) and the default
+    run *continued* with it (``continued_seed*``: ``experiment.continue_from=<default run>``, whose verified front
+    joins the candidates, so the answer cannot be dominated by the earlier one: checked, with the hypervolume);
 (c) **the optimiser beats a quasi-random scan of the same problem**: a scrambled Sobol sample
     (``scipy.stats.qmc``, seed 12345: not the job's own screen) of 2^scan_log2 designs of the same gene box,
     evaluated with the job's own coarse evaluator in two passes: every design without the regular workspace
@@ -95,6 +98,8 @@ def main(argv=None):
     ap.add_argument("--tol", type=float, default=0.05, help="stated stability tolerance (relative spread)")
     ap.add_argument("--large-seeds", type=int, nargs="*", default=None,
                     help="seeds also run at the larger budget (default: all of --seeds)")
+    ap.add_argument("--no-continued", action="store_true",
+                    help="skip the default runs continued with the larger budget (experiment.continue_from)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -102,10 +107,17 @@ def main(argv=None):
     t0, c0 = time.perf_counter(), _cpu()
     runs = {}
     large_seeds = args.seeds if args.large_seeds is None else args.large_seeds
-    for budget, extra, seeds in (("default", [], args.seeds), ("large", list(args.large), large_seeds)):
+    budgets = [("default", [], args.seeds), ("large", list(args.large), large_seeds)]
+    if not args.no_continued:
+        budgets.append(("continued", list(args.large), large_seeds))
+    for budget, extra, seeds in budgets:
         for s in seeds:
             # a finished run directory is a no-op for the job, a killed one resumes: always just rerun
             d = out / f"{budget}_seed{s}"
+            if budget == "continued":
+                if ("default", s) not in runs:
+                    continue
+                extra = list(args.large) + [f"experiment.continue_from={runs[('default', s)].parent}"]
             if args.skip_runs or args.scan_only:
                 if _complete(d / "results.h5"):
                     runs[(budget, s)] = d / "results.h5"
@@ -208,7 +220,7 @@ def main(argv=None):
             return
     # (a) stability and (b) budget, over the seeds with a complete run
     rec = {k: _objectives(p, "recommended") for k, p in runs.items()}
-    for budget in ("default", "large"):
+    for budget in ("default", "large", "continued"):
         seeds_b = [sd for sd in (args.seeds if budget == "default" else large_seeds) if (budget, sd) in rec]
         if not seeds_b:
             continue
@@ -253,20 +265,27 @@ def main(argv=None):
         print(f"(a) {budget} seed {sd}: {s.primary} {f[j]:.5g}; best any run verified at >= its other objectives "
               f"{best:.5g} (shortfall {100 * shortfall[f'{budget}_{sd}']:.2f} %)")
     report["shortfall_vs_pooled_front"] = shortfall
-    both = [sd for sd in large_seeds if ("default", sd) in rec and ("large", sd) in rec]
-    lost = [sd for sd in both if dominates(rec[("default", sd)][1], rec[("large", sd)][1], sense)]
-    report["larger_budget_seeds"] = both
-    report["larger_budget_dominated_by_smaller"] = lost
-    relation = {}
-    for sd in both:   # per seed: how the larger run's recommendation stands against the smaller run's
-        a, b = rec[("default", sd)][1], rec[("large", sd)][1]
-        relation[sd] = ("equal" if np.array_equal(a, b) else "dominated by the default run's" if dominates(a, b, sense)
-                        else "dominates the default run's" if dominates(b, a, sense) else "trade-off (neither dominates)")
-        print(f"(b) seed {sd}: default {dict(zip(objs, a.round(5)))} -> large {dict(zip(objs, b.round(5)))}: "
-              f"{relation[sd]}")
-    report["larger_budget_relation"] = {str(k): v for k, v in relation.items()}
-    print(f"(b) seeds {both}: those where the larger budget's recommendation is dominated by the smaller run's: "
-          f"{lost or 'none'}")
+    for budget, key in (("large", "larger_budget"), ("continued", "continued")):
+        both = [sd for sd in large_seeds if ("default", sd) in rec and (budget, sd) in rec]
+        if not both:
+            continue
+        lost = [sd for sd in both if dominates(rec[("default", sd)][1], rec[(budget, sd)][1], sense)]
+        report[f"{key}_seeds"] = both
+        report[f"{key}_dominated_by_smaller"] = lost
+        relation, hv_pair = {}, {}
+        for sd in both:   # per seed: how the larger run's recommendation stands against the smaller run's
+            a, b = rec[("default", sd)][1], rec[(budget, sd)][1]
+            relation[sd] = ("equal" if np.array_equal(a, b) else "dominated by the default run's"
+                            if dominates(a, b, sense) else "dominates the default run's" if dominates(b, a, sense)
+                            else "trade-off (neither dominates)")
+            hv_pair[sd] = [float(rec[(k, sd)][3]["verify"]["attrs"]["hypervolume"]) for k in ("default", budget)]
+            print(f"(b) {budget} seed {sd}: default {dict(zip(objs, a.round(5)))} -> {budget} "
+                  f"{dict(zip(objs, b.round(5)))}: {relation[sd]}; verified front hypervolume {hv_pair[sd][0]:.5g} "
+                  f"-> {hv_pair[sd][1]:.5g}")
+        report[f"{key}_relation"] = {str(k): v for k, v in relation.items()}
+        report[f"{key}_hypervolume"] = {str(k): v for k, v in hv_pair.items()}
+        print(f"(b) {budget}, seeds {both}: those where the larger budget's recommendation is dominated by the "
+              f"smaller run's: {lost or 'none'}")
     if args.no_scan:
         j = objs.index(s.primary)
         per_seed = []
@@ -331,7 +350,7 @@ def main(argv=None):
               f"designs at the floor ({s.recommend_floor} x the baseline): {best_scan_floor:.5g}", flush=True)
     report.update(scan_fine_best_primary_at_floor=best_scan_floor)
     per_seed = []
-    for budget, seeds in (("default", args.seeds), ("large", large_seeds)):
+    for budget, seeds in (("default", args.seeds), ("large", large_seeds), ("continued", large_seeds)):
         for seed in seeds:
             if (budget, seed) not in runs:
                 continue

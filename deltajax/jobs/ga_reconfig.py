@@ -3,6 +3,7 @@
     python -m deltajax.run experiment=ga_reconfig
     python -m deltajax.run experiment=ga_reconfig experiment.pareto.population_size=48 experiment.pareto.generations=40
     python -m deltajax.run experiment=ga_reconfig hydra.run.dir=<dir of a killed run>      # resume
+    python -m deltajax.run experiment=ga_reconfig experiment.continue_from=<a finished run> <larger budget>
 
 The problem (``configs/experiment/ga_reconfig.yaml``, read by :func:`deltajax.config.ga_reconfig_settings`):
 serve a task cylinder with the 25/305/25 mm cycle and a payload, with given servo motors through a gearbox
@@ -12,7 +13,10 @@ in the good workspace, passive joints, interference, motor envelope and RMS rati
 Stages (the library: :mod:`deltajax.optimize.workflow`; each stored in ``results.h5``, a rerun into the same
 ``hydra.run.dir`` resumes after the last finished one and a finished run is a no-op):
 baseline -> screen (Sobol, seeds the GA) -> ga (checkpointed) -> pareto (NSGA-II) -> refine (optax) ->
-verify (fine grids, recommendation) -> results (summary) -> plots.
+verify (fine grids, recommendation) -> results (summary) -> plots. ``experiment.continue_from`` (more budget for
+a finished run, :func:`deltajax.optimize.workflow.earlier_run`): its verified front seeds the GA and NSGA-II and
+joins the verified candidates with its stored metrics, so the recommendation cannot be one its recommendation
+dominates.
 The GA paper's claims are *not* compared here (different metrics); see docs/REPRODUCTION.md §5.
 """
 

@@ -19,6 +19,9 @@ only orders them, stores their outputs in ``results.h5`` and draws the plots.
    (:func:`deltajax.constraints.refine_cylinder`) (progress bar), the verified front, the floor step
    (:func:`deltajax.optimize.floor.solve_floor`, rule ``floor``: the rule's answer solved for from the verified
    front with :func:`descent_paths`), and :func:`recommend` (rule ``floor``, ``band``, ``knee`` or ``primary``).
+6. More budget for a finished run (``experiment.continue_from``): :func:`earlier_run` reads it (finished, the same
+   problem: only :data:`BUDGET_SETTINGS` differ), its verified front seeds the searches and
+   :func:`carry_earlier` adds it to the verified candidates with the metrics it verified.
 """
 
 from __future__ import annotations
