@@ -192,6 +192,7 @@ def test_a_different_config_into_a_finished_dir_is_refused(full_run):
     ("experiment.ga.generations=-1", "experiment.ga.generations"),
     ("experiment.constraints.max_arm_sum=-1", "experiment.constraints.max_arm_sum must be > 0"),
     ("experiment.cycle.law=linear", "experiment.cycle.law must be one of"),
+    ("experiment.continue_from=5", "experiment.continue_from must be null or the path of a finished ga_reconfig"),
 ])
 def test_bad_config_is_one_line_naming_the_field(override, match, tmp_path):
     with pytest.raises(ConfigError, match=match.replace("[", r"\[").replace("(", r"\(")) as ei:
@@ -278,6 +279,14 @@ def test_a_continued_run_keeps_the_earlier_answer_and_can_only_improve_it(full_r
     assert not (np.all(a >= b) and np.any(a > b)), (a, b)
     assert new["attrs"]["hypervolume"] >= old["attrs"]["hypervolume"]
     assert "continued run: the earlier recommendation earlier_" in caplog.text
+    # a continued run continued again (its search stages off): every name unique, the first run's front still there
+    p2 = run_experiment("ga_reconfig", TOY + [f"experiment.continue_from={p}", *GA_STAGES_OFF],
+                        run_dir=tmp_path / "again")
+    again = load(p2)["verify"]
+    names2 = list(again["design_name"])
+    assert len(set(names2)) == len(names2)
+    assert {f"earlier_{n}" for n in np.asarray(new["design_name"])[np.asarray(new["front"]).reshape(-1)]} <= set(names2)
+    assert again["attrs"]["hypervolume"] >= new["attrs"]["hypervolume"]
 
 
 @pytest.mark.slow

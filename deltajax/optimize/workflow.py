@@ -426,7 +426,7 @@ class EarlierRun:
 
     path: Path                 # its results.h5
     fingerprint: str           # its ga_reconfig_fingerprint
-    names: tuple               # its front points' names there, prefixed "earlier_"
+    names: tuple               # its front points' names there, each prefixed "earlier_"
     genes: np.ndarray          # (k, d) their genes
     rows: np.ndarray           # (k,) their rows on its verify group's design axis
     verify: Mapping[str, Any]  # its verify group as loaded (metrics on the fine grids)
@@ -474,11 +474,12 @@ def earlier_run(where: str, cfg) -> EarlierRun:
                          "and generations, .refine, .floor_solve)")
     V = data["verify"]
     rows = np.asarray(V["front"], int).reshape(-1)
-    names = [str(n) for n in np.asarray(V["design_name"])[rows]]
+    genes = np.asarray(V["genes"], float)
+    names = [str(n) for n in np.asarray(V["design_name"]).reshape(-1)[rows]]
     rec = int(V["attrs"]["recommended"])
-    return EarlierRun(path=p, fingerprint=fp, names=tuple(n if n.startswith("earlier_") else f"earlier_{n}"
-                                                             for n in names),
-                      genes=np.asarray(V["genes"], float)[rows].reshape(len(rows), -1), rows=rows, verify=V,
+    # "earlier_" on every carried name (a chain of continuations gives earlier_earlier_..., names stay unique)
+    return EarlierRun(path=p, fingerprint=fp, names=tuple(f"earlier_{n}" for n in names),
+                      genes=genes.reshape(-1, genes.shape[-1])[rows], rows=rows, verify=V,
                       recommended=int(np.flatnonzero(rows == rec)[0]) if rec in rows else -1)
 
 
