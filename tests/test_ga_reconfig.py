@@ -273,6 +273,9 @@ def test_a_continued_run_keeps_the_earlier_answer_and_can_only_improve_it(full_r
         np.testing.assert_array_equal(new["genes"][i], old["genes"][r])
         for k in objs + ["feasible", "constraint_values", "R_operating"]:
             np.testing.assert_array_equal(new[k][i], old[k][r], err_msg=k)
+    carried = [i for i, n in enumerate(names) if n.startswith("earlier_")]
+    for i in set(range(1, len(names))) - set(carried):              # no design verified twice under two names
+        assert not np.any(np.all(new["genes"][carried] == new["genes"][i], axis=1)), names[i]
     sense = np.asarray([DESIGN_SENSE[o] for o in objs])
     a = np.asarray([old[o][int(old["attrs"]["recommended"])] for o in objs]) * -sense   # larger is better
     b = np.asarray([new[o][int(new["attrs"]["recommended"])] for o in objs]) * -sense

@@ -288,6 +288,9 @@ def run(ctx) -> None:
         cand = np.concatenate([base_genes[None], best[None], front_X, refined, extra_X])
         names = (["baseline", "ga_best"] + [f"pareto_{i}" for i in range(len(front_X))]
                  + [f"refined_{i}" for i in range(len(refined))] + [f"population_{i}" for i in range(len(extra_X))])
+        if earlier is not None:     # a design the earlier run verified (e.g. a seed the GA kept) keeps its name there
+            keep = [i for i in range(len(cand)) if i == 0 or not np.any(np.all(carried == cand[i], axis=1))]
+            cand, names = cand[keep], [names[i] for i in keep]
         bar = ctx.progress(total=len(cand), desc="verify (fine grids)")
         mv = W.verify(pb_fine, space_v, cand, progress=bar.update)
         bar.close()
@@ -340,7 +343,8 @@ def run(ctx) -> None:
                 e_rec = n_before_floor - len(carried) + earlier.recommended
                 ctx.log(f"continued run: the earlier recommendation {names[e_rec]} ("
                         + ", ".join(f"{o} {float(mv[o][e_rec]):.5g}" for o in objs) + f") -> {names[rec]} ("
-                        + ", ".join(f"{o} {float(mv[o][rec]):.5g}" for o in objs) + ")")
+                        + ", ".join(f"{o} {float(mv[o][rec]):.5g}" for o in objs) + ")"
+                        + (": kept, nothing verified here does better by the rule" if rec == e_rec else ""))
         ctx.log(f"verified on the fine grids: {len(cand)} candidates, {len(ok)} feasible; front {len(nd)} points, "
                 f"hypervolume {hv:.4g}; recommended: {names[rec] if rec >= 0 else 'none'} ({R.rule_text(s)})")
         mark("verify")
