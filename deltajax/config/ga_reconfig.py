@@ -14,9 +14,9 @@ from ._readers import ConfigError, _choice, _field
 # GA settings and problem are then built by deltajax.optimize.workflow.setup (errors there become ConfigError here).
 
 _GA_KEYS = {
-    "": {"name", "resume", "stop_after", "continue_from", "design", "task", "good_workspace", "joints", "links", "motor", "cycle",
-         "regular_workspace", "objectives", "constraints", "screen", "ga", "pareto", "refine", "recommend",
-         "recommend_band", "recommend_floor", "floor_solve", "verify",
+    "": {"name", "resume", "stop_after", "continue_from", "design", "task", "good_workspace", "joints", "links",
+         "motor", "cycle", "regular_workspace", "objectives", "constraints", "screen", "ga", "pareto", "refine",
+         "recommend", "recommend_band", "recommend_floor", "floor_solve", "verify",
          "reconfig"},  # rtmode: experiment.reconfig is checked by deltajax.optimize.operating
     "screen": {"enabled", "log2_size", "seed_fraction"},
     "refine": {"enabled", "steps", "learning_rate", "penalty"},

@@ -478,7 +478,7 @@ def earlier_run(where: str, cfg) -> EarlierRun:
     names = [str(n) for n in np.asarray(V["design_name"]).reshape(-1)[rows]]
     rec = int(V["attrs"]["recommended"])
     # "earlier_" on every carried name (a chain of continuations gives earlier_earlier_..., names stay unique)
-    return EarlierRun(path=p, fingerprint=fp, names=tuple(f"earlier_{n}" for n in names),
+    return EarlierRun(path=p.resolve(), fingerprint=fp, names=tuple(f"earlier_{n}" for n in names),
                       genes=genes.reshape(-1, genes.shape[-1])[rows], rows=rows, verify=V,
                       recommended=int(np.flatnonzero(rows == rec)[0]) if rec in rows else -1)
 
