@@ -273,6 +273,8 @@ def test_a_continued_run_keeps_the_earlier_answer_and_can_only_improve_it(full_r
         np.testing.assert_array_equal(new["genes"][i], old["genes"][r])
         for k in objs + ["feasible", "constraint_values", "R_operating"]:
             np.testing.assert_array_equal(new[k][i], old[k][r], err_msg=k)
+    assert new["attrs"]["ga_best_design"] in names                  # "ga_best", or the carried design it kept
+    assert (p.parent / "ga_pareto.png").exists()
     carried = [i for i, n in enumerate(names) if n.startswith("earlier_")]
     for i in set(range(1, len(names))) - set(carried):              # no design verified twice under two names
         assert not np.any(np.all(new["genes"][carried] == new["genes"][i], axis=1)), names[i]

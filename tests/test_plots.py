@@ -193,3 +193,25 @@ def test_ga_pareto_draws_the_floor_and_the_floor_step_designs():
     assert floor_line(V, objs, s) is None
     fig = ga_pareto(V, objs, s, units, floor=floor_line(V, objs, s))
     assert not any(str(ln.get_label()).startswith("floor:") for ln in fig.axes[0].get_lines())
+
+
+def test_ga_pareto_of_a_continued_run_marks_the_earlier_front_and_finds_the_ga_best_by_name():
+    # experiment.continue_from: the earlier run's front is carried ("earlier_*"), and when the GA kept one of those
+    # designs as its best, no "ga_best" row exists (verify attrs ga_best_design names it)
+    from types import SimpleNamespace
+
+    from deltajax.plots.designer import ga_pareto
+
+    names = ["baseline", "pareto_0", "pareto_1", "earlier_pareto_0", "earlier_floor_0"]
+    pk = np.array([195.0, 214.0, 216.6, 216.0, 216.4])
+    vol = np.array([0.0265, 0.034, 0.0322, 0.033, 0.0323])
+    V = {"picks_per_min": pk, "regular_volume": vol, "regular_volume_fixed": vol / 4,
+         "feasible": np.ones(len(names), np.int8), "front": np.array([2, 1]), "design_name": names,
+         "attrs": {"recommended": 2, "hypervolume": 1.6, "ga_best_design": "earlier_floor_0"}}
+    s = SimpleNamespace(primary="picks_per_min", recommend="floor", recommend_floor=1.2, recommend_band=0.02)
+    fig = ga_pareto(V, ["picks_per_min", "regular_volume"], s, {"picks_per_min": "1/min", "regular_volume": "m^3"})
+    labels = {ln.get_label(): ln for ln in fig.axes[0].get_lines()}
+    np.testing.assert_allclose(labels["GA best on picks_per_min"].get_xdata(), [216.4])
+    np.testing.assert_allclose(labels["the earlier run's front (experiment.continue_from; its verified values)"]
+                               .get_xdata(), [216.0, 216.4])
+    np.testing.assert_allclose(labels["candidates, feasible, dominated"].get_xdata(), [216.0])  # GA best apart

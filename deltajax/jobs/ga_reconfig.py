@@ -288,9 +288,12 @@ def run(ctx) -> None:
         cand = np.concatenate([base_genes[None], best[None], front_X, refined, extra_X])
         names = (["baseline", "ga_best"] + [f"pareto_{i}" for i in range(len(front_X))]
                  + [f"refined_{i}" for i in range(len(refined))] + [f"population_{i}" for i in range(len(extra_X))])
+        ga_best_name = "ga_best"
         if earlier is not None:     # a design the earlier run verified (e.g. a seed the GA kept) keeps its name there
             keep = [i for i in range(len(cand)) if i == 0 or not np.any(np.all(carried == cand[i], axis=1))]
             cand, names = cand[keep], [names[i] for i in keep]
+            same = np.flatnonzero(np.all(carried == best, axis=1))
+            ga_best_name = earlier.names[same[0]] if len(same) else ga_best_name
         bar = ctx.progress(total=len(cand), desc="verify (fine grids)")
         mv = W.verify(pb_fine, space_v, cand, progress=bar.update)
         bar.close()
@@ -336,6 +339,7 @@ def run(ctx) -> None:
         hv = hypervolume(Fv[nd], ref) if len(nd) else 0.0
         # -- write ----------------------------------------------------------------------------------------------
         R.store_verify(res, space, cand, names, mv, Fv, nd, rec, hv, hypervolume(Fv[:1], ref), ref, objs, s)
+        res.set_attrs("verify", ga_best_design=ga_best_name)
         if earlier is not None:
             res.set_attrs("verify", continued_from=str(earlier.path), continued_from_fingerprint=earlier.fingerprint,
                           carried_designs=",".join(earlier.names))

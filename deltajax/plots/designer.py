@@ -38,7 +38,8 @@ def ga_convergence(G):
 
 def ga_pareto(V, objs, s, units, floor=None):
     """The main job's designs verified on the fine grids in the plane of the first two objectives: front,
-    baseline, GA best, refined and recommended designs (``V``: the staged ``verify`` group; ``s``: the job's
+    baseline, GA best, refined, floor-step, carried (a continued run's) and recommended designs (``V``: the staged
+    ``verify`` group; ``s``: the job's
     settings; ``units``: each objective's unit, e.g. ``{"picks_per_min": "1/min", "regular_volume": "m^3"}``;
     ``floor``: ``(objective, value)`` of the recommendation rule's floor in that objective's units, drawn as a line
     (:func:`deltajax.optimize.report.floor_line`), or None); None without them."""
@@ -55,7 +56,11 @@ def ga_pareto(V, objs, s, units, floor=None):
     ux = "dm^3 (L)" if sx == 1e3 else units[o0]
     uy = "dm^3 (L)" if sy == 1e3 else units[o1]
     fig, ax = plt.subplots(figsize=(11, 4.8))
-    others = np.setdiff1d(np.arange(2, len(x)), front)
+    names = [str(n) for n in V["design_name"]]
+    # the GA's best by name: in a continued run (experiment.continue_from) it can be a design of the earlier run
+    g = V["attrs"].get("ga_best_design", "ga_best")
+    gi = names.index(g) if g in names else -1
+    others = np.setdiff1d(np.arange(1, len(x)), np.concatenate([front, [gi]]))
     dom, bad = others[feas[others]], others[~feas[others]]
     if len(dom):
         ax.plot(x[dom] * sx, y[dom] * sy, "o", mfc="none", color="0.55", ms=5, label="candidates, feasible, dominated")
@@ -67,13 +72,17 @@ def ga_pareto(V, objs, s, units, floor=None):
         ax.step(x[o] * sx, y[o] * sy, "-", where="pre", color="C0", lw=1, alpha=0.6)
         ax.plot(x[o] * sx, y[o] * sy, "o", color="C0", ms=6, label="Pareto front (verified, all feasible)")
     ax.plot(x[0] * sx, y[0] * sy, "k*", ms=14, label="baseline franco2026" + ("" if feas[0] else " (infeasible)"))
-    if feas[1]:
-        ax.plot(x[1] * sx, y[1] * sy, "s", color="C2", ms=8, mfc="none", mew=2, label=f"GA best on {s.primary}")
-    ref_i = [i for i, n in enumerate(V["design_name"]) if str(n).startswith("refined_")]
+    if gi >= 0 and feas[gi]:
+        ax.plot(x[gi] * sx, y[gi] * sy, "s", color="C2", ms=8, mfc="none", mew=2, label=f"GA best on {s.primary}")
+    ea_i = [i for i, n in enumerate(names) if n.startswith("earlier_")]
+    if ea_i:
+        ax.plot(x[ea_i] * sx, y[ea_i] * sy, "o", color="C7", ms=9, mfc="none", mew=1.2,
+                label="the earlier run's front (experiment.continue_from; its verified values)")
+    ref_i = [i for i, n in enumerate(names) if n.startswith("refined_")]
     if ref_i:
         ax.plot(x[ref_i] * sx, y[ref_i] * sy, "^", color="C1", ms=7, mfc="none", mew=1.5,
                 label="refined by optax (accepted: feasible, no objective worse)")
-    fl_i = [i for i, n in enumerate(V["design_name"]) if str(n).startswith("floor_")]
+    fl_i = [i for i, n in enumerate(names) if n.startswith("floor_")]
     if fl_i:
         ax.plot(x[fl_i] * sx, y[fl_i] * sy, "+", color="C4", ms=9, mew=1.5,
                 label="floor step (descents at the floor, verified)")
