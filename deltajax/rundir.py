@@ -75,19 +75,21 @@ def _same(a: Any, b: Any) -> bool:
     return a == b
 
 
-def _neutral(key: str) -> bool:
-    return any(key == n or key.startswith(n + ".") for n in NEUTRAL)
+def _neutral(key: str, ignore: tuple = ()) -> bool:
+    return any(key == n or key.startswith(n + ".") for n in NEUTRAL + tuple(ignore))
 
 
-def config_differences(old: Mapping[str, Any], new: Mapping[str, Any]) -> list[tuple[str, Any, Any]]:
-    """(dotted key, old value, new value) of every setting that differs, :data:`NEUTRAL` ones left out.
+def config_differences(old: Mapping[str, Any], new: Mapping[str, Any], ignore: tuple = ()
+                       ) -> list[tuple[str, Any, Any]]:
+    """(dotted key, old value, new value) of every setting that differs, :data:`NEUTRAL` ones and those under
+    ``ignore`` (dotted keys or prefixes) left out.
 
     A key missing on one side has the value ``"<unset>"`` there.
     """
     a, b = _flatten(old), _flatten(new)
     out = []
     for k in sorted(a.keys() | b.keys()):
-        if _neutral(k):
+        if _neutral(k, ignore):
             continue
         va, vb = a.get(k, "<unset>"), b.get(k, "<unset>")
         if not _same(va, vb):

@@ -176,6 +176,7 @@ def store_verify(res, space, cand, names, mv, Fv, nd, rec, hv, hv_base, ref, obj
     import jax.numpy as jnp
 
     from .designer import CONSTRAINT_NAMES, DESIGN_UNITS
+    from .workflow import STORED_METRIC
 
     res.put_axis("verify", "design", np.arange(len(cand)), units="1")
     res.put_axis("verify", "gene", np.arange(space.dim), units="1")
@@ -190,7 +191,7 @@ def store_verify(res, space, cand, names, mv, Fv, nd, rec, hv, hv_base, ref, obj
                    "units_per_gene": ",".join(space.units(n) for n in space.names)})
     for k, v in mv.items():
         if k == "g":
-            res.put("verify", "constraint_values", v, units="1", dims=("design", "constraint"),
+            res.put("verify", STORED_METRIC[k], v, units="1", dims=("design", "constraint"),
                     attrs={"meaning": "normalised constraint values, <= 0 satisfied (see deltajax.optimize.designer)"})
         else:
             res.put("verify", k, v.astype(float) if v.dtype != bool else v.astype(np.uint8),

@@ -44,8 +44,8 @@ from .programs import batch_evaluator, content_key, design_metrics, objective_ma
 __all__ = ["SetupError", "setup", "designer_problem", "screen", "screen_front", "ga_fitness", "pareto_eval",
            "refine_designs", "RefineOutcome", "descent_paths", "verify", "floor_limits", "recommend",
            "load_checkpoint", "put_checkpoint", "restage", "stages_done", "job_fingerprint", "RECOMMEND_RULES",
-           "DESCENT_ROWS", "design_metrics", "batch_evaluator", "objective_matrix", "BUDGET_SETTINGS", "EarlierRun",
-           "continued_file", "earlier_run", "carry_earlier"]
+           "DESCENT_ROWS", "design_metrics", "batch_evaluator", "objective_matrix", "BUDGET_SETTINGS",
+           "STORED_METRIC", "EarlierRun", "continued_file", "earlier_run", "carry_earlier"]
 
 RECOMMEND_RULES = ("band", "knee", "primary")
 
@@ -412,12 +412,16 @@ def stages_done(path: Path) -> tuple[Optional[str], list]:
 
 # -- continuing a finished run with more budget (experiment.continue_from) --------------------------------------------
 
-#: Settings a continued run may change: the search's budget. Everything else (robot, precision, the problem, the
-#: verification grids, the recommendation rule) must equal the earlier run's, so that its verified metrics hold here.
-BUDGET_SETTINGS = ("seed", "plots", "progress", "compilation_cache", "fresh", "experiment.resume",
-                   "experiment.stop_after", "experiment.continue_from", "experiment.screen", "experiment.ga",
+#: Settings a continued run may change: the search's budget (besides :data:`deltajax.rundir.NEUTRAL`, which never
+#: change the numbers). Everything else (robot, precision, the problem, the verification grids, the recommendation
+#: rule) must equal the earlier run's, so that its verified metrics hold here.
+BUDGET_SETTINGS = ("seed", "experiment.continue_from", "experiment.screen", "experiment.ga",
                    "experiment.pareto.enabled", "experiment.pareto.population_size", "experiment.pareto.generations",
                    "experiment.refine", "experiment.floor_solve")
+
+#: The name under which ``verify`` stores a metric of the fine-grid evaluation (written by
+#: :func:`deltajax.optimize.report.store_verify`, read back by :func:`carry_earlier`); others keep their own.
+STORED_METRIC = {"g": "constraint_values"}
 
 
 @dataclasses.dataclass(frozen=True)
@@ -466,8 +470,7 @@ def earlier_run(where: str, cfg) -> EarlierRun:
         raise SetupError(f"{key}: the run in {p} has not finished its verification (stages done: "
                          f"{','.join(done) or 'none'}); resume it first (rerun with hydra.run.dir={p.parent})")
     new = OmegaConf.to_container(cfg, resolve=True)
-    diffs = [d for d in config_differences(old, new)
-             if not any(d[0] == b or d[0].startswith(b + ".") for b in BUDGET_SETTINGS)]
+    diffs = config_differences(old, new, ignore=BUDGET_SETTINGS)
     if diffs:
         raise SetupError(f"{key}: {p} is a run of another problem ({describe_differences(diffs)}); a continued run "
                          "may change only the search budget (seed, experiment.screen, .ga, .pareto population_size "
@@ -489,7 +492,7 @@ def carry_earlier(mv: Mapping[str, np.ndarray], earlier: EarlierRun, objs: Seque
     :class:`SetupError` when the earlier run's verified baseline differs from this run's (another deltajax
     computed it) or its file lacks a metric this run has."""
     V = earlier.verify
-    missing = [k for k in mv if ("constraint_values" if k == "g" else k) not in V]
+    missing = [k for k in mv if STORED_METRIC.get(k, k) not in V]
     if missing:
         raise SetupError(f"experiment.continue_from: {earlier.path} lacks the metrics {', '.join(sorted(missing))} "
                          "(written by an older deltajax); start a new run")
@@ -500,6 +503,6 @@ def carry_earlier(mv: Mapping[str, np.ndarray], earlier: EarlierRun, objs: Seque
                              f"{earlier.path} (computed by another deltajax); start a new run")
     out = {}
     for k, v in mv.items():
-        old = np.asarray(V["constraint_values" if k == "g" else k])[earlier.rows]
+        old = np.asarray(V[STORED_METRIC.get(k, k)])[earlier.rows]
         out[k] = np.concatenate([np.asarray(v), old.astype(np.asarray(v).dtype)])
     return out

@@ -39,8 +39,8 @@ def ga_convergence(G):
 def ga_pareto(V, objs, s, units, floor=None):
     """The main job's designs verified on the fine grids in the plane of the first two objectives: front,
     baseline, GA best, refined, floor-step, carried (a continued run's) and recommended designs (``V``: the staged
-    ``verify`` group; ``s``: the job's
-    settings; ``units``: each objective's unit, e.g. ``{"picks_per_min": "1/min", "regular_volume": "m^3"}``;
+    ``verify`` group; ``s``: the job's settings; ``units``: each objective's unit, e.g. ``{"picks_per_min":
+    "1/min", "regular_volume": "m^3"}``;
     ``floor``: ``(objective, value)`` of the recommendation rule's floor in that objective's units, drawn as a line
     (:func:`deltajax.optimize.report.floor_line`), or None); None without them."""
     plt = _plt()
