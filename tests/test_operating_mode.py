@@ -1,4 +1,4 @@
-"""Issue 14 item 4 / issue 12 item 5: the reconfigurable design's operating mode in ga_reconfig, "R per task" or
+"""The reconfigurable design's operating mode in ga_reconfig, "R per task" or
 "R(t) along the cycle" under the R drive's limits (deltajax/optimize/operating.py)."""
 
 import math

@@ -1,4 +1,4 @@
-"""The layout step of issue 10: config.py reads every job's fields once, papers.py holds the published numbers,
+"""Configuration read once: config.py reads every job's fields once, papers.py holds the published numbers,
 cycle.py split from dynamics.py with the old names kept, and the jobs' validation happens before the claim."""
 
 import pytest
