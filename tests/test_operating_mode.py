@@ -12,7 +12,7 @@ from hydra import compose, initialize_config_dir
 
 from deltajax import motion
 from deltajax.config import ConfigError, robot_from_config
-from deltajax.dynamics import cycle_profile
+from deltajax.cycle import cycle_profile
 from deltajax.jobs.ga_reconfig import build
 from deltajax.mechanism import drive_profile
 from deltajax.motion_refine import spline_basis

@@ -17,7 +17,7 @@ Metrics of one design (``METRICS``; units in :data:`METRIC_UNITS`, sense in :dat
   unreachable task points count as 0.
 * ``task_coverage``: fraction of the task cylinder that is reachable with index >= ``task.k_min``.
 * ``peak_torque``: max over actuators and time of |tau| on the standard pick-and-place ("Adept") cycle at its
-  nominal duration (N m), :func:`deltajax.dynamics.cycle_metrics`.
+  nominal duration (N m), :func:`deltajax.cycle.cycle_metrics`.
 * ``cycle_time``: minimum duration of that cycle under the motor torque and speed limits (s).
 * ``peak_speed``: end-effector speed (m/s) the motors give at ``motor_speed`` rad/s each, max over the
   directions |thetadot_i| <= motor_speed (the four vertex sign patterns of the box), averaged over the task
