@@ -19,10 +19,6 @@ from . import reference
 from . import cycle, dynamics, trajectory
 from .cycle import CycleMetrics, Limits, cycle_metrics, cycle_profile
 from .dynamics import Torques, inverse_dynamics
-
-for _name in cycle.MOVED_FROM_DYNAMICS:  # deltajax.dynamics.X of code written before cycle.py split off
-    setattr(dynamics, _name, getattr(cycle, _name))
-del _name
 from .mass import MassModel
 from .trajectory import Cycle, adept_cycle, ga_paper_motion
 from . import constraints

@@ -24,13 +24,7 @@ from .geometry import Delta
 from .mass import FOREARM_MODELS
 from .trajectory import trapezoid_weights
 
-#: The names that lived in :mod:`deltajax.dynamics` before the split; ``deltajax/__init__.py`` keeps them
-#: reachable as ``deltajax.dynamics.X`` for code written against it.
-MOVED_FROM_DYNAMICS = ("Limits", "CycleProfile", "CycleMetrics", "cycle_profile", "cycle_metrics", "within_limits",
-                       "min_cycle_time_bisection")
-
 __all__ = [
-    "MOVED_FROM_DYNAMICS",
     "Limits",
     "CycleProfile",
     "CycleMetrics",

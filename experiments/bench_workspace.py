@@ -73,7 +73,7 @@ def compare_backends(hs, old_jax: bool = True) -> None:
     machine code is cached on disk (warmed on a tiny grid first). The results must agree: the same reachable
     set and index statistics to rounding (JAX's fast singular values vs Numba's Jacobi ones), and the new JAX
     path's stored k~ field equal to the old one's to the old path's own rounding (its in-jit stack of the
-    outputs compiles the kernel differently; tests/test_jaxws_compact.py checks the new path bit for bit
+    outputs compiles the kernel differently; tests/test_workspace_grid_jax.py checks the new path bit for bit
     against the kernel)."""
     import tempfile
     from pathlib import Path

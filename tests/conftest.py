@@ -132,8 +132,8 @@ def toy_run(tmp_path_factory):
 #: Order from the CI durations of 2026-12-02 01:23 (warm XLA cache): the SLURM tests (one worker, ~190 s alone,
 #: mostly waiting for the cluster's jobs), the main job's toy runs (GA_TOY), the R(t) job, the sweeps, the kill/resume
 #: tests, the population screens, the other jobs end to end, the GPU check script, ...
-LONG_FIRST = ("tests/test_slurm.py", "tests/test_ga_reconfig.py", "tests/test_rtmode.py", "tests/test_sweeps.py",
-              "tests/test_faults.py", "tests/test_fitness_screen.py", "tests/test_jobs.py", "tests/test_gpu_check.py",
+LONG_FIRST = ("tests/test_slurm.py", "tests/test_ga_reconfig.py", "tests/test_operating_mode.py", "tests/test_sweeps.py",
+              "tests/test_faults.py", "tests/test_ga_fitness.py", "tests/test_jobs.py", "tests/test_gpu_check.py",
               "tests/test_optimize.py", "tests/test_dynamics.py", "tests/test_kernel.py", "tests/test_packaging.py",
               "tests/test_motion.py", "tests/test_backends.py")
 
@@ -141,9 +141,9 @@ LONG_FIRST = ("tests/test_slurm.py", "tests/test_ga_reconfig.py", "tests/test_rt
 #: files whose tests share in-process compiles without a fixture (module-level jitted functions or lru_cache'd
 #: compiled functions): one worker each, so that each is traced and compiled once per session, not once per
 #: worker. test_backends' two point-kernel cases each compiled the same Numba functions (~320 s wall each, cold,
-#: on both workers at once, 2026-12-01); test_fitness_screen's exact and screened population covers (per k_min)
+#: on both workers at once, 2026-12-01); test_ga_fitness's exact and screened population covers (per k_min)
 #: serve three tests
-SAME_WORKER = ("tests/test_backends.py", "tests/test_fitness_screen.py", "tests/test_jaxws_compact.py",
+SAME_WORKER = ("tests/test_backends.py", "tests/test_ga_fitness.py", "tests/test_workspace_grid_jax.py",
                "tests/test_dynamics.py", "tests/test_kernel.py", "tests/test_kinematics.py",
                "tests/test_trajectory.py", "tests/test_indices.py")
 
@@ -151,7 +151,7 @@ SAME_WORKER = ("tests/test_backends.py", "tests/test_fitness_screen.py", "tests/
 #: tests that run the main job in-process on the toy size's search and verification grids (tests/toy_jobs.py), or
 #: its refine descent: one worker, so that the job's compiled programs, which deltajax.optimize.workflow keeps by
 #: the content of the problem, are traced and compiled once per session rather than once per worker
-GA_TOY = ("tests/test_ga_reconfig.py", "tests/test_ga_resume_compat.py", "tests/test_jobs.py::test_ga_reconfig_",
+GA_TOY = ("tests/test_ga_reconfig.py", "tests/test_resume_older_runs.py", "tests/test_jobs.py::test_ga_reconfig_",
           "tests/test_jobs.py::test_every_job_end_to_end_at_toy_size[ga_reconfig]",
           "tests/test_optimize.py::test_refine_designs_",
           "tests/test_results_files.py::test_xarray_opens_every_group_with_units[ga_reconfig]")
@@ -170,6 +170,58 @@ def pytest_configure(config):
 
         os.environ[_GROUPS_ENV] = tempfile.mkdtemp(prefix="deltajax-xdist-groups-")
         config.option.loadscopereorder = False
+
+
+#: every process the session starts (xdist workers, CLI subprocesses, sweep, submitit and loky workers, SLURM jobs
+#: submitted with the caller's environment) inherits this variable; a process's /proc/PID/environ is the
+#: environment it was started with, so the controller itself (which sets it after its own start) does not carry it
+_SESSION_ENV = "DELTAJAX_TEST_SESSION"
+_SESSION_TOKEN = os.environ.setdefault(_SESSION_ENV, f"{os.getpid()}-{os.urandom(6).hex()}")
+#: how long a finished session waits for the processes it started to exit before it calls them left over
+LEFTOVER_GRACE_S = 15.0
+
+
+def session_processes(token: str = _SESSION_TOKEN) -> dict[int, str]:
+    """{pid: command line} of the running processes started by the test session ``token`` (Linux /proc)."""
+    marker = f"{_SESSION_ENV}={token}".encode()
+    found = {}
+    for d in Path("/proc").iterdir():
+        if not d.name.isdigit() or int(d.name) == os.getpid():
+            continue
+        try:
+            if marker in (d / "environ").read_bytes().split(b"\0"):
+                stat = (d / "stat").read_text()
+                if stat[stat.rindex(")") + 2] == "Z":  # a zombie has ended; its parent has not reaped it yet
+                    continue
+                found[int(d.name)] = (d / "cmdline").read_bytes().replace(b"\0", b" ").decode(errors="replace")
+        except (OSError, ValueError):  # gone meanwhile, or not ours to read
+            continue
+    return found
+
+
+@pytest.hookimpl(hookwrapper=True, trylast=True)
+def pytest_sessionfinish(session, exitstatus):
+    """In the controller, after every other finish hook (pytest-xdist's shutdown of its workers included): no
+    process that the session started may still be running. Leftovers are listed, killed, and fail the session."""
+    yield
+    if hasattr(session.config, "workerinput") or not Path("/proc/self/environ").exists():
+        return
+    import signal
+    import time
+
+    deadline = time.monotonic() + LEFTOVER_GRACE_S
+    while (left := session_processes()) and time.monotonic() < deadline:
+        time.sleep(0.5)
+    if not left:
+        return
+    for pid in left:
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+    lines = "\n".join(f"  {pid}: {cmd[:200]}" for pid, cmd in sorted(left.items()))
+    session.config.get_terminal_writer().line(
+        f"\nthe test session left {len(left)} process(es) running {LEFTOVER_GRACE_S:.0f} s after its end (killed):\n"
+        f"{lines}", red=True)
+    session.exitstatus = pytest.ExitCode.TESTS_FAILED
 
 
 def pytest_unconfigure(config):

@@ -255,7 +255,7 @@ def test_cycle_rate_gradient_is_the_implicit_derivative_of_the_bisection():
     np.testing.assert_allclose(g, cd, rtol=2e-4)
 
 
-# -- continuous regular-workspace measure (issue 12: the grid's levels quantised the recommended volume) ----------
+# -- continuous regular-workspace measure (a grid's levels would quantise the volume) --------------------------
 
 def _ball(c, rho):
     return lambda p: jnp.sum((p - jnp.asarray([0.0, 0.0, c])) ** 2) <= rho * rho

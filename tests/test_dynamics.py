@@ -548,7 +548,7 @@ def test_dynamics_cycle_experiment_reports_both_forearm_models(toy_run):
     cases = list(cmp_["case"])
     assert "industrial/adept" in cases and "franco2026/adept" in cases
     ind = d["industrial"]["adept_forearm_models"]
-    assert -0.09 < float(ind["rel_change_peak_torque"]) < -0.05      # ~ -7 % (issue 16)
+    assert -0.09 < float(ind["rel_change_peak_torque"]) < -0.05      # ~ -7 %
     assert float(ind["rel_change_cycle_time"]) < 0
     # the robot's own model (rigid_rod, the preset default) is what the main metrics hold
     np.testing.assert_array_equal(ind["peak_torque"][0], d["industrial"]["adept_metrics"]["peak_torque"])

@@ -1,4 +1,4 @@
-"""Fault injection (issue 11): kills, a full disk, concurrent starts, garbage and tampered files, bad configs,
+"""Fault injection: kills, a full disk, concurrent starts, garbage and tampered files, bad configs,
 fuzzed batches. Nothing finished may be lost, nothing may come back silently wrong, and every refusal is one
 line that names the path or the field and says what to do.
 

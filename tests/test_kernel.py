@@ -1,4 +1,4 @@
-"""The one kernel (issue 9) and failure as data (issue 11 item 7): accuracy against LAPACK and the NumPy
+"""The one kernel and failure as data: accuracy against LAPACK and the NumPy
 reference, finite and correct gradients, invalid inputs and designs, singularity detection through IK."""
 
 import math

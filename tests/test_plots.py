@@ -215,3 +215,18 @@ def test_ga_pareto_of_a_continued_run_marks_the_earlier_front_and_finds_the_ga_b
     np.testing.assert_allclose(labels["the earlier run's front (experiment.continue_from; its verified values)"]
                                .get_xdata(), [216.0, 216.4])
     np.testing.assert_allclose(labels["candidates, feasible, dominated"].get_xdata(), [216.0])  # GA best apart
+
+
+def test_reconfig_motion_torque_methods_stay_distinguishable_where_they_agree():
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from deltajax.jobs import reconfig_motion as job
+
+    t = np.linspace(0.0, 1.0, 20)
+    tau = np.stack([np.sin(t), np.cos(t), t], axis=1)
+    figs = [plots.motion_torques("adept", t, {m: {"tau": tau} for m in job.METHODS})]
+    for ax in figs[0].axes:
+        styles = {(str(ln.get_linestyle()), ln.get_linewidth()) for ln in ax.get_lines()}
+        assert len(ax.get_lines()) == len(job.METHODS) == len(styles)
+    matplotlib.pyplot.close(figs[0])

@@ -1,4 +1,4 @@
-"""Memory options of the grid drivers (issue 9 item 5): only the kept fields are stored, statistics accumulate
+"""Memory options of the grid drivers: only the kept fields are stored, statistics accumulate
 chunk by chunk (full-grid weights on the mirror half) and survive a kill + resume through the checkpoint."""
 
 import numpy as np

@@ -54,7 +54,7 @@ def overrides(name, *extra):
 
 def _optional_stages() -> set:
     """The ``experiment.<stage>`` blocks with an ``enabled`` switch in this checkout's ga_reconfig config (the
-    optax refine stage and the floor step came with issue 12; tests switch them off where they cost)."""
+    optax refine stage and the floor step; tests switch them off where they cost)."""
     from pathlib import Path
 
     import yaml

@@ -17,7 +17,7 @@ Metrics of one design (``METRICS``; units in :data:`METRIC_UNITS`, sense in :dat
   unreachable task points count as 0.
 * ``task_coverage``: fraction of the task cylinder that is reachable with index >= ``task.k_min``.
 * ``peak_torque``: max over actuators and time of |tau| on the standard pick-and-place ("Adept") cycle at its
-  nominal duration (N m), :func:`deltajax.dynamics.cycle_metrics`.
+  nominal duration (N m), :func:`deltajax.cycle.cycle_metrics`.
 * ``cycle_time``: minimum duration of that cycle under the motor torque and speed limits (s).
 * ``peak_speed``: end-effector speed (m/s) the motors give at ``motor_speed`` rad/s each, max over the
   directions |thetadot_i| <= motor_speed (the four vertex sign patterns of the box), averaged over the task
@@ -48,7 +48,7 @@ Population level (:func:`make_fitness`, :func:`evaluate_population`, ``screen=Tr
 and of the task coverage run for the whole population at once, skipping only samples that cannot change the
 answer (:func:`~deltajax.optimize.screens.reach_cover`, :func:`~deltajax.optimize.screens.task_cover`: a certified closed-form exclusion, one exact sample per point,
 then the exact sweep of the undecided points in ``lax.while_loop`` chunks); the flags, hence the fitness, are
-the per-design sweeps' bit for bit (tests/test_fitness_screen.py). :func:`evaluate_design` stays the per-design,
+the per-design sweeps' bit for bit (tests/test_ga_fitness.py). :func:`evaluate_design` stays the per-design,
 vmappable form.
 
 Fitness (minimised): sum_j w_j * s_j * m_j / m_j(baseline), s_j = -1 for metrics to maximise, +1 to minimise.

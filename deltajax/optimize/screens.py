@@ -4,7 +4,7 @@ a whole population at once, with the per-design sweeps' flags bit for bit and a 
 :func:`task_cover` decides each (design, task point) from exact values only (one IK pass, one exact sample per
 point, the exact sweep of the undecided points in ``lax.while_loop`` chunks); :func:`reach_cover` adds one
 certified closed-form exclusion (:data:`REACH_INFLATE`). :mod:`deltajax.optimize.objectives` (``screen=True``)
-calls them; tests/test_fitness_screen.py checks them against the sweeps.
+calls them; tests/test_ga_fitness.py checks them against the sweeps.
 """
 
 from __future__ import annotations

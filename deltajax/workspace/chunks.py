@@ -327,7 +327,7 @@ def plane_statistics(ok: np.ndarray, values: np.ndarray) -> dict[str, np.ndarray
     One pass over the values (:func:`deltajax.workspace._nb.plane_stats`, Numba) instead of NumPy's five full-size
     temporaries, which took half of a 2 mm ``workspace_grid`` run; the same numbers bit for bit (the sums in
     NumPy's order for this layout: each plane's points one after the other, masked entries as +0.0; tested
-    against the NumPy form in tests/test_jaxws_stats.py).
+    against the NumPy form in tests/test_workspace_plane_stats.py).
     """
     values = np.ascontiguousarray(values)
     ok = np.ascontiguousarray(ok, dtype=np.bool_)

@@ -102,7 +102,7 @@ def make_grid_evaluator(grid: Grid, n_devices: int, *, planes: int, b_v: float, 
     rest is padding, n = K ny nz with K = ``planes`` rounded up to a multiple of ``n_devices``).
 
     The kernel's values bit for bit (those of :func:`deltajax.workspace.index_fields` over the same points in
-    whole vector-width batches; tests/test_jaxws_compact.py) -- :func:`make_evaluator`'s in-jit stack of the
+    whole vector-width batches; tests/test_workspace_grid_jax.py) -- :func:`make_evaluator`'s in-jit stack of the
     outputs compiles the kernel differently and differs at some points by <= ~6e-13 relative -- but the work
     follows the reachable points, as the Numba path's does: the planes are split over the devices; each evaluates only the
     y >= 0 half when the grid is mirror-symmetric (``mirror``; the kernel evaluates (x, |y|, z), so the other

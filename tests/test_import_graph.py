@@ -1,4 +1,4 @@
-"""The module import graph (issue 10): no circles, and the ground floor (io, plots, papers, reference, ...)
+"""The module import graph: no circles, and the ground floor (io, plots, papers, reference, ...)
 imports nothing above it. Read from the source with ``ast`` (imports inside functions count too)."""
 
 from __future__ import annotations

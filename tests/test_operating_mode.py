@@ -1,4 +1,4 @@
-"""Issue 14 item 4 / issue 12 item 5: the reconfigurable design's operating mode in ga_reconfig, "R per task" or
+"""The reconfigurable design's operating mode in ga_reconfig, "R per task" or
 "R(t) along the cycle" under the R drive's limits (deltajax/optimize/operating.py)."""
 
 import math
@@ -12,7 +12,7 @@ from hydra import compose, initialize_config_dir
 
 from deltajax import motion
 from deltajax.config import ConfigError, robot_from_config
-from deltajax.dynamics import cycle_profile
+from deltajax.cycle import cycle_profile
 from deltajax.jobs.ga_reconfig import build
 from deltajax.mechanism import drive_profile
 from deltajax.motion_refine import spline_basis

@@ -1,4 +1,4 @@
-"""Issue 10, sweeps side: the one HDF5 reader (io.read) and its views, shard reducers looked up by name (old
+"""The one HDF5 reader (io.read) and its views, shard reducers looked up by name (old
 "module:function" strings mapped, never imported), the sweeps CLI, and the chunk engine's results-file
 checkpoint. All in-process and small (no CLI job runs here; tests/test_sweeps.py does those)."""
 

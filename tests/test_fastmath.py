@@ -1,4 +1,4 @@
-"""jaxkernel (issue 9): the cheap-op arithmetic of deltajax.fastmath and the one-loop kernel it gives."""
+"""The cheap-op arithmetic of deltajax.fastmath and the one-loop kernel it gives."""
 
 import re
 

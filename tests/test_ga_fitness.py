@@ -1,4 +1,4 @@
-"""GA fitness speed-ups (issue 9) keep the exact answer: the population-level task coverage
+"""The GA fitness's speed-ups keep the exact answer: the population-level task coverage
 (:func:`deltajax.optimize.screens.task_cover`) gives the exact sweep's flags, the fitness with and without
 it is identical, and the flat peak-speed term equals the Jacobian-solve formulation.
 

@@ -1,4 +1,4 @@
-"""The main job's recommendation rule ``floor`` and the search's continuous regular-workspace settings (issue 12)."""
+"""The main job's recommendation rule ``floor`` and the search's continuous regular-workspace settings."""
 
 import numpy as np
 import pytest

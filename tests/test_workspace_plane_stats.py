@@ -1,4 +1,4 @@
-"""workspace_grid's per-plane statistics (issue 9, host overhead): the one-pass kernel equals the NumPy form it
+"""workspace_grid's per-plane statistics: the one-pass kernel equals the NumPy form it
 replaced, bit for bit (sums in the same order), for float64 and float32, with NaN, +-inf and empty planes."""
 
 import numpy as np

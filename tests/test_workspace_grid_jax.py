@@ -1,4 +1,4 @@
-"""The workspace_grid JAX path (issue 9): mirror half + kernel only on reach candidates, compacted into blocks.
+"""The workspace_grid JAX path: mirror half + kernel only on reach candidates, compacted into blocks.
 
 Every result must be the kernel's own, bit for bit: :func:`deltajax.workspace.grid.box_fields` and
 :func:`deltajax.workspace.evaluators.make_grid_evaluator` against :func:`deltajax.workspace.index_fields` (the
@@ -192,7 +192,7 @@ import os, sys
 import numpy as np, jax
 jax.config.update("jax_enable_x64", True)
 sys.path.insert(0, os.environ["TESTS"])
-import test_jaxws_compact as t
+import test_workspace_grid_jax as t
 assert jax.local_device_count() == 2
 g = t.GRID
 ref_ok, ref_vals = t.reference(t.ROBOT, g)

@@ -1,4 +1,4 @@
-"""Issue 13: clean CLI errors, --help, the default job, degrees/full-turn limits, the float32 warning."""
+"""The CLI as a user meets it: clean errors, --help, the default job, degrees/full-turn limits, the float32 warning."""
 
 import os
 import subprocess
@@ -171,7 +171,7 @@ def test_import_creates_no_arrays():
     assert out.returncode == 0, out.stderr[-2000:]
 
 
-# --- a mistyped key without '+': one line listing the valid keys, exit 2 (issue 13) --------------------------
+# --- a mistyped key without '+': one line listing the valid keys, exit 2 ---------------------------------
 
 @pytest.mark.parametrize("args, expected", [
     (["robot.forarm=0.4"], ["robot.forarm is not a setting of robot", "did you mean robot.forearm?",

@@ -1,4 +1,4 @@
-"""Numba side of the Table-6 job (issue 9): the faster host paths give bitwise the results of the plain ones.
+"""Numba side of the Table-6 job: the faster host paths give bitwise the results of the plain ones.
 
 * ``_nb.fixed_fields`` (IK pass, reachable points gathered, kernel, scatter) equals ``_nb.fixed_fields_dense``
   (the kernel on every point) bitwise, both singular-value methods;

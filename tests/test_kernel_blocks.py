@@ -1,4 +1,4 @@
-"""jaxkernel (issue 9, JAX side): blocked batches (map_points) and the singular-value tail's reciprocals."""
+"""The JAX kernel's blocked batches (map_points) and the singular-value tail's reciprocals."""
 
 import jax
 import jax.numpy as jnp

@@ -1,4 +1,4 @@
-"""Issue 12 (c): the screen's feasible non-dominated set seeds NSGA-II (workflow.screen_front / spread_rows)."""
+"""The screen's feasible non-dominated set seeds NSGA-II (workflow.screen_front / spread_rows)."""
 
 import numpy as np
 
