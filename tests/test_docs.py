@@ -115,17 +115,33 @@ def test_jobs_table_lists_every_job_once():
     assert sorted(_jobs_table()) == sorted(_names("configs/experiment"))
 
 
+def _package_source() -> str:
+    return "\n".join(p.read_text() for p in (REPO / "deltajax").rglob("*.py"))
+
+
+def _written(group: str, source: str) -> bool:
+    """``group`` appears in the package as results groups are named there: the top group as a literal ("a" or
+    "a/..."), each subgroup as "/b" or "b" (f"{g}/b")."""
+    top, *subs = group.split("/")
+    return bool(re.search(rf"""["']{top}["/]""", source)) and all(re.search(rf"""[/"']{s}["/]""", source)
+                                                                   for s in subs)
+
+
+def test_every_nested_group_named_in_readme_exists():
+    """A slashed name in the README is a config group (configs/<name>) or a results group the code writes."""
+    source = _package_source()
+    names = set(re.findall(r"`([a-z_]+(?:/[a-z_]+)+)`", README.read_text()))
+    missing = [n for n in names if not (REPO / "configs" / n).is_dir() and not _written(n, source)]
+    assert not missing, missing
+
+
 def test_jobs_table_names_only_groups_and_figures_the_code_writes():
     """A group or figure in the table appears as a string literal in the package (the cheap check; the slow test
     below checks the files of real runs)."""
-    source = "\n".join(p.read_text() for p in (REPO / "deltajax").rglob("*.py"))
+    source = _package_source()
     missing = []
     for job, (groups, figures) in _jobs_table().items():
-        for g in groups:  # the top group as a literal ("a" or "a/..."), each subgroup as "/b" or "b" (f"{g}/b")
-            top, *subs = g.split("/")
-            if not re.search(rf"""["']{top}["/]""", source) or not all(re.search(rf"""[/"']{s}["/]""", source)
-                                                                       for s in subs):
-                missing.append((job, g))
+        missing += [(job, g) for g in groups if not _written(g, source)]
         for fig in figures:
             parts = [p for p in re.split(r"<\w+>|\*", fig.removesuffix(".png")) if p.strip("_")]
             missing += [(job, fig) for p in parts if p.strip("_") not in source]
