@@ -23,7 +23,8 @@ For each seed the default ``experiment=ga_reconfig`` runs twice: at its default 
     and how many scan designs dominate the recommendation on the coarse grids.
 
 Load and CPU time are printed with the figures (on a shared machine compare ratios); the measured cost of its runs
-and of the scan is in docs/BENCHMARKS.md. Run the jobs one at a time on a shared machine: ``--skip-runs`` analyses what is in ``--out``.
+and of the scan is in docs/BENCHMARKS.md. Run the jobs one at a time on a shared machine: ``--skip-runs`` analyses
+what is in ``--out``.
 """
 
 from __future__ import annotations
