@@ -172,3 +172,11 @@ def test_readme_code_runs():
     assert abs(float(ns["ind"].k_tilde) - 0.70362) < 1e-4  # Table 4's point (docs/REPRODUCTION.md §1)
     assert not bool(ns["res"].truncated) and float(ns["res"].volume) > 0
     assert 100 < float(ns["m"].cycles_per_minute) < 110  # 103.1 (docs/REPRODUCTION.md §4)
+
+
+def test_main_job_run_time_is_stated_alike():
+    """README, the job's config header and docs/CLUSTER.md give the same run time (the figure: docs/BENCHMARKS.md)."""
+    found = {}
+    for f in ("README.md", "configs/experiment/ga_reconfig.yaml", "docs/CLUSTER.md", "docs/design.md"):
+        found[f] = set(re.findall(r"(\d+)\s*[–-]\s*(\d+)\s+min(?:utes)?\s+on\s+2\s+cores", (REPO / f).read_text()))
+    assert all(found.values()) and len(set.union(*found.values())) == 1, found
