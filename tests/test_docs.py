@@ -159,6 +159,7 @@ def test_jobs_table_matches_a_real_run(job, toy_run):
     assert all(any(h == g or h.startswith(g + "/") for h in have) for g in table_groups), (table_groups, have)
     for fig in figures:
         assert list(path.parent.glob(re.sub(r"<\w+>", "*", fig))), fig
+    assert (path.parent / "run.log").is_file()  # README: every job writes results.h5, its plots and run.log
     if job == "ga_reconfig":  # docs/results.md: the GA checkpoint stays in the finished file
         assert "ga/checkpoint" in have
 
