@@ -32,7 +32,7 @@ acts along +z and the potential energy of a mass m at height z is ``V = -m g z``
   models are identical by construction, so only the inertial part changes. The error of point_split grows
   with the forearm's share of the moving mass: on the standard cycle it overestimates the peak torque by about
   1 % for franco2026 (41 g forearms) and about 7 % for ``industrial`` (300 g forearms); see
-  docs/REPRODUCTION.md §4 for the table. Select ``point_split`` to reproduce the earlier numbers.
+  docs/REPRODUCTION.md §4 for the table. Select ``point_split`` for the paper's (and Codourey's) lumped model.
 * ``elbow_mass``: extra point mass at each elbow (joint hardware), kg.
 * **Platform** (travelling plate) ``platform_mass`` plus ``payload_mass``, a translating point mass at P.
 * **Reconfiguration carriage** ``carriage_mass`` per chain: everything the R actuator moves radially that does

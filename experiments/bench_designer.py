@@ -22,14 +22,9 @@ For each seed the default ``experiment=ga_reconfig`` runs twice: at its default 
     non-dominated set vs the job's (both on the coarse grids, normalised by the same baseline, reference 0),
     and how many scan designs dominate the recommendation on the coarse grids.
 
-Load and CPU time are printed with the figures (shared 2-core machine: compare ratios). Measured there
-(2026-12-02, load 4-7; docs/REPRODUCTION.md 5.2, sixth stop): a warm default-budget run ~130 CPU-s, a warm
-``--large`` run 228-400 CPU-s (seventh stop, with the floor step, load 1.5-5: 159-248 / 263-453 CPU-s; ninth stop,
-the task cylinder on the symmetric wedge, load 2-3: 107-117 / 171-190 CPU-s, the scan 381 CPU-s with 4 554 feasible;
-tenth stop: a default run continued with the larger budget 160-166 CPU-s);
-the 2^17 scan's cheap pass 147 CPU-s, its regular pass (5 526 feasible designs,
-continuous measure) 629 CPU-s, the fine verification of its selection 100 CPU-s; peak RSS 3.5 GB (job), 2.9 GB
-(this process). Run the jobs one at a time on a shared machine: ``--skip-runs`` analyses what is in ``--out``.
+Load and CPU time are printed with the figures (on a shared machine compare ratios); the measured cost of its runs
+and of the scan is in docs/BENCHMARKS.md. Run the jobs one at a time on a shared machine: ``--skip-runs`` analyses
+what is in ``--out``.
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ before chunking + shuffle + gzip; same data and attributes, dimension-scale link
 file and prints both sizes. The copy is deleted.
 
 Usage: ``python experiments/file_sizes.py outputs/reconfig_indices/<run>/results.h5 [...]``
-(commands and figures: docs/CONVENTIONS.md, "Results files").
+(commands and figures: docs/BENCHMARKS.md, "Results file sizes").
 """
 
 import argparse

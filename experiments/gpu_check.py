@@ -1,5 +1,5 @@
 """GPU readiness check (issue 9 item 7): every job's JAX path on the default accelerator, checked against the
-CPU and timed. Run it first whenever a GPU is available and record the figures in docs/REPRODUCTION.md.
+CPU and timed. Run it first whenever a GPU is available and record the figures in docs/BENCHMARKS.md.
 
     python experiments/gpu_check.py --scale 64      # fills an H100/H200-class device (kernel N = 64 x 2^16)
     python experiments/gpu_check.py --scale 1       # tiny: what tests/test_gpu_check.py runs on CPU

@@ -269,7 +269,7 @@ def test_float32_warning_points_at_the_users_line(tmp_path):
 
 
 def test_file_sizes_tool_measures_the_uncompressed_size(tmp_path, capsys):
-    """experiments/file_sizes.py (the before/after figures in docs/CONVENTIONS.md): same data, no filters."""
+    """experiments/file_sizes.py (the before/after figures in docs/BENCHMARKS.md): same data, no filters."""
     import importlib.util
 
     import h5py

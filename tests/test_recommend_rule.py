@@ -23,7 +23,7 @@ def test_floor_rule_takes_the_fastest_point_above_the_volume_floor():
 
 
 def test_floor_rule_ignores_a_faster_far_point_where_the_band_rule_jumps():
-    # the large-budget seed 2 case of docs/REPRODUCTION.md 5.2: a faster design family with a small volume moves the
+    # a case the designer bench met (a large-budget seed): a faster design family with a small volume moves the
     # band rule's edge (relative to the front's best) past the large-volume designs; the floor does not move
     F = _front()[:4]
     far = np.concatenate([F, [[-1.16, -0.70]]])

@@ -5,7 +5,7 @@ the passive-joint and interference margins) is the same at phi, -phi and phi + 1
 and mirror symmetry -- checked here on the points themselves, for the baseline and for random designs of the main
 job's design space. Why the ends: there the angular derivative of each such quantity vanishes (it is even in
 phi about the plane), so the mirror planes hold extremes of the task constraint, which the earlier offset grid
-never sampled (docs/REPRODUCTION.md 5.2, ninth stop).
+never sampled (docs/REPRODUCTION.md §5.2).
 """
 
 import math

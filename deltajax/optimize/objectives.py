@@ -122,8 +122,8 @@ def cylinder_points(diameter: float, height: float, z_top: float, n_r: int, n_ph
     :func:`deltajax.regular.polar_grid`. Its ends lie on the mirror planes, where the angular derivative of each
     such quantity vanishes, so the planes hold extremes of the task constraint; samples offset from them (the
     earlier grid: full circle, (i + 1/2) 360/n_phi, none at a multiple of 30 deg) missed the binding points, and
-    designs verified on 3 x 12 x 5 such samples ran 2-6 % slower on a finer grid (docs/REPRODUCTION.md 5.2,
-    ninth stop).
+    designs verified on 3 x 12 x 5 such samples ran 2-6 % slower on a finer grid (docs/REPRODUCTION.md
+    §5.2).
 
     The axis itself is left out on purpose: there the three-fold symmetry makes two singular values equal,
     where closed-form singular values have no derivative (the relaxation needs gradients at every sample).

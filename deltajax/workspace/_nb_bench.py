@@ -173,7 +173,7 @@ def minimal_loop(x, y, z, R, r, L1, L2, lim, kt, out, ok):
 def minimal_loop_newton(x, y, z, R, r, L1, L2, lim, kt, out, ok):
     """:func:`minimal_loop` with every per-point divide and square root replaced by multiplies and adds (bit-trick
     start + Newton steps, as the JAX kernel's :mod:`deltajax.fastmath`): whether the IEEE divide / square-root
-    units bound the ceiling on this CPU (they do not: it runs slower, docs/REPRODUCTION.md §7)."""
+    units bound the ceiling on this CPU (they do not: it runs slower, docs/BENCHMARKS.md)."""
     _minimal(x, y, z, R, r, L1, L2, lim, kt, out, ok, _newton_div, _newton_sqrt0)
 
 
