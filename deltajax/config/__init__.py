@@ -18,7 +18,7 @@ __all__ = ["ConfigError", "robot_from_config", "mass_from_config", "validate_con
            "EXPERIMENT_VALIDATORS", "EXPERIMENT_SCHEMAS"]
 
 
-from ._readers import ConfigError, _choice, _field, _names, _vector  # noqa: E402,F401  the one set of readers
+from ._readers import ConfigError, _choice, _field, _fits, _names, _vector  # noqa: E402,F401  the one set of readers
 from .ga_reconfig import (GaReconfigSettings, _v_ga_reconfig, _v_ga_reconfig_run_dir,  # noqa: E402,F401
                           ga_reconfig_build, ga_reconfig_settings)
 
@@ -81,7 +81,7 @@ TOP_LEVEL_KEYS = ("robot", "experiment", "seed", "precision", "plots", "progress
                   "shard", "n_shards", "beta")
 
 def _validate_top(cfg: Mapping[str, Any]) -> None:
-    _field("seed", cfg.get("seed"), kind="int")
+    _field("seed", cfg.get("seed"), kind="int", lo=0, hi=2 ** 32 - 1)  # NumPy's and JAX's seed range
     _choice("precision", cfg.get("precision"), ("float64", "float32"))
     for k in ("plots", "progress", "fresh"):
         if k in cfg:
@@ -90,9 +90,20 @@ def _validate_top(cfg: Mapping[str, Any]) -> None:
     _field("shard", cfg.get("shard", 0), kind="int", lo=0, hi=n_shards - 1)
 
 
-def workspace_grid_from_config(g: Mapping[str, Any], robot=None):
+def _grid_fits(path: str, h: float, axes, bytes_per_point: float) -> None:
+    """Refuse a grid whose points (``bytes_per_point`` each, a lower bound of what the job holds per point) or
+    axes do not fit in memory, from the axis lengths alone (before any axis is built)."""
+    n = [math.floor((hi - lo) / h + 1e-6) + 1 for lo, hi in axes]
+    total = float(n[0]) * n[1] * n[2]
+    _fits(path, h, max(total * bytes_per_point, 16.0 * max(n)),
+          f"a grid of {n[0]} x {n[1]} x {n[2]} = {total:.3g} points", unit="m")
+
+
+def workspace_grid_from_config(g: Mapping[str, Any], robot=None, bytes_per_point: float = 1.0):
     """The grid of ``experiment.grid`` (h, x, y, z, bounds in m); an axis given as null is sized from the robot's
-    reach bound (:func:`deltajax.workspace.driver.reach_box`, widened outwards to whole steps of h, y symmetric)."""
+    reach bound (:func:`deltajax.workspace.driver.reach_box`, widened outwards to whole steps of h, y symmetric).
+    Every axis must have positive width; a grid of more than the machine's memory at ``bytes_per_point`` is
+    refused before it is built."""
     from ..workspace import make_grid
     from ..workspace.driver import reach_box
 
@@ -108,8 +119,8 @@ def workspace_grid_from_config(g: Mapping[str, Any], robot=None):
                 return -n * h, n * h
             return math.floor(lo / h + 1e-9) * h, math.ceil(hi / h - 1e-9) * h
         lo, hi = _vector(f"experiment.grid.{key}", v, 2)
-        if not hi >= lo:
-            raise ConfigError(f"experiment.grid.{key} must be [lo, hi] with lo <= hi (m), got {[lo, hi]!r}")
+        if not hi > lo:  # a zero-width box has no volume: its "volume" would be count h^3 of a plane
+            raise ConfigError(f"experiment.grid.{key} must be [lo, hi] with lo < hi (m), got {[lo, hi]!r}")
         return lo, hi
 
     bounds = g.get("bounds")
@@ -126,17 +137,20 @@ def workspace_grid_from_config(g: Mapping[str, Any], robot=None):
             if not hi > lo:
                 raise ConfigError(f"experiment.grid.bounds ({k}) must have lo < hi (m), got {[lo, hi]!r}")
     axes = (pair(0, "x"), pair(1, "y"), pair(2, "z"))
+    _grid_fits("experiment.grid.h", h, axes, bytes_per_point)
     try:
         return make_grid(*axes, h, bounds=bounds)
     except ValueError as err:
         raise ConfigError(f"experiment.grid: {err}") from None
 
 
-def paper_grid_from_config(e: Mapping[str, Any]):
-    """The Franco-López 2026 grid at spacing ``experiment.h`` (m, default 0.002)."""
+def paper_grid_from_config(e: Mapping[str, Any], bytes_per_point: float = 1.0):
+    """The Franco-López 2026 grid at spacing ``experiment.h`` (m, default 0.002); refused before it is built when
+    its points at ``bytes_per_point`` do not fit in memory."""
     from ..workspace import franco2026_grid
 
     h = _field("experiment.h", e.get("h", 0.002), lo=0, lo_open=True, unit="m")
+    _grid_fits("experiment.h", h, ((-0.4, 0.4), (-0.4, 0.4), (0.0, 0.6 - h)), bytes_per_point)
     try:
         return franco2026_grid(h)
     except ValueError as err:
@@ -146,11 +160,14 @@ def paper_grid_from_config(e: Mapping[str, Any]):
 def _v_workspace_grid(e, cfg, robot, recon) -> None:
     from ..indices import INDEX_NAMES
 
-    workspace_grid_from_config(e.get("grid") or {}, robot)
+    store = _names("experiment.store", e.get("store"), INDEX_NAMES)
+    itemsize = 8 if cfg.get("precision") == "float64" else 4
+    # per point of this shard: the reachable mask (1 byte) and every stored index field
+    workspace_grid_from_config(e.get("grid") or {}, robot,
+                               bytes_per_point=(1 + itemsize * len(store)) / int(cfg.get("n_shards", 1) or 1))
     _field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
     _field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True)
     _field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
-    _names("experiment.store", e.get("store"), INDEX_NAMES)
     _field("experiment.chunk_points", e.get("chunk_points"), kind="int", lo=1)
     _choice("experiment.backend", e.get("backend", "auto"), ("auto", "jax", "numba"))
     dev = e.get("devices", "all")
@@ -161,8 +178,9 @@ def _v_workspace_grid(e, cfg, robot, recon) -> None:
     _field("experiment.stop_after", e.get("stop_after"), kind="int", lo=1, none=True)
 
 
-def _v_paper_grid(e, cfg, robot, recon) -> None:
-    paper_grid_from_config(e)
+def _v_paper_grid(e, cfg, robot, recon, bytes_per_point: float = 2.0) -> None:
+    # reconfig_workspace: two reachable masks (fixed R, some R) of 1 byte per point
+    paper_grid_from_config(e, bytes_per_point)
     _field("experiment.chunk_points", e.get("chunk_points"), kind="int", lo=1)
     _field("experiment.checkpoint", e.get("checkpoint", True), kind="bool")
     if recon is None:
@@ -172,23 +190,37 @@ def _v_paper_grid(e, cfg, robot, recon) -> None:
 def _v_reconfig_indices(e, cfg, robot, recon) -> None:
     from ..indices import INDEX_NAMES
 
-    _v_paper_grid(e, cfg, robot, recon)
+    store = _names("experiment.store_fields", e.get("store_fields"), INDEX_NAMES)
+    # per point: two masks, R* and every stored field at R* and at fixed R (float32), the slice index field
+    _v_paper_grid(e, cfg, robot, recon, bytes_per_point=2 + 4 * (2 * len(store) + 2))
+    grid = paper_grid_from_config(e, 0.0)
     _field("beta", cfg.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
     _field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
     _field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True)
     _choice("experiment.criterion", e.get("criterion"), INDEX_NAMES)
     _choice("experiment.mode", e.get("mode"), ("fast", "exact"))
     _choice("experiment.slice_index", e.get("slice_index"), INDEX_NAMES)
-    _names("experiment.store_fields", e.get("store_fields"), INDEX_NAMES)
-    for i, z in enumerate(e.get("slices_z") or []):
-        _field(f"experiment.slices_z[{i}]", z, unit="m")
+    z0, z1 = float(grid.z[0]), float(grid.z[-1])
+    for i, z in enumerate(e.get("slices_z") or []):  # a plane of the grid below the base (the nearest is drawn)
+        _field(f"experiment.slices_z[{i}]", z, lo=max(z0, 0.0), hi=z1, lo_open=z0 <= 0.0, unit="m")
 
 
 def _v_bench_kernel(e, cfg, robot, recon) -> None:
     for k in ("n_points", "n_baseline", "block", "repeats"):
         _field(f"experiment.{k}", e.get(k), kind="int", lo=1)
+    for k in ("n_points", "n_baseline"):  # the points (3 coordinates) and their index values, float64
+        _fits(f"experiment.{k}", e.get(k), float(e.get(k)) * 8 * 12, f"{e.get(k)} points")
     _field("experiment.R", e.get("R"), lo=0, lo_open=True, unit="m")
     _names("experiment.dtypes", e.get("dtypes"), ("float32", "float64"), min_len=1)
+
+
+def _point_below_base(path: str, v: Any) -> list:
+    """A platform position (m) in the half-space z > 0 below the base (the base frame's z points down)."""
+    p = _vector(path, v, 3)
+    if not p[2] > 0:
+        raise ConfigError(f"{path}={p!r} m lies above the base plane: a platform position needs z > 0 m (the base "
+                          f"frame's z points down), got z = {p[2]!r} m")
+    return p
 
 
 def indices_examples_spec(e, cfg=None, robot=None, recon=None) -> dict:
@@ -196,7 +228,7 @@ def indices_examples_spec(e, cfg=None, robot=None, recon=None) -> dict:
     if recon is None:
         raise ConfigError("experiment=indices_examples needs a reconfigurable robot: robot.R_range is null")
     return dict(R_step=_field("experiment.R_step", e.get("R_step"), lo=0, lo_open=True, unit="m"),
-                points=[_vector(f"experiment.points[{i}]", p, 3) for i, p in enumerate(e.get("points") or [])],
+                points=[_point_below_base(f"experiment.points[{i}]", p) for i, p in enumerate(e.get("points") or [])],
                 b_v=_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True),
                 b_f=_field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True),
                 beta=_field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True),
@@ -257,6 +289,12 @@ def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
     out = dict(eps=pos("eps", "m"), rho_max=pos("rho_max", "m"), grid_h=pos("grid_h", "m"),
                sweep_step_deg=pos("sweep_step_deg", "deg"),
                centre=_vector("experiment.centre", e.get("centre"), 3))
+    if robot is not None:  # the search starts from the centre: outside the workspace it measures nothing
+        from ..workspace.grid import reachable_point
+
+        if not bool(reachable_point(robot, out["centre"])):
+            raise ConfigError(f"experiment.centre={out['centre']!r} m is outside the robot's workspace (no inverse "
+                              f"kinematics within the joint limits there); choose a reachable centre")
     if out["rho_max"] <= out["eps"]:
         raise ConfigError(f"experiment.rho_max must exceed experiment.eps, got {out['rho_max']} m <= {out['eps']} m")
     steps = [_field(f"experiment.steps_deg[{i}]", s, lo=0, lo_open=True, unit="deg")
@@ -289,6 +327,17 @@ def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
     out["half_space"] = _field("experiment.half_space", e.get("half_space", True), kind="bool")
     out["timing_repeats"] = _field("experiment.timing_repeats", e.get("timing_repeats", 3), kind="int", lo=1)
     return out
+
+
+#: the numeric settings of experiment.mechanism (deltajax.mechanism.example_screw_linkage / DirectRadial), with the
+#: ranges the mechanism needs, checked in the units the config writes them in
+MECHANISM_FIELDS = {
+    "lead": dict(lo=0, lo_open=True, unit="m"), "d2": dict(lo=0, lo_open=True, unit="m"), "d3": dict(unit="m"),
+    "sweep_deg": dict(lo=0, hi=90, lo_open=True, hi_open=True, unit="deg"),
+    "efficiency": dict(lo=0, hi=1, lo_open=True), "back_efficiency": dict(lo=0, hi=1, lo_open=True),
+    "gear_ratio": dict(lo=0, lo_open=True), "assembly": dict(kind="int", choices=(1, -1)),
+    "nut_side": dict(kind="int", choices=(1, -1)),
+}
 
 
 def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dict:
@@ -324,6 +373,14 @@ def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dic
         raise ConfigError(f"experiment.R_step={out['R_step']!r} m: {err}") from None
     mech = dict(e.get("mechanism") or {})
     kind = _choice("experiment.mechanism.kind", mech.pop("kind", "screw_linkage"), MECHANISMS)
+    for k, v in mech.items():  # in the units the config gives them (the linkage stores lead as a pitch in m/rad)
+        if k in MECHANISM_FIELDS:
+            rule = dict(MECHANISM_FIELDS[k])
+            choices = rule.pop("choices", None)
+            mech[k] = _field(f"experiment.mechanism.{k}", v, **rule)
+            if choices is not None and mech[k] not in choices:
+                raise ConfigError(f"experiment.mechanism.{k} must be one of {', '.join(map(str, choices))}, "
+                                  f"got {v!r}")
     try:
         if kind == "direct":
             out["mech"] = DirectRadial(**mech)

@@ -80,3 +80,24 @@ def _vector(path: str, v: Any, n: int, unit: str = "m") -> list:
     return items
 
 
+
+
+# ---- memory: sizes are refused up front when even a lower bound of what they hold exceeds the machine ----
+def memory_bytes() -> int:
+    """Physical memory of this machine (bytes): the cap that a grid, a population or a batch must fit in."""
+    import os
+
+    return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+
+
+def _gib(n: float) -> str:
+    return f"{n / 2 ** 30:.3g} GiB"
+
+
+def _fits(path: str, v: Any, n_bytes: float, what: str, unit: str = "") -> None:
+    """Refuse ``path=v`` when ``what`` needs at least ``n_bytes`` (a lower bound) and the machine has less."""
+    cap = memory_bytes()
+    if n_bytes > cap:
+        u = f" {unit}" if unit else ""
+        raise ConfigError(f"{path}={v!r}{u} needs at least {_gib(n_bytes)} of memory for {what}, more than this "
+                          f"machine's {_gib(cap)}")

@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Mapping, Optional
 
-from ._readers import ConfigError, _choice, _field
+from ._readers import ConfigError, _choice, _field, _fits
 
 # ---- ga_reconfig: the designer's problem (every field, unknown keys included); owner: designer ----
 # The one reader of experiment.* for experiment=ga_reconfig (the job and the validator call it); the design space,
@@ -41,6 +41,10 @@ _GA_KEYS = {
 
 # keys a config may omit (their defaults are applied where they are read)
 _GA_OPTIONAL = {"regular_workspace": {"search_refine", "search_refine_steps", "search_refine_samples"}}
+
+#: a lower bound of the memory of one evaluated point of a design (one 3x3 Jacobian in float32), for the refusal
+#: of populations that cannot be evaluated at once
+DESIGN_POINT_BYTES = 9 * 4
 
 RECOMMEND_RULES = ("floor", "band", "knee", "primary")   # deltajax.optimize.workflow.recommend
 
@@ -133,7 +137,7 @@ def _operating_settings(e: Mapping[str, Any]) -> dict:  # rtmode
 
 def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
     """Validate every field of ``experiment`` (one ``ConfigError`` line naming field and value)."""
-    from ..indices import INDEX_NAMES
+    from ..indices import INDEX_NAMES, INDEX_RANGES
     from ..optimize.designer import CONSTRAINT_NAMES, OBJECTIVES
 
     e = _ga_block(_ga_plain(ectx), "")
@@ -157,9 +161,10 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
     task["n_phi"] = _ga_num(t, "n_phi", "task", lo=2, integer=True)   # both ends of the 60 deg wedge
     task["n_z"] = _ga_num(t, "n_z", "task", lo=2, integer=True)
     gw = _ga_block(e, "good_workspace")
-    good = {"index": _ga_choice(gw, "index", "good_workspace", INDEX_NAMES),
-            "threshold": _ga_num(gw, "threshold", "good_workspace", lo=0), "beta": _ga_num(gw, "beta", "good_workspace",
-                                                                                     lo=0, hi=1)}
+    index = _ga_choice(gw, "index", "good_workspace", INDEX_NAMES)
+    lo, hi = INDEX_RANGES[index]  # a threshold outside the index's range selects every point or none
+    good = {"index": index, "threshold": _ga_num(gw, "threshold", "good_workspace", lo=lo, hi=hi),
+            "beta": _ga_num(gw, "beta", "good_workspace", lo=0, hi=1)}
     j = _ga_block(e, "joints")
     joints = {"kind": _ga_choice(j, "kind", "joints", ("ball", "universal")),
               "limit_deg": _ga_num(j, "limit_deg", "joints", lo=0, lo_open=True, hi=180),
@@ -251,6 +256,14 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
               "population_size": _ga_num(p, "population_size", "pareto", lo=4, integer=True),
               "generations": _ga_num(p, "generations", "pareto", lo=1, integer=True),
               "ref_min_factor": _ga_num(p, "ref_min_factor", "pareto", lo=1, lo_open=True)}
+    # every member of a generation is evaluated at once on the search grids: refuse a population that cannot fit
+    per_design = n_R * (task["n_r"] * task["n_phi"] * task["n_z"] + regular["n_r"] * regular["n_phi"] *
+                        regular["n_z"]) + cycle["n_R_operating"] * cycle["n_samples"]
+    for path, size in (("experiment.ga.population_size", ga.get("population_size")),
+                       ("experiment.pareto.population_size", pareto["population_size"])):
+        if isinstance(size, (int, float)) and not isinstance(size, bool) and size > 0:
+            _fits(path, size, float(size) * per_design * DESIGN_POINT_BYTES,
+                  f"{size:.3g} designs x {per_design} evaluated points each at once (a 3x3 Jacobian per point)")
     recommend = e.get("recommend")
     if recommend not in RECOMMEND_RULES:
         raise ConfigError(f"experiment.recommend must be one of {', '.join(RECOMMEND_RULES)}, got {recommend!r}")
