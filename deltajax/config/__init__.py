@@ -52,11 +52,18 @@ def robot_from_config(cfg: Mapping[str, Any], prefix: str = "robot") -> Tuple[De
         return robot, None
     p = f"{prefix}.R_range"
     r_min, r_max, r_step = (_field(f"{p}.{k}", rng.get(k), unit="m") for k in ("min", "max", "step"))
+    if r_step > 0 and r_max >= r_min:  # the R samples (one float64 each at least), before anything holds them
+        _fits(f"{p}.step", r_step, 8.0 * _n_steps(r_min, r_max, r_step), "the R samples", unit="m")
     try:
         recon = ReconfigurableDelta.from_range(robot, r_min, r_max, r_step)
     except GeometryError as e:
         raise ConfigError(f"{p}: {e}") from None
     return robot, recon
+
+
+def _n_steps(lo: float, hi: float, step: float) -> int:
+    """Samples of the inclusive range [lo, hi] every ``step`` (an estimate: no array is built)."""
+    return math.floor((hi - lo) / step + 1e-6) + 1
 
 
 def check_reach_over_range(cfg: Mapping[str, Any], recon: ReconfigurableDelta, prefix: str = "robot") -> None:
@@ -227,8 +234,14 @@ def indices_examples_spec(e, cfg=None, robot=None, recon=None) -> dict:
     """``experiment.*`` of indices_examples as plain values (the paper's example points, the R curve step)."""
     if recon is None:
         raise ConfigError("experiment=indices_examples needs a reconfigurable robot: robot.R_range is null")
-    return dict(R_step=_field("experiment.R_step", e.get("R_step"), lo=0, lo_open=True, unit="m"),
-                points=[_point_below_base(f"experiment.points[{i}]", p) for i, p in enumerate(e.get("points") or [])],
+    from ..indices import INDEX_NAMES
+
+    R_step = _field("experiment.R_step", e.get("R_step"), lo=0, lo_open=True, unit="m")
+    points = [_point_below_base(f"experiment.points[{i}]", p) for i, p in enumerate(e.get("points") or [])]
+    n_R = _n_steps(float(recon.R_min), float(recon.R_max), R_step)  # every index at every R of each point's curve
+    _fits("experiment.R_step", R_step, 8.0 * n_R * max(1, len(points)) * len(INDEX_NAMES),
+          f"{n_R:.3g} R samples of each point's index curves", unit="m")
+    return dict(R_step=R_step, points=points,
                 b_v=_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True),
                 b_f=_field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True),
                 beta=_field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True),
@@ -270,8 +283,12 @@ def dynamics_cycle_spec(e, cfg=None, robot=None, recon=None) -> dict:
         if not (lo <= R0 - amp and R0 + amp <= hi + 1e-12):
             raise ConfigError(f"experiment.recon_R_amplitude={amp!r} m takes R = {R0} +- {amp} m outside "
                               f"[{lo}, {hi}] m")
+    n_samples = _field("experiment.n_samples", e.get("n_samples"), kind="int", lo=11)
+    # positions, velocities and accelerations of every analysed robot's cycle (float64), at least
+    _fits("experiment.n_samples", n_samples, 72.0 * n_samples * len(setups), f"{len(setups)} cycles of "
+          f"{n_samples} samples")
     return dict(method=_choice("experiment.method", e.get("method"), ("virtual_work", "lagrange")),
-                n_samples=_field("experiment.n_samples", e.get("n_samples"), kind="int", lo=11),
+                n_samples=n_samples,
                 law=_choice("experiment.law", e.get("law"), MOTION_LAWS),
                 blend=_field("experiment.blend", e.get("blend"), lo=0, hi=1, hi_open=True),
                 robots=robots, cfg_name=cfg_name, setups=setups,
@@ -371,6 +388,9 @@ def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dic
                                                       out["R_step"])
     except GeometryError as err:
         raise ConfigError(f"experiment.R_step={out['R_step']!r} m: {err}") from None
+    # the DP's table: every R sample at every time sample of a case (3 at least)
+    _fits("experiment.R_step", out["R_step"], 3 * 8.0 * out["recon"].n_R,
+          f"{out['recon'].n_R:.3g} R samples at each time sample", unit="m")
     mech = dict(e.get("mechanism") or {})
     kind = _choice("experiment.mechanism.kind", mech.pop("kind", "screw_linkage"), MECHANISMS)
     for k, v in mech.items():  # in the units the config gives them (the linkage stores lead as a pitch in m/rad)
@@ -406,6 +426,12 @@ def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dic
         kind = _choice(f"{p}.kind", c.get("kind"), ("adept", "task"))
         boundary = _choice(f"{p}.boundary", c.get("boundary", "free"), BOUNDARIES)
         law = _choice(f"{p}.law", c.get("law", "poly5"), tr.MOTION_LAWS)
+        # the cycle's samples (position, velocity, acceleration) and the DP's table over them and the R samples
+        key = "n_samples" if kind == "adept" else "samples_per_segment"
+        per = _field(f"{p}.{key}", c.get(key), kind="int", lo=3 if kind == "adept" else 2)
+        n_t = per * (1 if kind == "adept" else max(1, len(c.get("points") or [])))
+        _fits(f"{p}.{key}", per, n_t * (72.0 + 8.0 * out["recon"].n_R),
+              f"{n_t} cycle samples x {out['recon'].n_R} R samples (the DP's table)")
         try:
             if kind == "adept":
                 cyc = tr.adept_cycle(_vector(f"{p}.centre", c.get("centre"), 3),
