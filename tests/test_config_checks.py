@@ -80,3 +80,14 @@ def test_reachable_centre_and_points_below_the_base_are_accepted():
     _validate(_compose("indices_examples", "experiment.points=[[0.0,0.0,0.3]]"))
     _validate(_compose("reconfig_indices", "experiment.slices_z=[0.4]"))
     _validate(_compose("ga_reconfig", "experiment.good_workspace.threshold=1.0"))
+
+
+@pytest.mark.parametrize("override, message", [
+    ("experiment.joints.limit_deg=200", r"^experiment.joints.limit_deg must be in \(0, 180\] deg, got 200.0 deg$"),
+    ("experiment.motor.peak_torque=-1", r"^experiment.motor.peak_torque must be > 0 N m, got -1.0 N m$"),
+    ("experiment.cycle.dwell=-0.1", r"^experiment.cycle.dwell must be >= 0 s, got -0.1 s$"),
+    ("experiment.task.diameter=0", r"^experiment.task.diameter must be > 0 m, got 0.0 m$"),
+])
+def test_ga_reconfig_messages_carry_the_units_written(override, message):
+    with pytest.raises(ConfigError, match=message):
+        _validate(_compose("ga_reconfig", override))

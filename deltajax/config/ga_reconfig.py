@@ -156,7 +156,7 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
     if not isinstance(d.get("bounds"), Mapping) or not d["bounds"]:
         raise ConfigError(f"experiment.design.bounds must be a non-empty mapping, got {d.get('bounds')!r}")
     t = _ga_block(e, "task")
-    task = {k: _ga_num(t, k, "task", lo=0, lo_open=True) for k in ("diameter", "height", "z_top")}
+    task = {k: _ga_num(t, k, "task", lo=0, lo_open=True, unit="m") for k in ("diameter", "height", "z_top")}
     task["n_r"] = _ga_num(t, "n_r", "task", lo=1, integer=True)
     task["n_phi"] = _ga_num(t, "n_phi", "task", lo=2, integer=True)   # both ends of the 60 deg wedge
     task["n_z"] = _ga_num(t, "n_z", "task", lo=2, integer=True)
@@ -167,16 +167,17 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
             "beta": _ga_num(gw, "beta", "good_workspace", lo=0, hi=1)}
     j = _ga_block(e, "joints")
     joints = {"kind": _ga_choice(j, "kind", "joints", ("ball", "universal")),
-              "limit_deg": _ga_num(j, "limit_deg", "joints", lo=0, lo_open=True, hi=180),
-              "elbow_neutral_deg": _ga_num(j, "elbow_neutral_deg", "joints", lo=-180, hi=180),
-              "platform_neutral_deg": _ga_num(j, "platform_neutral_deg", "joints", lo=-180, hi=180)}
+              "limit_deg": _ga_num(j, "limit_deg", "joints", lo=0, lo_open=True, hi=180, unit="deg"),
+              "elbow_neutral_deg": _ga_num(j, "elbow_neutral_deg", "joints", lo=-180, hi=180, unit="deg"),
+              "platform_neutral_deg": _ga_num(j, "platform_neutral_deg", "joints", lo=-180, hi=180, unit="deg")}
     lk = _ga_block(e, "links")
     links = {k: _ga_num(lk, k, "links", lo=0, hi=1) for k in ("forearm_radius", "upper_arm_radius", "clearance")}
     links["plate_overhang"] = _ga_num(lk, "plate_overhang", "links", lo=-1, hi=1)
     mo = _ga_block(e, "motor")
-    motor = {k: _ga_num(mo, k, "motor", lo=0, lo_open=True) for k in ("peak_torque", "rated_torque", "max_speed",
-                                                                   "corner_speed", "gear_ratio")}
-    motor["rotor_inertia"] = _ga_num(mo, "rotor_inertia", "motor", lo=0)
+    motor_units = {"peak_torque": "N m", "rated_torque": "N m", "max_speed": "rad/s", "corner_speed": "rad/s",
+                   "gear_ratio": ""}
+    motor = {k: _ga_num(mo, k, "motor", lo=0, lo_open=True, unit=u) for k, u in motor_units.items()}
+    motor["rotor_inertia"] = _ga_num(mo, "rotor_inertia", "motor", lo=0, unit="kg m^2")
     motor["efficiency"] = _ga_num(mo, "efficiency", "motor", lo=0, lo_open=True, hi=1)
     if motor["rated_torque"] > motor["peak_torque"]:
         raise ConfigError(f"experiment.motor.rated_torque={motor['rated_torque']!r} N m must be <= "
@@ -185,8 +186,9 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
         raise ConfigError(f"experiment.motor.corner_speed={motor['corner_speed']!r} rad/s must be <= "
                           f"experiment.motor.max_speed={motor['max_speed']!r} rad/s")
     c = _ga_block(e, "cycle")
-    cycle = {"payload": _ga_num(c, "payload", "cycle", lo=0), "dwell": _ga_num(c, "dwell", "cycle", lo=0),
-             "duration": _ga_num(c, "duration", "cycle", lo=0, lo_open=True),
+    cycle = {"payload": _ga_num(c, "payload", "cycle", lo=0, unit="kg"),
+             "dwell": _ga_num(c, "dwell", "cycle", lo=0, unit="s"),
+             "duration": _ga_num(c, "duration", "cycle", lo=0, lo_open=True, unit="s"),
              "n_samples": _ga_num(c, "n_samples", "cycle", lo=5, integer=True),
              "law": _ga_choice(c, "law", "cycle", ("poly5", "cycloidal", "modified_trapezoid")),
              "n_R_operating": _ga_num(c, "n_R_operating", "cycle", lo=1, integer=True)}
@@ -195,9 +197,9 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
                           f"got {cycle['n_samples']}")
     rw = _ga_block(e, "regular_workspace")
     regular = {"hd_ratio": _ga_num(rw, "hd_ratio", "regular_workspace", lo=0, lo_open=True),
-               "r_max": _ga_num(rw, "r_max", "regular_workspace", lo=0, lo_open=True),
-               "z_min": _ga_num(rw, "z_min", "regular_workspace", lo=0),
-               "z_max": _ga_num(rw, "z_max", "regular_workspace", lo=0, lo_open=True),
+               "r_max": _ga_num(rw, "r_max", "regular_workspace", lo=0, lo_open=True, unit="m"),
+               "z_min": _ga_num(rw, "z_min", "regular_workspace", lo=0, unit="m"),
+               "z_max": _ga_num(rw, "z_max", "regular_workspace", lo=0, lo_open=True, unit="m"),
                "n_r": _ga_num(rw, "n_r", "regular_workspace", lo=2, integer=True),
                "n_phi": _ga_num(rw, "n_phi", "regular_workspace", lo=2, integer=True),
                "n_z": _ga_num(rw, "n_z", "regular_workspace", lo=2, integer=True)}
@@ -248,7 +250,7 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
     cs = _ga_block(e, "constraints")
     cons = {k: _ga_flag(cs, k, "constraints") for k in ("task_in_good_workspace", "passive_joints", "interference")}
     cons["min_picks_per_min"] = _ga_num(cs, "min_picks_per_min", "constraints", lo=0)
-    cons["max_arm_sum"] = _ga_num(cs, "max_arm_sum", "constraints", lo=0, lo_open=True, allow_none=True)
+    cons["max_arm_sum"] = _ga_num(cs, "max_arm_sum", "constraints", lo=0, lo_open=True, allow_none=True, unit="m")
     assert set(CONSTRAINT_NAMES) >= {"task_in_good_workspace", "passive_joints", "interference"}
     ga = dict(e.get("ga") or {})
     p = _ga_block(e, "pareto")
