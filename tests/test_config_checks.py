@@ -27,8 +27,8 @@ def _validate(cfg):
 REFUSED = [
     # sizes: estimated from the settings, refused with the estimate (the grid is never built)
     ("workspace_grid", ["experiment.grid.h=1e-5"], r"^experiment.grid.h=1e-05 m needs at least .* GiB of memory "
-                                                   r"for a grid of \d+ x \d+ x \d+ = .* points, more than this "
-                                                   r"machine's .* GiB$"),
+                                                   r"for a grid of \d+ x \d+ x \d+ = .* points, more than the "
+                                                   r".* GiB this machine has$"),
     ("reconfig_indices", ["experiment.h=1e-5"], r"^experiment.h=1e-05 m needs at least .* GiB of memory"),
     ("ga_reconfig", ["experiment.ga.population_size=100000000"],
      r"^experiment.ga.population_size=100000000 needs at least .* GiB of memory for 1e\+08 designs"),

@@ -84,10 +84,19 @@ def _vector(path: str, v: Any, n: int, unit: str = "m") -> list:
 
 # ---- memory: sizes are refused up front when even a lower bound of what they hold exceeds the machine ----
 def memory_bytes() -> int:
-    """Physical memory of this machine (bytes): the cap that a grid, a population or a batch must fit in."""
+    """Memory this process may use (bytes): the machine's physical memory, or the cgroup's limit where lower (a
+    container, a SLURM allocation). The cap that a grid, a population or a batch must fit in."""
     import os
 
-    return int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    cap = int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    for f in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = open(f).read().strip()
+        except OSError:
+            continue
+        if text.isdigit():
+            cap = min(cap, int(text))
+    return cap
 
 
 def _gib(n: float) -> str:
@@ -99,5 +108,5 @@ def _fits(path: str, v: Any, n_bytes: float, what: str, unit: str = "") -> None:
     cap = memory_bytes()
     if n_bytes > cap:
         u = f" {unit}" if unit else ""
-        raise ConfigError(f"{path}={v!r}{u} needs at least {_gib(n_bytes)} of memory for {what}, more than this "
-                          f"machine's {_gib(cap)}")
+        raise ConfigError(f"{path}={v!r}{u} needs at least {_gib(n_bytes)} of memory for {what}, more than the "
+                          f"{_gib(cap)} this machine has")
