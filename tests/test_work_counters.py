@@ -33,8 +33,10 @@ def test_redundancy_counters_missing_from_a_checkpoint_are_refused(tmp_path):
     ck = tmp_path / "ck"
     ws.redundancy_grid(REC, G, **KW, checkpoint_dir=ck, max_chunks=2)
     (ck / "work_partials.npy").unlink()  # as written by a version without counters in the checkpoint
+    seen = []
     with pytest.raises(ws.CheckpointMismatch, match="work counters of chunks \\[0, 1\\] are missing"):
-        ws.redundancy_grid(REC, G, **KW, work={}, checkpoint_dir=ck)
+        ws.redundancy_grid(REC, G, **KW, work={}, checkpoint_dir=ck, progress=seen.append)
+    assert seen == []  # refused at the start of the resume, before any chunk is computed
 
 
 WG = ["plots=false", "progress=false", "experiment.grid.h=0.1", "experiment.grid.z=[0.0,0.6]",

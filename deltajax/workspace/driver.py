@@ -175,6 +175,7 @@ class _ChunkCounters:
 
     def __init__(self, names, n_chunks: int, checkpoint_dir):
         self.names = tuple(names)
+        self.resumed = None  # items found done in the checkpoint, once known
         shape = (n_chunks, len(self.names))
         path = None if checkpoint_dir is None else Path(checkpoint_dir) / "work_partials.npy"
         if path is not None and path.exists() and (Path(checkpoint_dir) / "state.json").exists():
@@ -191,6 +192,8 @@ class _ChunkCounters:
             self.parts = np.full(shape, -1, np.int64)
 
     def set(self, chunk: int, counters: Mapping[str, int]) -> None:
+        if self.resumed is None:
+            self.resumed = 0  # the first chunk computed: nothing was resumed
         self.parts[chunk] = [int(counters[n]) for n in self.names]
         if isinstance(self.parts, np.memmap):
             self.parts.flush()  # before run_chunks records the chunk as done
@@ -448,6 +451,9 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
     done_items = [0]  # items finished, earlier processes' included (run_chunks reports those first)
 
     def advance(n: int) -> None:
+        if work is not None and done_items[0] == 0 and counts.resumed is None:  # the resumed chunks, first
+            counts.resumed = n
+            counts.totals(math.ceil(n / chunk_size))  # their counters are there: refused now, not at the end
         done_items[0] += n
         if progress is not None:
             progress(n)
