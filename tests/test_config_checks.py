@@ -52,7 +52,10 @@ REFUSED = [
     ("workspace_grid", ["experiment.grid.x=[0.0,0.0]"],
      r"^experiment.grid.x must be \[lo, hi\] with lo < hi \(m\), got \[0.0, 0.0\]$"),
     ("boundary_search", ["experiment.centre=[0,0,-5]"],
-     r"^experiment.centre=\[0.0, 0.0, -5.0\] m is outside the robot's workspace"),
+     r"^experiment.centre=\[0.0, 0.0, -5.0\] m puts the search centre \[0.0, 0.0, -5.0\] m outside the robot's "
+     r"workspace"),
+    ("boundary_search", ["experiment.centre_sweep_z=[1.5,9.0]"],
+     r"^experiment.centre_sweep_z\[1\]=9.0 m puts the search centre \[0.0, 0.0, 9.0\] m outside"),
     ("reconfig_indices", ["experiment.slices_z=[-1.0]"], r"^experiment.slices_z\[0\] must be in \(0, 0.598\] m, "
                                                          r"got -1.0 m$"),
     ("reconfig_indices", ["experiment.slices_z=[0.9]"], r"^experiment.slices_z\[0\] must be in \(0, 0.598\] m"),

@@ -298,6 +298,18 @@ def dynamics_cycle_spec(e, cfg=None, robot=None, recon=None) -> dict:
                 recon_R_amplitude=amp)
 
 
+def _search_centre(path: str, v: Any, centre: list, robot) -> None:
+    """A boundary search starts from its centre: outside the workspace it would measure nothing (a NaN sector
+    volume); refused unless the inverse kinematics of ``centre`` succeeds within the joint limits."""
+    if robot is None:
+        return
+    from ..workspace.grid import reachable_point
+
+    if not bool(reachable_point(robot, centre)):
+        raise ConfigError(f"{path}={v!r} m puts the search centre {centre!r} m outside the robot's workspace (no "
+                          f"inverse kinematics within the joint limits there); choose a reachable centre")
+
+
 def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
     """``experiment.*`` of boundary_search as plain values (m, deg)."""
     from ..workspace import boundary as B
@@ -306,12 +318,7 @@ def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
     out = dict(eps=pos("eps", "m"), rho_max=pos("rho_max", "m"), grid_h=pos("grid_h", "m"),
                sweep_step_deg=pos("sweep_step_deg", "deg"),
                centre=_vector("experiment.centre", e.get("centre"), 3))
-    if robot is not None:  # the search starts from the centre: outside the workspace it measures nothing
-        from ..workspace.grid import reachable_point
-
-        if not bool(reachable_point(robot, out["centre"])):
-            raise ConfigError(f"experiment.centre={out['centre']!r} m is outside the robot's workspace (no inverse "
-                              f"kinematics within the joint limits there); choose a reachable centre")
+    _search_centre("experiment.centre", out["centre"], out["centre"], robot)
     if out["rho_max"] <= out["eps"]:
         raise ConfigError(f"experiment.rho_max must exceed experiment.eps, got {out['rho_max']} m <= {out['eps']} m")
     steps = [_field(f"experiment.steps_deg[{i}]", s, lo=0, lo_open=True, unit="deg")
@@ -341,6 +348,8 @@ def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
     out["grid_box"] = box
     out["centre_sweep_z"] = [_field(f"experiment.centre_sweep_z[{i}]", z, unit="m")
                              for i, z in enumerate(e.get("centre_sweep_z") or [])]
+    for i, z in enumerate(out["centre_sweep_z"]):  # each swept centre starts a search as the centre does
+        _search_centre(f"experiment.centre_sweep_z[{i}]", z, [out["centre"][0], out["centre"][1], z], robot)
     out["half_space"] = _field("experiment.half_space", e.get("half_space", True), kind="bool")
     out["timing_repeats"] = _field("experiment.timing_repeats", e.get("timing_repeats", 3), kind="int", lo=1)
     return out
