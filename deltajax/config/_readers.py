@@ -41,12 +41,14 @@ def _field(path: str, v: Any, *, kind: str = "float", lo: Optional[float] = None
     bad_lo = lo is not None and (v <= lo if lo_open else v < lo)
     bad_hi = hi is not None and (v >= hi if hi_open else v > hi)
     if bad_lo or bad_hi:
-        left = "" if lo is None else ("(" if lo_open else "[") + f"{lo:g}"
-        right = "" if hi is None else f"{hi:g}" + (")" if hi_open else "]")
+        g = str if kind == "int" and all(isinstance(b, int) for b in (lo, hi) if b is not None) else \
+            (lambda b: f"{b:g}")  # integer bounds in full (a seed's 4294967295, not 4.29497e+09)
+        left = "" if lo is None else ("(" if lo_open else "[") + g(lo)
+        right = "" if hi is None else g(hi) + (")" if hi_open else "]")
         if lo is not None and hi is None:
-            rng = f"{'>' if lo_open else '>='} {lo:g}{u}"
+            rng = f"{'>' if lo_open else '>='} {g(lo)}{u}"
         elif hi is not None and lo is None:
-            rng = f"{'<' if hi_open else '<='} {hi:g}{u}"
+            rng = f"{'<' if hi_open else '<='} {g(hi)}{u}"
         else:
             rng = f"in {left}, {right}{u}"
         raise ConfigError(f"{path} must be {rng}, got {v!r}{u}")
