@@ -378,7 +378,9 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
         field_dtype: dtype of the stored index fields.
         chunk_size, checkpoint_dir, progress, max_chunks: see :func:`run_chunks`.
         work: if a dict, receives the work counters (window samples, exact kernel evaluations, screened
-            samples, fallbacks; see :func:`deltajax.workspace.resolve_redundancy_host`) of this call.
+            samples, fallbacks; see :func:`deltajax.workspace.resolve_redundancy_host`) of every finished chunk,
+            those of earlier processes included (kept per chunk in the checkpoint): a resumed job reports what an
+            uninterrupted one does.
         screen, screen_margin: fast mode's screen-and-verify (see ``resolve_redundancy_host``); the selection
             does not depend on them, so they are not part of the checkpoint fingerprint.
         keep: fields returned on the grid, among :data:`deltajax.INDEX_NAMES`, ``"R_star"`` and ``"k_star"``
