@@ -34,6 +34,8 @@ REFUSED = [
      r"^experiment.ga.population_size=100000000 needs at least .* GiB of memory for 1e\+08 designs"),
     ("ga_reconfig", ["experiment.pareto.population_size=100000000"],
      r"^experiment.pareto.population_size=100000000 needs at least .* GiB"),
+    ("ga_reconfig", ["experiment.verify.task_n_r=100000000000"],
+     r"^experiment.verify=\{.*'task_n_r': 100000000000.*\} needs at least .* GiB of memory for .* evaluated points"),
     ("bench_kernel", ["experiment.n_points=100000000000000"], r"^experiment.n_points=100000000000000 needs at least"),
     ("reconfig_indices", ["robot.R_range.step=1e-13"],
      r"^robot.R_range.step=1e-13 m needs at least .* GiB of memory for the R samples"),

@@ -293,6 +293,10 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
             raise ConfigError(f"experiment.verify.{k} must be >= 2, got {verify[k]!r}")
     if verify["cycle_samples"] < 5 or verify["cycle_samples"] % 2 == 0:
         raise ConfigError(f"experiment.verify.cycle_samples must be odd and >= 5, got {verify['cycle_samples']!r}")
+    # the verification's fine grids, one design at least evaluated at once
+    fine = verify["n_R"] * (verify["task_n_r"] * verify["task_n_phi"] * verify["task_n_z"] + verify["rw_n_r"] *
+                            verify["rw_n_phi"] * verify["rw_n_z"]) + verify["n_R_operating"] * verify["cycle_samples"]
+    _fits("experiment.verify", verify, float(fine) * DESIGN_POINT_BYTES, f"{fine:.3g} evaluated points of a design")
     return GaReconfigSettings(resume=resume, stop_after=sa, n_R=n_R, bounds=dict(d["bounds"]), task=task, good=good,
                     joints=joints, links=links, motor=motor, cycle=cycle, regular=regular, mode=mode,
                     objectives=tuple(names), primary=primary, weights=weights, constraints=cons, ga=ga,
