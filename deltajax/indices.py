@@ -55,6 +55,8 @@ MATRICES = ("theta3x3", "full3x4")
 #: Names of the scalar indices returned by :func:`indices`, usable as a redundancy-resolution criterion.
 INDEX_NAMES = ("inv_cond", "sigma_min_v", "sigma_min_f", "omega_v", "omega_f", "k_tilde", "manipulability",
                "imi")
+#: The range of values of each index, (lo, hi), hi None: unbounded (thresholds on an index must lie in it).
+INDEX_RANGES = {name: (0.0, 1.0 if name in ("inv_cond", "k_tilde") else None) for name in INDEX_NAMES}
 
 
 class Indices(NamedTuple):

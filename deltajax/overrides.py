@@ -14,7 +14,7 @@ from typing import Iterable, Optional
 
 from omegaconf import DictConfig, OmegaConf
 
-__all__ = ["check_overrides", "composition_error_line"]
+__all__ = ["check_overrides", "composition_error_line", "sweep_jobs"]
 
 #: Hydra flags after which the next argument is the flag's value, not an override.
 _FLAGS_WITH_VALUE = {"--cfg", "-c", "--package", "-p", "--info", "-i"}
@@ -102,15 +102,9 @@ def _default_experiment(config_dir: str) -> Optional[str]:
     return None
 
 
-def check_overrides(args: Iterable[str], config_dir: str) -> Optional[str]:
-    """Compose the config of a command line the way Hydra will, before Hydra runs it; returns the one-line
-    error (:func:`composition_error_line`) or None if it composes. A multirun (``-m``) is checked once per
-    combination of its config-group choices (``experiment=a,b``), each value sweep at its first value.
-    Command lines with flags that change the config source are left to Hydra."""
-    from hydra.core.override_parser.overrides_parser import OverridesParser
-    from hydra.errors import HydraException
-
-    args = list(args)
+def _split(args: Iterable[str]) -> Optional[tuple]:
+    """(the config overrides of a command line, without Hydra's own settings; whether it is a multirun), or None
+    for a command line with flags that change the config source (Hydra alone handles those)."""
     overrides, skip, multirun = [], False, False
     for a in args:
         if skip:
@@ -123,7 +117,43 @@ def check_overrides(args: Iterable[str], config_dir: str) -> Optional[str]:
             skip = True
         elif not a.startswith("-"):
             overrides.append(a)
-    overrides = [o for o in overrides if not o.lstrip("+~").startswith("hydra")]  # Hydra's own settings
+    return [o for o in overrides if not o.lstrip("+~").startswith("hydra")], multirun  # Hydra's own settings
+
+
+def sweep_jobs(args: Iterable[str]) -> Optional[list]:
+    """The overrides of every job of a multirun command line (``-m``), in the basic sweeper's order (the product
+    of every sweep's values); None when it is not a multirun, or holds a sweep only Hydra's sweeper can expand
+    (a range, an interval, a glob)."""
+    import itertools
+
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+
+    split = _split(args)
+    if split is None or not split[1]:
+        return None
+    values = []
+    for o in OverridesParser.create().parse_overrides(split[0]):
+        if not o.is_sweep_override():
+            values.append([o.input_line])
+        elif o.is_discrete_sweep() and o.value_type.name != "GLOB_CHOICE_SWEEP":
+            values.append([f"{o.get_key_element()}={v}" for v in o.sweep_string_iterator()])
+        else:
+            return None
+    return [list(c) for c in itertools.product(*values)]
+
+
+def check_overrides(args: Iterable[str], config_dir: str) -> Optional[str]:
+    """Compose the config of a command line the way Hydra will, before Hydra runs it; returns the one-line
+    error (:func:`composition_error_line`) or None if it composes. A multirun (``-m``) is checked once per
+    combination of its config-group choices (``experiment=a,b``), each value sweep at its first value.
+    Command lines with flags that change the config source are left to Hydra."""
+    from hydra.core.override_parser.overrides_parser import OverridesParser
+    from hydra.errors import HydraException
+
+    split = _split(args)
+    if split is None:
+        return None
+    overrides, multirun = split
     try:
         parsed = OverridesParser.create().parse_overrides(overrides)
     except HydraException as e:

@@ -55,7 +55,7 @@ def _register_schemas() -> None:
 _register_schemas()  # before Hydra composes (configs/config.yaml names schema/robot and schema/experiment)
 
 __all__ = ["RunContext", "main", "cli", "run_experiment", "execute", "list_experiments", "CONFIG_DIR",
-           "check_overrides", "composition_error_line",
+           "check_overrides", "check_sweep", "composition_error_line",
            "EXIT_USER_ERROR"]
 
 
@@ -145,15 +145,12 @@ def list_experiments() -> dict[str, str]:
     return {name: job.summary for name, job in JOBS.items()}
 
 
-def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
-    """Run the experiment described by ``cfg`` into ``run_dir``; returns the results path.
-
-    The run directory is claimed first (:mod:`deltajax.rundir`: lock, manifest, refusal of another job or
-    config); ``on_claimed()`` runs right after the claim (the CLI writes ``.hydra/`` there).
+def _validated(cfg: DictConfig, run_dir: Optional[Path] = None):
+    """Every check of ``cfg`` that needs no run directory (and those of ``run_dir`` where given): (experiment name,
+    job module, robot, reconfigurable robot or None). Sets the precision (the robot is built in it).
 
     Raises:
-        ConfigError: a user error (bad value, unknown experiment), raised before anything compiles where the
-            value is known up front; the CLI prints it as one line and exits with status 2.
+        ConfigError: one line naming the field and the value; nothing has been compiled or written.
     """
     from .config import ConfigError, check_keys, robot_from_config, validate_config
 
@@ -171,14 +168,30 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
     from ._precision import float32_requested
 
     float32_requested(cfg.precision == "float32")  # asked for: no float32 warning
+    check_keys(cfg)  # unknown keys (also +key=value ones), before anything else reads the config
+    robot, recon = robot_from_config(cfg.robot)  # validated before anything compiles
+    validate_config(cfg, robot, recon, run_dir=run_dir)  # every experiment field
+    return name, module, robot, recon
+
+
+def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
+    """Run the experiment described by ``cfg`` into ``run_dir``; returns the results path.
+
+    The run directory is claimed first (:mod:`deltajax.rundir`: lock, manifest, refusal of another job or
+    config); ``on_claimed()`` runs right after the claim (the CLI writes ``.hydra/`` there).
+
+    Raises:
+        ConfigError: a user error (bad value, unknown experiment), raised before anything compiles where the
+            value is known up front; the CLI prints it as one line and exits with status 2.
+    """
+    import jax
+
+    name, module, robot, recon = _validated(cfg, run_dir)  # every field, before the run dir is touched
     cache = cfg.get("compilation_cache")
     if cache:  # persistent XLA cache: reruns, resumes and sweep jobs skip most compilation
         jax.config.update("jax_compilation_cache_dir", os.path.expanduser(str(cache)))
         if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ:  # JAX's own setting wins if given
             jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
-    check_keys(cfg)  # unknown keys (also +key=value ones), before anything else reads the config
-    robot, recon = robot_from_config(cfg.robot)  # validated before anything compiles
-    validate_config(cfg, robot, recon, run_dir=run_dir)  # every experiment field, before the run dir is touched
     from . import __version__
     from .io import ResultsFile, git_commit
     from .rundir import claim
@@ -186,7 +199,7 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
     with contextlib.ExitStack() as stack:
         owner = stack.enter_context(claim(run_dir, name, OmegaConf.to_container(cfg, resolve=True),
                                           fresh=bool(cfg.get("fresh", False))))
-        if on_claimed is not None:
+        if on_claimed is not None and owner.state != "complete":  # a finished run's .hydra/ stays as it is
             on_claimed()
         if owner.state == "complete":  # a no-op: not even a line in that run's run.log
             log.info(f"{run_dir} already holds the complete results of this {name} run; nothing to do "
@@ -320,6 +333,40 @@ def _use_agg_backend() -> None:
     matplotlib.use("Agg")
 
 
+try:
+    from hydra.experimental.callback import Callback as _Callback
+except ImportError:  # pragma: no cover
+    _Callback = object  # type: ignore[misc,assignment]
+
+
+class RunDirWatch(_Callback):
+    """Hydra callback (``configs/config.yaml``, ``hydra.callbacks.run_dir_watch``): notes, before Hydra creates a
+    single run's directory, which of it and its parents do not exist yet, so that a refused run removes exactly
+    those again (:func:`_remove_created`) and leaves nothing behind."""
+
+    created: list = []  # the missing directories of this process's run, deepest first
+
+    def on_run_start(self, config, **kwargs: Any) -> None:
+        d = Path(os.path.abspath(str(config.hydra.run.dir)))
+        missing = []
+        while not d.exists() and d != d.parent:
+            missing.append(d)
+            d = d.parent
+        RunDirWatch.created = missing
+
+
+def _remove_created(run_dir: Path) -> None:
+    """Remove the directories Hydra created for a refused run (:class:`RunDirWatch`), deepest first, while they are
+    empty; a directory that existed before, or that holds anything, is kept."""
+    created = RunDirWatch.created
+    if not created or created[0] != Path(os.path.abspath(run_dir)):
+        return
+    for d in created:
+        if not d.is_dir() or any(d.iterdir()):
+            break
+        d.rmdir()
+
+
 @hydra.main(config_path=CONFIG_DIR, config_name="config", version_base="1.3")
 def main(cfg: DictConfig) -> None:
     """Hydra entry point. A user error is one line on stderr (and in run.log) and exit status 2; set
@@ -344,6 +391,7 @@ def main(cfg: DictConfig) -> None:
     except _user_errors() as e:
         if os.environ.get("HYDRA_FULL_ERROR") == "1" or hc.mode == RunMode.MULTIRUN:
             raise  # a sweep records the failed job; the launcher reports it
+        _remove_created(run_dir)
         log.error("%s", e)
         sys.exit(EXIT_USER_ERROR)
     except ResultsWriteError as e:  # disk full / I/O error: one line (the previous results are intact), status 1
@@ -461,6 +509,50 @@ def composition_error_line(exc: Exception, overrides: Iterable[str]) -> str:
     return line(exc, overrides, CONFIG_DIR)
 
 
+def check_sweep(args: Iterable[str]) -> Optional[str]:
+    """The one-line refusal of a multirun command line (``-m``) with a bad value in any of its jobs, or None.
+
+    Every job's config (:func:`deltajax.overrides.sweep_jobs`) gets the checks a single run gets before its claim
+    (:func:`_validated`), in a child process: this one stays without a JAX backend, which the sweep's
+    worker callback configures per job. Sweeps only Hydra's sweeper can expand are left to the jobs."""
+    import subprocess
+
+    from .overrides import sweep_jobs
+
+    if sweep_jobs(args) is None:
+        return None
+    code = "import sys; from deltajax.run import _check_sweep_main; sys.exit(_check_sweep_main(sys.argv[1:]))"
+    proc = subprocess.run([sys.executable, "-c", code, *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                          text=True)
+    if proc.returncode == 0:
+        return None
+    lines = [ln for ln in proc.stderr.splitlines() if ln.startswith("ERROR: ")]
+    if proc.returncode == EXIT_USER_ERROR and lines:
+        return lines[-1][len("ERROR: "):]
+    raise RuntimeError(f"the check of the sweep's jobs failed (exit status {proc.returncode}):\n{proc.stderr}")
+
+
+def _check_sweep_main(args: list) -> int:
+    """The child process of :func:`check_sweep`: each job's config composed and validated in turn."""
+    from hydra.errors import HydraException
+
+    from .overrides import _compose, sweep_jobs
+
+    logging.getLogger().setLevel(logging.ERROR)  # the child's only output is the refusal
+    for i, overrides in enumerate(sweep_jobs(args)):
+        try:
+            _validated(_compose(overrides, CONFIG_DIR))
+        except HydraException as e:
+            problem = composition_error_line(e, overrides)
+        except _user_errors() as e:
+            problem = str(e)
+        else:
+            continue
+        print(f"ERROR: sweep job {i} ({' '.join(overrides)}): {problem}", file=sys.stderr)
+        return EXIT_USER_ERROR
+    return 0
+
+
 def cli(argv: Optional[list] = None) -> int:
     """Console entry point (``python -m deltajax.run`` / ``deltajax``): our ``--help``, an early check of
     ``experiment=NAME``, then Hydra."""
@@ -479,6 +571,8 @@ def cli(argv: Optional[list] = None) -> int:
                 return EXIT_USER_ERROR
     # HYDRA_FULL_ERROR=1: the user wants Hydra's own error with its traceback
     problem = None if os.environ.get("HYDRA_FULL_ERROR") == "1" else check_overrides(args)
+    if problem is None and os.environ.get("HYDRA_FULL_ERROR") != "1":
+        problem = check_sweep(args)  # every job of a multirun, before Hydra creates the sweep directory
     if problem is not None:  # Hydra would print several lines (and suggest +key=value for a typo), exit 1
         print(f"ERROR: {problem}", file=sys.stderr)
         return EXIT_USER_ERROR

@@ -422,7 +422,8 @@ def _validate(cfg):
 
 
 BAD = [
-    ("ga_reconfig", "experiment.regular_workspace.z_max=-1", "experiment.regular_workspace.z_max must be > 0, got -1"),
+    ("ga_reconfig", "experiment.regular_workspace.z_max=-1",
+     "experiment.regular_workspace.z_max must be > 0 m, got -1.0 m"),
     ("ga_reconfig", "experiment.pareto.ref_min_factor=nan", "experiment.pareto.ref_min_factor must be a finite number"),
     ("ga_reconfig", "experiment.motor.rated_torque=nan", "experiment.motor.rated_torque must be a finite number"),
     ("ga_reconfig", "experiment.pareto.population_size=0", "experiment.pareto.population_size must be >= 4, got 0"),

@@ -134,7 +134,8 @@ def test_merge_refuses_incomplete_or_foreign_shards(sweeps, tmp_path):
 def test_resume_from_checkpoint_matches_single_run(sweeps):
     assert "resuming: 4 x-planes already done" in sweeps["logs"]["resume"]
     with h5py.File(sweeps["resume"], "r") as f:
-        assert f.attrs["points_evaluated"] == 5 * 9 * 7  # only the 5 missing x-planes
+        assert f.attrs["points_evaluated"] == 9 * 9 * 7  # the whole run's work, as uninterrupted
+        assert f.attrs["points_evaluated_this_process"] == 5 * 9 * 7  # only the 5 missing x-planes
     _assert_identical(sweeps["resume"], sweeps["single"], same_config=False)  # config: checkpoint_s differs
 
 

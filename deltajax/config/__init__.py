@@ -18,7 +18,7 @@ __all__ = ["ConfigError", "robot_from_config", "mass_from_config", "validate_con
            "EXPERIMENT_VALIDATORS", "EXPERIMENT_SCHEMAS"]
 
 
-from ._readers import ConfigError, _choice, _field, _names, _vector  # noqa: E402,F401  the one set of readers
+from ._readers import ConfigError, _choice, _field, _fits, _names, _vector  # noqa: E402,F401  the one set of readers
 from .ga_reconfig import (GaReconfigSettings, _v_ga_reconfig, _v_ga_reconfig_run_dir,  # noqa: E402,F401
                           ga_reconfig_build, ga_reconfig_settings)
 
@@ -52,11 +52,18 @@ def robot_from_config(cfg: Mapping[str, Any], prefix: str = "robot") -> Tuple[De
         return robot, None
     p = f"{prefix}.R_range"
     r_min, r_max, r_step = (_field(f"{p}.{k}", rng.get(k), unit="m") for k in ("min", "max", "step"))
+    if r_step > 0 and r_max >= r_min:  # the R samples (one float64 each at least), before anything holds them
+        _fits(f"{p}.step", r_step, 8.0 * _n_steps(r_min, r_max, r_step), "the R samples", unit="m")
     try:
         recon = ReconfigurableDelta.from_range(robot, r_min, r_max, r_step)
     except GeometryError as e:
         raise ConfigError(f"{p}: {e}") from None
     return robot, recon
+
+
+def _n_steps(lo: float, hi: float, step: float) -> int:
+    """Samples of the inclusive range [lo, hi] every ``step`` (an estimate: no array is built)."""
+    return math.floor((hi - lo) / step + 1e-6) + 1
 
 
 def check_reach_over_range(cfg: Mapping[str, Any], recon: ReconfigurableDelta, prefix: str = "robot") -> None:
@@ -81,7 +88,7 @@ TOP_LEVEL_KEYS = ("robot", "experiment", "seed", "precision", "plots", "progress
                   "shard", "n_shards", "beta")
 
 def _validate_top(cfg: Mapping[str, Any]) -> None:
-    _field("seed", cfg.get("seed"), kind="int")
+    _field("seed", cfg.get("seed"), kind="int", lo=0, hi=2 ** 32 - 1)  # NumPy's and JAX's seed range
     _choice("precision", cfg.get("precision"), ("float64", "float32"))
     for k in ("plots", "progress", "fresh"):
         if k in cfg:
@@ -90,9 +97,20 @@ def _validate_top(cfg: Mapping[str, Any]) -> None:
     _field("shard", cfg.get("shard", 0), kind="int", lo=0, hi=n_shards - 1)
 
 
-def workspace_grid_from_config(g: Mapping[str, Any], robot=None):
+def _grid_fits(path: str, h: float, axes, bytes_per_point: float) -> None:
+    """Refuse a grid whose points (``bytes_per_point`` each, a lower bound of what the job holds per point) or
+    axes do not fit in memory, from the axis lengths alone (before any axis is built)."""
+    n = [math.floor((hi - lo) / h + 1e-6) + 1 for lo, hi in axes]
+    total = float(n[0]) * n[1] * n[2]
+    _fits(path, h, max(total * bytes_per_point, 16.0 * max(n)),
+          f"a grid of {n[0]} x {n[1]} x {n[2]} = {total:.3g} points", unit="m")
+
+
+def workspace_grid_from_config(g: Mapping[str, Any], robot=None, bytes_per_point: float = 1.0):
     """The grid of ``experiment.grid`` (h, x, y, z, bounds in m); an axis given as null is sized from the robot's
-    reach bound (:func:`deltajax.workspace.driver.reach_box`, widened outwards to whole steps of h, y symmetric)."""
+    reach bound (:func:`deltajax.workspace.driver.reach_box`, widened outwards to whole steps of h, y symmetric).
+    Every axis must have positive width; a grid of more than the machine's memory at ``bytes_per_point`` is
+    refused before it is built."""
     from ..workspace import make_grid
     from ..workspace.driver import reach_box
 
@@ -108,8 +126,8 @@ def workspace_grid_from_config(g: Mapping[str, Any], robot=None):
                 return -n * h, n * h
             return math.floor(lo / h + 1e-9) * h, math.ceil(hi / h - 1e-9) * h
         lo, hi = _vector(f"experiment.grid.{key}", v, 2)
-        if not hi >= lo:
-            raise ConfigError(f"experiment.grid.{key} must be [lo, hi] with lo <= hi (m), got {[lo, hi]!r}")
+        if not hi > lo:  # a zero-width box has no volume: its "volume" would be count h^3 of a plane
+            raise ConfigError(f"experiment.grid.{key} must be [lo, hi] with lo < hi (m), got {[lo, hi]!r}")
         return lo, hi
 
     bounds = g.get("bounds")
@@ -126,17 +144,20 @@ def workspace_grid_from_config(g: Mapping[str, Any], robot=None):
             if not hi > lo:
                 raise ConfigError(f"experiment.grid.bounds ({k}) must have lo < hi (m), got {[lo, hi]!r}")
     axes = (pair(0, "x"), pair(1, "y"), pair(2, "z"))
+    _grid_fits("experiment.grid.h", h, axes, bytes_per_point)
     try:
         return make_grid(*axes, h, bounds=bounds)
     except ValueError as err:
         raise ConfigError(f"experiment.grid: {err}") from None
 
 
-def paper_grid_from_config(e: Mapping[str, Any]):
-    """The Franco-López 2026 grid at spacing ``experiment.h`` (m, default 0.002)."""
+def paper_grid_from_config(e: Mapping[str, Any], bytes_per_point: float = 1.0):
+    """The Franco-López 2026 grid at spacing ``experiment.h`` (m, default 0.002); refused before it is built when
+    its points at ``bytes_per_point`` do not fit in memory."""
     from ..workspace import franco2026_grid
 
     h = _field("experiment.h", e.get("h", 0.002), lo=0, lo_open=True, unit="m")
+    _grid_fits("experiment.h", h, ((-0.4, 0.4), (-0.4, 0.4), (0.0, 0.6 - h)), bytes_per_point)
     try:
         return franco2026_grid(h)
     except ValueError as err:
@@ -146,11 +167,14 @@ def paper_grid_from_config(e: Mapping[str, Any]):
 def _v_workspace_grid(e, cfg, robot, recon) -> None:
     from ..indices import INDEX_NAMES
 
-    workspace_grid_from_config(e.get("grid") or {}, robot)
+    store = _names("experiment.store", e.get("store"), INDEX_NAMES)
+    itemsize = 8 if cfg.get("precision") == "float64" else 4
+    # per point of this shard: the reachable mask (1 byte) and every stored index field
+    workspace_grid_from_config(e.get("grid") or {}, robot,
+                               bytes_per_point=(1 + itemsize * len(store)) / int(cfg.get("n_shards", 1) or 1))
     _field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
     _field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True)
     _field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
-    _names("experiment.store", e.get("store"), INDEX_NAMES)
     _field("experiment.chunk_points", e.get("chunk_points"), kind="int", lo=1)
     _choice("experiment.backend", e.get("backend", "auto"), ("auto", "jax", "numba"))
     dev = e.get("devices", "all")
@@ -161,8 +185,9 @@ def _v_workspace_grid(e, cfg, robot, recon) -> None:
     _field("experiment.stop_after", e.get("stop_after"), kind="int", lo=1, none=True)
 
 
-def _v_paper_grid(e, cfg, robot, recon) -> None:
-    paper_grid_from_config(e)
+def _v_paper_grid(e, cfg, robot, recon, bytes_per_point: float = 2.0) -> None:
+    # reconfig_workspace: two reachable masks (fixed R, some R) of 1 byte per point
+    paper_grid_from_config(e, bytes_per_point)
     _field("experiment.chunk_points", e.get("chunk_points"), kind="int", lo=1)
     _field("experiment.checkpoint", e.get("checkpoint", True), kind="bool")
     if recon is None:
@@ -172,31 +197,51 @@ def _v_paper_grid(e, cfg, robot, recon) -> None:
 def _v_reconfig_indices(e, cfg, robot, recon) -> None:
     from ..indices import INDEX_NAMES
 
-    _v_paper_grid(e, cfg, robot, recon)
+    store = _names("experiment.store_fields", e.get("store_fields"), INDEX_NAMES)
+    # per point: two masks, R* and every stored field at R* and at fixed R (float32), the slice index field
+    _v_paper_grid(e, cfg, robot, recon, bytes_per_point=2 + 4 * (2 * len(store) + 2))
+    grid = paper_grid_from_config(e, 0.0)
     _field("beta", cfg.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
     _field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
     _field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True)
     _choice("experiment.criterion", e.get("criterion"), INDEX_NAMES)
     _choice("experiment.mode", e.get("mode"), ("fast", "exact"))
     _choice("experiment.slice_index", e.get("slice_index"), INDEX_NAMES)
-    _names("experiment.store_fields", e.get("store_fields"), INDEX_NAMES)
-    for i, z in enumerate(e.get("slices_z") or []):
-        _field(f"experiment.slices_z[{i}]", z, unit="m")
+    z0, z1 = float(grid.z[0]), float(grid.z[-1])
+    for i, z in enumerate(e.get("slices_z") or []):  # a plane of the grid below the base (the nearest is drawn)
+        _field(f"experiment.slices_z[{i}]", z, lo=max(z0, 0.0), hi=z1, lo_open=z0 <= 0.0, unit="m")
 
 
 def _v_bench_kernel(e, cfg, robot, recon) -> None:
     for k in ("n_points", "n_baseline", "block", "repeats"):
         _field(f"experiment.{k}", e.get(k), kind="int", lo=1)
+    for k in ("n_points", "n_baseline"):  # the points (3 coordinates) and their index values, float64
+        _fits(f"experiment.{k}", e.get(k), float(e.get(k)) * 8 * 12, f"{e.get(k)} points")
     _field("experiment.R", e.get("R"), lo=0, lo_open=True, unit="m")
     _names("experiment.dtypes", e.get("dtypes"), ("float32", "float64"), min_len=1)
+
+
+def _point_below_base(path: str, v: Any) -> list:
+    """A platform position (m) in the half-space z > 0 below the base (the base frame's z points down)."""
+    p = _vector(path, v, 3)
+    if not p[2] > 0:
+        raise ConfigError(f"{path}={p!r} m lies above the base plane: a platform position needs z > 0 m (the base "
+                          f"frame's z points down), got z = {p[2]!r} m")
+    return p
 
 
 def indices_examples_spec(e, cfg=None, robot=None, recon=None) -> dict:
     """``experiment.*`` of indices_examples as plain values (the paper's example points, the R curve step)."""
     if recon is None:
         raise ConfigError("experiment=indices_examples needs a reconfigurable robot: robot.R_range is null")
-    return dict(R_step=_field("experiment.R_step", e.get("R_step"), lo=0, lo_open=True, unit="m"),
-                points=[_vector(f"experiment.points[{i}]", p, 3) for i, p in enumerate(e.get("points") or [])],
+    from ..indices import INDEX_NAMES
+
+    R_step = _field("experiment.R_step", e.get("R_step"), lo=0, lo_open=True, unit="m")
+    points = [_point_below_base(f"experiment.points[{i}]", p) for i, p in enumerate(e.get("points") or [])]
+    n_R = _n_steps(float(recon.R_min), float(recon.R_max), R_step)  # every index at every R of each point's curve
+    _fits("experiment.R_step", R_step, 8.0 * n_R * max(1, len(points)) * len(INDEX_NAMES),
+          f"{n_R:.3g} R samples of each point's index curves", unit="m")
+    return dict(R_step=R_step, points=points,
                 b_v=_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True),
                 b_f=_field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True),
                 beta=_field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True),
@@ -238,8 +283,12 @@ def dynamics_cycle_spec(e, cfg=None, robot=None, recon=None) -> dict:
         if not (lo <= R0 - amp and R0 + amp <= hi + 1e-12):
             raise ConfigError(f"experiment.recon_R_amplitude={amp!r} m takes R = {R0} +- {amp} m outside "
                               f"[{lo}, {hi}] m")
+    n_samples = _field("experiment.n_samples", e.get("n_samples"), kind="int", lo=11)
+    # positions, velocities and accelerations of every analysed robot's cycle (float64), at least
+    _fits("experiment.n_samples", n_samples, 72.0 * n_samples * len(setups), f"{len(setups)} cycles of "
+          f"{n_samples} samples")
     return dict(method=_choice("experiment.method", e.get("method"), ("virtual_work", "lagrange")),
-                n_samples=_field("experiment.n_samples", e.get("n_samples"), kind="int", lo=11),
+                n_samples=n_samples,
                 law=_choice("experiment.law", e.get("law"), MOTION_LAWS),
                 blend=_field("experiment.blend", e.get("blend"), lo=0, hi=1, hi_open=True),
                 robots=robots, cfg_name=cfg_name, setups=setups,
@@ -247,6 +296,18 @@ def dynamics_cycle_spec(e, cfg=None, robot=None, recon=None) -> dict:
                                     unit="rad"),
                 ga_duration=_field("experiment.ga_motion.duration", gm.get("duration"), lo=0, lo_open=True, unit="s"),
                 recon_R_amplitude=amp)
+
+
+def _search_centre(path: str, v: Any, centre: list, robot) -> None:
+    """A boundary search starts from its centre: outside the workspace it would measure nothing (a NaN sector
+    volume); refused unless the inverse kinematics of ``centre`` succeeds within the joint limits."""
+    if robot is None:
+        return
+    from ..workspace.grid import reachable_point
+
+    if not bool(reachable_point(robot, centre)):
+        raise ConfigError(f"{path}={v!r} m puts the search centre {centre!r} m outside the robot's workspace (no "
+                          f"inverse kinematics within the joint limits there); choose a reachable centre")
 
 
 def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
@@ -257,6 +318,7 @@ def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
     out = dict(eps=pos("eps", "m"), rho_max=pos("rho_max", "m"), grid_h=pos("grid_h", "m"),
                sweep_step_deg=pos("sweep_step_deg", "deg"),
                centre=_vector("experiment.centre", e.get("centre"), 3))
+    _search_centre("experiment.centre", out["centre"], out["centre"], robot)
     if out["rho_max"] <= out["eps"]:
         raise ConfigError(f"experiment.rho_max must exceed experiment.eps, got {out['rho_max']} m <= {out['eps']} m")
     steps = [_field(f"experiment.steps_deg[{i}]", s, lo=0, lo_open=True, unit="deg")
@@ -286,9 +348,22 @@ def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
     out["grid_box"] = box
     out["centre_sweep_z"] = [_field(f"experiment.centre_sweep_z[{i}]", z, unit="m")
                              for i, z in enumerate(e.get("centre_sweep_z") or [])]
+    for i, z in enumerate(out["centre_sweep_z"]):  # each swept centre starts a search as the centre does
+        _search_centre(f"experiment.centre_sweep_z[{i}]", z, [out["centre"][0], out["centre"][1], z], robot)
     out["half_space"] = _field("experiment.half_space", e.get("half_space", True), kind="bool")
     out["timing_repeats"] = _field("experiment.timing_repeats", e.get("timing_repeats", 3), kind="int", lo=1)
     return out
+
+
+#: the numeric settings of experiment.mechanism (deltajax.mechanism.example_screw_linkage / DirectRadial), with the
+#: ranges the mechanism needs, checked in the units the config writes them in
+MECHANISM_FIELDS = {
+    "lead": dict(lo=0, lo_open=True, unit="m"), "d2": dict(lo=0, lo_open=True, unit="m"), "d3": dict(unit="m"),
+    "sweep_deg": dict(lo=0, hi=90, lo_open=True, hi_open=True, unit="deg"),
+    "efficiency": dict(lo=0, hi=1, lo_open=True), "back_efficiency": dict(lo=0, hi=1, lo_open=True),
+    "gear_ratio": dict(lo=0, lo_open=True), "assembly": dict(kind="int", choices=(1, -1)),
+    "nut_side": dict(kind="int", choices=(1, -1)),
+}
 
 
 def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dict:
@@ -322,8 +397,19 @@ def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dic
                                                       out["R_step"])
     except GeometryError as err:
         raise ConfigError(f"experiment.R_step={out['R_step']!r} m: {err}") from None
+    # the DP's table: every R sample at every time sample of a case (3 at least)
+    _fits("experiment.R_step", out["R_step"], 3 * 8.0 * out["recon"].n_R,
+          f"{out['recon'].n_R:.3g} R samples at each time sample", unit="m")
     mech = dict(e.get("mechanism") or {})
     kind = _choice("experiment.mechanism.kind", mech.pop("kind", "screw_linkage"), MECHANISMS)
+    for k, v in mech.items():  # in the units the config gives them (the linkage stores lead as a pitch in m/rad)
+        if k in MECHANISM_FIELDS:
+            rule = dict(MECHANISM_FIELDS[k])
+            choices = rule.pop("choices", None)
+            mech[k] = _field(f"experiment.mechanism.{k}", v, **rule)
+            if choices is not None and mech[k] not in choices:
+                raise ConfigError(f"experiment.mechanism.{k} must be one of {', '.join(map(str, choices))}, "
+                                  f"got {v!r}")
     try:
         if kind == "direct":
             out["mech"] = DirectRadial(**mech)
@@ -349,6 +435,12 @@ def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dic
         kind = _choice(f"{p}.kind", c.get("kind"), ("adept", "task"))
         boundary = _choice(f"{p}.boundary", c.get("boundary", "free"), BOUNDARIES)
         law = _choice(f"{p}.law", c.get("law", "poly5"), tr.MOTION_LAWS)
+        # the cycle's samples (position, velocity, acceleration) and the DP's table over them and the R samples
+        key = "n_samples" if kind == "adept" else "samples_per_segment"
+        per = _field(f"{p}.{key}", c.get(key), kind="int", lo=3 if kind == "adept" else 2)
+        n_t = per * (1 if kind == "adept" else max(1, len(c.get("points") or [])))
+        _fits(f"{p}.{key}", per, n_t * (72.0 + 8.0 * out["recon"].n_R),
+              f"{n_t} cycle samples x {out['recon'].n_R} R samples (the DP's table)")
         try:
             if kind == "adept":
                 cyc = tr.adept_cycle(_vector(f"{p}.centre", c.get("centre"), 3),

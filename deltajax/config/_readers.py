@@ -41,12 +41,14 @@ def _field(path: str, v: Any, *, kind: str = "float", lo: Optional[float] = None
     bad_lo = lo is not None and (v <= lo if lo_open else v < lo)
     bad_hi = hi is not None and (v >= hi if hi_open else v > hi)
     if bad_lo or bad_hi:
-        left = "" if lo is None else ("(" if lo_open else "[") + f"{lo:g}"
-        right = "" if hi is None else f"{hi:g}" + (")" if hi_open else "]")
+        g = str if kind == "int" and all(isinstance(b, int) for b in (lo, hi) if b is not None) else \
+            (lambda b: f"{b:g}")  # integer bounds in full (a seed's 4294967295, not 4.29497e+09)
+        left = "" if lo is None else ("(" if lo_open else "[") + g(lo)
+        right = "" if hi is None else g(hi) + (")" if hi_open else "]")
         if lo is not None and hi is None:
-            rng = f"{'>' if lo_open else '>='} {lo:g}{u}"
+            rng = f"{'>' if lo_open else '>='} {g(lo)}{u}"
         elif hi is not None and lo is None:
-            rng = f"{'<' if hi_open else '<='} {hi:g}{u}"
+            rng = f"{'<' if hi_open else '<='} {g(hi)}{u}"
         else:
             rng = f"in {left}, {right}{u}"
         raise ConfigError(f"{path} must be {rng}, got {v!r}{u}")
@@ -80,3 +82,33 @@ def _vector(path: str, v: Any, n: int, unit: str = "m") -> list:
     return items
 
 
+
+
+# ---- memory: sizes are refused up front when even a lower bound of what they hold exceeds the machine ----
+def memory_bytes() -> int:
+    """Memory this process may use (bytes): the machine's physical memory, or the cgroup's limit where lower (a
+    container, a SLURM allocation). The cap that a grid, a population or a batch must fit in."""
+    import os
+
+    cap = int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
+    for f in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
+        try:
+            text = open(f).read().strip()
+        except OSError:
+            continue
+        if text.isdigit():
+            cap = min(cap, int(text))
+    return cap
+
+
+def _gib(n: float) -> str:
+    return f"{n / 2 ** 30:.3g} GiB"
+
+
+def _fits(path: str, v: Any, n_bytes: float, what: str, unit: str = "") -> None:
+    """Refuse ``path=v`` when ``what`` needs at least ``n_bytes`` (a lower bound) and the machine has less."""
+    cap = memory_bytes()
+    if n_bytes > cap:
+        u = f" {unit}" if unit else ""
+        raise ConfigError(f"{path}={v!r}{u} needs at least {_gib(n_bytes)} of memory for {what}, more than the "
+                          f"{_gib(cap)} this machine has")

@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Mapping, Optional
 
-from ._readers import ConfigError, _choice, _field
+from ._readers import ConfigError, _choice, _field, _fits
 
 # ---- ga_reconfig: the designer's problem (every field, unknown keys included); owner: designer ----
 # The one reader of experiment.* for experiment=ga_reconfig (the job and the validator call it); the design space,
@@ -41,6 +41,10 @@ _GA_KEYS = {
 
 # keys a config may omit (their defaults are applied where they are read)
 _GA_OPTIONAL = {"regular_workspace": {"search_refine", "search_refine_steps", "search_refine_samples"}}
+
+#: a lower bound of the memory of one evaluated point of a design (one 3x3 Jacobian in float32), for the refusal
+#: of populations that cannot be evaluated at once
+DESIGN_POINT_BYTES = 9 * 4
 
 RECOMMEND_RULES = ("floor", "band", "knee", "primary")   # deltajax.optimize.workflow.recommend
 
@@ -133,7 +137,7 @@ def _operating_settings(e: Mapping[str, Any]) -> dict:  # rtmode
 
 def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
     """Validate every field of ``experiment`` (one ``ConfigError`` line naming field and value)."""
-    from ..indices import INDEX_NAMES
+    from ..indices import INDEX_NAMES, INDEX_RANGES
     from ..optimize.designer import CONSTRAINT_NAMES, OBJECTIVES
 
     e = _ga_block(_ga_plain(ectx), "")
@@ -152,26 +156,28 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
     if not isinstance(d.get("bounds"), Mapping) or not d["bounds"]:
         raise ConfigError(f"experiment.design.bounds must be a non-empty mapping, got {d.get('bounds')!r}")
     t = _ga_block(e, "task")
-    task = {k: _ga_num(t, k, "task", lo=0, lo_open=True) for k in ("diameter", "height", "z_top")}
+    task = {k: _ga_num(t, k, "task", lo=0, lo_open=True, unit="m") for k in ("diameter", "height", "z_top")}
     task["n_r"] = _ga_num(t, "n_r", "task", lo=1, integer=True)
     task["n_phi"] = _ga_num(t, "n_phi", "task", lo=2, integer=True)   # both ends of the 60 deg wedge
     task["n_z"] = _ga_num(t, "n_z", "task", lo=2, integer=True)
     gw = _ga_block(e, "good_workspace")
-    good = {"index": _ga_choice(gw, "index", "good_workspace", INDEX_NAMES),
-            "threshold": _ga_num(gw, "threshold", "good_workspace", lo=0), "beta": _ga_num(gw, "beta", "good_workspace",
-                                                                                     lo=0, hi=1)}
+    index = _ga_choice(gw, "index", "good_workspace", INDEX_NAMES)
+    lo, hi = INDEX_RANGES[index]  # a threshold outside the index's range selects every point or none
+    good = {"index": index, "threshold": _ga_num(gw, "threshold", "good_workspace", lo=lo, hi=hi),
+            "beta": _ga_num(gw, "beta", "good_workspace", lo=0, hi=1)}
     j = _ga_block(e, "joints")
     joints = {"kind": _ga_choice(j, "kind", "joints", ("ball", "universal")),
-              "limit_deg": _ga_num(j, "limit_deg", "joints", lo=0, lo_open=True, hi=180),
-              "elbow_neutral_deg": _ga_num(j, "elbow_neutral_deg", "joints", lo=-180, hi=180),
-              "platform_neutral_deg": _ga_num(j, "platform_neutral_deg", "joints", lo=-180, hi=180)}
+              "limit_deg": _ga_num(j, "limit_deg", "joints", lo=0, lo_open=True, hi=180, unit="deg"),
+              "elbow_neutral_deg": _ga_num(j, "elbow_neutral_deg", "joints", lo=-180, hi=180, unit="deg"),
+              "platform_neutral_deg": _ga_num(j, "platform_neutral_deg", "joints", lo=-180, hi=180, unit="deg")}
     lk = _ga_block(e, "links")
     links = {k: _ga_num(lk, k, "links", lo=0, hi=1) for k in ("forearm_radius", "upper_arm_radius", "clearance")}
     links["plate_overhang"] = _ga_num(lk, "plate_overhang", "links", lo=-1, hi=1)
     mo = _ga_block(e, "motor")
-    motor = {k: _ga_num(mo, k, "motor", lo=0, lo_open=True) for k in ("peak_torque", "rated_torque", "max_speed",
-                                                                   "corner_speed", "gear_ratio")}
-    motor["rotor_inertia"] = _ga_num(mo, "rotor_inertia", "motor", lo=0)
+    motor_units = {"peak_torque": "N m", "rated_torque": "N m", "max_speed": "rad/s", "corner_speed": "rad/s",
+                   "gear_ratio": ""}
+    motor = {k: _ga_num(mo, k, "motor", lo=0, lo_open=True, unit=u) for k, u in motor_units.items()}
+    motor["rotor_inertia"] = _ga_num(mo, "rotor_inertia", "motor", lo=0, unit="kg m^2")
     motor["efficiency"] = _ga_num(mo, "efficiency", "motor", lo=0, lo_open=True, hi=1)
     if motor["rated_torque"] > motor["peak_torque"]:
         raise ConfigError(f"experiment.motor.rated_torque={motor['rated_torque']!r} N m must be <= "
@@ -180,8 +186,9 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
         raise ConfigError(f"experiment.motor.corner_speed={motor['corner_speed']!r} rad/s must be <= "
                           f"experiment.motor.max_speed={motor['max_speed']!r} rad/s")
     c = _ga_block(e, "cycle")
-    cycle = {"payload": _ga_num(c, "payload", "cycle", lo=0), "dwell": _ga_num(c, "dwell", "cycle", lo=0),
-             "duration": _ga_num(c, "duration", "cycle", lo=0, lo_open=True),
+    cycle = {"payload": _ga_num(c, "payload", "cycle", lo=0, unit="kg"),
+             "dwell": _ga_num(c, "dwell", "cycle", lo=0, unit="s"),
+             "duration": _ga_num(c, "duration", "cycle", lo=0, lo_open=True, unit="s"),
              "n_samples": _ga_num(c, "n_samples", "cycle", lo=5, integer=True),
              "law": _ga_choice(c, "law", "cycle", ("poly5", "cycloidal", "modified_trapezoid")),
              "n_R_operating": _ga_num(c, "n_R_operating", "cycle", lo=1, integer=True)}
@@ -190,9 +197,9 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
                           f"got {cycle['n_samples']}")
     rw = _ga_block(e, "regular_workspace")
     regular = {"hd_ratio": _ga_num(rw, "hd_ratio", "regular_workspace", lo=0, lo_open=True),
-               "r_max": _ga_num(rw, "r_max", "regular_workspace", lo=0, lo_open=True),
-               "z_min": _ga_num(rw, "z_min", "regular_workspace", lo=0),
-               "z_max": _ga_num(rw, "z_max", "regular_workspace", lo=0, lo_open=True),
+               "r_max": _ga_num(rw, "r_max", "regular_workspace", lo=0, lo_open=True, unit="m"),
+               "z_min": _ga_num(rw, "z_min", "regular_workspace", lo=0, unit="m"),
+               "z_max": _ga_num(rw, "z_max", "regular_workspace", lo=0, lo_open=True, unit="m"),
                "n_r": _ga_num(rw, "n_r", "regular_workspace", lo=2, integer=True),
                "n_phi": _ga_num(rw, "n_phi", "regular_workspace", lo=2, integer=True),
                "n_z": _ga_num(rw, "n_z", "regular_workspace", lo=2, integer=True)}
@@ -243,7 +250,7 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
     cs = _ga_block(e, "constraints")
     cons = {k: _ga_flag(cs, k, "constraints") for k in ("task_in_good_workspace", "passive_joints", "interference")}
     cons["min_picks_per_min"] = _ga_num(cs, "min_picks_per_min", "constraints", lo=0)
-    cons["max_arm_sum"] = _ga_num(cs, "max_arm_sum", "constraints", lo=0, lo_open=True, allow_none=True)
+    cons["max_arm_sum"] = _ga_num(cs, "max_arm_sum", "constraints", lo=0, lo_open=True, allow_none=True, unit="m")
     assert set(CONSTRAINT_NAMES) >= {"task_in_good_workspace", "passive_joints", "interference"}
     ga = dict(e.get("ga") or {})
     p = _ga_block(e, "pareto")
@@ -251,6 +258,14 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
               "population_size": _ga_num(p, "population_size", "pareto", lo=4, integer=True),
               "generations": _ga_num(p, "generations", "pareto", lo=1, integer=True),
               "ref_min_factor": _ga_num(p, "ref_min_factor", "pareto", lo=1, lo_open=True)}
+    # every member of a generation is evaluated at once on the search grids: refuse a population that cannot fit
+    per_design = n_R * (task["n_r"] * task["n_phi"] * task["n_z"] + regular["n_r"] * regular["n_phi"] *
+                        regular["n_z"]) + cycle["n_R_operating"] * cycle["n_samples"]
+    for path, size in (("experiment.ga.population_size", ga.get("population_size")),
+                       ("experiment.pareto.population_size", pareto["population_size"])):
+        if isinstance(size, (int, float)) and not isinstance(size, bool) and size > 0:
+            _fits(path, size, float(size) * per_design * DESIGN_POINT_BYTES,
+                  f"{size:.3g} designs x {per_design} evaluated points each at once (a 3x3 Jacobian per point)")
     recommend = e.get("recommend")
     if recommend not in RECOMMEND_RULES:
         raise ConfigError(f"experiment.recommend must be one of {', '.join(RECOMMEND_RULES)}, got {recommend!r}")
@@ -278,6 +293,10 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
             raise ConfigError(f"experiment.verify.{k} must be >= 2, got {verify[k]!r}")
     if verify["cycle_samples"] < 5 or verify["cycle_samples"] % 2 == 0:
         raise ConfigError(f"experiment.verify.cycle_samples must be odd and >= 5, got {verify['cycle_samples']!r}")
+    # the verification's fine grids, one design at least evaluated at once
+    fine = verify["n_R"] * (verify["task_n_r"] * verify["task_n_phi"] * verify["task_n_z"] + verify["rw_n_r"] *
+                            verify["rw_n_phi"] * verify["rw_n_z"]) + verify["n_R_operating"] * verify["cycle_samples"]
+    _fits("experiment.verify", verify, float(fine) * DESIGN_POINT_BYTES, f"{fine:.3g} evaluated points of a design")
     return GaReconfigSettings(resume=resume, stop_after=sa, n_R=n_R, bounds=dict(d["bounds"]), task=task, good=good,
                     joints=joints, links=links, motor=motor, cycle=cycle, regular=regular, mode=mode,
                     objectives=tuple(names), primary=primary, weights=weights, constraints=cons, ga=ga,

@@ -214,7 +214,10 @@ def run(ctx) -> None:
     if warm_n == 0:  # a single chunk: its time includes compilation
         warm_s, warm_n = elapsed, n_eval
     rate = warm_n / warm_s if warm_s > 0 else 0.0
-    ctx.results.set_attrs(points_evaluated=n_eval, points_per_s=rate, first_chunk_s=first_chunk_s or 0.0,
+    # points_evaluated: the work of the whole run (every finished x-plane, those of the processes before a resume
+    # included: what an uninterrupted run reports); the rate is this process's
+    ctx.results.set_attrs(points_evaluated=done * plan.plane, points_evaluated_this_process=n_eval,
+                          points_per_s=rate, first_chunk_s=first_chunk_s or 0.0,
                           devices_used=n_dev if backend == "jax" else 0, backend=backend,
                           worker_env=os.environ.get("DELTAJAX_WORKER_ENV", ""))
     s = plane_summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume, x_faces)

@@ -13,8 +13,22 @@ import argparse
 import sys
 from pathlib import Path
 
+from .layout import find_runs
 from .merge import ShardError, merge_shards, merge_sweep
 from .summary import summarize_sweep
+
+
+def _not_a_sweep(path: Path, prog: str):
+    """Why ``path`` is not a sweep directory (a single run's directory, or no runs at all), or None."""
+    from ..rundir import MANIFEST
+
+    own = [n for n in (MANIFEST, "results.h5") if (path / n).exists()]
+    if own:
+        return (f"{path} is a run directory (it holds {' and '.join(own)}), not a sweep directory; merge shard "
+                f"files with: {prog} a.h5 b.h5 -o out.h5")
+    if not find_runs(path):
+        return f"{path} holds no runs of a sweep (<sweep>/<job number>/ with results.h5)"
+    return None
 
 
 def main(argv=None, prog: str = "python -m deltajax.sweeps") -> int:
@@ -26,6 +40,10 @@ def main(argv=None, prog: str = "python -m deltajax.sweeps") -> int:
     paths = [Path(p) for p in args.inputs]
     try:
         if len(paths) == 1 and paths[0].is_dir():
+            problem = _not_a_sweep(paths[0], prog)
+            if problem is not None:  # refused before anything is written into it
+                print(f"error: {problem}", file=sys.stderr)
+                return 2
             written = merge_sweep(paths[0])
             for w in written:
                 print(f"merged -> {w}")

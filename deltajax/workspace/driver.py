@@ -27,7 +27,7 @@ import hashlib
 import math
 import os
 from pathlib import Path
-from typing import Optional, Sequence
+from typing import Mapping, Optional, Sequence
 
 import numpy as np
 
@@ -166,6 +166,46 @@ class _ChunkStats:
             raise CheckpointMismatch(f"index statistics of chunks {missing[:5].tolist()} are missing from the "
                                      f"checkpoint (written by an older version?); rerun into a fresh directory")
         return stats_from_partials(self.parts, self.names)
+
+
+class _ChunkCounters:
+    """Per-chunk work counters, kept in ``<checkpoint_dir>/work_partials.npy`` when checkpointing (like
+    :class:`_ChunkStats`): a resumed job reports the work of every chunk, those of earlier processes included, the
+    same numbers as an uninterrupted run (-1: the chunk has not been computed)."""
+
+    def __init__(self, names, n_chunks: int, checkpoint_dir):
+        self.names = tuple(names)
+        self.resumed = None  # items found done in the checkpoint, once known
+        shape = (n_chunks, len(self.names))
+        path = None if checkpoint_dir is None else Path(checkpoint_dir) / "work_partials.npy"
+        if path is not None and path.exists() and (Path(checkpoint_dir) / "state.json").exists():
+            self.parts = np.load(path, mmap_mode="r+")
+            if self.parts.shape != shape or self.parts.dtype != np.int64:
+                raise CheckpointMismatch(f"{path} holds {self.parts.dtype}{self.parts.shape}, this job needs "
+                                         f"int64{shape}; use another directory")
+        elif path is not None:
+            Path(checkpoint_dir).mkdir(parents=True, exist_ok=True)
+            self.parts = np.lib.format.open_memmap(path, mode="w+", dtype=np.int64, shape=shape)
+            self.parts[:] = -1
+            self.parts.flush()
+        else:
+            self.parts = np.full(shape, -1, np.int64)
+
+    def set(self, chunk: int, counters: Mapping[str, int]) -> None:
+        if self.resumed is None:
+            self.resumed = 0  # the first chunk computed: nothing was resumed
+        self.parts[chunk] = [int(counters[n]) for n in self.names]
+        if isinstance(self.parts, np.memmap):
+            self.parts.flush()  # before run_chunks records the chunk as done
+
+    def totals(self, done_chunks: int) -> dict:
+        """The counters summed over the first ``done_chunks`` chunks (all of them must have been recorded)."""
+        part = np.asarray(self.parts[:done_chunks])
+        missing = np.flatnonzero((part < 0).any(axis=1))
+        if missing.size:
+            raise CheckpointMismatch(f"work counters of chunks {missing[:5].tolist()} are missing from the checkpoint "
+                                     f"(written by an older version?); rerun into a fresh directory")
+        return {n: int(part[:, i].sum()) for i, n in enumerate(self.names)}
 
 
 def _robot_desc(robot: Delta) -> dict:
@@ -338,7 +378,9 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
         field_dtype: dtype of the stored index fields.
         chunk_size, checkpoint_dir, progress, max_chunks: see :func:`run_chunks`.
         work: if a dict, receives the work counters (window samples, exact kernel evaluations, screened
-            samples, fallbacks; see :func:`deltajax.workspace.resolve_redundancy_host`) of this call.
+            samples, fallbacks; see :func:`deltajax.workspace.resolve_redundancy_host`) of every finished chunk,
+            those of earlier processes included (kept per chunk in the checkpoint): a resumed job reports what an
+            uninterrupted one does.
         screen, screen_margin: fast mode's screen-and-verify (see ``resolve_redundancy_host``); the selection
             does not depend on them, so they are not part of the checkpoint fingerprint.
         keep: fields returned on the grid, among :data:`deltajax.INDEX_NAMES`, ``"R_star"`` and ``"k_star"``
@@ -363,8 +405,8 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
     lay = _Layout(grid, mirror=(mode == "fast"))
     outputs = {"ok": (np.bool_, False)}
     outputs.update({n: all_fields[n] for n in all_fields if n in keep})
-    counters = {"samples": 0, "full": 0, "points": 0, "screened": 0, "fallback": 0}
     n_chunks = max(1, math.ceil(lay.n / chunk_size))
+    counts = _ChunkCounters(("samples", "full", "points", "screened", "fallback"), n_chunks, checkpoint_dir)
     acc = _ChunkStats(lay, n_chunks, INDEX_NAMES, checkpoint_dir) if stats else None
     need_indices = acc is not None or any(n in INDEX_NAMES for n in keep)
     sel_all = None if mask is None else lay.take_all(np.asarray(mask, bool))  # once, not per chunk
@@ -384,12 +426,11 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
         R.fill(np.nan)
         vals.fill(np.nan)
         sel = None if sel_all is None else sel_all[start:stop]
+        w = dict.fromkeys(counts.names, 0)
         if sel is None or sel.any():
             red, w = resolve_redundancy_host(recon, pts if sel is None else pts[sel], criterion, mode=mode, b_v=b_v,
                                              b_f=b_f, beta=beta, mirror=False, screen=screen,
                                              screen_margin=screen_margin, return_indices=need_indices)
-            for c in counters:
-                counters[c] += w[c]
             idx = slice(None) if sel is None else sel
             ok[idx] = red.ok
             k[idx] = red.k
@@ -398,6 +439,7 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
                 vals[:, idx] = red.indices.T
         if acc is not None:
             acc.add(start // chunk_size, start, vals)
+        counts.set(start // chunk_size, w)
         res = {"ok": ok, "k_star": k, "R_star": R}
         res.update({c: vals[i] for c, i in cols.items()})
         return res
@@ -408,10 +450,20 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
           "mask": None if mask is None else hashlib.sha256(np.packbits(mask)).hexdigest()[:16]}
     if keep != tuple(all_fields) or acc is not None or np.dtype(R_dtype) != np.float64:
         fp.update(keep=list(keep), stats=acc is not None)  # (the defaults keep older checkpoints valid)
+    done_items = [0]  # items finished, earlier processes' included (run_chunks reports those first)
+
+    def advance(n: int) -> None:
+        if work is not None and done_items[0] == 0 and counts.resumed is None:  # the resumed chunks, first
+            counts.resumed = n
+            counts.totals(math.ceil(n / chunk_size))  # their counters are there: refused now, not at the end
+        done_items[0] += n
+        if progress is not None:
+            progress(n)
+
     arrays, complete = run_chunks(lay.n, chunk_size, compute, outputs, checkpoint_dir=checkpoint_dir,
-                                  fingerprint=fp, progress=progress, max_chunks=max_chunks)
-    if work is not None:
-        work.update(counters)
+                                  fingerprint=fp, progress=advance, max_chunks=max_chunks)
+    if work is not None:  # every finished chunk's, those of the processes before a resume included
+        work.update(counts.totals(math.ceil(done_items[0] / chunk_size)))
     st = None if acc is None else acc.result(complete)
     out = lay.expand_all(arrays, list(outputs))
     ok = out.pop("ok")

@@ -1,0 +1,98 @@
+"""Configuration values checked against what they mean before anything runs (deltajax.config.validate_config):
+sizes against the machine's memory (estimated, never built), integers and ranges, cross-field rules (index
+thresholds in the index's range, points below the base, boxes of positive width, search centres inside the
+workspace), messages in the units the user wrote."""
+
+import time
+
+import pytest
+
+from deltajax.config import ConfigError, check_keys, robot_from_config, validate_config
+from deltajax.run import CONFIG_DIR
+
+
+def _compose(experiment, *overrides):
+    from hydra import compose, initialize_config_dir
+
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        return compose(config_name="config", overrides=[f"experiment={experiment}", *overrides])
+
+
+def _validate(cfg):
+    check_keys(cfg)
+    robot, recon = robot_from_config(cfg.robot)
+    validate_config(cfg, robot, recon)
+
+
+REFUSED = [
+    # sizes: estimated from the settings, refused with the estimate (the grid is never built)
+    ("workspace_grid", ["experiment.grid.h=1e-5"], r"^experiment.grid.h=1e-05 m needs at least .* GiB of memory "
+                                                   r"for a grid of \d+ x \d+ x \d+ = .* points, more than the "
+                                                   r".* GiB this machine has$"),
+    ("reconfig_indices", ["experiment.h=1e-5"], r"^experiment.h=1e-05 m needs at least .* GiB of memory"),
+    ("ga_reconfig", ["experiment.ga.population_size=100000000"],
+     r"^experiment.ga.population_size=100000000 needs at least .* GiB of memory for 1e\+08 designs"),
+    ("ga_reconfig", ["experiment.pareto.population_size=100000000"],
+     r"^experiment.pareto.population_size=100000000 needs at least .* GiB"),
+    ("ga_reconfig", ["experiment.verify.task_n_r=100000000000"],
+     r"^experiment.verify=\{.*'task_n_r': 100000000000.*\} needs at least .* GiB of memory for .* evaluated points"),
+    ("bench_kernel", ["experiment.n_points=100000000000000"], r"^experiment.n_points=100000000000000 needs at least"),
+    ("reconfig_indices", ["robot.R_range.step=1e-13"],
+     r"^robot.R_range.step=1e-13 m needs at least .* GiB of memory for the R samples"),
+    ("indices_examples", ["experiment.R_step=1e-13"], r"^experiment.R_step=1e-13 m needs at least .* GiB"),
+    ("reconfig_motion", ["experiment.R_step=1e-13"], r"^experiment.R_step=1e-13 m needs at least .* GiB"),
+    ("reconfig_motion", ["experiment.cases.adept.n_samples=100000000001"],
+     r"^experiment.cases.adept.n_samples=100000000001 needs at least .* GiB"),
+    ("dynamics_cycle", ["experiment.n_samples=100000000001"],
+     r"^experiment.n_samples=100000000001 needs at least .* GiB of memory for 2 cycles"),
+    # integers in their range
+    ("workspace_grid", ["seed=-1"], r"^seed must be in \[0, 4294967295\], got -1$"),
+    ("workspace_grid", ["seed=4294967296"], r"^seed must be in \[0, 4294967295\], got 4294967296$"),
+    # cross-field rules
+    ("ga_reconfig", ["experiment.good_workspace.threshold=1.5"],
+     r"^experiment.good_workspace.threshold must be in \[0, 1\], got 1.5$"),
+    ("workspace_grid", ["experiment.grid.x=[0.0,0.0]"],
+     r"^experiment.grid.x must be \[lo, hi\] with lo < hi \(m\), got \[0.0, 0.0\]$"),
+    ("boundary_search", ["experiment.centre=[0,0,-5]"],
+     r"^experiment.centre=\[0.0, 0.0, -5.0\] m puts the search centre \[0.0, 0.0, -5.0\] m outside the robot's "
+     r"workspace"),
+    ("boundary_search", ["experiment.centre_sweep_z=[1.5,9.0]"],
+     r"^experiment.centre_sweep_z\[1\]=9.0 m puts the search centre \[0.0, 0.0, 9.0\] m outside"),
+    ("reconfig_indices", ["experiment.slices_z=[-1.0]"], r"^experiment.slices_z\[0\] must be in \(0, 0.598\] m, "
+                                                         r"got -1.0 m$"),
+    ("reconfig_indices", ["experiment.slices_z=[0.9]"], r"^experiment.slices_z\[0\] must be in \(0, 0.598\] m"),
+    ("indices_examples", ["experiment.points=[[0.0,0.0,-0.3]]"],
+     r"^experiment.points\[0\]=\[0.0, 0.0, -0.3\] m lies above the base plane: .*got z = -0.3 m$"),
+    # the units the user wrote (lead in m per screw turn, not the linkage's pitch in m/rad)
+    ("reconfig_motion", ["experiment.mechanism.lead=-0.01"], r"^experiment.mechanism.lead must be > 0 m, got -0.01 m$"),
+    ("reconfig_motion", ["experiment.mechanism.efficiency=1.5"],
+     r"^experiment.mechanism.efficiency must be in \(0, 1\], got 1.5$"),
+]
+
+
+@pytest.mark.parametrize("experiment, overrides, message", REFUSED, ids=[" ".join(r[1]) for r in REFUSED])
+def test_refused_in_one_line_naming_the_field_within_seconds(experiment, overrides, message):
+    cfg = _compose(experiment, *overrides)
+    t0 = time.perf_counter()
+    with pytest.raises(ConfigError, match=message) as err:
+        _validate(cfg)
+    assert "\n" not in str(err.value)
+    assert time.perf_counter() - t0 < 10
+
+
+def test_reachable_centre_and_points_below_the_base_are_accepted():
+    _validate(_compose("boundary_search"))
+    _validate(_compose("indices_examples", "experiment.points=[[0.0,0.0,0.3]]"))
+    _validate(_compose("reconfig_indices", "experiment.slices_z=[0.4]"))
+    _validate(_compose("ga_reconfig", "experiment.good_workspace.threshold=1.0"))
+
+
+@pytest.mark.parametrize("override, message", [
+    ("experiment.joints.limit_deg=200", r"^experiment.joints.limit_deg must be in \(0, 180\] deg, got 200.0 deg$"),
+    ("experiment.motor.peak_torque=-1", r"^experiment.motor.peak_torque must be > 0 N m, got -1.0 N m$"),
+    ("experiment.cycle.dwell=-0.1", r"^experiment.cycle.dwell must be >= 0 s, got -0.1 s$"),
+    ("experiment.task.diameter=0", r"^experiment.task.diameter must be > 0 m, got 0.0 m$"),
+])
+def test_ga_reconfig_messages_carry_the_units_written(override, message):
+    with pytest.raises(ConfigError, match=message):
+        _validate(_compose("ga_reconfig", override))
