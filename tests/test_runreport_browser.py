@@ -105,7 +105,8 @@ def test_hovering_a_front_point_shows_its_parameters(page):
     pg.mouse.move(where["x"] - 30, where["y"] - 30)
     pg.mouse.move(where["x"], where["y"], steps=5)
     pg.wait_for_selector("#fig-front .hoverlayer .hovertext", timeout=10_000)
-    shown = pg.inner_text("#fig-front .hoverlayer .hovertext")
+    shown = pg.evaluate("Array.from(document.querySelectorAll('#fig-front .hoverlayer .hovertext tspan.line'))"
+                        ".map(t => t.textContent).join('\\n')")
     name = shown.splitlines()[0].split(" ")[0]
     assert name in {names[i] for i in front}, shown
     i = names.index(name)

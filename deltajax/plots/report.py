@@ -20,6 +20,11 @@ def _display(unit: str) -> tuple[float, str]:
     return (1e3, "L") if unit == "m^3" else (1.0, unit)
 
 
+def _suffix(unit: str) -> str:
+    """`` <unit>`` after a number, nothing for a dimensionless one."""
+    return "" if unit in ("1", "") else f" {unit}"
+
+
 def front_figure(V, objs, units, param_names, param_units):
     """The designs verified on the fine grids in the plane of the first two objectives: the verified Pareto front,
     the other candidates, the baseline (row 0) and the recommendation; each point's hover lists its objectives,
@@ -47,9 +52,9 @@ def front_figure(V, objs, units, param_names, param_units):
                 + (" (baseline)" if i == 0 else "") + ("" if feas[i] else " infeasible")]
         for m in show:
             f, u = _display(units.get(m, "1"))
-            rows.append(f"{m}: {float(np.asarray(V[m]).reshape(-1)[i]) * f:.5g} {u}")
+            rows.append(f"{m}: {float(np.asarray(V[m]).reshape(-1)[i]) * f:.5g}{_suffix(u)}")
         rows.append("<i>parameters</i>")
-        rows += [f"{p}: {params[i, j]:.5g} {u}" for j, (p, u) in enumerate(zip(pnames, punits))]
+        rows += [f"{p}: {params[i, j]:.5g}{_suffix(u)}" for j, (p, u) in enumerate(zip(pnames, punits))]
         if cvals is not None:
             rows.append("<i>constraint values (&lt;= 0 satisfied)</i>")
             rows += [f"{c}: {cvals[i, j]:.3g}" for j, c in enumerate(cnames)]
