@@ -30,6 +30,7 @@ def _problem(path, data):
     return _run_problem(data, path)
 
 
+@pytest.mark.slow  # the session's toy main-job run
 def test_job_writes_a_self_contained_report(run):
     path, data = run
     assert data["attrs"]["ga_reconfig_stages"].split(",")[-2:] == ["plots", "report"]
@@ -49,6 +50,7 @@ def test_job_writes_a_self_contained_report(run):
     assert f"Recommended: <b>{rec}</b>" in page
 
 
+@pytest.mark.slow  # the session's toy main-job run
 def test_front_hover_lists_each_designs_parameters_and_constraints(run):
     from deltajax.optimize.designer import DESIGN_UNITS
     from deltajax.plots.report import front_figure
@@ -81,6 +83,7 @@ def test_front_hover_lists_each_designs_parameters_and_constraints(run):
     assert len(traces["verified Pareto front"].x) == len(front)
 
 
+@pytest.mark.slow  # the session's toy main-job run
 def test_torque_speed_points_are_the_verified_cycle(run):
     """At the verified motion time, the cycle's motor points reproduce the verification's peak and speed
     utilisation of the recommendation and of the baseline (the same cycle, motor and gearbox)."""
@@ -102,6 +105,7 @@ def test_torque_speed_points_are_the_verified_cycle(run):
                                    rtol=1e-9)
 
 
+@pytest.mark.slow  # a compile or a CLI start, over 3 s
 def test_motor_side_is_the_drive_loads_conversion():
     """deltajax.constraints.motor_side turns cycle_profile's arm efforts into the motor loads drive_loads
     reports (peak torque, top speed)."""
@@ -123,23 +127,24 @@ def test_motor_side_is_the_drive_loads_conversion():
     assert float(jnp.max(jnp.abs(tau))) > 0
 
 
-def test_report_refuses_what_it_cannot_draw(tmp_path, run):
+def test_report_refuses_what_it_cannot_draw(tmp_path):
+    """Bad input is one ReportError line naming the file or the value, before anything compiles."""
     from deltajax.runreport import ReportError, write_report
 
     with pytest.raises(ReportError, match="no results file"):
         write_report(tmp_path / "nothing")
-    with pytest.raises(ReportError, match="workspace_points must be an integer >= 5, got 2"):
-        write_report(run[0], tmp_path / "r.html", workspace_points=2)
     p = tmp_path / "results.h5"
-    shutil.copy(run[0], p)
-    with h5py.File(p, "a") as f:          # a run killed before its verification
-        del f["verify"]
+    with h5py.File(p, "w") as f:          # a run killed before its verification
         f.attrs["ga_reconfig_stages"] = "screen,ga"
-    with pytest.raises(ReportError, match=r"not finished its verification \(stages done: screen,ga\)"):
-        write_report(p)
+        f.create_group("ga").create_dataset("best_fitness", data=np.zeros(2))
+    with pytest.raises(ReportError, match="workspace_points must be an integer >= 5, got 2"):
+        write_report(p, tmp_path / "r.html", workspace_points=2)
+    with pytest.raises(ReportError, match=r"not finished its verification \(stages done: screen,ga\); resume it"):
+        write_report(tmp_path)
     assert not (tmp_path / "report.html").exists()
 
 
+@pytest.mark.slow  # a compile or a CLI start, over 3 s
 def test_report_cli_bad_input_is_one_line(tmp_path):
     env = {**os.environ, "PYTHONPATH": str(REPO)}
     out = subprocess.run([sys.executable, "-m", "deltajax.report", str(tmp_path)], cwd=REPO, env=env,

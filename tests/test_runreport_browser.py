@@ -15,6 +15,9 @@ import pytest
 
 from deltajax.io import load
 
+#: the page is the session's toy main-job run's report (minutes to make, cold)
+pytestmark = pytest.mark.slow
+
 #: chromium's switches for a sandbox-less, offline, headless container run; SwiftShader (software WebGL) draws the
 #: 3-D workspace view without a GPU
 LAUNCH_ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic", "--no-first-run",
