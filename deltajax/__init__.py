@@ -31,5 +31,6 @@ from . import mechanism, motion, motion_refine
 from .mechanism import DirectRadial, ScrewLinkage, drive_profile, example_screw_linkage, reconfiguration_drive
 from .motion import PathResult, RDriveLimits, fixed_path, path_tables, pointwise_path, resolve_path, task_path
 from .motion_refine import refine_path
+from .runreport import ReportError, write_report  # the main job's HTML run report (plotly imported on use)
 
 __version__ = "0.1.0"

@@ -64,7 +64,7 @@ from .regular import (REFINE_BISECT, REFINE_GOLDEN, REFINE_SAMPLES, RegularWorks
                       largest_cylinder, polar_grid, refine_cylinder, regular_workspace)  # the designer's constraints
 
 __all__ = ["JointModel", "LinkModel", "Motor", "GoodSpec", "JointAngles", "Interference", "DriveLoads",
-           "joint_angles", "joint_margin", "segment_distance", "interference", "with_drive", "drive_loads",
+           "joint_angles", "joint_margin", "segment_distance", "interference", "with_drive", "motor_side", "drive_loads",
            "min_cycle_time", "picks_per_minute", "cycle_rate", "CycleRate", "PointCheck", "good_point", "largest_cylinder", "regular_workspace",
            "RegularWorkspace", "polar_grid", "cylinder_samples", "refine_cylinder", "ConstraintError"]
 
@@ -325,11 +325,16 @@ def _trap_weights(K, dtype):
     return jnp.ones((K,), dtype).at[0].set(0.5).at[-1].set(0.5) / (K - 1)
 
 
+def motor_side(tau_arm, theta_dot, motor: Motor, gear_ratio):
+    """(motor torque tau_arm / (n eta) in N m, motor speed n theta_dot in rad/s) of arm-side efforts and speeds
+    (any matching shapes) through the gearbox of ratio n = ``gear_ratio``; compare with ``motor.envelope``."""
+    return tau_arm * (1.0 / (gear_ratio * motor.efficiency)), theta_dot * gear_ratio
+
+
 def _loads_from_unit(a, g, thd_unit, T, dwell, motor: Motor, n, ok):
     """Motor loads at duration T from the T = 1 profile split (a / T^2 + g arm torque, thd_unit / T speed)."""
     scale = 1.0 / (n * motor.efficiency)
-    tau_m = (a / (T * T) + g) * scale                         # (K, 3)
-    om = thd_unit / T * n
+    tau_m, om = motor_side(a / (T * T) + g, thd_unit / T, motor, n)   # (K, 3)
     env = motor.envelope(om)
     ratio = jnp.abs(tau_m) / jnp.where(env > 0, env, 1.0)
     ratio = jnp.where(env > 0, ratio, jnp.where(jnp.abs(tau_m) > 0, jnp.inf, 0.0))

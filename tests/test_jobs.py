@@ -63,7 +63,8 @@ def _stages(path):
 def test_ga_reconfig_with_optional_stages_on(toy_run):
     path = toy_run("ga_reconfig")
     stages = _stages(path)
-    assert stages[-2:] == ["results", "plots"], stages
+    assert stages[-3:] == ["results", "plots", "report"], stages
+    assert (path.parent / "report.html").stat().st_size > 1_000_000     # plotly.js inline
     assert stages.index("ga") < stages.index("pareto") < stages.index("verify"), stages
     assert "pareto" in groups(path) and "verify" in stages
     if HAS_REFINE:
@@ -75,6 +76,6 @@ def test_ga_reconfig_with_optional_stages_off(toy_run):
     path = toy_run("ga_reconfig", *GA_STAGES_OFF)
     _assert_complete(path, "ga_reconfig")
     stages = _stages(path)
-    assert "pareto" not in stages and "refine" not in stages and stages[-1] == "plots", stages
+    assert "pareto" not in stages and "refine" not in stages and stages[-1] == "report", stages
     assert "pareto" not in groups(path)
     assert (path.parent / "ga_convergence.png").read_bytes()[:4] == b"\x89PNG"

@@ -13,7 +13,8 @@ in the good workspace, passive joints, interference, motor envelope and RMS rati
 Stages (the library: :mod:`deltajax.optimize.workflow`; each stored in ``results.h5``, a rerun into the same
 ``hydra.run.dir`` resumes after the last finished one and a finished run is a no-op):
 baseline -> screen (Sobol, seeds the GA) -> ga (checkpointed) -> pareto (NSGA-II) -> refine (optax) ->
-verify (fine grids, recommendation) -> results (summary) -> plots. ``experiment.continue_from`` (more budget for
+verify (fine grids, recommendation) -> results (summary) -> plots -> report (``report.html``, the self-contained
+run report of :mod:`deltajax.runreport`). ``experiment.continue_from`` (more budget for
 a finished run, :func:`deltajax.optimize.workflow.earlier_run`): its verified front seeds the GA and NSGA-II and
 joins the verified candidates with its stored metrics, so the recommendation cannot be one its recommendation
 dominates.
@@ -33,7 +34,7 @@ from ..optimize.workflow import load_checkpoint as _load_checkpoint, put_checkpo
 
 __all__ = ["run", "build", "settings_from_config", "Settings", "STAGES"]
 
-STAGES = ("screen", "ga", "pareto", "refine", "verify", "results", "plots")
+STAGES = ("screen", "ga", "pareto", "refine", "verify", "results", "plots", "report")
 SCREEN_FRONT_EVAL = 1024  # at most this many feasible screen designs (best primary first) get the regular workspace
 REFINE_MAX = 8          # winners refined: the GA's best and the front's best 7 on the primary objective
 settings_from_config = ga_reconfig_settings
@@ -84,7 +85,7 @@ def run(ctx) -> None:
     fp = W.job_fingerprint(ctx.cfg)
     done = _claim(ctx, s, path, fp, W)
     res.set_attrs(ga_reconfig_fingerprint=fp)
-    if "plots" in done:
+    if "report" in done:
         ctx.log(f"{path} holds a complete ga_reconfig run (stages {','.join(done)}); nothing to do")
         return
     stored = load(path) if path.exists() and done else {}
@@ -97,6 +98,11 @@ def run(ctx) -> None:
         timings[stage] = time.perf_counter() - t0[0]
         t0[0] = time.perf_counter()
         ctx.log(f"[{stage}: {timings[stage]:.1f} s]")
+
+    if "plots" in done:     # finished before the report stage existed: only its report is missing
+        _report(ctx, path)
+        mark("report")
+        return
 
     objs, primary = list(s.objectives), s.primary
     jp = objs.index(primary)
@@ -362,3 +368,12 @@ def run(ctx) -> None:
     R.print_summary(ctx, data)
     R.plots(ctx, data, objs, s)
     mark("plots")
+    _report(ctx, path)
+    mark("report")                                                # done only once report.html is on disk
+
+
+def _report(ctx, path) -> None:
+    """The run report (``report.html`` beside results.h5), drawn from the results on disk."""
+    from ..runreport import report_path, write_report
+
+    ctx.log(f"report -> {write_report(path, report_path(ctx.run_dir))}")
