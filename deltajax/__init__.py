@@ -35,5 +35,8 @@ from . import mechanism, motion, motion_refine
 from .mechanism import DirectRadial, ScrewLinkage, drive_profile, example_screw_linkage, reconfiguration_drive
 from .motion import PathResult, RDriveLimits, fixed_path, path_tables, pointwise_path, resolve_path, task_path
 from .motion_refine import refine_path
+from .datasheet import Datasheet, DatasheetError
+from .datasheet import datasheet as datasheet  # the function; the module stays importable as deltajax.datasheet
+from . import export
 
 __version__ = "0.1.0"
