@@ -65,7 +65,7 @@ from .constraints import Motor, with_drive
 from .geometry import CHAIN_ANGLES, Delta, ReconfigurableDelta
 from .kinematics import ik
 
-__all__ = ["mjcf", "urdf", "joint_state", "ExportError", "SPIN_INERTIA_FRACTION", "SIDECAR_FORMAT", "sidecar_path"]
+__all__ = ["mjcf", "urdf", "joint_state", "urdf_configuration", "ExportError", "SPIN_INERTIA_FRACTION", "SIDECAR_FORMAT", "sidecar_path"]
 
 #: inertia about a forearm's own axis / its perpendicular inertia (the spin is not modelled by deltajax)
 SPIN_INERTIA_FRACTION = 1e-3
@@ -382,6 +382,22 @@ def sidecar_path(urdf_path) -> str:
 def _inertial(m, com, ixx, iyy, izz) -> str:
     return (f'<inertial><origin xyz="{_f(com)}" rpy="0 0 0"/><mass value="{m!r}"/>'
             f'<inertia ixx="{ixx!r}" ixy="0" ixz="0" iyy="{iyy!r}" iyz="0" izz="{izz!r}"/></inertial>')
+
+
+def urdf_configuration(robot, p, theta=None, *, R=None) -> dict:
+    """{URDF joint name: value} of the assembled configuration with the platform at ``p`` (m, base frame, z
+    down; ``theta`` default: IK; ``R`` default: the nominal base radius): each ball as its x, y, z revolutes."""
+    st = joint_state(robot, p, theta=theta, R=R)
+    out = {}
+    for name, (q, _, _) in st.items():
+        if name.startswith("ball_"):
+            M = _quat_matrix(np.asarray(q))             # = Rx(a) Ry(b) Rz(c)
+            out[f"{name}_x"] = math.atan2(-M[1, 2], M[2, 2])
+            out[f"{name}_y"] = math.asin(max(-1.0, min(1.0, M[0, 2])))
+            out[f"{name}_z"] = math.atan2(-M[0, 1], M[0, 0])
+        else:
+            out[name] = float(q)
+    return out
 
 
 def urdf(robot: Union[Delta, ReconfigurableDelta], *, motor: Optional[Motor] = None,
