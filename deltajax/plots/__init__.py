@@ -6,13 +6,14 @@ Functions take plain NumPy arrays (as saved in results.h5) or the jobs' results 
 
 Modules: :mod:`.core` (shared helpers, actuator line styles), :mod:`.workspace` (workspaces, index slices and
 curves, workspace_grid and boundary_search figures), :mod:`.bench` (kernel throughputs), :mod:`.dynamics` (cycle
-profiles), :mod:`.motion` (reconfig_motion), :mod:`.designer` (the main job's GA and Pareto figures).
+profiles), :mod:`.datasheet` (the one-page datasheet), :mod:`.motion` (reconfig_motion), :mod:`.designer` (the main job's GA and Pareto figures).
 """
 
 from __future__ import annotations
 
 from .bench import bench_rates, bench_rates_from_results
 from .core import ACTUATOR_STYLES, actuator_lines, robust_limits
+from .datasheet import datasheet_page
 from .designer import ga_convergence, ga_pareto
 from .dynamics import adept_profiles, cycle_platform, cycle_torques
 from .motion import motion_landscape, motion_profiles, motion_torques
@@ -22,4 +23,4 @@ from .workspace import (boundary_slice, boundary_surface, index_slices, plot_ind
 __all__ = ["workspace_3d", "index_slices", "robust_limits", "bench_rates", "bench_rates_from_results", "actuator_lines",
            "ACTUATOR_STYLES", "cycle_platform", "cycle_torques", "adept_profiles", "plot_index_curves",
            "workspace_grid", "boundary_slice", "boundary_surface", "motion_landscape", "motion_profiles",
-           "motion_torques", "ga_convergence", "ga_pareto"]
+           "motion_torques", "ga_convergence", "ga_pareto", "datasheet_page"]
