@@ -51,3 +51,25 @@ def test_source_is_refused_by_other_experiments(tmp_path):
 
     with pytest.raises(ConfigError, match="source='industrial' is read only by experiment=datasheet"):
         run_experiment("dynamics_cycle", ["+source=industrial"], run_dir=tmp_path / "run")
+
+
+@pytest.mark.slow
+def test_datasheet_of_a_ga_run_uses_its_designs_and_drive(toy_run, tmp_path):
+    """source=<ga_reconfig run dir>: the baseline and the recommended design, each with the run's motor and the
+    design's own gear ratio (a design variable of the GA)."""
+    from deltajax.run import run_experiment
+    from toy_jobs import TOY
+
+    ga = load(toy_run("ga_reconfig"))
+    run_dir = tmp_path / "ds"
+    extra = [a for a in TOY["datasheet"] if not a.startswith("source=")]
+    run_experiment("datasheet", [f"source={toy_run('ga_reconfig').parent}", *extra], run_dir=run_dir)
+    data = load(run_dir / "results.h5")
+    S = ga["summary"]
+    names = list(S["parameter_name"])
+    k = names.index("gear_ratio")
+    for col in ("baseline", "recommended"):
+        g = data["datasheet"][col]
+        assert float(g["gear_ratio"]) == pytest.approx(float(S[f"{col}_params"][k]), rel=1e-12)
+        assert np.all(np.isfinite(g["picks_per_min"])) and float(g["working_volume"]) > 0
+    assert (run_dir / "datasheet_recommended.png").read_bytes()[:4] == b"\x89PNG"
