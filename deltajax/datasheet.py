@@ -60,7 +60,7 @@ ROW_FIELDS = (
     ("peak_utilisation", "1", "max |tau_motor| / torque-speed envelope at T_min"),
     ("rms_utilisation", "1", "RMS motor torque / rated torque at T_min"),
     ("speed_utilisation", "1", "max motor speed / motor max speed at T_min"),
-    ("peak_acceleration_g", "1", "peak platform acceleration at T_min / standard gravity"),
+    ("peak_acceleration_g", "1", "peak platform acceleration at T_min / standard gravity (NaN: no T_min)"),
 )
 #: units of every field of :class:`Datasheet` (and of the table columns)
 UNITS = {
@@ -249,15 +249,18 @@ def datasheet(robot: Union[Delta, ReconfigurableDelta], motor: Motor, gear_ratio
         raise DatasheetError("robot.mass is None: a datasheet needs a mass model (e.g. presets.industrial() or "
                              "presets.franco2026(fixed_R=0.2, with_mass=True))")
     mm = robot.mass
+    if centre is not None:
+        centre = tuple(float(c) for c in centre)
+        if len(centre) != 3 or not all(math.isfinite(c) for c in centre):
+            raise DatasheetError(f"centre must be 3 finite coordinates (m, z down), got {centre!r}")
+    if len(cylinder_grid) != 3 or min(int(g) for g in cylinder_grid) < 2:
+        raise DatasheetError(f"cylinder_grid must be 3 counts >= 2 (rings, angles, levels), got {cylinder_grid!r}")
     cyl = regular_cylinder(robot, hd_ratio, n_r=cylinder_grid[0], n_phi=cylinder_grid[1], n_z=cylinder_grid[2])
     D, H, z_top = float(cyl.diameter), float(cyl.height), float(cyl.z_top)
     if centre is None:
         if not D > 0:
             raise DatasheetError("the regular cylinder is empty (no reachable axis point on the grid): pass centre=")
         centre = (0.0, 0.0, z_top + 0.5 * H)
-    centre = tuple(float(c) for c in centre)
-    if len(centre) != 3 or not all(math.isfinite(c) for c in centre):
-        raise DatasheetError(f"centre must be 3 finite coordinates (m), got {centre!r}")
     dtype = robot.upper_arm.dtype
     cycle = adept_cycle(centre, n_samples=int(n_samples), dtype=dtype)
     vol = volume(full, volume_h)
@@ -280,7 +283,8 @@ def datasheet(robot: Union[Delta, ReconfigurableDelta], motor: Motor, gear_ratio
         rates["peak_utilisation"].append(float(a.loads.peak_utilisation))
         rates["rms_utilisation"].append(float(a.loads.rms_utilisation))
         rates["speed_utilisation"].append(float(a.loads.speed_utilisation))
-        rates["peak_acceleration_g"].append(acc_unit / (T * T) / STANDARD_GRAVITY if math.isfinite(T) else 0.0)
+        # no cycle within the limits (T_min = inf, picks/min 0): no acceleration to report
+        rates["peak_acceleration_g"].append(acc_unit / (T * T) / STANDARD_GRAVITY if math.isfinite(T) else math.nan)
     eta = float(motor.efficiency)
     return Datasheet(
         name=name, base_radius=float(robot.base_radius), platform_radius=float(robot.platform_radius),

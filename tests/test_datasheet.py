@@ -17,7 +17,8 @@ TOY = dict(volume_h=0.05, cylinder_grid=(9, 3, 9), n_samples=41)
 
 # Published ABB IRB 360 FlexPicker cycle rates on the 25/305/25 mm cycle (figures include 2 x 35 ms vacuum delay
 # and a 90 deg tool rotation): IRB 360-8/1130 160 / 140 / 100 picks/min at 1 / 4 / 8 kg (product specification);
-# the light variants reach about 200 picks/min at 0.1 kg (IRB 360-1/1130: 0.30 s per cycle).
+# the light variants are quoted at about 200 picks/min at 0.1 kg (IRB 360-1/1130, a 0.30 s cycle; from ABB's
+# product range, to be re-checked against the current product specification).
 IRB360_PPM = {0.1: 200.0, 1.0: 160.0}
 #: the band: our ``industrial`` estimate (masses are engineering guesses, no tool rotation, a 750 W servo whose
 #: thermal rating binds) must lie within 25 % of the published figure
@@ -66,7 +67,9 @@ def test_datasheet_rows_match_cycle_rate(industrial_sheet):
 
 
 @pytest.mark.parametrize("kw, field", [({"gear_ratio": 0.0}, "gear_ratio"), ({"vendor_dwell": -0.01}, "vendor_dwell"),
-                                       ({"payloads": (0.1, -1.0)}, "payloads"), ({"hd_ratio": float("nan")}, "hd_ratio")])
+                                       ({"payloads": (0.1, -1.0)}, "payloads"), ({"hd_ratio": float("nan")}, "hd_ratio"),
+                                       ({"centre": (0.0, 0.0, float("nan"))}, "centre"),
+                                       ({"cylinder_grid": (9, 1, 9)}, "cylinder_grid")])
 def test_bad_input_names_the_field(kw, field):
     args = dict(robot=dj.presets.industrial(), motor=dj.presets.servo_750w(), gear_ratio=20.0)
     args.update(kw)
