@@ -71,8 +71,8 @@ def datasheet_page(ds, title: str = ""):
     pl = ds.payload[:-1]             # the table's payloads; the largest payload is a note (it squashes the curve)
     ax_p.plot(pl, ds.picks_per_min[:-1], "o-", label="motion only")
     ax_p.plot(pl, ds.picks_per_min_vendor[:-1], "s--", label=f"+ 2 x {1000 * ds.dwell:.0f} ms dwell")
-    ax_p.text(0.98, 0.02, f"max payload {ds.max_payload:.3g} kg: {ds.picks_per_min[-1]:.3g} / "
-              f"{ds.picks_per_min_vendor[-1]:.3g} picks/min", transform=ax_p.transAxes, ha="right", va="bottom",
+    ax_p.text(0.02, 0.02, f"max payload {ds.max_payload:.3g} kg: {ds.picks_per_min[-1]:.3g} / "
+              f"{ds.picks_per_min_vendor[-1]:.3g} picks/min", transform=ax_p.transAxes, ha="left", va="bottom",
               fontsize=7)
     ax_p.set_xlabel("payload (kg)")
     ax_p.set_ylabel("picks / min")
