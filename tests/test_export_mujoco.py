@@ -6,6 +6,7 @@ import equinox as eqx
 import mujoco
 import numpy as np
 import pytest
+from hypothesis import given, settings, strategies as st
 
 import deltajax as dj
 from deltajax import trajectory as tr
@@ -163,3 +164,29 @@ def test_forward_simulation_tracks_cycle(name):
                              for i in range(3)))
     print(f"{name}: max platform error {err:.3g} m, max loop gap {loop:.3g} m")
     assert err < SIM_POS_TOL and loop < SIM_LOOP_TOL
+
+
+@settings(max_examples=6, deadline=None)
+@given(scale=st.floats(0.3, 3.0), fore=st.floats(1.6, 2.6), arm_mass=st.floats(0.05, 3.0),
+       fore_mass=st.floats(0.01, 1.0), s=st.floats(0.2, 0.8), plate=st.floats(0.0, 1.0))
+def test_any_design_exports_assembled(scale, fore, arm_mass, fore_mass, s, plate):
+    mass = dj.MassModel(upper_arm_mass=arm_mass, forearm_mass=fore_mass, forearm_elbow_fraction=s,
+                        forearm_inertia_factor=0.5 * s * (1 - s), platform_mass=plate, gear_ratio=10.0,
+                        rotor_inertia=1e-5)
+    robot = dj.Delta.from_degrees(base_radius=0.2 * scale, platform_radius=0.05 * scale, upper_arm=0.3 * scale,
+                                  forearm=0.3 * fore * scale, theta_min_deg=-60.0, theta_max_deg=100.0, mass=mass)
+    model, data = load(robot)
+    mujoco.mj_resetDataKeyframe(model, data, model.key("home").id)
+    mujoco.mj_forward(model, data)
+    assert np.abs(data.efc_pos[:data.nefc]).max() < 1e-12 * scale
+    assert model.body_subtreemass[0] == pytest.approx(3 * (arm_mass + fore_mass) + max(plate, 1e-9), rel=1e-9)
+
+
+def test_motor_sets_armature_gear_and_ctrlrange():
+    motor = dj.presets.servo_750w()
+    model, _ = load(dj.presets.industrial(), motor=motor, gear_ratio=25.0)
+    dof = model.jnt_dofadr[model.joint("theta_1").id]
+    assert model.dof_armature[dof] == pytest.approx(25.0 ** 2 * float(motor.rotor_inertia))
+    act = model.actuator("motor_1")
+    assert act.gear[0] == 25.0
+    np.testing.assert_allclose(act.ctrlrange, [-float(motor.peak_torque), float(motor.peak_torque)])
