@@ -32,5 +32,8 @@ from .mechanism import DirectRadial, ScrewLinkage, drive_profile, example_screw_
 from .motion import PathResult, RDriveLimits, fixed_path, path_tables, pointwise_path, resolve_path, task_path
 from .motion_refine import refine_path
 from .runreport import ReportError, write_report  # the main job's HTML run report (plotly imported on use)
+from .datasheet import Datasheet, DatasheetError
+from .datasheet import datasheet as datasheet  # the function; the module stays importable as deltajax.datasheet
+from . import export
 
 __version__ = "0.1.0"

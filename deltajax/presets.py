@@ -27,16 +27,35 @@ from typing import Optional, Union
 import equinox as eqx
 
 from .geometry import Delta, ReconfigurableDelta
+from .constraints import Motor
 from .mass import MassModel
 
 __all__ = ["franco2026", "boundary2d", "industrial", "franco2026_mass", "industrial_mass", "PRESETS", "get",
-           "INDUSTRIAL_LIMITS", "FRANCO2026_LIMITS"]
+           "INDUSTRIAL_LIMITS", "FRANCO2026_LIMITS", "servo_750w", "INDUSTRIAL_GEAR_RATIO"]
 
 #: Arm-side actuator limits for ``industrial``: a ~750 W servo (peak about 7 N m, 5000 rpm) behind 20:1,
 #: i.e. 140 N m and 5000 rpm / 20 = 26.2 rad/s at the arm (estimates, see the module docstring).
 INDUSTRIAL_LIMITS = {"torque": 140.0, "speed": 26.2}
 #: Illustrative limits for ``franco2026`` (the paper gives no motor data): 20 N m, 10 rad/s at the arm.
 FRANCO2026_LIMITS = {"torque": 20.0, "speed": 10.0}
+
+
+#: Gear ratio of ``industrial`` (motor speed / arm speed), the 20:1 of :func:`industrial_mass`.
+INDUSTRIAL_GEAR_RATIO = 20.0
+
+
+def servo_750w(efficiency: float = 0.9) -> Motor:
+    """A 750 W-class AC servo (motor side), the drive :func:`industrial` is sized for.
+
+    Catalogue values of the Panasonic MINAS A6 MSMF082L1 (750 W, 200 V, low inertia, no brake): rated
+    torque 2.39 N m, peak (instantaneous) torque 7.16 N m, rated speed 3000 r/min, maximum speed 6000 r/min,
+    rotor inertia 1.51e-4 kg m^2. The peak torque is taken as available up to 4500 r/min and falling linearly
+    to zero at 6000 r/min (a straight-line reading of the catalogue's torque-speed curve, an approximation).
+    ``efficiency``: of the gearbox (0.9: a typical single-stage planetary gearhead).
+    """
+    rpm = 2.0 * math.pi / 60.0
+    return Motor(peak_torque=7.16, rated_torque=2.39, max_speed=6000.0 * rpm, corner_speed=4500.0 * rpm,
+                 rotor_inertia=1.51e-4, efficiency=efficiency)
 
 
 def franco2026_mass(payload_mass: float = 0.0) -> MassModel:

@@ -177,6 +177,31 @@ class BoundarySearchSchema:
     timing_repeats: int = _REQ
 
 
+@dataclasses.dataclass
+class MotorSchema:
+    peak_torque: float = _REQ
+    rated_torque: float = _REQ
+    max_speed: float = _REQ
+    corner_speed: float = _REQ
+    rotor_inertia: float = 0.0
+    efficiency: float = 1.0
+
+
+@dataclasses.dataclass
+class DatasheetSchema:
+    name: str = "datasheet"
+    payloads: List[float] = _list()
+    vendor_dwell: float = _REQ
+    hd_ratio: float = _REQ
+    volume_h: float = _REQ
+    n_samples: int = _REQ
+    cylinder_grid: List[int] = _list()
+    centre: Optional[List[float]] = None
+    R: Optional[float] = None
+    motor: MotorSchema = dataclasses.field(default_factory=MotorSchema)
+    gear_ratio: float = _REQ
+
+
 # ga_reconfig has no schema here: its job's reader checks every key and value (config._v_ga_reconfig).
 
 
@@ -189,6 +214,7 @@ EXPERIMENT_SCHEMAS = {
     "bench_kernel": BenchKernelSchema,
     "dynamics_cycle": DynamicsCycleSchema,
     "boundary_search": BoundarySearchSchema,
+    "datasheet": DatasheetSchema,
 }
 
 

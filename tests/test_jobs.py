@@ -24,6 +24,7 @@ PLOTS = {
     "bench_kernel": [],
     "reconfig_motion": ["adept_landscape.png", "task_profiles.png"],
     "ga_reconfig": ["ga_pareto.png", "ga_convergence.png"],
+    "datasheet": ["datasheet_industrial.png"],
 }
 
 

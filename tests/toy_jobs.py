@@ -28,6 +28,9 @@ TOY = {
                        "experiment.checkpoint_s=0"],
     # franco2026 is always evaluated; industrial adds the second preset (tests/test_dynamics.py)
     "dynamics_cycle": ["experiment.n_samples=41", "experiment.robots=[industrial]"],
+    # industrial, coarse volume / working-range grids, 41 cycle samples, three payloads (tests/test_datasheet_job.py)
+    "datasheet": ["source=industrial", "experiment.volume_h=0.05", "experiment.cylinder_grid=[9,3,9]",
+                  "experiment.n_samples=41", "experiment.payloads=[0.0,0.1,1.0]"],
     "bench_kernel": ["experiment.n_points=4000", "experiment.n_baseline=1000", "experiment.block=1000",
                      "experiment.repeats=1"],
     "reconfig_motion": ["experiment.R_step=0.007", "experiment.cases.adept.n_samples=11",

@@ -85,7 +85,9 @@ def check_reach_over_range(cfg: Mapping[str, Any], recon: ReconfigurableDelta, p
 # =============================================================================================================
 #: Top-level keys of the composed config (configs/config.yaml and the `# @package _global_` experiment files).
 TOP_LEVEL_KEYS = ("robot", "experiment", "seed", "precision", "plots", "progress", "compilation_cache", "fresh",
-                  "shard", "n_shards", "beta")
+                  "shard", "n_shards", "beta", "source")
+#: experiments that read the top-level ``source`` (what they describe); any other experiment refuses it
+SOURCE_EXPERIMENTS = ("datasheet",)
 
 def _validate_top(cfg: Mapping[str, Any]) -> None:
     _field("seed", cfg.get("seed"), kind="int", lo=0, hi=2 ** 32 - 1)  # NumPy's and JAX's seed range
@@ -310,6 +312,59 @@ def _search_centre(path: str, v: Any, centre: list, robot) -> None:
                           f"inverse kinematics within the joint limits there); choose a reachable centre")
 
 
+def datasheet_spec(e, cfg=None, robot=None, recon=None) -> dict:
+    """``experiment.*`` and the top-level ``source`` of the datasheet job as plain values (kg, s, m, N m, rad/s).
+
+    ``source``: a :data:`deltajax.presets.PRESETS` name (with ``experiment.motor`` and ``experiment.gear_ratio``) or
+    a ga_reconfig run directory (its baseline and recommended designs with the run's own motor and gear ratios).
+    """
+    import os
+
+    from .. import presets
+
+    src = (cfg or {}).get("source")
+    if src is None or str(src) == "":
+        raise ConfigError("source is required: a preset name (" + ", ".join(sorted(presets.PRESETS))
+                          + ") or a ga_reconfig run directory (containing results.h5)")
+    src = str(src)
+    if src in presets.PRESETS:
+        kind = "preset"
+    elif os.path.isfile(os.path.join(os.path.expanduser(src), "results.h5")):
+        kind = "run_dir"
+        src = os.path.abspath(os.path.expanduser(src))
+    else:
+        raise ConfigError(f"source={src!r} is neither a preset ({', '.join(sorted(presets.PRESETS))}) nor a run "
+                          "directory with a results.h5")
+    pos = lambda k, unit: _field(f"experiment.{k}", e.get(k), lo=0, lo_open=True, unit=unit)  # noqa: E731
+    payloads = [_field(f"experiment.payloads[{i}]", p, lo=0, unit="kg") for i, p in enumerate(e.get("payloads") or [])]
+    if not payloads:
+        raise ConfigError("experiment.payloads must list at least one payload (kg)")
+    grid = e.get("cylinder_grid") or []
+    if len(grid) != 3:
+        raise ConfigError(f"experiment.cylinder_grid must be [rings, angles, levels], got {list(grid)!r}")
+    mcfg = e.get("motor") or {}
+    motor = {k: _field(f"experiment.motor.{k}", mcfg.get(k), lo=0, lo_open=(k != "rotor_inertia"), unit=u)
+             for k, u in (("peak_torque", "N m"), ("rated_torque", "N m"), ("max_speed", "rad/s"),
+                          ("corner_speed", "rad/s"), ("rotor_inertia", "kg m^2"), ("efficiency", "1"))}
+    for lo_k, hi_k, unit in (("rated_torque", "peak_torque", "N m"), ("corner_speed", "max_speed", "rad/s")):
+        if motor[lo_k] > motor[hi_k]:
+            raise ConfigError(f"experiment.motor.{lo_k}={motor[lo_k]!r} {unit} must be <= experiment.motor.{hi_k}="
+                              f"{motor[hi_k]!r} {unit}")
+    if motor["efficiency"] > 1:
+        raise ConfigError(f"experiment.motor.efficiency must be in (0, 1], got {motor['efficiency']!r}")
+    centre = e.get("centre")
+    R = e.get("R")
+    return dict(source=src, kind=kind, payloads=payloads, vendor_dwell=_field("experiment.vendor_dwell",
+                                                                              e.get("vendor_dwell"), lo=0, unit="s"),
+                hd_ratio=pos("hd_ratio", "1"), volume_h=pos("volume_h", "m"),
+                n_samples=_field("experiment.n_samples", e.get("n_samples"), kind="int", lo=3),
+                cylinder_grid=tuple(_field(f"experiment.cylinder_grid[{i}]", g, kind="int", lo=2)
+                                    for i, g in enumerate(grid)),
+                centre=None if centre is None else _vector("experiment.centre", centre, 3),
+                R=None if R is None else _field("experiment.R", R, lo=0, lo_open=True, unit="m"),
+                motor=motor, gear_ratio=pos("gear_ratio", "motor speed / arm speed"))
+
+
 def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
     """``experiment.*`` of boundary_search as plain values (m, deg)."""
     from ..workspace import boundary as B
@@ -480,6 +535,7 @@ EXPERIMENT_VALIDATORS = {
     "boundary_search": boundary_search_spec,
     "reconfig_motion": reconfig_motion_spec,
     "ga_reconfig": _v_ga_reconfig,
+    "datasheet": datasheet_spec,
 }
 
 
@@ -499,6 +555,9 @@ def validate_config(cfg: Mapping[str, Any], robot=None, recon=None, *, run_dir=N
     check_keys(cfg)
     _validate_top(cfg)
     e = cfg.get("experiment") or {}
+    if cfg.get("source") is not None and e.get("name") not in SOURCE_EXPERIMENTS:
+        raise ConfigError(f"source={cfg.get('source')!r} is read only by experiment="
+                          f"{'|'.join(SOURCE_EXPERIMENTS)}, not by experiment={e.get('name')}")
     if recon is not None and e.get("name") in R_RANGE_EXPERIMENTS:
         check_reach_over_range(cfg.get("robot"), recon)
     if run_dir is not None and e.get("name") in RUN_DIR_CHECKS:

@@ -40,6 +40,9 @@ JOBS: dict[str, Job] = {
                           "reachable mask, volume, index fields and statistics on a grid (shardable; used by sweeps)"),
     "dynamics_cycle": Job("deltajax.jobs.dynamics_cycle",
                           "actuator torque/speed/acceleration on the pick-and-place cycle and the GA paper's motion"),
+    "datasheet": Job("deltajax.jobs.datasheet",
+                     "vendor-style datasheet (working range, picks/min vs payload, utilisations) of a preset or of a "
+                     "ga_reconfig run's baseline and recommended designs"),
     "bench_kernel": Job("deltajax.jobs.bench_kernel",
                         "IK + Jacobian + indices throughput, float32/float64, vs NumPy and the frozen old kernel"),
 }

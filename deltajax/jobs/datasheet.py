@@ -1,0 +1,105 @@
+"""Vendor-style datasheets (issue 29): ``python -m deltajax.run experiment=datasheet source=<preset | run dir>``.
+
+``source`` is a :data:`deltajax.presets.PRESETS` name (``franco2026``: its fixed variant at R = 0.200 m with the GA
+paper's masses, as in dynamics_cycle; the drive from ``experiment.motor`` / ``experiment.gear_ratio``) or a
+ga_reconfig run directory: then its baseline and recommended designs (``summary`` group), each with the run's own
+motor and the design's gear ratio (the run's settings rebuild its design space; ``experiment.motor`` and
+``experiment.gear_ratio`` are not used, and the log says so).
+
+Writes, per design, group ``datasheet/<design>``: the payload table (axis ``payload``, kg; columns of
+:data:`deltajax.datasheet.ROW_FIELDS` with units) and every scalar of :class:`deltajax.datasheet.Datasheet` as a
+scalar dataset with its unit; the figure ``datasheet_<design>.png`` (one page).
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+
+from .. import plots, presets
+from ..config import ConfigError, datasheet_spec
+from ..constraints import Motor
+from ..datasheet import MOTOR_FIELDS, ROW_FIELDS, UNITS, datasheet
+
+
+def _designs_from_run(run_dir: str, ctx):
+    """[(name, robot, motor, gear ratio)] of a ga_reconfig run's baseline and recommended designs."""
+    import yaml
+
+    from .. import io
+    from ..config import ga_reconfig_build, robot_from_config
+
+    data = io.load(os.path.join(run_dir, "results.h5"))
+    cfg = yaml.safe_load(data["attrs"]["config"])
+    if (cfg.get("experiment") or {}).get("name") != "ga_reconfig":
+        raise ConfigError(f"source={run_dir!r} is a {(cfg.get('experiment') or {}).get('name')!r} run, not ga_reconfig")
+    S = data.get("summary") or {}
+    if "recommended_params" not in S:
+        raise ConfigError(f"source={run_dir!r}: the run has no recommendation (group summary; unfinished run or no "
+                          "feasible design)")
+    robot, recon = robot_from_config(cfg["robot"])
+    s, space = ga_reconfig_build(cfg["experiment"], robot, recon)[:2]
+    motor = Motor(**{k: v for k, v in s.motor.items() if k != "gear_ratio"})
+    ctx.log(f"source is a ga_reconfig run: its motor and each design's gear ratio are used "
+            f"(experiment.motor / experiment.gear_ratio ignored)")
+    out = []
+    for col, label in (("baseline_params", "baseline"), ("recommended_params", "recommended")):
+        rob = space.decode(space.from_params(np.asarray(S[col], float)))
+        base = rob.robot if hasattr(rob, "robot") else rob
+        out.append((label, rob, motor, float(base.mass.gear_ratio)))
+    return out
+
+
+def _designs_from_preset(name: str, spec):
+    from .dynamics_cycle import _preset_robot   # the presets with a mass model, as the dynamics job analyses them
+
+    robot = _preset_robot(name)
+    if robot is None:
+        raise ConfigError(f"source={name!r}: the preset has no mass model, a datasheet needs one")
+    return [(name, robot, Motor(**spec["motor"]), spec["gear_ratio"])]
+
+
+def save(res, group: str, ds) -> None:
+    """One datasheet into ``group`` of the results file (units on every dataset)."""
+    res.put_axis(group, "payload", ds.payload, units="kg", long_name="payload carried by the platform")
+    for name, unit, long_name in ROW_FIELDS[1:]:
+        res.put(group, name, getattr(ds, name), units=unit, dims=("payload",), long_name=long_name)
+    for name, value in ds.scalars().items():
+        if name.startswith("motor_"):
+            res.put(group, name, float(value), units=MOTOR_FIELDS[name[len("motor_"):]], long_name="motor side")
+        elif name == "centre":
+            res.put(group, name, np.asarray(value), units="m", dims=("xyz",), attrs={"positive": "down"},
+                    long_name="centre of the 25/305/25 mm cycle (base frame, z down)")
+        elif isinstance(value, str):
+            continue
+        elif name in UNITS:
+            res.put(group, name, float(value), units=UNITS[name])
+    res.set_attrs(group, name=ds.name, forearm_model=ds.forearm_model, volume_truncated=bool(ds.volume_truncated),
+                  cycle="25/305/25 mm go-and-back (deltajax.adept_cycle), one pick per cycle",
+                  vendor_column=f"60 / (T_min + 2 x {ds.dwell} s); no tool rotation modelled")
+
+
+def run(ctx) -> None:
+    spec = datasheet_spec(ctx.cfg.experiment, ctx.cfg, ctx.robot, ctx.recon)
+    if spec["kind"] == "preset":
+        designs = _designs_from_preset(spec["source"], spec)
+    else:
+        designs = _designs_from_run(spec["source"], ctx)
+    for name, robot, motor, n in ctx.progress(designs, total=len(designs), desc="datasheets"):
+        ds = datasheet(robot, motor, n, payloads=spec["payloads"], vendor_dwell=spec["vendor_dwell"],
+                       centre=spec["centre"], hd_ratio=spec["hd_ratio"], volume_h=spec["volume_h"],
+                       n_samples=spec["n_samples"], R=spec["R"], name=name, cylinder_grid=spec["cylinder_grid"])
+        save(ctx.results, f"datasheet/{name}", ds)
+        ctx.results.flush()
+        ctx.log(f"{name}: working range {1000 * ds.working_diameter:.0f} x {1000 * ds.working_height:.0f} mm, "
+                f"reachable volume {ds.reachable_volume:.4g} m^3, max payload {ds.max_payload:.3g} kg")
+        ctx.log(f"  {'payload kg':>10s} {'picks/min':>10s} {'vendor':>8s} {'T_min s':>8s} {'peak':>6s} {'RMS':>6s} "
+                f"{'acc g':>6s}")
+        for r in ds.rows():
+            ctx.log(f"  {r['payload']:10.3g} {r['picks_per_min']:10.1f} {r['picks_per_min_vendor']:8.1f} "
+                    f"{r['cycle_time']:8.4f} {r['peak_utilisation']:6.3f} {r['rms_utilisation']:6.3f} "
+                    f"{r['peak_acceleration_g']:6.2f}")
+        ctx.savefig(plots.datasheet_page(ds, f"deltajax datasheet: {name}"), f"datasheet_{name}")
+    ctx.results.set_attrs("datasheet", source=spec["source"], source_kind=spec["kind"],
+                          designs=",".join(d[0] for d in designs))
