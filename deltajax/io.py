@@ -660,10 +660,7 @@ def load(path: os.PathLike, group: Optional[str] = None, *, verify: bool = True)
         ResultsGroupError: ``group`` is not in the file; the message lists the groups it has.
         ChecksumError: with ``verify``, the file is damaged or was edited, or has no integrity record.
     """
-    try:
-        contents = read(path, group, verify=verify)
-    except ChecksumError as e:
-        raise ChecksumError(f"{e}; load(..., verify=False) reads it as it is") from None
+    contents = read(path, group, verify=verify)
     top = contents.top
     nested: dict[str, dict[str, Any]] = {}
     for name in sorted(contents.group_attrs, key=lambda n: (n.count("/") if n else -1, n)):

@@ -82,6 +82,21 @@ def test_the_record_survives_many_groups_and_attributes_and_xarray_reads_the_fil
     assert int(dio.open_xarray(res.path, "group_7/nested_7").v[2]) == 2
 
 
+def test_an_edited_shard_is_never_merged(tmp_path, monkeypatch):
+    """The merge reads finished shards verified: an edited one would otherwise get fresh checksums in the merge."""
+    from deltajax.sweeps import REDUCERS, ShardError, merge_shards
+    from test_sweeps_package import _shard
+
+    monkeypatch.setitem(REDUCERS, "toy_total", lambda data, attrs: ({"total": np.float64(data["v"].sum())}, {}))
+    shards = [_shard(tmp_path / f"{k}.h5", k, 2, "toy_total") for k in (0, 1)]
+    dio.verify_file(merge_shards(shards, tmp_path / "ok.h5"))
+    with h5py.File(shards[1], "r+") as f:
+        f["g/v"][0] = 100.0
+    with pytest.raises(ShardError, match=r"1\.h5:/g/v does not match its checksum.*rerun that shard"):
+        merge_shards(shards, tmp_path / "m.h5")
+    assert not (tmp_path / "m.h5").exists()
+
+
 # -- the main job: a checkpoint and the bookkeeping of a stopped run ------------------------------------------------
 @pytest.fixture(scope="module")
 def stopped_run(tmp_path_factory):
@@ -155,7 +170,7 @@ def test_library_reads_of_a_tampered_checkpoint_refuse_it(stopped_run, tmp_path)
     assert W.stages_done(path)[1] == ["screen"]
     with h5py.File(path, "r+") as f:
         f["ga/checkpoint"].attrs["generations_done"] = 3
-    with pytest.raises(CheckpointError, match="generations_done does not match its checksum.*fresh=true"):
+    with pytest.raises(CheckpointError, match="'generations_done' does not match its checksum.*fresh=true"):
         W.load_checkpoint(path)
     with pytest.raises(dio.ChecksumError, match="generations_done"):
         W.stages_done(path)
