@@ -676,7 +676,7 @@ def load(path: os.PathLike, group: Optional[str] = None, *, verify: bool = True)
     return nested[top]
 
 
-def open_xarray(path: os.PathLike, group: str):
+def open_xarray(path: os.PathLike, group: str, *, verify: bool = True):
     """Open one group of a results file as an in-memory :class:`xarray.Dataset` (SPEC §5): a view of :func:`read`.
 
     Gridded datasets come with their named dimensions and coordinate axes (the HDF5 dimension scales), each
@@ -689,13 +689,17 @@ def open_xarray(path: os.PathLike, group: str):
         ws = open_xarray(run_dir / "results.h5", "workspace")
         area_vs_z = ws.reachable.sum(("x", "y")) * float(ws.attrs["h"]) ** 2      # m^2 per z level
 
+    ``verify`` (default): the group is checked against its checksums and the file's integrity record, as by
+    :func:`load`; ``False`` reads a damaged, edited or older file as it is.
+
     Raises:
         FileNotFoundError: no file at ``path``.
         ResultsGroupError: ``group`` is not in the file; the message lists the groups it has.
+        ChecksumError: with ``verify``, the file is damaged or was edited, or has no integrity record.
     """
     import xarray as xr
 
-    contents = read(path, group)
+    contents = read(path, group, verify=verify)
     variables = contents.variables.get(contents.top, {})
 
     def attrs(v: Variable) -> dict[str, Any]:
