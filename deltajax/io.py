@@ -16,8 +16,12 @@ Writes are atomic: the whole file is built in memory, written to a temporary nam
 run) never sees a half-written file and two writers never share a temporary. A full disk or another I/O error
 raises :class:`ResultsWriteError` (one line: the path, the cause, that the previous file is intact, what to
 do) and leaves no temporary behind. Every dataset carries a ``checksum`` attribute (``sha256:<hex>`` of its
-data) that :func:`read_checked` verifies, so a resume refuses a damaged or edited checkpoint. Host-side only;
-never call inside jit.
+data), and the file's HDF5 user block holds an integrity record (:data:`INTEGRITY_MAGIC`, then JSON): a checksum
+of every attribute of every group (the root's bookkeeping: stages done, generations done, ...) and of each
+group's members (datasets, subgroups and the datasets' attributes). ``read(..., verify=True)`` and
+:func:`verify_file` check both, so a resume and a finished run's rerun refuse a damaged or edited file (a value, a
+deleted ``checksum`` attribute, an edited attribute, a removed dataset, a file without a record). Host-side
+only; never call inside jit.
 """
 
 from __future__ import annotations
@@ -27,6 +31,7 @@ import datetime as _dt
 import errno as _errno
 import hashlib
 import itertools
+import json
 import os
 import subprocess
 import uuid
@@ -38,7 +43,8 @@ import numpy as np
 
 __all__ = ["ResultsFile", "ResultsWriteError", "ChecksumError", "ResultsGroupError", "load", "read", "Contents",
            "Variable", "groups",
-           "read_checked", "checksum", "write_atomic", "git_commit", "RESERVED_NAMES"]
+           "read_checked", "checksum", "write_atomic", "git_commit", "RESERVED_NAMES", "verify_file",
+           "INTEGRITY_MAGIC"]
 
 RESERVED_NAMES = ("attrs", "units")
 
@@ -243,8 +249,9 @@ class ResultsFile:
         # The file is built in memory (HDF5 core driver) and written to disk with plain OS calls. Writing through
         # HDF5's own file driver, a full disk made File.close() fail half-way and the surviving dataset ids
         # segfaulted at garbage collection (exit 139); now HDF5 never sees an I/O error.
+        block = _userblock_size(self._record_size_bound())
         f = h5py.File(f"deltajax-image-{os.getpid()}-{next(_IMAGE_IDS)}", "w", driver="core",
-                      backing_store=False, block_size=1 << 22)
+                      backing_store=False, block_size=1 << 22, userblock_size=block)
         try:
             for k, v in self.attrs.items():
                 f.attrs[k] = _attr_value(v)
@@ -261,9 +268,25 @@ class ResultsFile:
                     for k, v in gattrs.items():
                         g.attrs[k] = _attr_value(v)
             f.flush()
-            return f.id.get_file_image()
+            record = _integrity_record(f)
+            if len(record) > block:
+                raise RuntimeError(f"{self.path}: integrity record of {len(record)} bytes exceeds the user block "
+                                   f"({block} bytes)")  # a bug in _record_size_bound, never the user's input
+            # the core driver's image starts at the superblock: the user block goes in front of it
+            return record.ljust(block, b"\0") + f.id.get_file_image()
         finally:
             f.close()
+
+    def _record_size_bound(self) -> int:
+        """An upper bound on the size of the integrity record (:func:`_integrity_record`) of this file."""
+        names = {""}
+        for g in list(self._groups) + list(self._group_attrs):
+            parts = g.strip("/").split("/")
+            names.update("/".join(parts[:i]) for i in range(1, len(parts) + 1))
+        keys = (list(self.attrs) + [k for a in self._group_attrs.values() for k in a]
+                + [k for v in self._groups.values() for k in v] + [n.rpartition("/")[2] for n in names])
+        return (len(INTEGRITY_MAGIC) + 64 + sum(len(json.dumps(n)) + 64 for n in names)
+                + sum(len(json.dumps(str(k))) + 2 * _HASH_CHARS for k in keys))
 
     @staticmethod
     def _write_group(g: h5py.Group, variables: dict[str, _Var]) -> None:
@@ -341,6 +364,100 @@ def _verify(dset: "h5py.Dataset", data: Any) -> None:
         raise ChecksumError(f"{where} has no checksum (not written by this deltajax version, or edited)")
     if checksum(data) != want:
         raise ChecksumError(f"{where} does not match its checksum (the file is damaged or was edited)")
+
+
+#: first bytes of the integrity record in a results file's HDF5 user block (followed by JSON, then NUL padding)
+INTEGRITY_MAGIC = b"deltajax-integrity-record 1\n"
+_HASH_CHARS = 16  # hex characters kept of each sha256 in the record (it detects damage and edits, not attacks)
+#: attributes HDF5 uses to wire dimension scales: references whose bytes change with the layout, left out of the
+#: record (the scales themselves are members and are recorded)
+_LAYOUT_ATTRS = ("CLASS", "NAME", "REFERENCE_LIST", "DIMENSION_LIST", "DIMENSION_LABELS")
+
+
+def _userblock_size(n: int) -> int:
+    """The HDF5 user block size (a power of two, at least 512) that holds ``n`` bytes."""
+    size = 512
+    while size < n:
+        size *= 2
+    return size
+
+
+def _attr_hash(value: Any) -> str:
+    return checksum(np.asarray(to_python(value)))[7:7 + _HASH_CHARS]
+
+
+def _member_hash(item) -> str:
+    """Checksum of a group's member: "group" for a subgroup; a dataset's attributes (units, checksum, ...; not
+    the dimension-scale wiring) for a dataset."""
+    if isinstance(item, h5py.Group):
+        return "group"
+    h = hashlib.sha256()
+    for k in sorted(item.attrs):
+        if k not in _LAYOUT_ATTRS:
+            h.update(f"{k}={_attr_hash(item.attrs[k])}\0".encode())
+    return h.hexdigest()[:_HASH_CHARS]
+
+
+def _group_record(g: "h5py.Group") -> dict:
+    return {"attrs": {k: _attr_hash(g.attrs[k]) for k in sorted(g.attrs)},
+            "members": {k: _member_hash(g[k]) for k in sorted(g)}}
+
+
+def _integrity_record(f: "h5py.File") -> bytes:
+    """The integrity record of an open file: per group ("" for the root) its attributes' and members' checksums."""
+    groups = {"": _group_record(f)}
+    f.visititems(lambda name, item: groups.__setitem__(name, _group_record(item))
+                 if isinstance(item, h5py.Group) else None)
+    return INTEGRITY_MAGIC + json.dumps({"groups": groups}, sort_keys=True, separators=(",", ":")).encode() + b"\n"
+
+
+def _stored_record(f: "h5py.File") -> dict:
+    """The integrity record in the user block of an open file. Raises :class:`ChecksumError` when it has none."""
+    block = f.userblock_size
+    raw = b""
+    if block:
+        with open(f.filename, "rb") as fh:
+            raw = fh.read(block)
+    if not raw.startswith(INTEGRITY_MAGIC):
+        raise ChecksumError(f"{f.filename} has no integrity record (written by an older deltajax, or rewritten by "
+                            "another tool)")
+    try:
+        return json.loads(raw[len(INTEGRITY_MAGIC):].rstrip(b"\0"))["groups"]
+    except (ValueError, KeyError, TypeError):
+        raise ChecksumError(f"{f.filename}: its integrity record is damaged") from None
+
+
+def _verify_group(f: "h5py.File", record: dict, name: str, g: "h5py.Group") -> None:
+    """Check a group's attributes and members against the file's integrity record (:class:`ChecksumError`)."""
+    where = f"{f.filename}:/{name}" if name else f"{f.filename}:/ (root)"
+    want = record.get(name)
+    if not isinstance(want, dict):
+        raise ChecksumError(f"{where} is not in the file's integrity record (a group added after it was written)")
+    have = _group_record(g)
+    for kind, what in (("attrs", "attribute"), ("members", "member")):
+        a, b = have[kind], want.get(kind, {})
+        for k in sorted(set(a) | set(b)):
+            item = f"{what} {k!r}" if kind == "attrs" else f"{'group' if a.get(k) == 'group' else 'dataset'} {k!r}"
+            if k not in a:
+                raise ChecksumError(f"{where}: its {item} was removed after the file was written (it was edited)")
+            if k not in b:
+                raise ChecksumError(f"{where}: its {item} was added after the file was written (it was edited)")
+            if a[k] != b[k]:
+                detail = "does not match its checksum" if kind == "attrs" else "has attributes that do not match " \
+                                                                               "their checksum"
+                raise ChecksumError(f"{where}: its {item} {detail} (the file is damaged or was edited)")
+
+
+def verify_file(path: os.PathLike) -> None:
+    """Verify a whole results file: every dataset against its checksum, every attribute and group against the
+    integrity record (the reads a resume or a rerun of a finished run trusts).
+
+    Raises:
+        FileNotFoundError: no file at ``path``.
+        OSError: HDF5 cannot open it (truncated, not HDF5).
+        ChecksumError: damaged or edited (the message names the file, the item and what is wrong).
+    """
+    read(path, verify=True)
 
 
 def _write_all(fd: int, data: bytes) -> None:
@@ -431,17 +548,22 @@ def read(path: os.PathLike, group: Optional[str] = None, *, max_elements: Option
         group: a group name ("a/b"); ``None``: the whole file.
         max_elements: read only datasets of at most this many elements (a scalar has 1; 0 reads attributes
             only); the others are left out of ``variables``. ``None``: every dataset.
+        verify: check every dataset read against its checksum, and the attributes and members of every group
+            read (and the root's attributes) against the file's integrity record.
 
     Raises:
         FileNotFoundError: no file at ``path``.
         ResultsGroupError: ``group`` is not in the file; the message lists the groups it has.
-        ChecksumError: with ``verify``, a dataset does not match its checksum (or has none).
+        ChecksumError: with ``verify``, a dataset does not match its checksum (or has none), or an attribute or
+            the members of a group read (and the root's attributes) differ from the file's integrity record (or
+            the file has none).
     """
     with _open(path) as f:
         top = "" if group is None else group.strip("/")
         g = f.get(top or "/")
         if not isinstance(g, h5py.Group):
             raise _no_group(path, str(group))
+        record = _stored_record(f) if verify else {}
         root = {k: to_python(v) for k, v in f.attrs.items()}
         group_attrs: dict[str, dict] = {}
         variables: dict[str, dict[str, Variable]] = {}
@@ -454,8 +576,14 @@ def read(path: os.PathLike, group: Optional[str] = None, *, max_elements: Option
                     walk(f"{name}/{key}" if name else key, item)
                 elif max_elements is None or item.size <= max_elements:
                     own[key] = _variable(key, item, verify)
+                elif verify and "checksum" not in item.attrs:
+                    _verify(item, None)  # not read, but a dataset without its checksum is refused all the same
+            if verify:  # after the datasets: a removed checksum attribute is named as such
+                _verify_group(f, record, name, grp)
 
         walk(top, g)
+        if verify and top:
+            _verify_group(f, record, "", f)  # the root's attributes (returned too) and its members
     return Contents(attrs=root, group_attrs=group_attrs, variables=variables, top=top)
 
 
@@ -513,12 +641,14 @@ def _no_group(path: os.PathLike, group: str) -> ResultsGroupError:
     return ResultsGroupError(f"{path} has no group {group!r}; its groups with data: {', '.join(have) or 'none'}")
 
 
-def load(path: os.PathLike, group: Optional[str] = None) -> dict[str, Any]:
+def load(path: os.PathLike, group: Optional[str] = None, *, verify: bool = True) -> dict[str, Any]:
     """Load a results file (or one group of it) as plain Python/NumPy: a view of :func:`read`.
 
     Args:
         path: the results file.
         group: a group name ("a/b"); ``None`` loads the whole file.
+        verify: check what is read against its checksums and the file's integrity record (:func:`read`);
+            ``False`` reads a damaged, edited or older file as it is (to inspect it).
 
     Returns:
         A dict with ``"attrs"`` (root attributes; ``attrs["config"]`` is the resolved YAML), ``"units"`` and
@@ -528,8 +658,9 @@ def load(path: os.PathLike, group: Optional[str] = None) -> dict[str, Any]:
     Raises:
         FileNotFoundError: no file at ``path``.
         ResultsGroupError: ``group`` is not in the file; the message lists the groups it has.
+        ChecksumError: with ``verify``, the file is damaged or was edited, or has no integrity record.
     """
-    contents = read(path, group)
+    contents = read(path, group, verify=verify)
     top = contents.top
     nested: dict[str, dict[str, Any]] = {}
     for name in sorted(contents.group_attrs, key=lambda n: (n.count("/") if n else -1, n)):
@@ -545,7 +676,7 @@ def load(path: os.PathLike, group: Optional[str] = None) -> dict[str, Any]:
     return nested[top]
 
 
-def open_xarray(path: os.PathLike, group: str):
+def open_xarray(path: os.PathLike, group: str, *, verify: bool = True):
     """Open one group of a results file as an in-memory :class:`xarray.Dataset` (SPEC §5): a view of :func:`read`.
 
     Gridded datasets come with their named dimensions and coordinate axes (the HDF5 dimension scales), each
@@ -558,13 +689,17 @@ def open_xarray(path: os.PathLike, group: str):
         ws = open_xarray(run_dir / "results.h5", "workspace")
         area_vs_z = ws.reachable.sum(("x", "y")) * float(ws.attrs["h"]) ** 2      # m^2 per z level
 
+    ``verify`` (default): the group is checked against its checksums and the file's integrity record, as by
+    :func:`load`; ``False`` reads a damaged, edited or older file as it is.
+
     Raises:
         FileNotFoundError: no file at ``path``.
         ResultsGroupError: ``group`` is not in the file; the message lists the groups it has.
+        ChecksumError: with ``verify``, the file is damaged or was edited, or has no integrity record.
     """
     import xarray as xr
 
-    contents = read(path, group)
+    contents = read(path, group, verify=verify)
     variables = contents.variables.get(contents.top, {})
 
     def attrs(v: Variable) -> dict[str, Any]:

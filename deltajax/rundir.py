@@ -10,8 +10,10 @@ its output directory before it writes anything there, ``.hydra/`` included:
   and the status (``running`` until the job returns, then ``complete``).
 * **Rerun**: into a directory whose manifest holds the same experiment and the same config (up to the
   settings in :data:`NEUTRAL`, which do not change the numbers) resumes it (``running``) or reports that it is
-  complete and does nothing (``complete``). Anything else is refused with one line naming the settings that
-  differ, and nothing in the directory is touched. A directory holding deltajax results but no manifest is
+  complete and does nothing (``complete``), after verifying its ``results.h5`` (checksums and integrity record,
+  :func:`deltajax.io.verify_file`): a damaged, edited or truncated file is refused with :class:`CheckpointError`
+  (one line: the path, what is wrong, ``fresh=true``). Anything else is refused with one line naming the
+  settings that differ, and nothing in the directory is touched. A directory holding deltajax results but no manifest is
   refused too (it cannot be matched to a config).
 * **Killed writers**: their unique temporaries (``.<name>.<pid>.<random>.tmp``) are removed by the next claim.
 * **Starting over is explicit**: ``fresh=true`` deletes what earlier runs wrote there (results, checkpoints,
@@ -176,19 +178,31 @@ def _remove_artefacts(path: Path) -> None:
         p.unlink()
 
 
-def _check_readable(results: Path) -> None:
-    """Refuse to resume over a results file HDF5 cannot open (killed mid-rename never happens: writes are atomic;
-    this is a file damaged or replaced by something else)."""
-    if not results.exists():
-        return
-    from .io import read  # the one HDF5 reader (io.py imports nothing of deltajax)
+def _check_results(results: Path, state: str) -> None:
+    """Verify the results file a rerun trusts (state ``resume``: its checkpoint and finished stages; ``complete``:
+    the finished results it reports as done): every dataset against its checksum, every attribute (stages done,
+    generations done, ...) and group against the file's integrity record (:func:`deltajax.io.verify_file`).
+    Raises :class:`CheckpointError` (one line: the path, what is wrong, what to do) when it is damaged,
+    edited, truncated or missing."""
+    from .io import ChecksumError, verify_file  # the one HDF5 reader (io.py imports nothing of deltajax)
 
+    if state == "resume":
+        head, todo = "cannot resume", "move it away to keep it, or add fresh=true to start over"
+    else:
+        head, todo = "cannot trust the finished run", "move it away to keep it, or add fresh=true to recompute it"
+    if not results.exists():
+        if state == "resume":
+            return  # killed before its first write: nothing to trust, nothing to lose
+        raise CheckpointError(f"{head}: {results} is missing although {results.parent / MANIFEST} records the run "
+                              f"as complete; add fresh=true to recompute it")
     try:
-        read(results, max_elements=0)  # opens the file and walks its groups, attributes only
+        verify_file(results)
+    except ChecksumError as e:
+        what = str(e).replace(f"{results}:", "").replace(f"{results} ", "")
+        raise CheckpointError(f"{head}: {results} fails verification: {what}; {todo}") from None
     except (OSError, RuntimeError) as e:
         cause = str(e).split("(")[0].strip() or type(e).__name__
-        raise RunDirError(f"cannot resume: {results} is not a readable HDF5 file ({cause}); move it away to keep "
-                          f"it, or add fresh=true to start over") from None
+        raise CheckpointError(f"{head}: {results} is not a readable HDF5 file ({cause}); {todo}") from None
 
 
 def claim(path: os.PathLike, experiment: str, config: Mapping[str, Any], *, fresh: bool = False) -> RunDirectory:
@@ -236,8 +250,7 @@ def claim(path: os.PathLike, experiment: str, config: Mapping[str, Any], *, fres
                                   f"{describe_differences(diffs)}; choose another hydra.run.dir, or add fresh=true to "
                                   "replace it")
             state = "complete" if status == "complete" else "resume"
-            if state == "resume":
-                _check_readable(path / "results.h5")
+            _check_results(path / "results.h5", state)  # what a resume or a "nothing to do" trusts
             manifest = old
             if state == "resume":
                 manifest.update(resumed=_now())

@@ -151,7 +151,7 @@ def test_unreadable_results_file_is_refused_on_resume(tmp_path):
 
 
 @pytest.mark.parametrize("tamper, message", [
-    ("planes_done", "do not match their checksum"),
+    ("planes_done", "attribute 'planes_done' does not match its checksum"),
     ("flip_plane", "workspace/reachable does not match its checksum"),
     ("flip_value", "workspace/k_tilde does not match its checksum"),
     ("count", "workspace/plane_count does not match its checksum"),

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from deltajax.config import ConfigError
-from deltajax.io import load
+from deltajax.io import ResultsFile, load
+from deltajax.optimize.workflow import restage
 from deltajax.run import run_experiment
 from deltajax.rundir import RunDirError
 
@@ -302,10 +303,10 @@ def test_continue_from_refuses_another_problem_an_unfinished_run_and_its_own_dir
               r"1.0 now\)"),
              ([f"experiment.continue_from={tmp_path / 'nowhere'}"], "is neither a run directory"),
              ([f"experiment.continue_from={tmp_path / 'own'}", "fresh=true"], "is this run's own directory")]
-    unfinished = tmp_path / "unfinished.h5"
-    unfinished.write_bytes(full_run.read_bytes())
-    with h5py.File(unfinished, "a") as f:
-        f.attrs["ga_reconfig_stages"] = "screen,ga"
+    unfinished = ResultsFile(tmp_path / "unfinished.h5")  # written as by a run stopped after its GA stage
+    restage(unfinished, full_run)
+    unfinished.set_attrs(ga_reconfig_stages="screen,ga")
+    unfinished = unfinished.flush()
     cases.append(([f"experiment.continue_from={unfinished}"], r"has not finished its verification \(stages done: "
                                                                r"screen,ga\)"))
     own = tmp_path / "own"

@@ -1,4 +1,4 @@
-"""Run directories (deltajax.rundir): a results file to resume over is checked through io.read."""
+"""Run directories (deltajax.rundir): a results file to resume over is read and verified through deltajax.io."""
 
 import pytest
 
@@ -12,13 +12,20 @@ def test_rundir_checks_a_results_file_through_io_read(tmp_path):
     from deltajax.rundir import RunDirError
 
     assert "h5py" not in inspect.getsource(rundir)
+    from deltajax.io import ResultsFile
+
     good = tmp_path / "good.h5"
-    with h5py.File(good, "w") as f:
-        f.create_group("a").attrs["x"] = 1
-        f["a"].create_dataset("v", data=[1.0, 2.0])
-    rundir._check_readable(good)
-    rundir._check_readable(tmp_path / "missing.h5")  # nothing to resume over
+    res = ResultsFile(good)
+    res.set_attrs("a", x=1)
+    res.put("a", "v", [1.0, 2.0], units="1")
+    res.flush()
+    rundir._check_results(good, "resume")
+    rundir._check_results(tmp_path / "missing.h5", "resume")  # nothing to resume over
     for name, data in (("garbage.h5", b"garbage" * 100), ("cut.h5", good.read_bytes()[:800])):
         (tmp_path / name).write_bytes(data)
         with pytest.raises(RunDirError, match=rf"cannot resume: .*{name} is not a readable HDF5 file.*fresh=true"):
-            rundir._check_readable(tmp_path / name)
+            rundir._check_results(tmp_path / name, "resume")
+    with h5py.File(good, "r+") as f:  # readable, but edited: refused too
+        f["a"].attrs["x"] = 2
+    with pytest.raises(RunDirError, match=r"cannot resume: .*good.h5 fails verification: .*'x'.*fresh=true"):
+        rundir._check_results(good, "resume")

@@ -29,6 +29,7 @@ import time
 import numpy as np
 
 from ..config import ConfigError, GaReconfigSettings as Settings, ga_reconfig_build, ga_reconfig_settings
+from ..io import ChecksumError
 from ..rundir import CheckpointError
 from ..optimize.workflow import load_checkpoint as _load_checkpoint, put_checkpoint as _put_checkpoint
 
@@ -45,7 +46,9 @@ def _claim(ctx, s, path, fp, W):
     """Stages already finished in ``path`` (everything on disk staged into the results), or refuse."""
     old_fp, done = None, []
     try:
-        old_fp, done = W.stages_done(path)
+        old_fp, done = W.stages_done(path)                        # verified attributes (integrity record)
+    except ChecksumError as err:
+        raise CheckpointError(f"cannot resume: {err}; add fresh=true to start over") from None
     except OSError as err:
         raise ConfigError(f"{path} exists but cannot be read ({err}); move it away or choose another "
                           "hydra.run.dir") from None
@@ -58,7 +61,10 @@ def _claim(ctx, s, path, fp, W):
     if s.resume == "never":
         return []
     if path.exists():
-        W.restage(ctx.results, path)                              # nothing already on disk is ever dropped
+        try:
+            W.restage(ctx.results, path)       # verified, and nothing already on disk is ever dropped
+        except ChecksumError as err:
+            raise CheckpointError(f"cannot resume: {err}; add fresh=true to start over") from None
     if s.resume == "must" and "ga" not in done and _load_checkpoint(path) is None:
         raise ConfigError(f"experiment.resume=must but {path} holds no GA checkpoint")
     return done
@@ -88,7 +94,7 @@ def run(ctx) -> None:
     if "report" in done:
         ctx.log(f"{path} holds a complete ga_reconfig run (stages {','.join(done)}); nothing to do")
         return
-    stored = load(path) if path.exists() and done else {}
+    stored = load(path, verify=True) if path.exists() and done else {}
     timings, t0 = {}, [time.perf_counter()]
 
     def mark(stage):
@@ -367,6 +373,7 @@ def run(ctx) -> None:
     data = load(path)
     R.print_summary(ctx, data)
     R.plots(ctx, data, objs, s)
+    ctx.write_figures()                      # the stage is done once its figures are on disk, not before
     mark("plots")
     _report(ctx, path)
     mark("report")                                                # done only once report.html is on disk

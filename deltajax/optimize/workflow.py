@@ -301,30 +301,44 @@ def recommend(F: np.ndarray, front: np.ndarray, rule: str, j_primary: int, *, ba
 
 # -- results-file bookkeeping (checkpoint, restaging, stages) -------------------------------------------------------
 
-_H5_INTERNAL = {"units", "CLASS", "NAME", "REFERENCE_LIST", "DIMENSION_LIST", "_Netcdf4Dimid", "_Netcdf4Coordinates"}
-
-
 def _history_name(k: str) -> str:
     return k.replace("/", "__")
 
 
 def load_checkpoint(path) -> Any:
-    """The GA checkpoint stored in a results.h5, or None."""
-    from ..io import load
+    """The GA checkpoint stored in a results.h5, or None; verified (checksums, integrity record) before use.
+
+    Raises:
+        deltajax.rundir.CheckpointError: the checkpoint is damaged, edited or malformed (one line: the path, what
+            is wrong, ``fresh=true``).
+    """
+    from ..io import ChecksumError, ResultsGroupError, load
+    from ..rundir import CheckpointError
 
     if not Path(path).exists():
         return None
-    data = load(path)
-    ck = data.get("ga", {}).get("checkpoint")
-    if not ck:
+    todo = "add fresh=true to start over (the checkpoint is part of results.h5)"
+    try:
+        ck = load(path, "ga/checkpoint", verify=True)
+    except ResultsGroupError:
         return None
-    attrs = ck["attrs"]
-    state = {k: v for k, v in ck["state"].items() if re.fullmatch(r"leaf_\d{3}", k)}
-    hist = {k.replace("__", "/"): v for k, v in ck["history"].items()
-            if k not in ("attrs", "units", "generation", "gene")}
-    return {"fingerprint": attrs["fingerprint"], "generations_done": int(attrs["generations_done"]),
-            "state": state, "key": ck["key"], "history": hist, "population": ck["population"],
-            "fitness": ck["fitness"]}
+    except ChecksumError as e:
+        raise CheckpointError(f"cannot resume the GA from {path}: {str(e).replace(f'{path}:', '')}; {todo}") from None
+    try:
+        attrs = ck["attrs"]
+        state = {k: v for k, v in ck["state"].items() if re.fullmatch(r"leaf_\d{3}", k)}
+        hist = {k.replace("__", "/"): v for k, v in ck["history"].items()
+                if k not in ("attrs", "units", "generation", "gene")}
+        out = {"fingerprint": str(attrs["fingerprint"]), "generations_done": int(attrs["generations_done"]),
+               "state": state, "key": ck["key"], "history": hist, "population": ck["population"],
+               "fitness": ck["fitness"]}
+    except (KeyError, TypeError, ValueError) as e:
+        raise CheckpointError(f"cannot resume the GA from {path}: its ga/checkpoint is malformed ({type(e).__name__}: "
+                              f"{e}); {todo}") from None
+    if out["generations_done"] != len(np.asarray(ck["history"].get("generation", []))):
+        raise CheckpointError(f"cannot resume the GA from {path}: ga/checkpoint generations_done="
+                              f"{out['generations_done']} does not match its history; {todo}")
+    return out
 
 
 def put_checkpoint(res, ck: Mapping[str, Any]) -> None:
@@ -343,45 +357,20 @@ def put_checkpoint(res, ck: Mapping[str, Any]) -> None:
     res.set_attrs(g, fingerprint=ck["fingerprint"], generations_done=int(ck["generations_done"]))
 
 
-def _attr(v):
-    if isinstance(v, bytes):
-        return v.decode()
-    if isinstance(v, np.generic):
-        return v.item()
-    return v
-
-
 def restage(res, path: Path) -> None:
-    """Stage everything an existing results.h5 holds into ``res`` (so the next flush keeps it)."""
-    import h5py
+    """Stage everything an existing results.h5 holds into ``res`` (so the next flush keeps it), verified first:
+    data that does not match its checksums or the file's integrity record is never re-staged (the next flush
+    would write fresh checksums over it). Raises :class:`deltajax.io.ChecksumError` (or OSError) then."""
+    from ..io import read
 
-    def walk(g, prefix):
-        if prefix:
-            res.set_attrs(prefix, **{k: _attr(v) for k, v in g.attrs.items() if k not in _H5_INTERNAL})
-        for name, item in g.items():
-            full = f"{prefix}/{name}" if prefix else name
-            if isinstance(item, h5py.Group):
-                walk(item, full)
-                continue
-            data = item.asstr()[()] if h5py.check_string_dtype(item.dtype) is not None else item[()]
-            if isinstance(data, (str, bytes)):
-                data = np.asarray(data, dtype=object)
-            if item.is_scale:
-                dims = (name,)
-            else:
-                dims = []
-                for i in range(item.ndim):
-                    scales = list(item.dims[i].values())
-                    dims.append(scales[0].name.rsplit("/", 1)[-1] if scales else f"{name}_dim{i}")
-                dims = tuple(dims)
-            attrs = {k: _attr(v) for k, v in item.attrs.items() if k not in _H5_INTERNAL}
-            res.put(prefix, name, data, units=_attr(item.attrs.get("units", "1")), dims=dims, attrs=attrs)
-
-    with h5py.File(path, "r") as f:
-        for k, v in f.attrs.items():
-            if k not in ("start_time",):
-                res.attrs.setdefault(k, _attr(v))
-        walk(f, "")
+    contents = read(path, verify=True)
+    for k, v in contents.attrs.items():
+        if k not in ("start_time",):
+            res.attrs.setdefault(k, v)
+    for group, variables in contents.variables.items():
+        if group:
+            res.set_attrs(group, **contents.group_attrs[group])
+            res.put_variables(group, variables)
 
 
 def job_fingerprint(cfg) -> str:
@@ -398,15 +387,16 @@ def job_fingerprint(cfg) -> str:
 
 
 def stages_done(path: Path) -> tuple[Optional[str], list]:
-    """(fingerprint, finished stages) recorded in ``path``; (None, []) when there is no file. Raises OSError
-    (with the path) when it exists but cannot be read."""
-    import h5py
+    """(fingerprint, finished stages) recorded in ``path``; (None, []) when there is no file. Its attributes are
+    verified against the file's integrity record first (raises :class:`deltajax.io.ChecksumError`); raises
+    OSError (with the path) when it exists but cannot be read."""
+    from ..io import read
 
     if not path.exists():
         return None, []
-    with h5py.File(path, "r") as f:
-        fp = _attr(f.attrs.get("ga_reconfig_fingerprint", ""))
-        st = _attr(f.attrs.get("ga_reconfig_stages", ""))
+    attrs = read(path, max_elements=0, verify=True).attrs
+    fp = attrs.get("ga_reconfig_fingerprint", "")
+    st = attrs.get("ga_reconfig_stages", "")
     return (fp or None), [x for x in str(st).split(",") if x]
 
 

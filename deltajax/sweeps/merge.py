@@ -18,7 +18,7 @@ from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 
-from ..io import ResultsFile, Variable, read
+from ..io import ChecksumError, ResultsFile, Variable, read
 from .layout import find_runs, label, override_dict, run_overrides
 from .reducers import ShardError, get_reducer
 
@@ -53,8 +53,12 @@ def _config_without_shard(config_yaml: str) -> tuple[str, Any]:
 
 
 def _tree(path: Path) -> tuple[dict, dict[str, dict], dict[str, dict[str, Variable]]]:
-    """(root attrs, {group: attrs}, {group: {name: Variable}}) of a results file (groups by full path)."""
-    c = read(path)
+    """(root attrs, {group: attrs}, {group: {name: Variable}}) of a results file (groups by full path), verified:
+    a damaged or edited shard is never merged into a file with fresh checksums."""
+    try:
+        c = read(path, verify=True)
+    except ChecksumError as e:
+        raise ShardError(f"{e}; rerun that shard (fresh=true in its run directory)") from None
     return c.attrs, {g: a for g, a in c.group_attrs.items() if g}, c.variables
 
 
