@@ -13,6 +13,7 @@ from hypothesis import strategies as st
 from omegaconf import OmegaConf
 
 import deltajax as dj
+from deltajax import cycle as cyc
 from deltajax import dynamics as dyn
 from deltajax import trajectory as tr
 from deltajax.config import ConfigError, robot_from_config
@@ -33,14 +34,14 @@ ROBOTS = {"rigid_rod": ROBOT,
           "point_split": eqx.tree_at(lambda d: d.mass, ROBOT, FULL_MASS_PS),
           "heavy_rod": eqx.tree_at(lambda d: d.mass, ROBOT, FULL_MASS_ROD)}
 CONFIGS = Path(__file__).resolve().parent.parent / "configs"
-LIMITS = dyn.Limits(torque=20.0, speed=10.0)
+LIMITS = cyc.Limits(torque=20.0, speed=10.0)
 K = 101  # samples per cycle in these tests (one compilation of each jitted helper)
 
 # Cached jitted helpers: one compilation per cycle structure, shared by the tests.
-_profile = jax.jit(dyn.cycle_profile)
-_metrics = jax.jit(dyn.cycle_metrics)
-_bisect = jax.jit(dyn.min_cycle_time_bisection)
-_within = jax.jit(dyn.within_limits)
+_profile = jax.jit(cyc.cycle_profile)
+_metrics = jax.jit(cyc.cycle_metrics)
+_bisect = jax.jit(cyc.min_cycle_time_bisection)
+_within = jax.jit(cyc.within_limits)
 
 
 def _vw_lagrange(robot, p, thd, thdd, Rd, Rdd):
@@ -247,7 +248,7 @@ def test_vertical_move_symmetric_robot(model):
     for i in range(3):
         np.testing.assert_allclose(prof.tau[:, i], expected, rtol=1e-10, atol=1e-10)
     # speed-limited cycle time of the 1-DOF move: max |theta'| / omega_max
-    m = _metrics(robot, cycle, dyn.Limits(torque=jnp.inf, speed=2.0))
+    m = _metrics(robot, cycle, cyc.Limits(torque=jnp.inf, speed=2.0))
     assert abs(float(m.cycle_time) - float(np.max(np.abs(thd)) * 0.3 / 2.0)) < 1e-12
 
 
@@ -260,7 +261,7 @@ def test_time_scaling_law_and_min_cycle_time():
     p2 = _profile(robot, cycle, 1.0)
     np.testing.assert_allclose(p2.tau - p2.tau_gravity, (p1.tau - p1.tau_gravity) / 4.0, rtol=1e-12, atol=1e-12)
     np.testing.assert_allclose(p2.theta_dot, p1.theta_dot / 2.0, rtol=1e-12)
-    for limits in (LIMITS, dyn.Limits(torque=5.0, speed=jnp.inf), dyn.Limits(torque=jnp.inf, speed=4.0)):
+    for limits in (LIMITS, cyc.Limits(torque=5.0, speed=jnp.inf), cyc.Limits(torque=jnp.inf, speed=4.0)):
         m = _metrics(robot, cycle, limits)
         Tb = _bisect(robot, cycle, limits)
         assert bool(m.ok)
@@ -271,7 +272,7 @@ def test_time_scaling_law_and_min_cycle_time():
         assert bool(_within(prof, limits, rtol=1e-9))
         assert not bool(_within(_profile(robot, cycle, 0.999 * m.cycle_time), limits))
     # gravity alone above the torque limit: no cycle time, flagged
-    weak = _metrics(robot, cycle, dyn.Limits(torque=0.5))
+    weak = _metrics(robot, cycle, cyc.Limits(torque=0.5))
     assert bool(weak.reachable) and not bool(weak.ok) and math.isinf(float(weak.cycle_time))
 
 
@@ -280,7 +281,7 @@ def test_unreachable_cycle_is_masked_not_raised():
     robot = dj.presets.franco2026(fixed_R=0.2, with_mass=True)
     cycles = jax.tree.map(lambda *a: jnp.stack(a), tr.adept_cycle((0.0, 0.0, 0.4), n_samples=K),
                           tr.adept_cycle((0.0, 0.0, 0.62), n_samples=K))
-    m = jax.jit(jax.vmap(dyn.cycle_metrics, in_axes=(None, 0, None)))(robot, cycles, LIMITS)
+    m = jax.jit(jax.vmap(cyc.cycle_metrics, in_axes=(None, 0, None)))(robot, cycles, LIMITS)
     assert bool(m.ok[0]) and not bool(m.ok[1]) and not bool(m.reachable[1])
     assert int(m.n_bad[0]) == 0 and int(m.n_bad[1]) > 0
     assert np.isfinite(np.asarray(m.peak_torque[0])).all() and np.isnan(np.asarray(m.peak_torque[1])).all()
@@ -294,7 +295,7 @@ TRACES = []
 
 def _counted_metrics(robot, cycle, limits):
     TRACES.append(1)  # runs only while tracing
-    return dyn.cycle_metrics(robot, cycle, limits)
+    return cyc.cycle_metrics(robot, cycle, limits)
 
 
 _population_metrics = jax.jit(jax.vmap(_counted_metrics, in_axes=(0, None, None)))
@@ -319,7 +320,7 @@ def test_vmap_over_designs_no_retrace_and_finite_gradient():
     one = eqx.tree_at(lambda d: (d.upper_arm, d.mass.upper_arm_mass), robot, (jnp.asarray(0.22), jnp.asarray(2.0)))
     np.testing.assert_allclose(pop.cycle_time[2], _metrics(one, cycle, LIMITS).cycle_time, rtol=1e-12)
 
-    def cycle_time(L1, metrics=dyn.cycle_metrics):
+    def cycle_time(L1, metrics=cyc.cycle_metrics):
         return metrics(eqx.tree_at(lambda d: d.upper_arm, robot, L1), cycle, LIMITS).cycle_time
 
     g = jax.jit(jax.grad(cycle_time))(jnp.asarray(0.2))
@@ -328,7 +329,7 @@ def test_vmap_over_designs_no_retrace_and_finite_gradient():
     assert np.isfinite(float(g)) and abs(float(g) - float(fd)) < 1e-4 * abs(float(fd))
 
     # peak and RMS torque (one variadic reduction with its own JVP) against central differences too
-    def peak_rms(L1, metrics=dyn.cycle_metrics):
+    def peak_rms(L1, metrics=cyc.cycle_metrics):
         m = metrics(eqx.tree_at(lambda d: d.upper_arm, robot, L1), cycle, LIMITS)
         return m.peak_torque[0] + 10.0 * m.rms_torque[1]
 
@@ -458,7 +459,7 @@ def newton_euler(robot, p, pd, pdd, th, thd, thdd, R, Rd, Rdd):
 
 def _ne_check(robot, cycle, *, has_R=False):
     prof = _profile(robot, cycle)
-    lag = jax.jit(dyn.cycle_profile, static_argnames="method")(robot, cycle, method="lagrange")
+    lag = jax.jit(cyc.cycle_profile, static_argnames="method")(robot, cycle, method="lagrange")
     assert bool(jnp.all(prof.ok))
     T = float(cycle.duration)
     Rdd = np.asarray(cycle.ddR) / T ** 2 if has_R else 0.0

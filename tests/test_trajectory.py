@@ -13,7 +13,7 @@ import deltajax as dj
 from deltajax import dynamics as dyn
 from deltajax import trajectory as tr
 
-_profile = jax.jit(dyn.cycle_profile)  # one compilation per cycle structure for this file
+_profile = jax.jit(dj.cycle_profile)  # one compilation per cycle structure for this file
 PEAK_ACC = {"poly5": 10.0 / math.sqrt(3.0), "cycloidal": 2.0 * math.pi, "modified_trapezoid": 4.888}
 
 
