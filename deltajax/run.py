@@ -186,12 +186,13 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
     """
     import jax
 
-    name, module, robot, recon = _validated(cfg, run_dir)  # every field, before the run dir is touched
     cache = cfg.get("compilation_cache")
-    if cache:  # persistent XLA cache: reruns, resumes and sweep jobs skip most compilation
+    if cache:  # persistent XLA cache: reruns, resumes and sweep jobs skip most compilation (set before the checks,
+        # some of which compile: a boundary search's centre is checked by inverse kinematics)
         jax.config.update("jax_compilation_cache_dir", os.path.expanduser(str(cache)))
         if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ:  # JAX's own setting wins if given
             jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+    name, module, robot, recon = _validated(cfg, run_dir)  # every field, before the run dir is touched
     from . import __version__
     from .io import ResultsFile, git_commit
     from .rundir import claim

@@ -88,7 +88,7 @@ def test_the_record_survives_many_groups_and_attributes_and_xarray_reads_the_fil
 def test_an_edited_shard_is_never_merged(tmp_path, monkeypatch):
     """The merge reads finished shards verified: an edited one would otherwise get fresh checksums in the merge."""
     from deltajax.sweeps import REDUCERS, ShardError, merge_shards
-    from test_sweeps_package import _shard
+    from test_results_reader import _shard
 
     monkeypatch.setitem(REDUCERS, "toy_total", lambda data, attrs: ({"total": np.float64(data["v"].sum())}, {}))
     shards = [_shard(tmp_path / f"{k}.h5", k, 2, "toy_total") for k in (0, 1)]

@@ -8,10 +8,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-import h5py
 import numpy as np
 import pytest
 
+import deltajax.io as dio
 from deltajax.io import load
 
 REPO = Path(__file__).resolve().parent.parent
@@ -134,9 +134,10 @@ def test_report_refuses_what_it_cannot_draw(tmp_path):
     with pytest.raises(ReportError, match="no results file"):
         write_report(tmp_path / "nothing")
     p = tmp_path / "results.h5"
-    with h5py.File(p, "w") as f:          # a run killed before its verification
-        f.attrs["ga_reconfig_stages"] = "screen,ga"
-        f.create_group("ga").create_dataset("best_fitness", data=np.zeros(2))
+    res = dio.ResultsFile(p)              # a run killed before its verification
+    res.set_attrs(ga_reconfig_stages="screen,ga")
+    res.put("ga", "best_fitness", np.zeros(2), units="1")
+    res.flush()
     with pytest.raises(ReportError, match="workspace_points must be an integer >= 5, got 2"):
         write_report(p, tmp_path / "r.html", workspace_points=2)
     with pytest.raises(ReportError, match=r"not finished its verification \(stages done: screen,ga\); resume it"):
@@ -184,8 +185,16 @@ def test_finished_run_from_before_the_report_stage_gets_only_its_report(tmp_path
     manifest = json.loads((d / "deltajax_run.json").read_text())
     manifest["status"] = "running"
     (d / "deltajax_run.json").write_text(json.dumps(manifest))
-    with h5py.File(d / "results.h5", "a") as f:
-        f.attrs["ga_reconfig_stages"] = "screen,ga,pareto,refine,verify,results,plots"
+    # as a deltajax before the report stage left it: written through ResultsFile (an edited file is refused)
+    stored = dio.read(d / "results.h5", verify=True)
+    res = dio.ResultsFile(d / "results.h5")
+    res.attrs.update({k: v for k, v in stored.attrs.items() if k != "start_time"},
+                     ga_reconfig_stages="screen,ga,pareto,refine,verify,results,plots")
+    for group, variables in stored.variables.items():
+        if group:
+            res.set_attrs(group, **stored.group_attrs[group])
+            res.put_variables(group, variables)
+    res.flush()
     (d / "ga_pareto.png").unlink()
     before = load(d / "results.h5")["verify"]["picks_per_min"]
     run_experiment("ga_reconfig", overrides("ga_reconfig"), run_dir=d)
