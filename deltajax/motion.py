@@ -31,9 +31,8 @@ R) (the joint rates are affine in Rdot, the joint accelerations quadratic in Rdo
 the efforts linear in the accelerations and quadratic in the rates), so four dynamics evaluations per
 (sample, R) give its coefficients (:func:`path_tables`; tested against direct evaluation). For aggregate "min"
 the DP runs twice (the optimal minimum m*, then the best integral with every cell >= m*; ``_dp`` says why one
-pass is not exact). The optimum is exact
-for the discretised problem (tested against brute force) and never worse than the best fixed R (a constant
-sequence is feasible for the DP whenever it is feasible at all).
+pass is not exact). The optimum is exact for the discretised problem (tested against brute force) and never
+worse than the best fixed R (a constant sequence is feasible for the DP whenever it is feasible at all).
 
 Boundary conditions: ``"free"``; ``"rest"`` (Rdot = 0 at both ends: k_1 = k_0, k_{K-1} = k_{K-2}); ``"closed"``
 (rest and R_{K-1} = R_0, so that a closed cycle repeats with continuous R, Rdot and zero wrap-around

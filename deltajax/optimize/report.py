@@ -93,7 +93,7 @@ def change_text(baseline: float, recommended: float, sense: int) -> str:
 
 
 def print_summary(ctx, data) -> None:
-    from .designer import CONSTRAINT_NAMES, DESIGN_SENSE, FEASIBILITY_TOL
+    from .designer import DESIGN_SENSE, FEASIBILITY_TOL
     from .workflow import STORED_METRIC
 
     S = data.get("summary")
@@ -118,10 +118,10 @@ def print_summary(ctx, data) -> None:
         for who, name in (("baseline", names_v[0]), ("recommended", rec)):
             i = names_v.index(name)
             g = np.asarray(V[STORED_METRIC["g"]], float)[i]
-            cn = list(V.get("constraint_names", CONSTRAINT_NAMES))
-            bad = [c for c, v in zip(cn, g) if v > FEASIBILITY_TOL]
+            bad = [str(c) for c, v in zip(V["constraint_names"], g) if not v <= FEASIBILITY_TOL]  # NaN: violated
             ctx.log(f"  {who} on the fine grids: " + ("feasible (every constraint met)" if bool(V["feasible"][i])
-                                                       else f"infeasible, violates {', '.join(bad) or 'a limit'}"))
+                                                       else "infeasible" + (f", violates {', '.join(bad)}" if bad
+                                                                            else "")))
     pn, pu = list(S["parameter_name"]), list(S["parameter_units"])
     ctx.log("  parameters: " + "; ".join(f"{n} [{u}] {x:.4g} -> {y:.4g}" for n, u, x, y in
                                           zip(pn, pu, S["baseline_params"], S["recommended_params"])))
