@@ -5,8 +5,11 @@ point independently; along a path R* jumps between branches of the index landsca
 R drive can do. Here the whole sequence R_0..R_{K-1} at the K samples t_j = j dt of a Cartesian cycle is chosen
 at once:
 
-    maximise    Phi = sum_j w_j v(p_j, R_j)           (aggregate "integral": trapezoid weights w_j, dt included)
-             or Phi = min_j v(p_j, R_j)               (aggregate "min"; ties broken by the integral)
+    maximise    Phi = sum_j w_j v(p_j, R_j)           (aggregate "integral": trapezoid weights w_j, dt included;
+                                                        ties broken by the minimum)
+             or Phi = min_j v(p_j, R_j)               (aggregate "min"; ties broken by the integral: the order is
+                                                        lexicographic, best minimum first, then the largest
+                                                        integral among the paths with that minimum)
     subject to  R_j = R_min + k_j dR (the R samples of the robot), p_j reachable and non-singular at R_j,
                 |R_{j+1} - R_j| <= Rdot_max dt,  |R_{j+1} - 2 R_j + R_{j-1}| <= Rddot_max dt^2,
                 |F_R(p_j, R_j, Rdot_j, Rddot_j)| <= F_max at every sample,
@@ -26,9 +29,10 @@ n_R (2w + 1) (2a + 1) transitions vectorised and stores one small back-pointer p
 O(K n_R w). The force is exactly a quadratic polynomial in Rdot and linear in Rddot at fixed (p, pdot, pddot,
 R) (the joint rates are affine in Rdot, the joint accelerations quadratic in Rdot and affine in Rddot, and
 the efforts linear in the accelerations and quadratic in the rates), so four dynamics evaluations per
-(sample, R) give its coefficients (:func:`path_tables`; tested against direct evaluation). The optimum is exact
-for the discretised problem (tested against brute force) and never worse than the best fixed R (a constant
-sequence is feasible for the DP whenever it is feasible at all).
+(sample, R) give its coefficients (:func:`path_tables`; tested against direct evaluation). For aggregate "min"
+the DP runs twice (the optimal minimum m*, then the best integral with every cell >= m*; ``_dp`` says why one
+pass is not exact). The optimum is exact for the discretised problem (tested against brute force) and never
+worse than the best fixed R (a constant sequence is feasible for the DP whenever it is feasible at all).
 
 Boundary conditions: ``"free"``; ``"rest"`` (Rdot = 0 at both ends: k_1 = k_0, k_{K-1} = k_{K-2}); ``"closed"``
 (rest and R_{K-1} = R_0, so that a closed cycle repeats with continuous R, Rdot and zero wrap-around
@@ -269,7 +273,30 @@ def _dp(value, feasible, coef, weights, dR, dt, fmax, k0, *, w: int, a: int, pri
     ``k0`` (traced int) fixes the start sample for ``boundary="closed"`` (ignored otherwise). ``speed`` (m/s) and
     ``accel`` (m/s^2) are traced limits applied inside the static bands w, a (for a population whose R step
     differs per design: bands from the smallest step, limits per design); ``inf`` leaves the bands alone.
+
+    ``primary_min``: the lexicographic order (min, then integral) in two exact passes. One (min, integral) pair
+    per DP state is not exact: which of two partial paths continues better depends on the minimum still to come
+    (a partial path with the higher running minimum but the lower integral loses once a later cell drags both
+    minima to the same value). Both single criteria are exact per state (min and sum are monotone in the
+    running value), so pass 1 finds the optimal minimum m* (the bottleneck DP) and pass 2 maximises the integral
+    over the paths whose every cell is >= m* (cells below m* infeasible): each such path has minimum exactly m*.
     """
+    if not primary_min:
+        return _dp_pass(value, feasible, coef, weights, dR, dt, fmax, k0, w=w, a=a, primary_min=False,
+                        boundary=boundary, backtrack=backtrack, speed=speed, accel=accel)
+    m_star, _, _ = _dp_pass(value, feasible, coef, weights, dR, dt, fmax, k0, w=w, a=a, primary_min=True,
+                            boundary=boundary, backtrack=False, speed=speed, accel=accel)
+    at_least = feasible & (value >= m_star)         # NaN (infeasible) compares False; m* = -inf: no path either way
+    integral, _, path = _dp_pass(value, at_least, coef, weights, dR, dt, fmax, k0, w=w, a=a, primary_min=False,
+                                 boundary=boundary, backtrack=backtrack, speed=speed, accel=accel)
+    return m_star, integral, path
+
+
+def _dp_pass(value, feasible, coef, weights, dR, dt, fmax, k0, *, w: int, a: int, primary_min: bool, boundary: str,
+             backtrack: bool, speed=math.inf, accel=math.inf):
+    """One Viterbi pass of :func:`_dp` with one lexicographic (P, S) pair per state: exact for (integral, min),
+    and for the primary alone when ``primary_min`` (the bottleneck); :func:`_dp` composes the exact (min,
+    integral) order from two passes."""
     K, n = value.shape
     D, A = 2 * w + 1, 2 * a + 1
     neg = -jnp.inf

@@ -1,54 +1,18 @@
 """Path-level redundancy resolution: DP exact vs brute force, limits respected, >= best fixed R, pointwise
 equals the workspace resolver, exact force polynomial, smooth refinement, task paths."""
 
-import itertools
 import math
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _motion_helpers import brute_force as _brute
+from _motion_helpers import random_tables as _random_tables
 
 import deltajax as dj
 from deltajax import motion as mo
 from deltajax.geometry import ReconfigurableDelta
-
-
-def _brute(tab, dt, w, a, fmax, aggregate, boundary):
-    K, n = tab.value.shape
-    dR = float(tab.R_step)
-    best = (-math.inf, -math.inf)
-    coef_all = np.asarray(tab.force_coef)
-    for ks in itertools.product(range(n), repeat=K):
-        k = np.array(ks)
-        d1, d2 = np.diff(k), np.diff(k, 2)
-        if np.any(np.abs(d1) > w) or np.any(np.abs(d2) > a):
-            continue
-        if boundary in ("rest", "closed") and (d1[0] != 0 or d1[-1] != 0):
-            continue
-        if boundary == "closed" and k[0] != k[-1]:
-            continue
-        s = mo.path_score(tab, k, aggregate)
-        if not np.isfinite(s[0]):
-            continue
-        v, acc = mo._int_rates(k, dR, dt)
-        c = coef_all[np.arange(K), k]
-        F = c[:, 0] + v * (c[:, 1] + v * c[:, 2]) + acc * c[:, 3]
-        if np.any(~(np.abs(F) <= fmax)):
-            continue
-        best = max(best, s)
-    return best
-
-
-def _random_tables(seed, K=5, n=4):
-    rng = np.random.default_rng(seed)
-    value = rng.uniform(0.0, 1.0, (K, n)).round(2)   # rounded: ties happen and must be handled
-    feasible = rng.uniform(size=(K, n)) > 0.15
-    coef = rng.normal(0.0, 1.0, (K, n, 4)) * np.array([3.0, 1.0, 0.5, 0.3])
-    return mo.PathTables(t=jnp.linspace(0, 1, K), R=jnp.arange(n) * 0.01 + 0.1,
-                         value=jnp.asarray(np.where(feasible, value, np.nan)), feasible=jnp.asarray(feasible),
-                         force_coef=jnp.asarray(np.where(feasible[..., None], coef, np.nan)),
-                         weights=jnp.asarray(np.r_[0.5, np.ones(K - 2), 0.5] * 0.25), R_step=jnp.asarray(0.01))
 
 
 @pytest.mark.slow

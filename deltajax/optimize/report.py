@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SUMMARY_METRICS", "FIXED_R_METRIC", "summary", "print_summary", "plots"]
+__all__ = ["SUMMARY_METRICS", "FIXED_R_METRIC", "summary", "change_text", "print_summary", "plots"]
 
 SUMMARY_METRICS = ("picks_per_min", "regular_volume", "regular_diameter", "peak_utilisation", "rms_utilisation",
                    "speed_utilisation", "task_good_fraction", "task_index_min", "joint_margin_deg",
@@ -75,7 +75,27 @@ def summary(ctx, res, data, space, objs, s) -> None:
                   evaluation="fine verification grids (group verify)")
 
 
+def change_text(baseline: float, recommended: float, sense: int) -> str:
+    """The table's change column: the relative change of a metric from the baseline to the recommended design
+    and whether that is better or worse (``sense``: -1 higher is better, 1 lower is better, 0 describes the
+    design: no verdict), e.g. ``"+21.7 % better"``; the verdict alone where a relative change means nothing (a
+    value not positive, e.g. a negative margin), ``"-"`` where a value is not finite."""
+    x, y = float(baseline), float(recommended)
+    if not (np.isfinite(x) and np.isfinite(y)):
+        return "-"
+    verdict = {-1: "better" if y > x else "worse", 1: "better" if y < x else "worse"}.get(int(sense), "")
+    if not (x > 0 and y > 0):
+        return verdict if verdict and y != x else ("same" if sense else "-")
+    pct = 100 * (y - x) / x
+    if round(pct, 1) == 0:
+        return "0.0 % same" if sense else "0.0 %"
+    return f"{pct:+.1f} % {verdict}".rstrip()
+
+
 def print_summary(ctx, data) -> None:
+    from .designer import DESIGN_SENSE, FEASIBILITY_TOL
+    from .workflow import STORED_METRIC
+
     S = data.get("summary")
     if not S or "metric_name" not in S:
         return
@@ -87,11 +107,21 @@ def print_summary(ctx, data) -> None:
     rec = S["attrs"]["recommended"]
     ctx.log(f"baseline (franco2026 + motor) vs recommended design ({rec}; rule {S['attrs'].get('rule_text', '')}), "
             "fine verification grids; reconfigurable (R per point) | fixed R (R frozen at the operating R):")
-    ctx.log(f"  {'metric':20s} {'units':6s} {'baseline':>9s} {'recommended':>11s} {'change':>8s} | "
+    ctx.log(f"  {'metric':20s} {'units':6s} {'baseline':>9s} {'recommended':>11s} {'change':>15s} | "
             f"{'base fixR':>9s} {'rec fixR':>9s}  direction")
     for n, u, d, x, y, xf, yf in zip(names, units, dirs, b, r, bf, rf):
-        ch = f"{100 * (y - x) / x:+7.1f}%" if np.isfinite(x) and x > 0 and np.isfinite(y) and y > 0 else "     -  "
-        ctx.log(f"  {n:20s} {u:6s} {x:9.4g} {y:11.4g} {ch:>8s} | {xf:9.4g} {yf:9.4g}  {d}")
+        ch = change_text(x, y, DESIGN_SENSE.get(n, 0))
+        ctx.log(f"  {n:20s} {u:6s} {x:9.4g} {y:11.4g} {ch:>15s} | {xf:9.4g} {yf:9.4g}  {d}")
+    V = data.get("verify")
+    if V is not None and "feasible" in V:   # on the same fine grids as the table (the search grids may differ)
+        names_v = list(V["design_name"])
+        for who, name in (("baseline", names_v[0]), ("recommended", rec)):
+            i = names_v.index(name)
+            g = np.asarray(V[STORED_METRIC["g"]], float)[i]
+            bad = [str(c) for c, v in zip(V["constraint_names"], g) if not v <= FEASIBILITY_TOL]  # NaN: violated
+            ctx.log(f"  {who} on the fine grids: " + ("feasible (every constraint met)" if bool(V["feasible"][i])
+                                                       else "infeasible" + (f", violates {', '.join(bad)}" if bad
+                                                                            else "")))
     pn, pu = list(S["parameter_name"]), list(S["parameter_units"])
     ctx.log("  parameters: " + "; ".join(f"{n} [{u}] {x:.4g} -> {y:.4g}" for n, u, x, y in
                                           zip(pn, pu, S["baseline_params"], S["recommended_params"])))
@@ -109,7 +139,17 @@ def plots(ctx, data, objs, s) -> None:
     from .. import plots as P
     from .designer import DESIGN_UNITS
 
-    fig = P.ga_convergence(data.get("ga", {}))
+    G = data.get("ga", {})
+    # the GA minimises -picks/min / |baseline picks/min| when picks/min is its only objective
+    scale = (abs(float(G["attrs"]["baseline_primary"]))
+             if s.mode != "weighted" and s.primary == "picks_per_min" and "baseline_primary" in G.get("attrs", {})
+             else None)
+    seeds = ["the baseline"]
+    if s.screen["enabled"] and not s.primary.startswith("regular"):
+        seeds.append("the screen's best designs")
+    if s.continue_from is not None:
+        seeds.append("the earlier run's front")
+    fig = P.ga_convergence(G, picks_per_fitness=scale, seeds=", ".join(seeds) + ", random members")
     if fig is not None:
         ctx.savefig(fig, "ga_convergence")
     V = data.get("verify")

@@ -16,7 +16,7 @@ from __future__ import annotations
 from .bench import bench_rates, bench_rates_from_results
 from .core import ACTUATOR_STYLES, actuator_lines, robust_limits
 from .datasheet import datasheet_page
-from .designer import ga_convergence, ga_pareto
+from .designer import convergence_series, ga_convergence, ga_pareto
 from .dynamics import adept_profiles, cycle_platform, cycle_torques
 from .motion import motion_landscape, motion_profiles, motion_torques
 from . import report
@@ -26,4 +26,4 @@ from .workspace import (boundary_slice, boundary_surface, index_slices, plot_ind
 __all__ = ["workspace_3d", "index_slices", "robust_limits", "bench_rates", "bench_rates_from_results", "actuator_lines",
            "ACTUATOR_STYLES", "cycle_platform", "cycle_torques", "adept_profiles", "plot_index_curves",
            "workspace_grid", "boundary_slice", "boundary_surface", "motion_landscape", "motion_profiles",
-           "motion_torques", "ga_convergence", "ga_pareto", "report", "datasheet_page"]
+           "motion_torques", "convergence_series", "ga_convergence", "ga_pareto", "report", "datasheet_page"]

@@ -6,33 +6,108 @@ import numpy as np
 
 from .core import _plt
 
-__all__ = ["ga_convergence", "ga_pareto"]
+__all__ = ["convergence_series", "ga_convergence", "ga_pareto"]
+
+#: feasibility first (:func:`deltajax.optimize.workflow.ga_fitness`): an infeasible design's fitness is 1e3 + violation
+_INFEASIBLE_FITNESS = 1e3
 
 
-def ga_convergence(G):
-    """The main job's GA convergence: best fitness and feasible fraction per generation (``G``: the staged
-    ``ga`` group); None without a GA history."""
-    from matplotlib.ticker import MaxNLocator
+def convergence_series(G, picks_per_fitness=None):
+    """The GA convergence in the designer's units, from the staged ``ga`` group ``G`` (picks/min, 1/min).
 
+    The GA minimises a normalised fitness; its state's best so far also holds the initial population (generation
+    0: the seeds and random members), which no generation record holds. So the best so far at generation g is
+    the generation's best that set it (fitness equal to the state's best), or the initial population's best when
+    no generation up to g reached it (``from_initial``).
+
+    Args:
+        G: the ``ga`` group as loaded (``best_fitness``, ``gen_best_fitness``, ``gen_best_picks_per_min``,
+            ``gen_best_feasible``, ``gen_feasible_fraction`` per generation).
+        picks_per_fitness: picks/min per unit of -fitness when the GA's fitness is -picks/min / |baseline picks/min|
+            (objective picks_per_min alone: the baseline's picks/min on the search grids); None for another
+            objective (the initial population's best then has no picks/min: NaN).
+
+    Returns:
+        None without a GA history, else a dict of (n,) arrays over ``generation`` 1..n: ``gen_best`` (picks/min of
+        each generation's best design by the GA's fitness, NaN if infeasible), ``best_so_far`` (picks/min of the best
+        design so far by the GA's fitness, NaN while none is feasible or it is unknown), ``from_initial`` (the best
+        so far is still the initial population's), ``feasible_fraction``; and ``initial_best`` (picks/min of the
+        initial population's best if it beat generation 1, else NaN) and ``baseline`` (the baseline's picks/min on
+        the search grids, NaN unless ``picks_per_fitness``) as floats.
+    """
     if "best_fitness" not in G:
         return None
+    best = np.asarray(G["best_fitness"], float)
+    gbf = np.asarray(G["gen_best_fitness"], float)
+    n = len(best)
+    feas = (np.asarray(G["gen_best_feasible"]).astype(bool) if "gen_best_feasible" in G
+            else gbf < _INFEASIBLE_FITNESS)
+    if "gen_best_picks_per_min" in G:
+        picks = np.asarray(G["gen_best_picks_per_min"], float)
+    else:
+        picks = -gbf * (np.nan if picks_per_fitness is None else picks_per_fitness)
+    gen_best = np.where(feas, picks, np.nan)
+    # the state's best is the minimum over the initial population and generations 1..g (evosax keeps the first
+    # of equal values, and a generation record is that minimum's exact copy)
+    from_initial = best < np.minimum.accumulate(gbf)
+    src = np.zeros(n, int)
+    for g in range(n):
+        hit = np.flatnonzero(gbf[:g + 1] == best[g])
+        src[g] = hit[-1] if len(hit) else -1
+    init_fit = best[0] if from_initial[0] else np.nan
+    scale = np.nan if picks_per_fitness is None else float(picks_per_fitness)
+    initial_best = -init_fit * scale if init_fit < _INFEASIBLE_FITNESS else np.nan
+    best_so_far = np.where(from_initial, initial_best, gen_best[np.maximum(src, 0)])
+    best_so_far = np.where(best < _INFEASIBLE_FITNESS, best_so_far, np.nan)
+    return {"generation": np.arange(1, n + 1), "gen_best": gen_best, "best_so_far": best_so_far,
+            "from_initial": from_initial, "feasible_fraction": np.asarray(G["gen_feasible_fraction"], float),
+            "initial_best": float(initial_best), "baseline": scale}
+
+
+def ga_convergence(G, picks_per_fitness=None, seeds="the seeds"):
+    """The main job's GA convergence in picks/min (:func:`convergence_series`) and the feasible fraction per
+    generation (``G``: the staged ``ga`` group; ``seeds``: what seeded the initial population, in words); None
+    without a GA history."""
+    from matplotlib.ticker import MaxNLocator
+
+    c = convergence_series(G, picks_per_fitness)
+    if c is None:
+        return None
     plt = _plt()
-    fig, ax = plt.subplots(1, 2, figsize=(10, 3.6))
-    bf = np.asarray(G["best_fitness"])
-    gens = np.arange(1, len(bf) + 1)
-    ax[0].plot(gens, np.where(bf < 1e3, bf, np.nan), label="best so far (feasible)")
-    gb = np.asarray(G["gen_best_fitness"])
-    ax[0].plot(gens, np.where(gb < 1e3, gb, np.nan), ".", label="best of generation")
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4.6), gridspec_kw={"width_ratios": [1.6, 1]})
+    gens = c["generation"]
+    objective = str(G.get("attrs", {}).get("objective", ""))
+    if np.isfinite(c["baseline"]):
+        ax[0].axhline(c["baseline"], color="k", ls=":", lw=1, label="baseline franco2026 (search grids)")
+    has0 = np.isfinite(c["initial_best"])
+    x0 = np.concatenate([[0], gens]) if has0 else gens
+    y0 = np.concatenate([[c["initial_best"]], c["best_so_far"]]) if has0 else c["best_so_far"]
+    ax[0].step(x0, y0, ".-", where="post", color="C0", lw=1.5, label="best so far (feasible)")
+    ax[0].plot(gens, c["gen_best"], "o", color="C1", ms=5, label="best of each generation (feasible)")
+    if has0:
+        ax[0].plot([0], [c["initial_best"]], "s", color="C0", ms=7, mfc="none", mew=1.5,
+                   label=f"generation 0: initial population ({seeds})")
+    title = f"GA on the {objective}, search grids" if objective else "GA, search grids"
+    if picks_per_fitness is None:   # the GA ranks by another objective: these are its best designs' picks/min
+        title += "\npicks/min of the designs the GA ranks best by its objective"
+    if np.any(c["from_initial"]):
+        last = int(gens[c["from_initial"]][-1])
+        title += (f"\nbest so far through generation {last}: the initial population's best (generation 0)"
+                  + ("" if has0 else ", whose picks/min are not stored for this objective"))
+    ax[0].set_title(title, fontsize=9)
     ax[0].set_xlabel("generation")
-    ax[0].set_ylabel("fitness (minimised; baseline = -1 per objective)")
-    ax[0].legend(fontsize=8)
-    ax[0].set_title(str(G["attrs"].get("objective", "")), fontsize=9)
-    ax[1].plot(gens, np.asarray(G["gen_feasible_fraction"]))
+    ax[0].set_ylabel("picks per minute [1/min]  (higher is better)")
+    ax[0].grid(alpha=0.3)
+    ax[1].plot(gens, c["feasible_fraction"], "o-", ms=4)
     ax[1].set_ylim(0, 1.02)
     ax[1].set_xlabel("generation")
     ax[1].set_ylabel("feasible fraction of the population")
+    ax[1].grid(alpha=0.3)
     for a in ax:  # generations are whole numbers (short toy runs drew 1.5, 2.5, ...)
         a.xaxis.set_major_locator(MaxNLocator(integer=True))
+    fig.tight_layout()
+    # below the axes, so no point hides behind it (after the layout: it must not widen the left panel)
+    ax[0].legend(fontsize=7, loc="upper left", bbox_to_anchor=(0.0, -0.16), ncol=2, borderaxespad=0)
     return fig
 
 
