@@ -72,7 +72,7 @@ def test_toy_run_front_feasible_summary_and_units(full_run):
     assert S["recommended_fixed_R"][1] <= S["recommended"][1] + 1e-15   # R per point can only add
     assert V["units"]["picks_per_min"] == "1/min" and V["units"]["regular_volume"] == "m^3"
     assert "ga/checkpoint" in {k for k in _datasets(full_run)[1]}
-    assert data["attrs"]["ga_reconfig_stages"] == "screen,ga,pareto,refine,verify,results,plots,report"
+    assert data["attrs"]["ga_reconfig_stages"] == "screen,ga,pareto,refine,verify,results,plots,export,report"
     # the refined winners: accepted only if feasible and no objective worse, and verified like every candidate
     R = data["refine"]
     acc = np.asarray(R["accepted"]).astype(bool)

@@ -5,6 +5,7 @@ the other test files check their numbers on the same files, so no job runs twice
 import json
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from deltajax.io import groups, load
@@ -64,7 +65,7 @@ def _stages(path):
 def test_ga_reconfig_with_optional_stages_on(toy_run):
     path = toy_run("ga_reconfig")
     stages = _stages(path)
-    assert stages[-3:] == ["results", "plots", "report"], stages
+    assert stages[-4:] == ["results", "plots", "export", "report"], stages
     assert (path.parent / "report.html").stat().st_size > 1_000_000     # plotly.js inline
     assert stages.index("ga") < stages.index("pareto") < stages.index("verify"), stages
     assert "pareto" in groups(path) and "verify" in stages
@@ -80,3 +81,36 @@ def test_ga_reconfig_with_optional_stages_off(toy_run):
     assert "pareto" not in stages and "refine" not in stages and stages[-1] == "report", stages
     assert "pareto" not in groups(path)
     assert (path.parent / "ga_convergence.png").read_bytes()[:4] == b"\x89PNG"
+
+
+@pytest.mark.slow
+def test_ga_reconfig_exports_its_baseline_and_recommendation(toy_run):
+    """The export stage: both designs' datasheets (with units, figures on disk) and the recommendation's MJCF,
+    URDF and loop-closure sidecar, which load and describe the design the summary recommends."""
+    import json
+
+    import mujoco
+
+    from deltajax.export import SIDECAR_FORMAT
+
+    path = toy_run("ga_reconfig")
+    data = load(path)
+    run_dir = path.parent
+    for name in ("baseline", "recommended"):
+        sheet = data["datasheet"][name]
+        assert np.all(np.diff(sheet["picks_per_min"][:-1]) < 0)           # the rate falls with payload
+        assert sheet["picks_per_min_vendor"][0] < sheet["picks_per_min"][0]
+        assert (run_dir / f"datasheet_{name}.png").read_bytes()[:4] == b"\x89PNG"
+    model = mujoco.MjModel.from_xml_path(str(run_dir / "recommended.xml"))
+    assert model.nu >= 3 and model.neq >= 3                               # three motors, three loop closures
+    loops = json.loads((run_dir / "recommended.loops.json").read_text())
+    assert loops["format"] == SIDECAR_FORMAT and loops["urdf"] == "recommended.urdf"
+    assert len(loops["loop_closures"]) == 3
+    from types import SimpleNamespace
+
+    from deltajax.jobs.datasheet import _designs_from_run
+
+    designs = {n: r for n, r, *_ in _designs_from_run(str(run_dir), SimpleNamespace(log=lambda msg: None))}
+    rec = getattr(designs["recommended"], "robot", designs["recommended"])
+    assert loops["loop_closures"][0]["point1"][2] == pytest.approx(-float(rec.forearm))
+    assert "<robot name=\"deltajax_recommended\">" in (run_dir / "recommended.urdf").read_text()

@@ -33,7 +33,7 @@ def _problem(path, data):
 @pytest.mark.slow  # the session's toy main-job run
 def test_job_writes_a_self_contained_report(run):
     path, data = run
-    assert data["attrs"]["ga_reconfig_stages"].split(",")[-2:] == ["plots", "report"]
+    assert data["attrs"]["ga_reconfig_stages"].split(",")[-3:] == ["plots", "export", "report"]
     page = (path.parent / "report.html").read_text()
     assert page.startswith("<!DOCTYPE html>")
     # plotly.js inline, once; the rest of the page names no address at all (nothing to fetch)
@@ -199,7 +199,7 @@ def test_finished_run_from_before_the_report_stage_gets_only_its_report(tmp_path
     before = load(d / "results.h5")["verify"]["picks_per_min"]
     run_experiment("ga_reconfig", overrides("ga_reconfig"), run_dir=d)
     data = load(d / "results.h5")
-    assert data["attrs"]["ga_reconfig_stages"].endswith(",plots,report")
+    assert data["attrs"]["ga_reconfig_stages"].endswith(",plots,export,report")
     assert (d / "report.html").stat().st_size > 1_000_000
     assert not (d / "ga_pareto.png").exists()                          # no stage before it ran again
     np.testing.assert_array_equal(data["verify"]["picks_per_min"], before)

@@ -40,15 +40,42 @@ def _designs_from_run(run_dir: str, ctx):
                           "feasible design)")
     robot, recon = robot_from_config(cfg["robot"])
     s, space = ga_reconfig_build(cfg["experiment"], robot, recon)[:2]
-    motor = Motor(**{k: v for k, v in s.motor.items() if k != "gear_ratio"})
     ctx.log(f"source is a ga_reconfig run: its motor and each design's gear ratio are used "
             f"(experiment.motor / experiment.gear_ratio ignored)")
+    return run_designs(space, S, s.motor)
+
+
+def run_designs(space, summary, motor_settings) -> list:
+    """[(name, robot, motor, gear ratio)] of a ga_reconfig run's baseline and (where the run recommends one)
+    recommended design: its ``summary`` group's parameters decoded by the run's design space ``space``, with the
+    run's motor ``motor_settings`` (the settings' ``motor`` mapping) and each design's own gear ratio."""
+    motor = Motor(**{k: v for k, v in motor_settings.items() if k != "gear_ratio"})
     out = []
     for col, label in (("baseline_params", "baseline"), ("recommended_params", "recommended")):
-        rob = space.decode(space.from_params(np.asarray(S[col], float)))
+        if col not in summary:
+            continue
+        rob = space.decode(space.from_params(np.asarray(summary[col], float)))
         base = rob.robot if hasattr(rob, "robot") else rob
         out.append((label, rob, motor, float(base.mass.gear_ratio)))
     return out
+
+
+def write(ctx, designs, **kwargs) -> None:
+    """The datasheet of each of ``designs`` ([(name, robot, motor, gear ratio)]) into group ``datasheet/<name>``,
+    its log lines and its figure ``datasheet_<name>.png``; ``kwargs`` go to :func:`deltajax.datasheet`."""
+    for name, robot, motor, n in ctx.progress(designs, total=len(designs), desc="datasheets"):
+        ds = datasheet(robot, motor, n, name=name, **kwargs)
+        save(ctx.results, f"datasheet/{name}", ds)
+        ctx.results.flush()
+        ctx.log(f"{name}: working range {1000 * ds.working_diameter:.0f} x {1000 * ds.working_height:.0f} mm, "
+                f"reachable volume {ds.reachable_volume:.4g} m^3, max payload {ds.max_payload:.3g} kg")
+        ctx.log(f"  {'payload kg':>10s} {'picks/min':>10s} {'vendor':>8s} {'T_min s':>8s} {'peak':>6s} {'RMS':>6s} "
+                f"{'acc g':>6s}")
+        for r in ds.rows():
+            ctx.log(f"  {r['payload']:10.3g} {r['picks_per_min']:10.1f} {r['picks_per_min_vendor']:8.1f} "
+                    f"{r['cycle_time']:8.4f} {r['peak_utilisation']:6.3f} {r['rms_utilisation']:6.3f} "
+                    f"{r['peak_acceleration_g']:6.2f}")
+        ctx.savefig(plots.datasheet_page(ds, f"deltajax datasheet: {name}"), f"datasheet_{name}")
 
 
 def _designs_from_preset(name: str, spec):
@@ -86,20 +113,8 @@ def run(ctx) -> None:
         designs = _designs_from_preset(spec["source"], spec)
     else:
         designs = _designs_from_run(spec["source"], ctx)
-    for name, robot, motor, n in ctx.progress(designs, total=len(designs), desc="datasheets"):
-        ds = datasheet(robot, motor, n, payloads=spec["payloads"], vendor_dwell=spec["vendor_dwell"],
-                       centre=spec["centre"], hd_ratio=spec["hd_ratio"], volume_h=spec["volume_h"],
-                       n_samples=spec["n_samples"], R=spec["R"], name=name, cylinder_grid=spec["cylinder_grid"])
-        save(ctx.results, f"datasheet/{name}", ds)
-        ctx.results.flush()
-        ctx.log(f"{name}: working range {1000 * ds.working_diameter:.0f} x {1000 * ds.working_height:.0f} mm, "
-                f"reachable volume {ds.reachable_volume:.4g} m^3, max payload {ds.max_payload:.3g} kg")
-        ctx.log(f"  {'payload kg':>10s} {'picks/min':>10s} {'vendor':>8s} {'T_min s':>8s} {'peak':>6s} {'RMS':>6s} "
-                f"{'acc g':>6s}")
-        for r in ds.rows():
-            ctx.log(f"  {r['payload']:10.3g} {r['picks_per_min']:10.1f} {r['picks_per_min_vendor']:8.1f} "
-                    f"{r['cycle_time']:8.4f} {r['peak_utilisation']:6.3f} {r['rms_utilisation']:6.3f} "
-                    f"{r['peak_acceleration_g']:6.2f}")
-        ctx.savefig(plots.datasheet_page(ds, f"deltajax datasheet: {name}"), f"datasheet_{name}")
+    write(ctx, designs, payloads=spec["payloads"], vendor_dwell=spec["vendor_dwell"], centre=spec["centre"],
+          hd_ratio=spec["hd_ratio"], volume_h=spec["volume_h"], n_samples=spec["n_samples"], R=spec["R"],
+          cylinder_grid=spec["cylinder_grid"])
     ctx.results.set_attrs("datasheet", source=spec["source"], source_kind=spec["kind"],
                           designs=",".join(d[0] for d in designs))

@@ -105,9 +105,8 @@ def run(ctx) -> None:
         t0[0] = time.perf_counter()
         ctx.log(f"[{stage}: {timings[stage]:.1f} s]")
 
-    if "plots" in done:     # finished before the report stage existed: only its report is missing
-        _report(ctx, path)
-        mark("report")
+    if "plots" in done:     # stopped after its figures (or finished before the later stages existed)
+        _finish(ctx, path, space, s, done, mark)
         return
 
     objs, primary = list(s.objectives), s.primary
@@ -378,8 +377,46 @@ def run(ctx) -> None:
     R.plots(ctx, data, objs, s)
     ctx.write_figures()                      # the stage is done once its figures are on disk, not before
     mark("plots")
+    _finish(ctx, path, space, s, done, mark)
+
+
+def _finish(ctx, path, space, s, done, mark) -> None:
+    """The stages after the figures: the export (marked once the datasheets are in results.h5 and their figures
+    and the model files on disk), then the report (marked once report.html is on disk)."""
+    from ..io import load
+
+    if "export" not in done:
+        _export(ctx, space, load(path)["summary"], s.motor)
+        mark("export")
     _report(ctx, path)
-    mark("report")                                                # done only once report.html is on disk
+    mark("report")
+
+
+def _export(ctx, space, summary, motor_settings) -> None:
+    """The baseline's and the recommendation's datasheets (group ``datasheet``, ``datasheet_<design>.png``, at
+    :func:`deltajax.datasheet`'s defaults) and the recommendation's models: ``recommended.xml`` (MJCF),
+    ``recommended.urdf`` and its loop-closure sidecar ``recommended.loops.json`` (:mod:`deltajax.export`)."""
+    import json
+
+    from .. import export
+    from ..io import write_atomic
+    from .datasheet import run_designs, write
+
+    designs = run_designs(space, summary, motor_settings)
+    write(ctx, designs)
+    ctx.write_figures()
+    for name, robot, motor, n in designs:
+        if name != "recommended":
+            continue
+        write_atomic(ctx.run_dir / "recommended.xml",
+                     export.mjcf(robot, motor=motor, gear_ratio=n, name="deltajax_recommended").encode())
+        text, loops = export.urdf(robot, motor=motor, gear_ratio=n, name="deltajax_recommended")
+        loops = dict(loops, urdf="recommended.urdf")
+        write_atomic(ctx.run_dir / "recommended.urdf", text.encode())
+        write_atomic(ctx.run_dir / "recommended.loops.json", (json.dumps(loops, indent=1) + "\n").encode())
+        ctx.log(f"export -> {ctx.run_dir / 'recommended.xml'}, recommended.urdf, recommended.loops.json")
+    if not any(name == "recommended" for name, *_ in designs):
+        ctx.log("export: no recommended design (no feasible candidate), so no model files")
 
 
 def _report(ctx, path) -> None:
