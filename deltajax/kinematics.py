@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
@@ -42,6 +43,8 @@ __all__ = [
     "LimitTerms",
     "limit_terms",
     "design_ok",
+    "guarded_configuration",
+    "harmless_design",
     "chain_local",
     "LoopClosure",
     "loop_closure",
@@ -154,6 +157,32 @@ def design_ok(robot: Delta) -> Bool[Array, ""]:
     finite_range = jnp.isfinite(lo) & jnp.isfinite(hi)
     limits = (lo < hi) & ~(finite_range & (hi - lo > FULL_TURN_MAX))  # NaN compares False; a full turn is fine
     return lengths & limits
+
+
+def guarded_configuration(robot: Delta, p, theta):
+    """(robot, p, theta, ok) with ``ok`` = :func:`design_ok` and finite p and theta; where not ok all three are
+    replaced by a harmless configuration before any algebra (double where: finite values and gradients).
+
+    The one guard of every public function of a configuration (indices, Jacobians, passive joints,
+    interference): callers compute on the returned stand-ins and put NaN (``ok=False``) where ``ok`` is False
+    with ``jnp.where`` -- never through ``jnp.minimum``/``maximum``, which XLA:CPU's vectorised loops do not
+    NaN-propagate at every batch size.
+    """
+    theta, p = jnp.asarray(theta), jnp.asarray(p)
+    dtype = jnp.result_type(p.dtype, theta.dtype, robot.upper_arm.dtype)
+    ok = design_ok(robot) & jnp.all(jnp.isfinite(p)) & jnp.all(jnp.isfinite(theta))
+    theta = jnp.where(ok, theta, jnp.asarray([0.3, 0.5, 0.7], dtype)).astype(dtype)
+    p = jnp.where(ok, p, jnp.asarray([0.01, 0.02, 0.3], dtype)).astype(dtype)
+    return harmless_design(robot, ok), p, theta, ok
+
+
+def harmless_design(robot: Delta, ok) -> Delta:
+    """``robot`` where ``ok``, else a valid stand-in design (double where for traced invalid designs)."""
+    f = lambda v, good: jnp.where(ok, v, jnp.asarray(good, v.dtype))  # noqa: E731
+    return eqx.tree_at(lambda r: (r.base_radius, r.platform_radius, r.upper_arm, r.forearm, r.theta_min,
+                                  r.theta_max), robot,
+                       (f(robot.base_radius, 0.2), f(robot.platform_radius, 0.05), f(robot.upper_arm, 0.2),
+                        f(robot.forearm, 0.4), f(robot.theta_min, -1.0), f(robot.theta_max, 2.0)))
 
 
 def chain_local(px, py, pz, i: int):
