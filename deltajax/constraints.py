@@ -21,9 +21,9 @@ Models (explicit, documented; all frames: base frame, z down, chain i at angle 2
   relative to the neutral direction above, about the second the out-of-plane tilt ``theta_i3 - pi/2``.
 * **Link interference** (:class:`LinkModel`): forearms (the parallelogram's envelope) and upper arms are
   capsules (segments B_i C_i and A_i B_i with radii ``forearm_radius`` / ``upper_arm_radius``); the base plate
-  is the disc ``z = 0, |xy| <= plate_radius``. Clearances (surface-to-surface, m): forearm-forearm (3 pairs),
-  forearm i - upper arm j (j != i, 6 pairs), base plate - forearms and platform centre. Margin = min
-  clearance - ``clearance``.
+  is the disc ``z = 0, |xy| <= plate_radius``. Clearances (surface-to-surface, m, exact: no sampling):
+  forearm-forearm (3 pairs), forearm i - upper arm j (j != i, 6 pairs), base plate - forearms
+  (:func:`segment_disc_distance`) and platform centre. Margin = min clearance - ``clearance``.
 * **Motors and gearing** (:class:`Motor`): per actuator a servo motor (motor side: peak torque, rated
   (continuous) torque, maximum speed, the speed where the peak torque starts to fall linearly to zero at the
   maximum speed, rotor inertia) behind a gearbox of ratio n (motor speed = n x arm speed) and efficiency
@@ -59,12 +59,12 @@ from .cycle import cycle_profile, log_bisect
 from .fields import float_leaf
 from .geometry import CHAIN_ANGLES, Delta
 from .indices import point_indices
-from .kinematics import elbows, forearm_units, ik
+from .kinematics import elbows, forearm_units, guarded_configuration, ik
 from .regular import (REFINE_BISECT, REFINE_GOLDEN, REFINE_SAMPLES, RegularWorkspace, cylinder_samples,  # noqa: F401
                       largest_cylinder, polar_grid, refine_cylinder, regular_workspace)  # the designer's constraints
 
 __all__ = ["JointModel", "LinkModel", "Motor", "GoodSpec", "JointAngles", "Interference", "DriveLoads",
-           "joint_angles", "joint_margin", "segment_distance", "interference", "with_drive", "drive_loads",
+           "joint_angles", "joint_margin", "segment_distance", "segment_disc_distance", "interference", "with_drive", "drive_loads",
            "min_cycle_time", "picks_per_minute", "cycle_rate", "CycleRate", "PointCheck", "good_point", "largest_cylinder", "regular_workspace",
            "RegularWorkspace", "polar_grid", "cylinder_samples", "refine_cylinder", "ConstraintError"]
 
@@ -211,35 +211,109 @@ class Interference(NamedTuple):
     margin: Float[Array, ""]
 
 
-def _point_disc_distance(q, radius):
-    """Signed distance from points q (n, 3) to the disc z = 0, |xy| <= radius; < 0 for points above the
-    plate (z < 0) over it, i.e. through the base."""
-    rho = jnp.sqrt(q[:, 0] ** 2 + q[:, 1] ** 2)
-    out = jnp.maximum(rho - radius, 0.0)
-    return jnp.where(out > 0, jnp.sqrt(out * out + q[:, 2] ** 2), q[:, 2])
+def _plate_excess(q0, d, t, radius):
+    """(rho(t) - radius)^+ and z(t) of the point q0 + t d (base frame) against the disc of ``radius``."""
+    x, y, z = q0[0] + t * d[0], q0[1] + t * d[1], q0[2] + t * d[2]
+    rho2 = x * x + y * y
+    out = rho2 > radius * radius
+    rho = jnp.sqrt(jnp.where(out, rho2, 1.0))                 # double where: rho = 0 only inside the disc
+    return jnp.where(out, rho - radius, 0.0), z, x, y, jnp.where(out, rho, 1.0)
+
+
+def segment_disc_distance(q0: Float[Array, "3"], q1: Float[Array, "3"], radius: Float[Array, ""]
+                          ) -> Float[Array, ""]:
+    """Signed clearance (m) between the segment [q0, q1] (base frame, z down) and the base plate, the disc
+    ``z = 0, |xy| <= radius``, exact (no sampling).
+
+    It is the minimum over the segment of the signed point-disc distance: a point over the disc
+    (|xy| <= radius) counts its height z, negative above the plate (z < 0: through the base); a point beside
+    the disc counts its distance to the rim, sqrt((|xy| - radius)^2 + z^2). Negative exactly when part of the
+    segment lies over the disc above the plate; the answer then is the lowest z of that part (the set where
+    |xy| <= radius is an interval of t, from a quadratic, and z is linear, so an end of it). Otherwise it is
+    the unsigned segment-disc distance sqrt(min_t h(t)), h(t) = ((|xy(t)| - radius)^+)^2 + z(t)^2; h is convex
+    in t (the distance to a convex set along a line), so the minimiser is the root of the monotone h'(t),
+    found by bisection with a fixed step count (one per mantissa bit: exact to rounding; no data-dependent
+    loop, so vmap and jit(vmap(grad)) run at once). The derivative comes from the value at the minimiser
+    (envelope theorem: the minimiser's own derivative does not enter), so the bisection is not
+    differentiated; sqrt at a touching segment has the double-where guard.
+    """
+    q0, q1 = jnp.asarray(q0), jnp.asarray(q1)
+    dtype = jnp.result_type(q0.dtype, q1.dtype, jnp.asarray(radius).dtype)
+    q0, q1, radius = q0.astype(dtype), q1.astype(dtype), jnp.asarray(radius, dtype)
+    d = q1 - q0
+    sg = jax.lax.stop_gradient
+
+    # -- the part over the disc: |xy(t)|^2 = a t^2 + b t + c <= 0 on [t_lo, t_hi] (clipped to [0, 1])
+    a = d[0] * d[0] + d[1] * d[1]
+    b = 2.0 * (q0[0] * d[0] + q0[1] * d[1])
+    c = q0[0] * q0[0] + q0[1] * q0[1] - radius * radius
+    tiny = jnp.finfo(dtype).tiny
+    moves = a > tiny * jnp.maximum(jnp.abs(c), 1.0)           # not a vertical segment
+    disc = b * b - 4.0 * a * c
+    real = moves & (disc >= 0.0)
+    root = jnp.sqrt(jnp.where(real, disc, 0.0) + jnp.where(real, 0.0, 1.0)) * jnp.where(real, 1.0, 0.0)
+    a_s = jnp.where(moves, a, 1.0)
+    t1 = (-b - root) / (2.0 * a_s)
+    t2 = (-b + root) / (2.0 * a_s)
+    t_lo = jnp.where(moves, jnp.clip(t1, 0.0, 1.0), 0.0)
+    t_hi = jnp.where(moves, jnp.clip(t2, 0.0, 1.0), 1.0)
+    over = jnp.where(moves, real & (t1 <= 1.0) & (t2 >= 0.0), c <= 0.0)
+    z_over = jnp.minimum(q0[2] + t_lo * d[2], q0[2] + t_hi * d[2])
+    through = over & (z_over < 0.0)
+
+    # -- unsigned distance: bisection on the sign of h'(t) (h convex), one step per mantissa bit
+    q0s, ds, rs = sg(q0), sg(d), sg(radius)
+
+    def slope(t):
+        ex, z, x, y, rho = _plate_excess(q0s, ds, t, rs)
+        return ex * (x * ds[0] + y * ds[1]) / rho + z * ds[2]   # h'(t) / 2
+
+    def step(_, lohi):
+        lo, hi = lohi
+        mid = 0.5 * (lo + hi)
+        up = slope(mid) > 0.0
+        return jnp.where(up, lo, mid), jnp.where(up, mid, hi)
+
+    n_steps = jnp.finfo(dtype).nmant + 2
+    lo, hi = jax.lax.fori_loop(0, n_steps, step, (jnp.zeros((), dtype), jnp.ones((), dtype)))
+    t_min = sg(0.5 * (lo + hi))
+    ex, z, _, _, _ = _plate_excess(q0, d, t_min, radius)
+    h = ex * ex + z * z
+    touch = h > 0.0
+    dist = jnp.where(touch, jnp.sqrt(jnp.where(touch, h, 1.0)), 0.0)
+    return jnp.where(through, z_over, dist)
 
 
 def interference(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], links: LinkModel, *,
-                 plate_radius: Optional[Float[Array, ""]] = None, n_plate: int = 9) -> Interference:
-    """Link clearances of one configuration (see :class:`LinkModel`).
+                 plate_radius: Optional[Float[Array, ""]] = None, n_plate: Optional[int] = None) -> Interference:
+    """Link clearances of one configuration (see :class:`LinkModel`), all exact: segment-segment distances
+    between the link axes (:func:`segment_distance`) and the segment-disc clearance of each forearm axis to
+    the base plate (:func:`segment_disc_distance`); the base-plate clearance is also at most the platform
+    centre's height p_z.
 
-    The base-plate clearance samples each forearm axis at ``n_plate`` points (exact point-disc distances);
-    the link-link clearances are exact segment distances.
+    Every field is NaN where the (traced) design is invalid, p or theta is not finite (e.g. a failed IK) or
+    the plate radius is negative or not finite (:func:`deltajax.kinematics.guarded_configuration`).
+    ``n_plate`` is accepted for old callers and ignored (the plate clearance is no longer sampled).
     """
+    del n_plate
+    robot, p, theta, ok = guarded_configuration(robot, p, theta)
     B = elbows(robot, theta)                                          # (3, 3) base frame
     dirs = jnp.asarray([[math.cos(a), math.sin(a), 0.0] for a in CHAIN_ANGLES], B.dtype)  # chain x axes
-    C = jnp.asarray(p)[None, :] + robot.platform_radius * dirs        # forearm ends at the platform
+    C = p[None, :] + robot.platform_radius * dirs                     # forearm ends at the platform
     A = robot.base_radius * dirs
     pairs = ((0, 1), (1, 2), (2, 0))
     ff = jnp.min(jnp.stack([segment_distance(B[i], C[i], B[j], C[j]) for i, j in pairs])) - 2 * links.forearm_radius
     fu = jnp.min(jnp.stack([segment_distance(B[i], C[i], A[j], B[j]) for i in range(3) for j in range(3) if j != i]))
     fu = fu - links.forearm_radius - links.upper_arm_radius
-    Rp = robot.base_radius + links.plate_overhang if plate_radius is None else plate_radius
-    s = jnp.linspace(0.0, 1.0, n_plate, dtype=B.dtype)
-    pts = (B[:, None, :] + s[None, :, None] * (C - B)[:, None, :]).reshape(-1, 3)
-    bp = jnp.minimum(jnp.min(_point_disc_distance(pts, Rp)) - links.forearm_radius, p[2])
+    Rp = robot.base_radius + links.plate_overhang if plate_radius is None else jnp.asarray(plate_radius, B.dtype)
+    ok = ok & jnp.isfinite(Rp) & (Rp >= 0.0)
+    Rp = jnp.where(ok, Rp, robot.base_radius)
+    plate = jnp.stack([segment_disc_distance(B[i], C[i], Rp) for i in range(3)])
+    bp = jnp.minimum(jnp.min(plate) - links.forearm_radius, p[2])
     margin = jnp.minimum(jnp.minimum(ff, fu), bp) - links.clearance
-    return Interference(forearm_forearm=ff, forearm_upper_arm=fu, base_plate=bp, margin=margin)
+    nan = jnp.asarray(jnp.nan, B.dtype)
+    # NaN by where: jnp.minimum does not carry NaN through XLA:CPU's vectorised loops at every batch size
+    return Interference(*(jnp.where(ok, v, nan) for v in (ff, fu, bp, margin)))
 
 
 # -- motors and gearing ----------------------------------------------------------------------------------------

@@ -17,7 +17,6 @@ from __future__ import annotations
 
 from typing import NamedTuple, Optional
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
