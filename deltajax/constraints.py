@@ -135,7 +135,17 @@ def joint_angles(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], j
         p: platform centre (m, base frame).
         theta: actuated angles (rad), e.g. ``dj.ik(robot, p).theta``.
         joints: the joint model.
+
+    Returns:
+        :class:`JointAngles`, NaN where the (traced) design is invalid or p or theta is not finite
+        (:func:`deltajax.kinematics.guarded_configuration`).
     """
+    robot, p, theta, ok = guarded_configuration(robot, p, theta)
+    nan = jnp.asarray(jnp.nan, theta.dtype)
+    return JointAngles(*(jnp.where(ok, v, nan) for v in _joint_angles(robot, p, theta, joints)))
+
+
+def _joint_angles(robot: Delta, p, theta, joints: JointModel) -> JointAngles:
     u = forearm_units(robot, p, theta)                       # (3, 3) chain frames, B -> C
     th = jnp.asarray(theta)
     z = jnp.zeros_like(th)
@@ -153,9 +163,11 @@ def joint_angles(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], j
 
 
 def joint_margin(robot: Delta, p, theta, joints: JointModel) -> Float[Array, ""]:
-    """limit - largest deflection over the six joints (rad); >= 0 when every joint is within its limit."""
-    a = joint_angles(robot, p, theta, joints)
-    return joints.limit - jnp.maximum(jnp.max(a.elbow), jnp.max(a.platform))
+    """limit - largest deflection over the six joints (rad); >= 0 when every joint is within its limit; NaN as
+    :func:`joint_angles` (by ``where``: ``jnp.max`` does not carry NaN at every batch size)."""
+    robot, p, theta, ok = guarded_configuration(robot, p, theta)
+    a = _joint_angles(robot, p, theta, joints)
+    return jnp.where(ok, joints.limit - jnp.maximum(jnp.max(a.elbow), jnp.max(a.platform)), jnp.nan)
 
 
 # -- link interference -----------------------------------------------------------------------------------------
