@@ -60,11 +60,12 @@ from .fields import float_leaf
 from .geometry import CHAIN_ANGLES, Delta
 from .indices import point_indices
 from .kinematics import elbows, forearm_units, guarded_configuration, ik
+from .mass import check_field
 from .regular import (REFINE_BISECT, REFINE_GOLDEN, REFINE_SAMPLES, RegularWorkspace, cylinder_samples,  # noqa: F401
                       largest_cylinder, polar_grid, refine_cylinder, regular_workspace)  # the designer's constraints
 
 __all__ = ["JointModel", "LinkModel", "Motor", "GoodSpec", "JointAngles", "Interference", "DriveLoads",
-           "joint_angles", "joint_margin", "segment_distance", "segment_disc_distance", "interference", "with_drive", "drive_loads",
+           "joint_angles", "joint_margin", "segment_distance", "segment_disc_distance", "interference", "with_drive", "drive_ok", "drive_loads",
            "min_cycle_time", "picks_per_minute", "cycle_rate", "CycleRate", "PointCheck", "good_point", "largest_cylinder", "regular_workspace",
            "RegularWorkspace", "polar_grid", "cylinder_samples", "refine_cylinder", "ConstraintError"]
 
@@ -372,12 +373,46 @@ class Motor(eqx.Module):
         return self.peak_torque * jnp.where(w >= self.max_speed, 0.0, frac)
 
 
+def _check_gear_ratio(gear_ratio):
+    """Concrete scalar gear ratio: one clean error before anything compiles (traced: :func:`_guarded_drive`)."""
+    msg = check_field("gear_ratio", "pos", gear_ratio)
+    if msg is not None:
+        raise ConstraintError(msg + " (motor speed / arm speed)")
+
+
+def drive_ok(motor: Motor, gear_ratio) -> Bool[Array, ""]:
+    """Whether a (possibly traced) motor and gear ratio are valid: every torque and speed finite and > 0,
+    rated <= peak torque, corner <= max speed, rotor inertia finite and >= 0, efficiency in (0, 1], gear ratio
+    finite and > 0. The traced twin of :meth:`Motor.__check_init__` (which raises for concrete input) and of
+    the gear-ratio check: inside a vmapped population an invalid drive gives NaN / ``ok=False``."""
+    pos = lambda v: jnp.isfinite(v) & (v > 0)  # noqa: E731  (NaN compares False)
+    m = motor
+    return (pos(jnp.asarray(gear_ratio)) & pos(m.peak_torque) & pos(m.rated_torque) & pos(m.max_speed)
+            & pos(m.corner_speed) & (m.rated_torque <= m.peak_torque) & (m.corner_speed <= m.max_speed)
+            & jnp.isfinite(m.rotor_inertia) & (m.rotor_inertia >= 0) & pos(m.efficiency) & (m.efficiency <= 1))
+
+
+def _guarded_drive(motor: Motor, gear_ratio):
+    """(motor, gear ratio, ok): concrete bad input raises (:func:`_check_gear_ratio`); where a traced one is not
+    :func:`drive_ok` both are replaced by a harmless stand-in before any algebra (double where), and the
+    callers put NaN / ``ok=False`` there."""
+    _check_gear_ratio(gear_ratio)
+    ok = drive_ok(motor, gear_ratio)
+    f = lambda v, good: jnp.where(ok, v, jnp.asarray(good, jnp.result_type(v)))  # noqa: E731
+    m = eqx.tree_at(lambda q: (q.peak_torque, q.rated_torque, q.max_speed, q.corner_speed, q.rotor_inertia,
+                               q.efficiency), motor,
+                    (f(motor.peak_torque, 1.0), f(motor.rated_torque, 0.5), f(motor.max_speed, 100.0),
+                     f(motor.corner_speed, 50.0), f(motor.rotor_inertia, 0.0), f(motor.efficiency, 1.0)))
+    return m, f(jnp.asarray(gear_ratio, jnp.result_type(float)), 1.0), ok
+
+
 def with_drive(robot: Delta, motor: Motor, gear_ratio, payload_mass=None) -> Delta:
     """The robot whose mass model carries this gearbox (ratio n) and the motor's rotor inertia (reflected as
     n^2 J_rotor by :class:`deltajax.MassModel`), optionally with a payload (kg)."""
     m = robot.mass
     if m is None:
         raise ConstraintError("with_drive: the robot has no mass model (robot.mass); dynamics need one")
+    _check_gear_ratio(gear_ratio)
     m = eqx.tree_at(lambda q: (q.gear_ratio, q.rotor_inertia), m, (float_leaf(gear_ratio) + 0 * m.gear_ratio,
                                                                    motor.rotor_inertia + 0 * m.rotor_inertia))
     if payload_mass is not None:
@@ -451,9 +486,14 @@ def drive_loads(robot: Delta, cycle, motor: Motor, gear_ratio, *, duration=None,
         duration: motion time T (s).
         dwell: s, stop at pick and at place (each).
         payload_mass: kg, replaces the robot's payload if given.
+
+    Every field is NaN and ``ok`` False where the cycle is unreachable or the motor or gear ratio is invalid
+    (:func:`drive_ok`; a concrete invalid gear ratio raises :class:`ConstraintError`).
     """
+    motor, gear_ratio, drive = _guarded_drive(motor, gear_ratio)
     r = with_drive(robot, motor, gear_ratio, payload_mass)
     a, g, thd, ok = _unit_profile(r, cycle)
+    ok = ok & drive
     T = cycle.duration if duration is None else jnp.asarray(duration, a.dtype)
     return _loads_from_unit(a, g, thd, T, jnp.asarray(dwell, a.dtype), motor, jnp.asarray(gear_ratio, a.dtype), ok)
 
@@ -509,10 +549,14 @@ def cycle_rate(robot: Delta, cycle, motor: Motor, gear_ratio, *, dwell=0.0, payl
     resulting picks per minute (one pick per go-and-back cycle: 60 / (T_min + 2 dwell)) and the loads there.
 
     Bisection on T over [T_low, T_high] (in log T) with the profile computed once (efforts scale exactly as
-    a / T^2 + g, speeds as 1 / T). Feasibility is checked at the returned T (tested at the edge).
+    a / T^2 + g, speeds as 1 / T). Feasibility is checked at the returned T (tested at the edge). NaN time and
+    rate (loads NaN, ``ok`` False) where the cycle is unreachable or the motor or gear ratio is invalid
+    (:func:`drive_ok`; a concrete invalid gear ratio raises :class:`ConstraintError`).
     """
+    motor, gear_ratio, drive = _guarded_drive(motor, gear_ratio)
     r = with_drive(robot, motor, gear_ratio, payload_mass)
     a, g, thd, ok = _unit_profile(r, cycle)
+    ok = ok & drive
     n = jnp.asarray(gear_ratio, a.dtype)
     dw = jnp.asarray(dwell, a.dtype)
     sg = jax.lax.stop_gradient                      # the derivative comes from _implicit_time, not the loop
