@@ -111,7 +111,7 @@ def singular_values(jx, d=None, *, method: str = "fast", with_inverses: bool = F
     """Singular values s1 >= s2 >= s3 of M = Jx^-1 diag(d), flat (no inverse, no SVD); or, legacy, of a matrix.
 
     ``singular_values(M)`` (one argument, a 3 x n matrix) is the reference ``jnp.linalg.svd`` and returns an
-    array. The kernel form takes ``jx`` = the 9 entries of Jx row-major (row i = unit forearm vector u_i,
+    array (NaN for a matrix with a non-finite entry, which never reaches LAPACK). The kernel form takes ``jx`` = the 9 entries of Jx row-major (row i = unit forearm vector u_i,
     base frame) and ``d`` = the 3 homogenised Jq diagonal entries (:func:`deltajax.jacobian.jq_theta`) as
     scalars and returns the tuple (s1, s2, s3) of scalars. Two exact reformulations, chosen per point by
     which factor is closer to singular (G = Jx Jx^T, D = diag(d)):
@@ -131,7 +131,11 @@ def singular_values(jx, d=None, *, method: str = "fast", with_inverses: bool = F
     repeated pair); ``"jacobi"`` <= 6e-13 everywhere. float32: fast <= 2.7e-3, jacobi <= 3e-4.
     """
     if d is None:
-        return jnp.linalg.svd(jx, compute_uv=False)
+        # LAPACK never sees a non-finite entry: it prints "** On entry to DLASCL parameter number 4 had an
+        # illegal value" on stdout for inf (a solve through a singular Jx); such a matrix gives NaN here
+        fin = jnp.all(jnp.isfinite(jx), axis=(-2, -1))
+        s = jnp.linalg.svd(jnp.where(fin[..., None, None], jx, 0.0), compute_uv=False)
+        return jnp.where(fin[..., None], s, jnp.nan)
     if method not in ("fast", "jacobi"):
         raise ValueError(f"method must be 'fast' or 'jacobi', got {method!r}")
     J = [[jx[3 * i + k] for k in range(3)] for i in range(3)]
