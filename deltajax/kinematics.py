@@ -344,8 +344,14 @@ def ik(robot: Delta, p: Float[Array, "3"], *, branch: str = "outer") -> IKResult
 
 
 def elbows(robot: Delta, theta: Float[Array, "3"]) -> Float[Array, "3 3"]:
-    """Elbow points B_i in the base frame (m); row i is chain i."""
+    """Elbow points B_i in the base frame (m); row i is chain i. NaN where the (traced) design is invalid or
+    theta is not finite (:func:`guarded_configuration`)."""
     theta = jnp.asarray(theta)
+    robot, _, theta_g, ok = guarded_configuration(robot, jnp.zeros((3,), theta.dtype), theta)
+    return jnp.where(ok, _elbows(robot, theta_g), jnp.nan)
+
+
+def _elbows(robot: Delta, theta):
     L1 = robot.upper_arm
     local = jnp.stack([robot.base_radius + L1 * jnp.cos(theta), jnp.zeros_like(theta), L1 * jnp.sin(theta)],
                       axis=-1)
@@ -440,10 +446,14 @@ def forearm_units(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]) 
     """Unit forearm vectors u_i = (C_i - B_i) / L2 in each chain's *local* frame; row i is chain i.
 
     In the local frame u = (sin th3 cos(th1 + th2), cos th3, sin th3 sin(th1 + th2)) (paper §2.1); built
-    from :func:`loop_vectors` with cos/sin of the given theta.
+    from :func:`loop_vectors` with cos/sin of the given theta. NaN where the (traced) design is invalid or p or
+    theta is not finite (:func:`guarded_configuration`).
     """
-    p = jnp.asarray(p)
-    theta = jnp.asarray(theta)
+    robot, p, theta, ok = guarded_configuration(robot, p, theta)
+    return jnp.where(ok, _forearm_units(robot, p, theta), jnp.nan)
+
+
+def _forearm_units(robot: Delta, p, theta):
     c, s = jnp.cos(theta), jnp.sin(theta)
     rows = []
     for i in range(3):
@@ -466,9 +476,16 @@ def passive_angles(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]
         theta: actuated angles (rad), e.g. from :func:`ik`.
 
     Returns:
-        (theta2, theta3), each of shape (3,).
+        (theta2, theta3), each of shape (3,); NaN where the (traced) design is invalid or p or theta is not
+        finite (:func:`guarded_configuration`; by ``where``, as ``clip`` does not carry NaN at every batch size).
     """
-    u = forearm_units(robot, p, theta)
+    robot, p, theta, ok = guarded_configuration(robot, p, theta)
+    t2, t3 = _passive_angles(robot, p, theta)
+    return jnp.where(ok, t2, jnp.nan), jnp.where(ok, t3, jnp.nan)
+
+
+def _passive_angles(robot: Delta, p, theta):
+    u = _forearm_units(robot, p, theta)
     uy = jnp.clip(u[:, 1], -1.0, 1.0)
     theta3 = jnp.arccos(uy)
     theta12 = jnp.arctan2(u[:, 2], u[:, 0])
