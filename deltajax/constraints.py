@@ -47,6 +47,7 @@ Models (explicit, documented; all frames: base frame, z down, chain i at angle 2
 from __future__ import annotations
 
 import math
+import warnings
 from typing import NamedTuple, Optional
 
 import equinox as eqx
@@ -306,9 +307,12 @@ def interference(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], l
 
     Every field is NaN where the (traced) design is invalid, p or theta is not finite (e.g. a failed IK) or
     the plate radius is negative or not finite (:func:`deltajax.kinematics.guarded_configuration`).
-    ``n_plate`` is accepted for old callers and ignored (the plate clearance is no longer sampled).
+    ``n_plate`` (the old sample count) is accepted for old callers with a DeprecationWarning: the plate
+    clearance is no longer sampled.
     """
-    del n_plate
+    if n_plate is not None:
+        warnings.warn("interference: n_plate is ignored, the base-plate clearance is exact (no samples)",
+                      DeprecationWarning, stacklevel=2)
     robot, p, theta, ok = guarded_configuration(robot, p, theta)
     B = elbows(robot, theta)                                          # (3, 3) base frame
     dirs = jnp.asarray([[math.cos(a), math.sin(a), 0.0] for a in CHAIN_ANGLES], B.dtype)  # chain x axes

@@ -128,6 +128,18 @@ DTYPES = [jnp.float64, jnp.float32]
 EAGER_FAST = ("interference", "joint_margin", "passive_angles", "jacobian")
 
 
+@functools.lru_cache(maxsize=None)
+def _compiled_min_max():
+    return jax.jit(_per_row(EAGER_FAST, jnp.float64))
+
+
+def test_min_max_functions_are_nan_at_4096_jitted():
+    """The fast tier's share of the property below: the functions whose NaN was lost at 4096 rows."""
+    x, p, t, valid = _batch(BIG, jnp.float64)
+    _check_all(_compiled_min_max()(x, p, t), valid, BIG)
+
+
+@pytest.mark.slow
 @pytest.mark.parametrize("dtype", DTYPES, ids=["f64", "f32"])
 def test_invalid_input_is_nan_at_every_batch_size(dtype):
     x, p, t, valid = _batch(BIG, dtype)
