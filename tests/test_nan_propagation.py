@@ -155,8 +155,9 @@ def test_invalid_input_is_nan_at_every_batch_size(dtype):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("dtype", DTYPES, ids=["f64", "f32"])
-def test_invalid_input_is_nan_unjitted_every_function(dtype):
+def test_invalid_input_is_nan_unjitted_every_function():
+    """Every function un-jitted in float64 (float32 un-jitted: the min/max functions above)."""
+    dtype = jnp.float64
     x, p, t, valid = _batch(BIG, dtype)
     eager = _per_row(tuple(FUNCS), dtype)
     for n in (1, 8, BIG):
