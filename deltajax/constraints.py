@@ -21,9 +21,9 @@ Models (explicit, documented; all frames: base frame, z down, chain i at angle 2
   relative to the neutral direction above, about the second the out-of-plane tilt ``theta_i3 - pi/2``.
 * **Link interference** (:class:`LinkModel`): forearms (the parallelogram's envelope) and upper arms are
   capsules (segments B_i C_i and A_i B_i with radii ``forearm_radius`` / ``upper_arm_radius``); the base plate
-  is the disc ``z = 0, |xy| <= plate_radius``. Clearances (surface-to-surface, m): forearm-forearm (3 pairs),
-  forearm i - upper arm j (j != i, 6 pairs), base plate - forearms and platform centre. Margin = min
-  clearance - ``clearance``.
+  is the disc ``z = 0, |xy| <= plate_radius``. Clearances (surface-to-surface, m, exact: no sampling):
+  forearm-forearm (3 pairs), forearm i - upper arm j (j != i, 6 pairs), base plate - forearms
+  (:func:`segment_disc_distance`) and platform centre. Margin = min clearance - ``clearance``.
 * **Motors and gearing** (:class:`Motor`): per actuator a servo motor (motor side: peak torque, rated
   (continuous) torque, maximum speed, the speed where the peak torque starts to fall linearly to zero at the
   maximum speed, rotor inertia) behind a gearbox of ratio n (motor speed = n x arm speed) and efficiency
@@ -47,6 +47,7 @@ Models (explicit, documented; all frames: base frame, z down, chain i at angle 2
 from __future__ import annotations
 
 import math
+import warnings
 from typing import NamedTuple, Optional
 
 import equinox as eqx
@@ -59,12 +60,14 @@ from .cycle import cycle_profile, log_bisect
 from .fields import float_leaf
 from .geometry import CHAIN_ANGLES, Delta
 from .indices import point_indices
-from .kinematics import elbows, forearm_units, ik
+from .kinematics import elbows, forearm_units, guarded_configuration, ik
+from .mass import check_field
 from .regular import (REFINE_BISECT, REFINE_GOLDEN, REFINE_SAMPLES, RegularWorkspace, cylinder_samples,  # noqa: F401
                       largest_cylinder, polar_grid, refine_cylinder, regular_workspace)  # the designer's constraints
 
 __all__ = ["JointModel", "LinkModel", "Motor", "GoodSpec", "JointAngles", "Interference", "DriveLoads",
-           "joint_angles", "joint_margin", "segment_distance", "interference", "with_drive", "motor_side", "drive_loads",
+           "joint_angles", "joint_margin", "segment_distance", "segment_disc_distance", "interference", "with_drive",
+           "motor_side", "drive_ok", "drive_loads",
            "min_cycle_time", "picks_per_minute", "cycle_rate", "CycleRate", "PointCheck", "good_point", "largest_cylinder", "regular_workspace",
            "RegularWorkspace", "polar_grid", "cylinder_samples", "refine_cylinder", "ConstraintError"]
 
@@ -135,7 +138,17 @@ def joint_angles(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], j
         p: platform centre (m, base frame).
         theta: actuated angles (rad), e.g. ``dj.ik(robot, p).theta``.
         joints: the joint model.
+
+    Returns:
+        :class:`JointAngles`, NaN where the (traced) design is invalid or p or theta is not finite
+        (:func:`deltajax.kinematics.guarded_configuration`).
     """
+    robot, p, theta, ok = guarded_configuration(robot, p, theta)
+    nan = jnp.asarray(jnp.nan, theta.dtype)
+    return JointAngles(*(jnp.where(ok, v, nan) for v in _joint_angles(robot, p, theta, joints)))
+
+
+def _joint_angles(robot: Delta, p, theta, joints: JointModel) -> JointAngles:
     u = forearm_units(robot, p, theta)                       # (3, 3) chain frames, B -> C
     th = jnp.asarray(theta)
     z = jnp.zeros_like(th)
@@ -153,9 +166,11 @@ def joint_angles(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], j
 
 
 def joint_margin(robot: Delta, p, theta, joints: JointModel) -> Float[Array, ""]:
-    """limit - largest deflection over the six joints (rad); >= 0 when every joint is within its limit."""
-    a = joint_angles(robot, p, theta, joints)
-    return joints.limit - jnp.maximum(jnp.max(a.elbow), jnp.max(a.platform))
+    """limit - largest deflection over the six joints (rad); >= 0 when every joint is within its limit; NaN as
+    :func:`joint_angles` (by ``where``: ``jnp.max`` does not carry NaN at every batch size)."""
+    robot, p, theta, ok = guarded_configuration(robot, p, theta)
+    a = _joint_angles(robot, p, theta, joints)
+    return jnp.where(ok, joints.limit - jnp.maximum(jnp.max(a.elbow), jnp.max(a.platform)), jnp.nan)
 
 
 # -- link interference -----------------------------------------------------------------------------------------
@@ -211,35 +226,112 @@ class Interference(NamedTuple):
     margin: Float[Array, ""]
 
 
-def _point_disc_distance(q, radius):
-    """Signed distance from points q (n, 3) to the disc z = 0, |xy| <= radius; < 0 for points above the
-    plate (z < 0) over it, i.e. through the base."""
-    rho = jnp.sqrt(q[:, 0] ** 2 + q[:, 1] ** 2)
-    out = jnp.maximum(rho - radius, 0.0)
-    return jnp.where(out > 0, jnp.sqrt(out * out + q[:, 2] ** 2), q[:, 2])
+def _plate_excess(q0, d, t, radius):
+    """(rho(t) - radius)^+ and z(t) of the point q0 + t d (base frame) against the disc of ``radius``."""
+    x, y, z = q0[0] + t * d[0], q0[1] + t * d[1], q0[2] + t * d[2]
+    rho2 = x * x + y * y
+    out = rho2 > radius * radius
+    rho = jnp.sqrt(jnp.where(out, rho2, 1.0))                 # double where: rho = 0 only inside the disc
+    return jnp.where(out, rho - radius, 0.0), z, x, y, jnp.where(out, rho, 1.0)
+
+
+def segment_disc_distance(q0: Float[Array, "3"], q1: Float[Array, "3"], radius: Float[Array, ""]
+                          ) -> Float[Array, ""]:
+    """Signed clearance (m) between the segment [q0, q1] (base frame, z down) and the base plate, the disc
+    ``z = 0, |xy| <= radius``, exact (no sampling).
+
+    It is the minimum over the segment of the signed point-disc distance: a point over the disc
+    (|xy| <= radius) counts its height z, negative above the plate (z < 0: through the base); a point beside
+    the disc counts its distance to the rim, sqrt((|xy| - radius)^2 + z^2). Negative exactly when part of the
+    segment lies over the disc above the plate; the answer then is the lowest z of that part (the set where
+    |xy| <= radius is an interval of t, from a quadratic, and z is linear, so an end of it). Otherwise it is
+    the unsigned segment-disc distance sqrt(min_t h(t)), h(t) = ((|xy(t)| - radius)^+)^2 + z(t)^2; h is convex
+    in t (the distance to a convex set along a line), so the minimiser is the root of the monotone h'(t),
+    found by bisection with a fixed step count (one per mantissa bit: exact to rounding; no data-dependent
+    loop, so vmap and jit(vmap(grad)) run at once). The derivative comes from the value at the minimiser
+    (envelope theorem: the minimiser's own derivative does not enter), so the bisection is not
+    differentiated; sqrt at a touching segment has the double-where guard.
+    """
+    q0, q1 = jnp.asarray(q0), jnp.asarray(q1)
+    dtype = jnp.result_type(q0.dtype, q1.dtype, jnp.asarray(radius).dtype)
+    q0, q1, radius = q0.astype(dtype), q1.astype(dtype), jnp.asarray(radius, dtype)
+    d = q1 - q0
+    sg = jax.lax.stop_gradient
+
+    # -- the part over the disc: |xy(t)|^2 = a t^2 + b t + c <= 0 on [t_lo, t_hi] (clipped to [0, 1])
+    a = d[0] * d[0] + d[1] * d[1]
+    b = 2.0 * (q0[0] * d[0] + q0[1] * d[1])
+    c = q0[0] * q0[0] + q0[1] * q0[1] - radius * radius
+    tiny = jnp.finfo(dtype).tiny
+    moves = a > tiny * jnp.maximum(jnp.abs(c), 1.0)           # not a vertical segment
+    disc = b * b - 4.0 * a * c
+    real = moves & (disc >= 0.0)
+    root = jnp.sqrt(jnp.where(real, disc, 0.0) + jnp.where(real, 0.0, 1.0)) * jnp.where(real, 1.0, 0.0)
+    a_s = jnp.where(moves, a, 1.0)
+    t1 = (-b - root) / (2.0 * a_s)
+    t2 = (-b + root) / (2.0 * a_s)
+    t_lo = jnp.where(moves, jnp.clip(t1, 0.0, 1.0), 0.0)
+    t_hi = jnp.where(moves, jnp.clip(t2, 0.0, 1.0), 1.0)
+    over = jnp.where(moves, real & (t1 <= 1.0) & (t2 >= 0.0), c <= 0.0)
+    z_over = jnp.minimum(q0[2] + t_lo * d[2], q0[2] + t_hi * d[2])
+    through = over & (z_over < 0.0)
+
+    # -- unsigned distance: bisection on the sign of h'(t) (h convex), one step per mantissa bit
+    q0s, ds, rs = sg(q0), sg(d), sg(radius)
+
+    def slope(t):
+        ex, z, x, y, rho = _plate_excess(q0s, ds, t, rs)
+        return ex * (x * ds[0] + y * ds[1]) / rho + z * ds[2]   # h'(t) / 2
+
+    def step(_, lohi):
+        lo, hi = lohi
+        mid = 0.5 * (lo + hi)
+        up = slope(mid) > 0.0
+        return jnp.where(up, lo, mid), jnp.where(up, mid, hi)
+
+    n_steps = jnp.finfo(dtype).nmant + 2
+    lo, hi = jax.lax.fori_loop(0, n_steps, step, (jnp.zeros((), dtype), jnp.ones((), dtype)))
+    t_min = sg(0.5 * (lo + hi))
+    ex, z, _, _, _ = _plate_excess(q0, d, t_min, radius)
+    h = ex * ex + z * z
+    touch = h > 0.0
+    dist = jnp.where(touch, jnp.sqrt(jnp.where(touch, h, 1.0)), 0.0)
+    return jnp.where(through, z_over, dist)
 
 
 def interference(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], links: LinkModel, *,
-                 plate_radius: Optional[Float[Array, ""]] = None, n_plate: int = 9) -> Interference:
-    """Link clearances of one configuration (see :class:`LinkModel`).
+                 plate_radius: Optional[Float[Array, ""]] = None, n_plate: Optional[int] = None) -> Interference:
+    """Link clearances of one configuration (see :class:`LinkModel`), all exact: segment-segment distances
+    between the link axes (:func:`segment_distance`) and the segment-disc clearance of each forearm axis to
+    the base plate (:func:`segment_disc_distance`); the base-plate clearance is also at most the platform
+    centre's height p_z.
 
-    The base-plate clearance samples each forearm axis at ``n_plate`` points (exact point-disc distances);
-    the link-link clearances are exact segment distances.
+    Every field is NaN where the (traced) design is invalid, p or theta is not finite (e.g. a failed IK) or
+    the plate radius is negative or not finite (:func:`deltajax.kinematics.guarded_configuration`).
+    ``n_plate`` (the old sample count) is accepted for old callers with a DeprecationWarning: the plate
+    clearance is no longer sampled.
     """
+    if n_plate is not None:
+        warnings.warn("interference: n_plate is ignored, the base-plate clearance is exact (no samples)",
+                      DeprecationWarning, stacklevel=2)
+    robot, p, theta, ok = guarded_configuration(robot, p, theta)
     B = elbows(robot, theta)                                          # (3, 3) base frame
     dirs = jnp.asarray([[math.cos(a), math.sin(a), 0.0] for a in CHAIN_ANGLES], B.dtype)  # chain x axes
-    C = jnp.asarray(p)[None, :] + robot.platform_radius * dirs        # forearm ends at the platform
+    C = p[None, :] + robot.platform_radius * dirs                     # forearm ends at the platform
     A = robot.base_radius * dirs
     pairs = ((0, 1), (1, 2), (2, 0))
     ff = jnp.min(jnp.stack([segment_distance(B[i], C[i], B[j], C[j]) for i, j in pairs])) - 2 * links.forearm_radius
     fu = jnp.min(jnp.stack([segment_distance(B[i], C[i], A[j], B[j]) for i in range(3) for j in range(3) if j != i]))
     fu = fu - links.forearm_radius - links.upper_arm_radius
-    Rp = robot.base_radius + links.plate_overhang if plate_radius is None else plate_radius
-    s = jnp.linspace(0.0, 1.0, n_plate, dtype=B.dtype)
-    pts = (B[:, None, :] + s[None, :, None] * (C - B)[:, None, :]).reshape(-1, 3)
-    bp = jnp.minimum(jnp.min(_point_disc_distance(pts, Rp)) - links.forearm_radius, p[2])
+    Rp = robot.base_radius + links.plate_overhang if plate_radius is None else jnp.asarray(plate_radius, B.dtype)
+    ok = ok & jnp.isfinite(Rp) & (Rp >= 0.0)
+    Rp = jnp.where(ok, Rp, robot.base_radius)
+    plate = jnp.stack([segment_disc_distance(B[i], C[i], Rp) for i in range(3)])
+    bp = jnp.minimum(jnp.min(plate) - links.forearm_radius, p[2])
     margin = jnp.minimum(jnp.minimum(ff, fu), bp) - links.clearance
-    return Interference(forearm_forearm=ff, forearm_upper_arm=fu, base_plate=bp, margin=margin)
+    nan = jnp.asarray(jnp.nan, B.dtype)
+    # NaN by where: jnp.minimum does not carry NaN through XLA:CPU's vectorised loops at every batch size
+    return Interference(*(jnp.where(ok, v, nan) for v in (ff, fu, bp, margin)))
 
 
 # -- motors and gearing ----------------------------------------------------------------------------------------
@@ -286,12 +378,46 @@ class Motor(eqx.Module):
         return self.peak_torque * jnp.where(w >= self.max_speed, 0.0, frac)
 
 
+def _check_gear_ratio(gear_ratio):
+    """Concrete scalar gear ratio: one clean error before anything compiles (traced: :func:`_guarded_drive`)."""
+    msg = check_field("gear_ratio", "pos", gear_ratio)
+    if msg is not None:
+        raise ConstraintError(msg + " (motor speed / arm speed)")
+
+
+def drive_ok(motor: Motor, gear_ratio) -> Bool[Array, ""]:
+    """Whether a (possibly traced) motor and gear ratio are valid: every torque and speed finite and > 0,
+    rated <= peak torque, corner <= max speed, rotor inertia finite and >= 0, efficiency in (0, 1], gear ratio
+    finite and > 0. The traced twin of :meth:`Motor.__check_init__` (which raises for concrete input) and of
+    the gear-ratio check: inside a vmapped population an invalid drive gives NaN / ``ok=False``."""
+    pos = lambda v: jnp.isfinite(v) & (v > 0)  # noqa: E731  (NaN compares False)
+    m = motor
+    return (pos(jnp.asarray(gear_ratio)) & pos(m.peak_torque) & pos(m.rated_torque) & pos(m.max_speed)
+            & pos(m.corner_speed) & (m.rated_torque <= m.peak_torque) & (m.corner_speed <= m.max_speed)
+            & jnp.isfinite(m.rotor_inertia) & (m.rotor_inertia >= 0) & pos(m.efficiency) & (m.efficiency <= 1))
+
+
+def _guarded_drive(motor: Motor, gear_ratio):
+    """(motor, gear ratio, ok): concrete bad input raises (:func:`_check_gear_ratio`); where a traced one is not
+    :func:`drive_ok` both are replaced by a harmless stand-in before any algebra (double where), and the
+    callers put NaN / ``ok=False`` there."""
+    _check_gear_ratio(gear_ratio)
+    ok = drive_ok(motor, gear_ratio)
+    f = lambda v, good: jnp.where(ok, v, jnp.asarray(good, jnp.result_type(v)))  # noqa: E731
+    m = eqx.tree_at(lambda q: (q.peak_torque, q.rated_torque, q.max_speed, q.corner_speed, q.rotor_inertia,
+                               q.efficiency), motor,
+                    (f(motor.peak_torque, 1.0), f(motor.rated_torque, 0.5), f(motor.max_speed, 100.0),
+                     f(motor.corner_speed, 50.0), f(motor.rotor_inertia, 0.0), f(motor.efficiency, 1.0)))
+    return m, f(jnp.asarray(gear_ratio, jnp.result_type(float)), 1.0), ok
+
+
 def with_drive(robot: Delta, motor: Motor, gear_ratio, payload_mass=None) -> Delta:
     """The robot whose mass model carries this gearbox (ratio n) and the motor's rotor inertia (reflected as
     n^2 J_rotor by :class:`deltajax.MassModel`), optionally with a payload (kg)."""
     m = robot.mass
     if m is None:
         raise ConstraintError("with_drive: the robot has no mass model (robot.mass); dynamics need one")
+    _check_gear_ratio(gear_ratio)
     m = eqx.tree_at(lambda q: (q.gear_ratio, q.rotor_inertia), m, (float_leaf(gear_ratio) + 0 * m.gear_ratio,
                                                                    motor.rotor_inertia + 0 * m.rotor_inertia))
     if payload_mass is not None:
@@ -370,9 +496,14 @@ def drive_loads(robot: Delta, cycle, motor: Motor, gear_ratio, *, duration=None,
         duration: motion time T (s).
         dwell: s, stop at pick and at place (each).
         payload_mass: kg, replaces the robot's payload if given.
+
+    Every field is NaN and ``ok`` False where the cycle is unreachable or the motor or gear ratio is invalid
+    (:func:`drive_ok`; a concrete invalid gear ratio raises :class:`ConstraintError`).
     """
+    motor, gear_ratio, drive = _guarded_drive(motor, gear_ratio)
     r = with_drive(robot, motor, gear_ratio, payload_mass)
     a, g, thd, ok = _unit_profile(r, cycle)
+    ok = ok & drive
     T = cycle.duration if duration is None else jnp.asarray(duration, a.dtype)
     return _loads_from_unit(a, g, thd, T, jnp.asarray(dwell, a.dtype), motor, jnp.asarray(gear_ratio, a.dtype), ok)
 
@@ -428,10 +559,14 @@ def cycle_rate(robot: Delta, cycle, motor: Motor, gear_ratio, *, dwell=0.0, payl
     resulting picks per minute (one pick per go-and-back cycle: 60 / (T_min + 2 dwell)) and the loads there.
 
     Bisection on T over [T_low, T_high] (in log T) with the profile computed once (efforts scale exactly as
-    a / T^2 + g, speeds as 1 / T). Feasibility is checked at the returned T (tested at the edge).
+    a / T^2 + g, speeds as 1 / T). Feasibility is checked at the returned T (tested at the edge). NaN time and
+    rate (loads NaN, ``ok`` False) where the cycle is unreachable or the motor or gear ratio is invalid
+    (:func:`drive_ok`; a concrete invalid gear ratio raises :class:`ConstraintError`).
     """
+    motor, gear_ratio, drive = _guarded_drive(motor, gear_ratio)
     r = with_drive(robot, motor, gear_ratio, payload_mass)
     a, g, thd, ok = _unit_profile(r, cycle)
+    ok = ok & drive
     n = jnp.asarray(gear_ratio, a.dtype)
     dw = jnp.asarray(dwell, a.dtype)
     sg = jax.lax.stop_gradient                      # the derivative comes from _implicit_time, not the loop

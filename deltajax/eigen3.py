@@ -47,7 +47,7 @@ def recip(x):
 @recip.defjvp
 def _recip_jvp(primals, tangents):
     (x,), (dx,) = primals, tangents
-    y = recip(x)
+    y = 1.0 / x  # plain divide under differentiation (see _PLAIN)
     return y, -dx * y * y
 
 
@@ -66,7 +66,7 @@ def rsqrt(x):
 @rsqrt.defjvp
 def _rsqrt_jvp(primals, tangents):
     (x,), (dx,) = primals, tangents
-    y = rsqrt(x)
+    y = lax.rsqrt(x)  # plain under differentiation (see _PLAIN)
     return y, -0.5 * dx * y * y * y
 
 
@@ -85,8 +85,21 @@ def _sqrt0_jvp(primals, tangents):
     (x,), (dx,) = primals, tangents
     x = jnp.asarray(x)
     pos = x > 0.0
-    y = rsqrt(jnp.where(pos, x, 1.0))
-    return sqrt0(x), jnp.where(pos, 0.5 * dx * y, 0.0)
+    y = lax.rsqrt(jnp.where(pos, x, 1.0))  # plain under differentiation (see _PLAIN)
+    return jnp.where(pos, x * y, 0.0), jnp.where(pos, 0.5 * dx * y, 0.0)
+
+
+def _sqrt0_plain(x):
+    pos = x > 0.0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, x, 1.0)), 0.0)
+
+
+#: (recip, rsqrt, sqrt0) of the forward kernels, and their plain twins (divide, lax.rsqrt, sqrt) for every program
+#: that is differentiated: the JVP rules above and sym3_top2's. The bit-trick Newton chains reuse each iterate
+#: several times; in a transposed (reverse-mode) program under vmap XLA:CPU fuses them through the slices, pads
+#: and concatenates of the backward pass and re-emits each reuse instead of sharing it, so the work grows
+#: geometrically with the chain depth: jit(vmap(grad(k_tilde))) ran for minutes on 4 points without returning.
+_PLAIN = (lambda x: 1.0 / x, lax.rsqrt, _sqrt0_plain)
 
 
 def _sink(leaves):
@@ -132,6 +145,8 @@ def fuse_outputs(tree):
     return jax.tree_util.tree_unflatten(treedef, out)
 
 
+_FAST = (recip, rsqrt, sqrt0)
+
 # -- the eigenvalue solvers --------------------------------------------------------------------------------------
 #: t = u P(u), u = sqrt(c), approximates the root t in [0, 1] of t^2 (t + 3) = c (c in [0, 4]) to 3.2e-6
 #: relative (least-squares Chebyshev fit); one Halley step then gives ~3e-16 relative (measured over 4e5 c).
@@ -139,8 +154,9 @@ _T_POLY = (0.5773484152710456, -0.055513434266994274, 0.013131880611233873, -0.0
            0.0007894847448390405, -8.944924427049106e-05)
 
 
-def _cubic_root01(c):
+def _cubic_root01(c, ops=None):
     """The root t in [0, 1] of t^2 (t + 3) = c for c in [0, 4]: polynomial start in sqrt(c), one Halley step."""
+    recip, _, sqrt0 = ops or _FAST
     u = sqrt0(c)
     poly = _T_POLY[-1]
     for a in _T_POLY[-2::-1]:
@@ -153,7 +169,7 @@ def _cubic_root01(c):
     return t - 2.0 * g * g1 * recip(den + jnp.finfo(jnp.result_type(c)).tiny)
 
 
-def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det):
+def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det, ops=None):
     """Two largest eigenvalues of a symmetric PSD 3x3 by the closed-form cubic, without inverse trig.
 
     With q = tr/3, p^2 = ||X - q I||_F^2 / 6 and r = det((X - q I)/p) / 2 in [-1, 1], the eigenvalues are
@@ -165,6 +181,7 @@ def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det):
     sigma, lambda_2 = sigma / 2 + sqrt(sigma^2 / 4 - pi) (no cancellation). A split below the cubic's
     ~sqrt(eps) noise (a repeated eigenvalue, e.g. on the robot's axis) is reported as the pair's mean.
     """
+    recip, rsqrt, sqrt0 = ops or _FAST
     q = (x00 + x11 + x22) * (1.0 / 3.0)
     b00, b11, b22 = x00 - q, x11 - q, x22 - q
     p2 = (b00 * b00 + b11 * b11 + b22 * b22 + 2.0 * (x01 * x01 + x02 * x02 + x12 * x12)) * (1.0 / 6.0)
@@ -175,8 +192,8 @@ def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det):
     p = p2 * rp
     det_b = b00 * (b11 * b22 - x12 * x12) - x01 * (x01 * b22 - x12 * x02) + x02 * (x01 * x12 - b11 * x02)
     r = jnp.clip(((0.5 * det_b * rp) * rp) * rp, -1.0, 1.0)  # det_b / (2 p^3), in an order that cannot overflow
-    t = _cubic_root01(2.0 * (1.0 + r))
-    t2 = _cubic_root01(2.0 * (1.0 - r))
+    t = _cubic_root01(2.0 * (1.0 + r), ops)
+    t2 = _cubic_root01(2.0 * (1.0 - r), ops)
     l1, l2c = q + p * (1.0 + t), q + p * (t2 - t)
     eps = jnp.finfo(jnp.result_type(x00)).eps
     # r carries an absolute error ~eps (1 + |q| / p) (cancellation in X - q I); t moves by its square root
@@ -191,8 +208,9 @@ def _eig_top2_fast(x00, x11, x22, x01, x02, x12, c2, det):
     return l1, l2
 
 
-def _jacobi_rotate(A, p: int, q: int):
+def _jacobi_rotate(A, p: int, q: int, ops=None):
     """One Jacobi rotation zeroing A[p, q] of a symmetric 3x3 matrix given as a dict of its 6 entries."""
+    recip, rsqrt, _ = ops or _FAST
     r = 3 - p - q
     app, aqq, apq = A[(p, p)], A[(q, q)], A[(p, q)]
     arp, arq = A[(r, p)], A[(r, q)]
@@ -219,7 +237,7 @@ def _jacobi_rotate(A, p: int, q: int):
     return out
 
 
-def _eig_top2_jacobi(x00, x11, x22, x01, x02, x12, sweeps: int = 4):
+def _eig_top2_jacobi(x00, x11, x22, x01, x02, x12, sweeps: int = 4, ops=None):
     """Two largest eigenvalues of a symmetric 3x3 by cyclic Jacobi (exact to ~eps ||X||, repeated ones too).
 
     Convergence is quadratic; 4 sweeps reach machine precision for 3x3. sqrt only, no inverse trig.
@@ -228,7 +246,7 @@ def _eig_top2_jacobi(x00, x11, x22, x01, x02, x12, sweeps: int = 4):
          (1, 2): x12, (2, 1): x12}
     for _ in range(sweeps):
         for p, q in ((0, 1), (0, 2), (1, 2)):
-            A = _jacobi_rotate(A, p, q)
+            A = _jacobi_rotate(A, p, q, ops)
     e0, e1, e2 = A[(0, 0)], A[(1, 1)], A[(2, 2)]
     hi = jnp.maximum(jnp.maximum(e0, e1), e2)
     lo = jnp.minimum(jnp.minimum(e0, e1), e2)
@@ -261,8 +279,10 @@ def sym3_top2(x00, x11, x22, x01, x02, x12, c2, det, method: str = "fast"):
 def _sym3_top2_jvp(method, primals, tangents):
     x00, x11, x22, x01, x02, x12 = primals[:6]
     d00, d11, d22, d01, d02, d12 = tangents[:6]
-    lam1, lam2 = sym3_top2(*primals, method)
-    l1, l2 = (lam1, lam2) if method == "jacobi" else _eig_top2_jacobi(*primals[:6])
+    # plain arithmetic in the differentiated program (_PLAIN); values equal the forward ones to ~1 ulp
+    lam1, lam2 = (_eig_top2_fast(*primals, ops=_PLAIN) if method == "fast"
+                  else _eig_top2_jacobi(*primals[:6], ops=_PLAIN))
+    l1, l2 = (lam1, lam2) if method == "jacobi" else _eig_top2_jacobi(*primals[:6], ops=_PLAIN)
     l3 = x00 + x11 + x22 - l1 - l2
     dtr = d00 + d11 + d22
 

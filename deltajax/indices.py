@@ -17,7 +17,6 @@ from __future__ import annotations
 
 from typing import NamedTuple, Optional
 
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
@@ -26,8 +25,8 @@ from .eigen3 import _T_POLY, sym3_top2  # noqa: F401  (_T_POLY: the Numba mirror
 from .fastmath import fuse_outputs, recip, sqrt0
 from .geometry import Delta
 from .jacobian import _resolve_length, homogenise, jq_diagonal, jq_theta, jx_det, jx_row
-from .kinematics import (_branch_sign, _from_chain_frames, chain_local, design_ok, forearm_units, limit_terms,
-                         loop_closure, loop_vectors, passive_angles, safe_point)
+from .kinematics import (_branch_sign, _from_chain_frames, chain_local, design_ok, forearm_units,
+                         guarded_configuration, limit_terms, loop_closure, loop_vectors, passive_angles, safe_point)
 
 __all__ = [
     "Indices",
@@ -114,7 +113,7 @@ def singular_values(jx, d=None, *, method: str = "fast", with_inverses: bool = F
     """Singular values s1 >= s2 >= s3 of M = Jx^-1 diag(d), flat (no inverse, no SVD); or, legacy, of a matrix.
 
     ``singular_values(M)`` (one argument, a 3 x n matrix) is the reference ``jnp.linalg.svd`` and returns an
-    array. The kernel form takes ``jx`` = the 9 entries of Jx row-major (row i = unit forearm vector u_i,
+    array (NaN for a matrix with a non-finite entry, which never reaches LAPACK). The kernel form takes ``jx`` = the 9 entries of Jx row-major (row i = unit forearm vector u_i,
     base frame) and ``d`` = the 3 homogenised Jq diagonal entries (:func:`deltajax.jacobian.jq_theta`) as
     scalars and returns the tuple (s1, s2, s3) of scalars. Two exact reformulations, chosen per point by
     which factor is closer to singular (G = Jx Jx^T, D = diag(d)):
@@ -134,7 +133,11 @@ def singular_values(jx, d=None, *, method: str = "fast", with_inverses: bool = F
     repeated pair); ``"jacobi"`` <= 6e-13 everywhere. float32: fast <= 2.7e-3, jacobi <= 3e-4.
     """
     if d is None:
-        return jnp.linalg.svd(jx, compute_uv=False)
+        # LAPACK never sees a non-finite entry: it prints "** On entry to DLASCL parameter number 4 had an
+        # illegal value" on stdout for inf (a solve through a singular Jx); such a matrix gives NaN here
+        fin = jnp.all(jnp.isfinite(jx), axis=(-2, -1))
+        s = jnp.linalg.svd(jnp.where(fin[..., None, None], jx, 0.0), compute_uv=False)
+        return jnp.where(fin[..., None], s, jnp.nan)
     if method not in ("fast", "jacobi"):
         raise ValueError(f"method must be 'fast' or 'jacobi', got {method!r}")
     J = [[jx[3 * i + k] for k in range(3)] for i in range(3)]
@@ -386,7 +389,7 @@ def indices(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], *, mat
     if matrix not in MATRICES:
         raise ValueError(f"matrix must be one of {MATRICES}, got {matrix!r}")
     method = _resolve_sv_method(sv_method, "jacobi")
-    robot, p, theta, ok = _guarded_configuration(robot, p, theta)
+    robot, p, theta, ok = guarded_configuration(robot, p, theta)
     L = _resolve_length(robot, length)
     u_local = forearm_units(robot, p, theta)
     Jx = _from_chain_frames(u_local)
@@ -412,26 +415,6 @@ def indices(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], *, mat
     ind = indices_from_singular_values(s, b_v=b_v, b_f=b_f, beta=beta)
     manip = jnp.sqrt(jnp.abs(jnp.linalg.det(J @ J.T)))
     return _nan_where_not(ok, ind._replace(manipulability=manip, imi=1.0 / manip))
-
-
-def _guarded_configuration(robot: Delta, p, theta):
-    """(robot, p, theta, ok) with ``ok`` = valid design and finite p and theta; where not ok all three are
-    replaced by a harmless configuration before any algebra (double where: finite values and gradients)."""
-    theta, p = jnp.asarray(theta), jnp.asarray(p)
-    dtype = jnp.result_type(p.dtype, theta.dtype, robot.upper_arm.dtype)
-    ok = design_ok(robot) & jnp.all(jnp.isfinite(p)) & jnp.all(jnp.isfinite(theta))
-    theta = jnp.where(ok, theta, jnp.asarray([0.3, 0.5, 0.7], dtype)).astype(dtype)
-    p = jnp.where(ok, p, jnp.asarray([0.01, 0.02, 0.3], dtype)).astype(dtype)
-    return _harmless_design(robot, ok), p, theta, ok
-
-
-def _harmless_design(robot: Delta, ok) -> Delta:
-    """``robot`` where ``ok``, else a valid stand-in design (double where for traced invalid designs)."""
-    f = lambda v, good: jnp.where(ok, v, jnp.asarray(good, v.dtype))  # noqa: E731
-    return eqx.tree_at(lambda r: (r.base_radius, r.platform_radius, r.upper_arm, r.forearm, r.theta_min,
-                                  r.theta_max), robot,
-                       (f(robot.base_radius, 0.2), f(robot.platform_radius, 0.05), f(robot.upper_arm, 0.2),
-                        f(robot.forearm, 0.4), f(robot.theta_min, -1.0), f(robot.theta_max, 2.0)))
 
 
 def point_indices(robot: Delta, p: Float[Array, "3"], *, branch: str = "outer", b_v: float = 2.0,
@@ -518,7 +501,7 @@ def classify_singularity(robot: Delta, p: Float[Array, "3"], theta: Float[Array,
         near_tol: threshold on 1/k, sigma_min_v and sigma_min_f for "near singular".
         omega_tol: threshold on omega_v and omega_f for "near singular".
     """
-    robot, p, theta, finite = _guarded_configuration(robot, p, theta)
+    robot, p, theta, finite = guarded_configuration(robot, p, theta)
     u_local = forearm_units(robot, p, theta)
     closes = jnp.all(jnp.abs(jnp.sqrt(jnp.sum(u_local * u_local, axis=-1)) - 1.0) <= 1e-6)
     ok = finite & closes

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .geometry import Delta
-from .kinematics import _COS_A, _SIN_A, _from_chain_frames, forearm_units
+from .kinematics import _COS_A, _SIN_A, _from_chain_frames, forearm_units, guarded_configuration
 
 __all__ = ["Jacobians", "jacobians", "jacobian", "homogenise", "jq_diagonal", "jx_row", "jq_theta", "jx_det"]
 
@@ -73,21 +73,25 @@ def jq_diagonal(robot: Delta, u_local: Float[Array, "3 3"], theta: Float[Array, 
 
 
 def jacobians(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]) -> Jacobians:
-    """Jx and Jq at platform position ``p`` (m, base frame) and actuated angles ``theta`` (rad)."""
+    """Jx and Jq at platform position ``p`` (m, base frame) and actuated angles ``theta`` (rad); NaN where the
+    (traced) design is invalid or p or theta is not finite (:func:`deltajax.kinematics.guarded_configuration`)."""
+    robot, p, theta, ok = guarded_configuration(robot, p, theta)
     u_local = forearm_units(robot, p, theta)
     Jx = _from_chain_frames(u_local)
     diag = jq_diagonal(robot, u_local, theta)
     Jq = jnp.concatenate([u_local[:, :1], jnp.diag(diag)], axis=1)
-    return Jacobians(Jx=Jx, Jq=Jq)
+    return Jacobians(Jx=jnp.where(ok, Jx, jnp.nan), Jq=jnp.where(ok, Jq, jnp.nan))
 
 
 def jacobian(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]) -> Float[Array, "3 4"]:
     """The full Jacobian J = Jx^-1 Jq mapping (Rdot [m/s], thetadot [rad/s]) to pdot [m/s] (base frame).
 
-    ``J[:, 0]`` is dP/dR (dimensionless) and ``J[:, 1:]`` the classic fixed-R Jacobian (m/rad).
+    ``J[:, 0]`` is dP/dR (dimensionless) and ``J[:, 1:]`` the classic fixed-R Jacobian (m/rad). NaN where the
+    (traced) design is invalid or p or theta is not finite; LAPACK only ever sees the finite stand-in.
     """
+    robot, p, theta, ok = guarded_configuration(robot, p, theta)
     jac = jacobians(robot, p, theta)
-    return jnp.linalg.solve(jac.Jx, jac.Jq)
+    return jnp.where(ok, jnp.linalg.solve(jac.Jx, jac.Jq), jnp.nan)
 
 
 def homogenise(J: Float[Array, "3 4"], length: Float[Array, ""] | float) -> Float[Array, "3 4"]:

@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
@@ -42,6 +43,8 @@ __all__ = [
     "LimitTerms",
     "limit_terms",
     "design_ok",
+    "guarded_configuration",
+    "harmless_design",
     "chain_local",
     "LoopClosure",
     "loop_closure",
@@ -154,6 +157,32 @@ def design_ok(robot: Delta) -> Bool[Array, ""]:
     finite_range = jnp.isfinite(lo) & jnp.isfinite(hi)
     limits = (lo < hi) & ~(finite_range & (hi - lo > FULL_TURN_MAX))  # NaN compares False; a full turn is fine
     return lengths & limits
+
+
+def guarded_configuration(robot: Delta, p, theta):
+    """(robot, p, theta, ok) with ``ok`` = :func:`design_ok` and finite p and theta; where not ok all three are
+    replaced by a harmless configuration before any algebra (double where: finite values and gradients).
+
+    The one guard of every public function of a configuration (indices, Jacobians, passive joints,
+    interference): callers compute on the returned stand-ins and put NaN (``ok=False``) where ``ok`` is False
+    with ``jnp.where`` -- never through ``jnp.minimum``/``maximum``, which XLA:CPU's vectorised loops do not
+    NaN-propagate at every batch size.
+    """
+    theta, p = jnp.asarray(theta), jnp.asarray(p)
+    dtype = jnp.result_type(p.dtype, theta.dtype, robot.upper_arm.dtype)
+    ok = design_ok(robot) & jnp.all(jnp.isfinite(p)) & jnp.all(jnp.isfinite(theta))
+    theta = jnp.where(ok, theta, jnp.asarray([0.3, 0.5, 0.7], dtype)).astype(dtype)
+    p = jnp.where(ok, p, jnp.asarray([0.01, 0.02, 0.3], dtype)).astype(dtype)
+    return harmless_design(robot, ok), p, theta, ok
+
+
+def harmless_design(robot: Delta, ok) -> Delta:
+    """``robot`` where ``ok``, else a valid stand-in design (double where for traced invalid designs)."""
+    f = lambda v, good: jnp.where(ok, v, jnp.asarray(good, v.dtype))  # noqa: E731
+    return eqx.tree_at(lambda r: (r.base_radius, r.platform_radius, r.upper_arm, r.forearm, r.theta_min,
+                                  r.theta_max), robot,
+                       (f(robot.base_radius, 0.2), f(robot.platform_radius, 0.05), f(robot.upper_arm, 0.2),
+                        f(robot.forearm, 0.4), f(robot.theta_min, -1.0), f(robot.theta_max, 2.0)))
 
 
 def chain_local(px, py, pz, i: int):
@@ -315,8 +344,14 @@ def ik(robot: Delta, p: Float[Array, "3"], *, branch: str = "outer") -> IKResult
 
 
 def elbows(robot: Delta, theta: Float[Array, "3"]) -> Float[Array, "3 3"]:
-    """Elbow points B_i in the base frame (m); row i is chain i."""
+    """Elbow points B_i in the base frame (m); row i is chain i. NaN where the (traced) design is invalid or
+    theta is not finite (:func:`guarded_configuration`)."""
     theta = jnp.asarray(theta)
+    robot, _, theta_g, ok = guarded_configuration(robot, jnp.zeros((3,), theta.dtype), theta)
+    return jnp.where(ok, _elbows(robot, theta_g), jnp.nan)
+
+
+def _elbows(robot: Delta, theta):
     L1 = robot.upper_arm
     local = jnp.stack([robot.base_radius + L1 * jnp.cos(theta), jnp.zeros_like(theta), L1 * jnp.sin(theta)],
                       axis=-1)
@@ -411,10 +446,14 @@ def forearm_units(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]) 
     """Unit forearm vectors u_i = (C_i - B_i) / L2 in each chain's *local* frame; row i is chain i.
 
     In the local frame u = (sin th3 cos(th1 + th2), cos th3, sin th3 sin(th1 + th2)) (paper §2.1); built
-    from :func:`loop_vectors` with cos/sin of the given theta.
+    from :func:`loop_vectors` with cos/sin of the given theta. NaN where the (traced) design is invalid or p or
+    theta is not finite (:func:`guarded_configuration`).
     """
-    p = jnp.asarray(p)
-    theta = jnp.asarray(theta)
+    robot, p, theta, ok = guarded_configuration(robot, p, theta)
+    return jnp.where(ok, _forearm_units(robot, p, theta), jnp.nan)
+
+
+def _forearm_units(robot: Delta, p, theta):
     c, s = jnp.cos(theta), jnp.sin(theta)
     rows = []
     for i in range(3):
@@ -437,9 +476,16 @@ def passive_angles(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]
         theta: actuated angles (rad), e.g. from :func:`ik`.
 
     Returns:
-        (theta2, theta3), each of shape (3,).
+        (theta2, theta3), each of shape (3,); NaN where the (traced) design is invalid or p or theta is not
+        finite (:func:`guarded_configuration`; by ``where``, as ``clip`` does not carry NaN at every batch size).
     """
-    u = forearm_units(robot, p, theta)
+    robot, p, theta, ok = guarded_configuration(robot, p, theta)
+    t2, t3 = _passive_angles(robot, p, theta)
+    return jnp.where(ok, t2, jnp.nan), jnp.where(ok, t3, jnp.nan)
+
+
+def _passive_angles(robot: Delta, p, theta):
+    u = _forearm_units(robot, p, theta)
     uy = jnp.clip(u[:, 1], -1.0, 1.0)
     theta3 = jnp.arccos(uy)
     theta12 = jnp.arctan2(u[:, 2], u[:, 0])

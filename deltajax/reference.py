@@ -77,7 +77,10 @@ def singular_values(Jx: np.ndarray, d: np.ndarray) -> np.ndarray:
     good &= np.abs(np.linalg.det(np.where(good[:, None, None], Jx, np.eye(3)))) > 0
     if good.any():
         M = np.linalg.solve(Jx[good], d[good][:, :, None] * np.eye(3)[None])
-        out[good] = np.linalg.svd(M, compute_uv=False)
+        fin = np.isfinite(M).all(axis=(1, 2))  # an overflowing solve: LAPACK's SVD must not see inf (DLASCL)
+        sv = np.full(d[good].shape, np.nan)
+        sv[fin] = np.linalg.svd(M[fin], compute_uv=False)
+        out[good] = sv
     return out
 
 

@@ -1,0 +1,95 @@
+"""Exact link-plate geometry of deltajax.constraints.interference against an independent dense sampling
+(1e5 points per segment of the signed point-disc distance), including forearms that cross the plate plane."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+from jax.test_util import check_grads
+
+import deltajax as dj
+from deltajax import constraints as C
+
+ROBOT = dj.presets.franco2026(fixed_R=0.2)
+N_DENSE = 100_001
+SEG_DISC = jax.jit(jax.vmap(C.segment_disc_distance))
+
+
+def _dense_plate(q0, q1, radius, n=N_DENSE):
+    """min over n points of the segment of the signed point-disc distance: z over the disc (< 0 above the
+    plate), the distance to the rim beside it."""
+    s = np.linspace(0.0, 1.0, n)[:, None]
+    q = q0[None] + s * (q1 - q0)[None]
+    rho = np.hypot(q[:, 0], q[:, 1])
+    return float(np.where(rho > radius, np.hypot(rho - radius, q[:, 2]), q[:, 2]).min())
+
+
+def _assert_exact(d, q0, q1, radius):
+    dense = np.array([_dense_plate(a, b, r) for a, b, r in zip(q0, q1, radius)])
+    step = np.linalg.norm(q1 - q0, axis=1) / (N_DENSE - 1)
+    assert np.all(d <= dense + 1e-12)            # the exact minimum is never above a sampled one
+    assert np.all(d >= dense - step - 1e-12)     # and below it by at most the sample spacing
+
+
+def test_segment_disc_distance_against_dense_sampling():
+    rng = np.random.default_rng(7)
+    n = 120
+    q0 = rng.uniform(-0.5, 0.5, (n, 3))
+    q1 = rng.uniform(-0.5, 0.5, (n, 3))
+    q1[:20, :2] = q0[:20, :2]                                  # vertical segments
+    q0[20:40, 2], q1[20:40, 2] = -0.1, 0.2                    # crossing the plate plane
+    q1[40:50] = q0[40:50]                                     # points
+    radius = rng.uniform(0.0, 0.4, n)
+    d = np.asarray(SEG_DISC(jnp.asarray(q0), jnp.asarray(q1), jnp.asarray(radius)))
+    _assert_exact(d, q0, q1, radius)
+    assert np.any(d[20:40] < 0) and np.any(d[20:40] > 0)      # both kinds of crossing occur
+
+
+def _forearms(p, theta):
+    B = np.asarray(dj.elbows(ROBOT, jnp.asarray(theta)))
+    ang = np.array([0.0, 2 * np.pi / 3, 4 * np.pi / 3])
+    return B, np.asarray(p)[None] + 0.065 * np.stack([np.cos(ang), np.sin(ang), np.zeros(3)], 1)
+
+
+def test_forearm_crossing_the_plate_plane_through_the_disc():
+    """Arms raised (theta = -0.6 rad) with the platform 5 cm below the plate: each forearm runs from above the
+    plate beside the disc to below it, crossing the plate plane inside the disc."""
+    links = C.LinkModel(forearm_radius=0.02, plate_overhang=0.03)
+    p, theta = np.array([0.0, 0.0, 0.05]), np.full(3, -0.6)
+    out = C.interference(ROBOT, jnp.asarray(p), jnp.asarray(theta), links)
+    B, Cp = _forearms(p, theta)
+    dense = min(_dense_plate(B[i], Cp[i], 0.23) for i in range(3))
+    step = np.linalg.norm(Cp - B, axis=1).max() / (N_DENSE - 1)
+    assert dense - step - 1e-12 <= float(out.base_plate) + 0.02 <= dense + 1e-12
+    assert float(out.base_plate) < -0.02 and float(out.margin) < 0
+
+
+def test_interference_plate_clearance_exact_over_random_configurations():
+    rng = np.random.default_rng(3)
+    n = 60
+    p = np.stack([rng.uniform(-0.25, 0.25, n), rng.uniform(-0.25, 0.25, n), rng.uniform(0.05, 0.5, n)], 1)
+    theta = rng.uniform(-1.0, 1.5, (n, 3))
+    links = C.LinkModel(forearm_radius=0.0, plate_overhang=0.03)
+    f = jax.jit(jax.vmap(lambda p_, t_: C.interference(ROBOT, p_, t_, links).base_plate))
+    bp = np.asarray(f(jnp.asarray(p), jnp.asarray(theta)))
+    for i in range(n):
+        B, Cp = _forearms(p[i], theta[i])
+        dense = min(min(_dense_plate(B[k], Cp[k], 0.23) for k in range(3)), p[i, 2])
+        step = np.linalg.norm(Cp - B, axis=1).max() / (N_DENSE - 1)
+        assert dense - step - 1e-12 <= bp[i] <= dense + 1e-12, (i, bp[i], dense)
+
+
+@pytest.mark.slow
+def test_plate_clearance_gradient_matches_finite_differences():
+    # a forearm passing beside the rim: the nearest point is inside the segment (envelope-theorem derivative)
+    q0 = jnp.asarray([0.30, 0.02, -0.05])
+    q1 = jnp.asarray([0.10, -0.03, 0.30])
+    check_grads(lambda a, b, r: C.segment_disc_distance(a, b, r), (q0, q1, jnp.asarray(0.23)), order=1,
+                modes=("rev", "fwd"), eps=1e-6)
+    links = C.LinkModel(forearm_radius=0.02, plate_overhang=0.03)
+    th = jnp.asarray([0.1, -0.2, 0.3])
+    check_grads(lambda p: C.interference(ROBOT, p, th, links).base_plate, (jnp.asarray([0.05, 0.02, 0.35]),),
+                order=1, modes=("rev",), eps=1e-6)
+    assert math.isfinite(float(C.interference(ROBOT, jnp.asarray([0.05, 0.02, 0.35]), th, links).base_plate))
