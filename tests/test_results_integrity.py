@@ -254,5 +254,5 @@ def test_plots_stage_is_marked_only_after_its_figures_are_on_disk(toy_run, tmp_p
     run_experiment("ga_reconfig", TOY, run_dir=d)
     assert sorted(p.name for p in d.glob("*.png")) == sorted(p.name for p in full.parent.glob("*.png"))
     assert list(d.glob("*.png"))
-    assert dio.load(d / "results.h5")["attrs"]["ga_reconfig_stages"].endswith(",results,plots")
+    assert dio.load(d / "results.h5")["attrs"]["ga_reconfig_stages"].endswith(",results,plots,export,report")
     assert json.loads((d / MANIFEST).read_text())["status"] == "complete"
