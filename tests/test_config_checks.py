@@ -7,21 +7,8 @@ import time
 
 import pytest
 
-from deltajax.config import ConfigError, check_keys, robot_from_config, validate_config
-from deltajax.run import CONFIG_DIR
-
-
-def _compose(experiment, *overrides):
-    from hydra import compose, initialize_config_dir
-
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        return compose(config_name="config", overrides=[f"experiment={experiment}", *overrides])
-
-
-def _validate(cfg):
-    check_keys(cfg)
-    robot, recon = robot_from_config(cfg.robot)
-    validate_config(cfg, robot, recon)
+from _config_helpers import compose, validate
+from deltajax.config import ConfigError
 
 
 REFUSED = [
@@ -72,19 +59,19 @@ REFUSED = [
 
 @pytest.mark.parametrize("experiment, overrides, message", REFUSED, ids=[" ".join(r[1]) for r in REFUSED])
 def test_refused_in_one_line_naming_the_field_within_seconds(experiment, overrides, message):
-    cfg = _compose(experiment, *overrides)
+    cfg = compose(experiment, *overrides)
     t0 = time.perf_counter()
     with pytest.raises(ConfigError, match=message) as err:
-        _validate(cfg)
+        validate(cfg)
     assert "\n" not in str(err.value)
     assert time.perf_counter() - t0 < 10
 
 
 def test_reachable_centre_and_points_below_the_base_are_accepted():
-    _validate(_compose("boundary_search"))
-    _validate(_compose("indices_examples", "experiment.points=[[0.0,0.0,0.3]]"))
-    _validate(_compose("reconfig_indices", "experiment.slices_z=[0.4]"))
-    _validate(_compose("ga_reconfig", "experiment.good_workspace.threshold=1.0"))
+    validate(compose("boundary_search"))
+    validate(compose("indices_examples", "experiment.points=[[0.0,0.0,0.3]]"))
+    validate(compose("reconfig_indices", "experiment.slices_z=[0.4]"))
+    validate(compose("ga_reconfig", "experiment.good_workspace.threshold=1.0"))
 
 
 @pytest.mark.parametrize("override, message", [
@@ -95,4 +82,4 @@ def test_reachable_centre_and_points_below_the_base_are_accepted():
 ])
 def test_ga_reconfig_messages_carry_the_units_written(override, message):
     with pytest.raises(ConfigError, match=message):
-        _validate(_compose("ga_reconfig", override))
+        validate(compose("ga_reconfig", override))

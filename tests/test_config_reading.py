@@ -1,5 +1,5 @@
 """Configuration read once: config.py reads every job's fields once, papers.py holds the published numbers,
-cycle.py split from dynamics.py with the old names kept, and the jobs' validation happens before the claim."""
+the cycle names live in cycle.py, and the jobs' validation happens before the claim."""
 
 import pytest
 from omegaconf import OmegaConf
@@ -8,22 +8,7 @@ import deltajax as dj
 from deltajax import config as C
 from deltajax.config import ConfigError
 
-CONFIG_DIR = str(__import__("pathlib").Path(__file__).resolve().parents[1] / "configs")
-
-
-def _compose(experiment, *overrides):
-    from hydra import compose, initialize_config_dir
-
-    C.register_schemas()  # as deltajax.run does at import
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        return compose(config_name="config", overrides=[f"experiment={experiment}", *overrides])
-
-
-def _validate(cfg):
-    C.check_keys(cfg)
-    robot, recon = C.robot_from_config(cfg.robot)
-    C.validate_config(cfg, robot, recon)
-    return robot, recon
+from _config_helpers import compose, validate
 
 
 def test_cycle_names_live_in_cycle_and_import_patches_no_module():
@@ -49,17 +34,17 @@ def test_papers_hold_the_numbers_the_jobs_store():
 
 @pytest.mark.slow  # ~3.4 CPU-s: the first eager JAX ops of the cases (the job reuses them)
 def test_reconfig_motion_is_validated_before_the_claim():
-    _validate(_compose("reconfig_motion"))  # float64 (conftest), as the CLI at its default precision
+    validate(compose("reconfig_motion"))  # float64 (conftest), as the CLI at its default precision
     for override, message in (("experiment.drive.force=0", r"experiment\.drive\.force must be > 0"),
                               ("experiment.R_step=0.0013", r"experiment\.R_step=0\.0013 m"),
                               ("experiment.refine.n_ctrl=3", r"experiment\.refine\.n_ctrl must be >= 6"),
                               ("experiment.cases.adept.law=linear", r"experiment\.cases\.adept\.law")):
         with pytest.raises(ConfigError, match=message):
-            _validate(_compose("reconfig_motion", override))
+            validate(compose("reconfig_motion", override))
 
 
 def test_job_specs_are_plain_values_read_once():
-    cfg = _compose("dynamics_cycle")
+    cfg = compose("dynamics_cycle")
     robot, recon = C.robot_from_config(cfg.robot)
     spec = C.dynamics_cycle_spec(cfg.experiment, cfg, robot, recon)
     assert spec["n_samples"] == 401 and spec["method"] == "virtual_work"
@@ -67,7 +52,7 @@ def test_job_specs_are_plain_values_read_once():
     assert spec["setups"]["industrial"]["torque_limit"] == 140.0
     with pytest.raises(ConfigError, match=r"experiment\.n_samples must be >= 11, got 5"):
         C.dynamics_cycle_spec(OmegaConf.merge(cfg.experiment, {"n_samples": 5}), cfg, robot, recon)
-    b = C.boundary_search_spec(_compose("boundary_search").experiment)
+    b = C.boundary_search_spec(compose("boundary_search").experiment)
     assert b["steps_deg"] == [2.0, 1.0] and isinstance(b["half_space"], bool)
 
 

@@ -26,9 +26,10 @@ from hypothesis import strategies as st
 
 import deltajax as dj
 import deltajax.io as dio
-from deltajax.config import ConfigError, check_keys, robot_from_config, validate_config
+from _config_helpers import compose, validate
+from deltajax.config import ConfigError
 from deltajax.rundir import CheckpointError, RunDirError, claim
-from deltajax.run import CONFIG_DIR, run_experiment
+from deltajax.run import run_experiment
 
 REPO = Path(__file__).resolve().parent.parent
 # workspace_grid at toy size: 9 x 9 x 7 points, one x-plane per chunk, a checkpoint after every chunk
@@ -408,17 +409,6 @@ def test_concurrent_starts_one_runs_the_other_is_refused(tmp_path):
 
 
 # -- 5. bad configuration values: rejected up front, naming the field -------------------------------------------
-def _compose(experiment, *overrides):
-    from hydra import compose, initialize_config_dir
-
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        return compose(config_name="config", overrides=[f"experiment={experiment}", *overrides])
-
-
-def _validate(cfg):
-    check_keys(cfg)
-    robot, recon = robot_from_config(cfg.robot)
-    validate_config(cfg, robot, recon)
 
 
 BAD = [
@@ -452,7 +442,7 @@ BAD = [
 @pytest.mark.parametrize("experiment, override, message", BAD, ids=[b[1] for b in BAD])
 def test_bad_config_is_rejected_before_anything_runs(experiment, override, message):
     with pytest.raises(ConfigError, match=message):
-        _validate(_compose(experiment, override))
+        validate(compose(experiment, override))
 
 
 @pytest.mark.parametrize("override, key", [("experiment.checkpoint_s=abc", "experiment.checkpoint_s"),
@@ -463,7 +453,7 @@ def test_schema_rejects_wrong_types_and_mistyped_keys_at_composition(override, k
     from hydra.errors import ConfigCompositionException
 
     with pytest.raises(ConfigCompositionException) as err:
-        _compose("workspace_grid", override)
+        compose("workspace_grid", override)
     assert key in str(err.value) + str(err.value.__cause__)
 
 
@@ -480,9 +470,9 @@ def test_valid_keys_for_composition_errors():
 def test_every_experiment_composes_and_validates_at_its_defaults():
     for name in ("workspace_grid", "reconfig_workspace", "reconfig_indices", "indices_examples", "bench_kernel",
                  "dynamics_cycle", "boundary_search", "ga_reconfig"):
-        _validate(_compose(name))
-    _validate(_compose("workspace_grid", "robot=industrial"))
-    _validate(_compose("workspace_grid", "robot.forearm=0.35"))  # the R range is not used by this job
+        validate(compose(name))
+    validate(compose("workspace_grid", "robot=industrial"))
+    validate(compose("workspace_grid", "robot.forearm=0.35"))  # the R range is not used by this job
 
 
 def test_rejected_config_leaves_the_run_directory_untouched(tmp_path):
