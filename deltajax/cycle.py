@@ -302,6 +302,9 @@ def cycle_metrics(robot: Delta, cycle, limits: Limits, *, method: str = "virtual
     T2 = jnp.concatenate([jnp.stack(T2_effort), jnp.where(jnp.isinf(sp), 0.0, (thd_unit / sp) ** 2),
                           jnp.where(jnp.isinf(limits.speed_R), 0.0, (R_speed / limits.speed_R) ** 2)[None]])
     cycle_time = jnp.where(feasible, jnp.sqrt(jnp.max(T2)), jnp.inf)
+    # traced limits are not checked by Limits (concrete ones are): a NaN or non-positive limit has no cycle time
+    limits_valid = jnp.all(jnp.stack([jnp.all(x > 0) for x in (tq, sp, limits.force_R, limits.speed_R)]))
+    cycle_time = jnp.where(limits_valid, cycle_time, jnp.nan)
     nan = jnp.asarray(jnp.nan, w.dtype)
     nan_if = lambda x: jnp.where(reachable, x, nan)  # noqa: E731
     cycle_time = nan_if(cycle_time)

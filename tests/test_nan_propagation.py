@@ -200,3 +200,21 @@ def test_traced_invalid_motor_or_gear_is_nan(n_rows):
     ppm, ok = np.asarray(out.picks_per_min), np.asarray(out.loads.ok)
     assert np.all(np.isnan(ppm[~valid])) and not ok[~valid].any()
     assert np.all(np.isfinite(ppm[valid]) & (ppm[valid] > 0)) and ok[valid].all()
+
+
+def test_traced_invalid_limits_give_no_cycle_time():
+    """Limits checks concrete values; traced ones (a batch of limits) that are NaN or <= 0 give a NaN cycle time
+    and ok=False, never 0 cycles/min or a number."""
+    robot = dj.presets.franco2026(fixed_R=0.2, with_mass=True)
+    cycle = dj.adept_cycle((0.0, 0.0, 0.4))
+    torques = jnp.asarray([20.0, jnp.nan, 0.0, -1.0])
+
+    @jax.jit
+    @jax.vmap
+    def rate(torque):
+        m = dj.cycle_metrics(robot, cycle, dj.Limits(torque=torque, speed=10.0))
+        return m.cycles_per_minute, m.ok
+
+    cpm, ok = rate(torques)
+    assert bool(ok[0]) and np.isfinite(cpm[0]) and cpm[0] > 0
+    assert not np.any(np.asarray(ok[1:])) and np.all(np.isnan(np.asarray(cpm[1:])))
