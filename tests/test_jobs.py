@@ -111,6 +111,10 @@ def test_ga_reconfig_exports_its_baseline_and_recommendation(toy_run):
     from deltajax.jobs.datasheet import _designs_from_run
 
     designs = {n: r for n, r, *_ in _designs_from_run(str(run_dir), SimpleNamespace(log=lambda msg: None))}
+    S = data["summary"]
+    R_op = list(S["metric_name"]).index("R_operating")
+    for name in ("baseline", "recommended"):   # each datasheet at the R the run operates the design at
+        assert float(data["datasheet"][name]["base_radius"]) == pytest.approx(float(S[name][R_op]))
     rec = getattr(designs["recommended"], "robot", designs["recommended"])
     assert loops["loop_closures"][0]["point1"][2] == pytest.approx(-float(rec.forearm))
     assert "<robot name=\"deltajax_recommended\">" in (run_dir / "recommended.urdf").read_text()

@@ -2,7 +2,8 @@
 
 ``source`` is a :data:`deltajax.presets.PRESETS` name (``franco2026``: its fixed variant at R = 0.200 m with the GA
 paper's masses, as in dynamics_cycle; the drive from ``experiment.motor`` / ``experiment.gear_ratio``) or a
-ga_reconfig run directory: then its baseline and recommended designs (``summary`` group), each with the run's own
+ga_reconfig run directory: then its baseline and recommended designs (``summary`` group), each at its operating R
+and with the run's own
 motor and the design's gear ratio (the run's settings rebuild its design space; ``experiment.motor`` and
 ``experiment.gear_ratio`` are not used, and the log says so).
 
@@ -24,7 +25,7 @@ from ..datasheet import MOTOR_FIELDS, ROW_FIELDS, UNITS, datasheet
 
 
 def _designs_from_run(run_dir: str, ctx):
-    """[(name, robot, motor, gear ratio)] of a ga_reconfig run's baseline and recommended designs."""
+    """[(name, robot, motor, gear ratio, R)] of a ga_reconfig run's baseline and recommended designs."""
     import yaml
 
     from .. import io
@@ -46,25 +47,28 @@ def _designs_from_run(run_dir: str, ctx):
 
 
 def run_designs(space, summary, motor_settings) -> list:
-    """[(name, robot, motor, gear ratio)] of a ga_reconfig run's baseline and (where the run recommends one)
+    """[(name, robot, motor, gear ratio, R)] of a ga_reconfig run's baseline and (where the run recommends one)
     recommended design: its ``summary`` group's parameters decoded by the run's design space ``space``, with the
-    run's motor ``motor_settings`` (the settings' ``motor`` mapping) and each design's own gear ratio."""
+    run's motor ``motor_settings`` (the settings' ``motor`` mapping), each design's own gear ratio and, for a
+    reconfigurable design, the operating R the run chose for its task (``R_operating``; None: a fixed-R design)."""
     motor = Motor(**{k: v for k, v in motor_settings.items() if k != "gear_ratio"})
+    metrics = [str(m) for m in summary["metric_name"]]
     out = []
     for col, label in (("baseline_params", "baseline"), ("recommended_params", "recommended")):
         if col not in summary:
             continue
         rob = space.decode(space.from_params(np.asarray(summary[col], float)))
         base = rob.robot if hasattr(rob, "robot") else rob
-        out.append((label, rob, motor, float(base.mass.gear_ratio)))
+        R = float(np.asarray(summary[label])[metrics.index("R_operating")]) if hasattr(rob, "robot") else None
+        out.append((label, rob, motor, float(base.mass.gear_ratio), R))
     return out
 
 
 def write(ctx, designs, **kwargs) -> None:
-    """The datasheet of each of ``designs`` ([(name, robot, motor, gear ratio)]) into group ``datasheet/<name>``,
+    """The datasheet of each of ``designs`` ([(name, robot, motor, gear ratio, R)]) into group ``datasheet/<name>``,
     its log lines and its figure ``datasheet_<name>.png``; ``kwargs`` go to :func:`deltajax.datasheet`."""
-    for name, robot, motor, n in ctx.progress(designs, total=len(designs), desc="datasheets"):
-        ds = datasheet(robot, motor, n, name=name, **kwargs)
+    for name, robot, motor, n, R in ctx.progress(designs, total=len(designs), desc="datasheets"):
+        ds = datasheet(robot, motor, n, name=name, R=R, **kwargs)
         save(ctx.results, f"datasheet/{name}", ds)
         ctx.results.flush()
         ctx.log(f"{name}: working range {1000 * ds.working_diameter:.0f} x {1000 * ds.working_height:.0f} mm, "
@@ -84,7 +88,7 @@ def _designs_from_preset(name: str, spec):
     robot = _preset_robot(name)
     if robot is None:
         raise ConfigError(f"source={name!r}: the preset has no mass model, a datasheet needs one")
-    return [(name, robot, Motor(**spec["motor"]), spec["gear_ratio"])]
+    return [(name, robot, Motor(**spec["motor"]), spec["gear_ratio"], spec["R"])]
 
 
 def save(res, group: str, ds) -> None:
@@ -114,7 +118,7 @@ def run(ctx) -> None:
     else:
         designs = _designs_from_run(spec["source"], ctx)
     write(ctx, designs, payloads=spec["payloads"], vendor_dwell=spec["vendor_dwell"], centre=spec["centre"],
-          hd_ratio=spec["hd_ratio"], volume_h=spec["volume_h"], n_samples=spec["n_samples"], R=spec["R"],
+          hd_ratio=spec["hd_ratio"], volume_h=spec["volume_h"], n_samples=spec["n_samples"],
           cylinder_grid=spec["cylinder_grid"])
     ctx.results.set_attrs("datasheet", source=spec["source"], source_kind=spec["kind"],
                           designs=",".join(d[0] for d in designs))

@@ -393,8 +393,8 @@ def _finish(ctx, path, space, s, done, mark) -> None:
 
 
 def _export(ctx, space, summary, motor_settings) -> None:
-    """The baseline's and the recommendation's datasheets (group ``datasheet``, ``datasheet_<design>.png``, at
-    :func:`deltajax.datasheet`'s defaults) and the recommendation's models: ``recommended.xml`` (MJCF),
+    """The baseline's and the recommendation's datasheets (group ``datasheet``, ``datasheet_<design>.png``, each
+    at its operating R, otherwise at :func:`deltajax.datasheet`'s defaults) and the recommendation's models: ``recommended.xml`` (MJCF),
     ``recommended.urdf`` and its loop-closure sidecar ``recommended.loops.json`` (:mod:`deltajax.export`)."""
     import json
 
@@ -405,7 +405,7 @@ def _export(ctx, space, summary, motor_settings) -> None:
     designs = run_designs(space, summary, motor_settings)
     write(ctx, designs)
     ctx.write_figures()
-    for name, robot, motor, n in designs:
+    for name, robot, motor, n, _ in designs:
         if name != "recommended":
             continue
         write_atomic(ctx.run_dir / "recommended.xml",
