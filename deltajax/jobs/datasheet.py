@@ -18,7 +18,7 @@ import os
 
 import numpy as np
 
-from .. import plots, presets
+from .. import plots
 from ..config import ConfigError, datasheet_spec
 from ..constraints import Motor
 from ..datasheet import MOTOR_FIELDS, ROW_FIELDS, UNITS, datasheet
@@ -41,8 +41,8 @@ def _designs_from_run(run_dir: str, ctx):
                           "feasible design)")
     robot, recon = robot_from_config(cfg["robot"])
     s, space = ga_reconfig_build(cfg["experiment"], robot, recon)[:2]
-    ctx.log(f"source is a ga_reconfig run: its motor and each design's gear ratio are used "
-            f"(experiment.motor / experiment.gear_ratio ignored)")
+    ctx.log("source is a ga_reconfig run: its motor and each design's gear ratio are used "
+            "(experiment.motor / experiment.gear_ratio ignored)")
     return run_designs(space, S, s.motor)
 
 

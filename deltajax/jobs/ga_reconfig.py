@@ -393,9 +393,9 @@ def _finish(ctx, path, space, s, done, mark) -> None:
 
 
 def _export(ctx, space, summary, motor_settings) -> None:
-    """The baseline's and the recommendation's datasheets (group ``datasheet``, ``datasheet_<design>.png``, each
-    at its operating R, otherwise at :func:`deltajax.datasheet`'s defaults) and the recommendation's models: ``recommended.xml`` (MJCF),
-    ``recommended.urdf`` and its loop-closure sidecar ``recommended.loops.json`` (:mod:`deltajax.export`)."""
+    """The baseline's and the recommendation's datasheets (group ``datasheet``, ``datasheet_<design>.png``, each at
+    its operating R) and the recommendation's models: ``recommended.xml`` (MJCF), ``recommended.urdf`` and its
+    loop-closure sidecar ``recommended.loops.json`` (:mod:`deltajax.export`)."""
     import json
 
     from .. import export
@@ -405,18 +405,19 @@ def _export(ctx, space, summary, motor_settings) -> None:
     designs = run_designs(space, summary, motor_settings)
     write(ctx, designs)
     ctx.write_figures()
-    for name, robot, motor, n, _ in designs:
-        if name != "recommended":
-            continue
-        write_atomic(ctx.run_dir / "recommended.xml",
-                     export.mjcf(robot, motor=motor, gear_ratio=n, name="deltajax_recommended").encode())
-        text, loops = export.urdf(robot, motor=motor, gear_ratio=n, name="deltajax_recommended")
-        loops = dict(loops, urdf="recommended.urdf")
-        write_atomic(ctx.run_dir / "recommended.urdf", text.encode())
-        write_atomic(ctx.run_dir / "recommended.loops.json", (json.dumps(loops, indent=1) + "\n").encode())
-        ctx.log(f"export -> {ctx.run_dir / 'recommended.xml'}, recommended.urdf, recommended.loops.json")
-    if not any(name == "recommended" for name, *_ in designs):
+    recommended = [d for d in designs if d[0] == "recommended"]
+    if not recommended:
         ctx.log("export: no recommended design (no feasible candidate), so no model files")
+        return
+    _, robot, motor, n, _ = recommended[0]
+    name = "deltajax_recommended"
+    text, loops = export.urdf(robot, motor=motor, gear_ratio=n, name=name)
+    files = {"recommended.xml": export.mjcf(robot, motor=motor, gear_ratio=n, name=name),
+             "recommended.urdf": text,
+             "recommended.loops.json": json.dumps(dict(loops, urdf="recommended.urdf"), indent=1) + "\n"}
+    for fname, content in files.items():
+        write_atomic(ctx.run_dir / fname, content.encode())
+    ctx.log(f"export -> {ctx.run_dir}: " + ", ".join(files))
 
 
 def _report(ctx, path) -> None:
