@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Optional, Sequence, Union
+from typing import Optional, Sequence, Union
 
 import jax
 import jax.numpy as jnp
@@ -40,7 +40,7 @@ from .geometry import Delta, ReconfigurableDelta
 from .kinematics import ik
 from .mass import STANDARD_GRAVITY
 from .regular import polar_grid, regular_workspace
-from .trajectory import ADEPT_HEIGHT, ADEPT_WIDTH, adept_cycle
+from .trajectory import adept_cycle
 from .workspace.measure import reach_box, volume
 
 __all__ = ["Datasheet", "DatasheetError", "datasheet", "DEFAULT_PAYLOADS", "VENDOR_DWELL", "UNITS", "ROW_FIELDS"]

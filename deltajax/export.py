@@ -56,7 +56,7 @@ from __future__ import annotations
 import json
 import math
 import os
-from typing import Any, Optional, Sequence, Union
+from typing import Optional, Sequence, Union
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
@@ -282,12 +282,12 @@ def mjcf(robot: Union[Delta, ReconfigurableDelta], *, motor: Optional[Motor] = N
     a(f'<mujoco model={quoteattr(name)}>')
     a('  <!-- exported by deltajax.export: z-up frame = deltajax base frame rotated by pi about x (to_z_up); '
       'SI units -->')
-    a(f'  <compiler angle="radian" inertiafromgeom="false" autolimits="true"/>')
+    a('  <compiler angle="radian" inertiafromgeom="false" autolimits="true"/>')
     a(f'  <option timestep="{ts!r}" gravity="0 0 {-float(mm.gravity)!r}">')
     a('    <flag contact="disable"/>')
     a('  </option>')
-    a(f'  <default><geom contype="0" conaffinity="0" rgba="0.6 0.6 0.7 1"/>'
-      f'<equality solref="0.004 1" solimp="0.9999 0.9999 0.001"/></default>')
+    a('  <default><geom contype="0" conaffinity="0" rgba="0.6 0.6 0.7 1"/>'
+      '<equality solref="0.004 1" solimp="0.9999 0.9999 0.001"/></default>')
     a('  <worldbody>')
     a(f'    <body name="base"><geom name="base_plate" type="cylinder" size="{_f([R_ref + 0.05, 0.01])}" '
       f'pos="0 0 0.01"/></body>')
@@ -421,7 +421,7 @@ def urdf(robot: Union[Delta, ReconfigurableDelta], *, motor: Optional[Motor] = N
     speed = float(motor.max_speed) / n if motor is not None else 0.0
     lo, hi = float(base.theta_min), float(base.theta_max)
     lo, hi = (lo, hi) if math.isfinite(lo) and math.isfinite(hi) else (-math.pi, math.pi)
-    L = [f'<?xml version="1.0"?>', f'<robot name={quoteattr(name)}>',
+    L = ['<?xml version="1.0"?>', f'<robot name={quoteattr(name)}>',
          '  <!-- exported by deltajax.export: z-up frame (deltajax.to_z_up), SI units; open tree, loop closures in '
          'the .loops.json sidecar; limit effort/velocity 0 = not given -->',
          '  <link name="base"/>']
