@@ -65,7 +65,8 @@ from .constraints import Motor, with_drive
 from .geometry import CHAIN_ANGLES, Delta, ReconfigurableDelta
 from .kinematics import ik
 
-__all__ = ["mjcf", "urdf", "joint_state", "urdf_configuration", "ExportError", "SPIN_INERTIA_FRACTION", "SIDECAR_FORMAT", "sidecar_path"]
+__all__ = ["mjcf", "urdf", "joint_state", "urdf_configuration", "ExportError", "SPIN_INERTIA_FRACTION", "SIDECAR_FORMAT",
+           "sidecar_path"]
 
 #: inertia about a forearm's own axis / its perpendicular inertia (the spin is not modelled by deltajax)
 SPIN_INERTIA_FRACTION = 1e-3

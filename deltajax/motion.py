@@ -30,7 +30,7 @@ O(K n_R w). The force is exactly a quadratic polynomial in Rdot and linear in Rd
 R) (the joint rates are affine in Rdot, the joint accelerations quadratic in Rdot and affine in Rddot, and
 the efforts linear in the accelerations and quadratic in the rates), so four dynamics evaluations per
 (sample, R) give its coefficients (:func:`path_tables`; tested against direct evaluation). For aggregate "min"
-the DP runs twice (the optimal minimum m*, then the best integral with every cell >= m*; ``_dp`` says why one
+the DP runs twice (the optimal minimum m*, then the best integral with every cell >= m*; ``path_dp`` says why one
 pass is not exact). The optimum is exact for the discretised problem (tested against brute force) and never
 worse than the best fixed R (a constant sequence is feasible for the DP whenever it is feasible at all).
 
@@ -91,6 +91,7 @@ __all__ = [
     "path_constraints_ok",
     "task_path",
     "with_R",
+    "path_dp",
 ]
 
 AGGREGATES = ("integral", "min")
@@ -266,7 +267,7 @@ def _lex_argmax(P, S, axis):
     return idx, take(P), take(S)
 
 
-def _dp(value, feasible, coef, weights, dR, dt, fmax, k0, *, w: int, a: int, primary_min: bool, boundary: str,
+def path_dp(value, feasible, coef, weights, dR, dt, fmax, k0, *, w: int, a: int, primary_min: bool, boundary: str,
         backtrack: bool, speed=math.inf, accel=math.inf):
     """Viterbi over states (k_j, d_j = k_j - k_{j-1}); returns (P, S, path k (K,) or None).
 
@@ -294,8 +295,8 @@ def _dp(value, feasible, coef, weights, dR, dt, fmax, k0, *, w: int, a: int, pri
 
 def _dp_pass(value, feasible, coef, weights, dR, dt, fmax, k0, *, w: int, a: int, primary_min: bool, boundary: str,
              backtrack: bool, speed=math.inf, accel=math.inf):
-    """One Viterbi pass of :func:`_dp` with one lexicographic (P, S) pair per state: exact for (integral, min),
-    and for the primary alone when ``primary_min`` (the bottleneck); :func:`_dp` composes the exact (min,
+    """One Viterbi pass of :func:`path_dp` with one lexicographic (P, S) pair per state: exact for (integral, min),
+    and for the primary alone when ``primary_min`` (the bottleneck); :func:`path_dp` composes the exact (min,
     integral) order from two passes."""
     K, n = value.shape
     D, A = 2 * w + 1, 2 * a + 1
@@ -387,11 +388,11 @@ def _dp_pass(value, feasible, coef, weights, dR, dt, fmax, k0, *, w: int, a: int
     return Pbest, Sbest, path
 
 
-_dp_jit = jax.jit(_dp, static_argnames=("w", "a", "primary_min", "boundary", "backtrack"))
+path_dp_jit = jax.jit(path_dp, static_argnames=("w", "a", "primary_min", "boundary", "backtrack"))
 
 
 def _closed_starts(value, feasible, coef, weights, dR, dt, fmax, starts, *, w, a, primary_min, batch):
-    one = lambda k0: _dp(value, feasible, coef, weights, dR, dt, fmax, k0, w=w, a=a,  # noqa: E731
+    one = lambda k0: path_dp(value, feasible, coef, weights, dR, dt, fmax, k0, w=w, a=a,  # noqa: E731
                          primary_min=primary_min, boundary="closed", backtrack=False)[:2]
     P, S = jax.lax.map(one, starts, batch_size=batch)
     flat = jnp.argmax(jnp.where(P == jnp.max(P), S, -jnp.inf))
@@ -528,7 +529,7 @@ def resolve_tables(tables: PathTables, dt: float, w: int, a: int, force_limit: f
         pad = -(-starts.size // start_batch) * start_batch
         starts = np.concatenate([starts, np.full(pad - starts.size, starts[0])]).astype(np.int32)
         k0 = int(_closed_jit(*args, jnp.asarray(starts), w=w, a=a, primary_min=pm, batch=int(start_batch)))
-    P, S, path = _dp_jit(*args, k0, w=w, a=a, primary_min=pm, boundary=boundary, backtrack=True)
+    P, S, path = path_dp_jit(*args, k0, w=w, a=a, primary_min=pm, boundary=boundary, backtrack=True)
     ok = bool(np.isfinite(float(P)))
     return _evaluate(tables, np.asarray(path), aggregate, float(dt), (w, a), ok)
 
@@ -563,9 +564,9 @@ def path_optimum(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_t
     pm = aggregate == "min"
     lim = dict(speed=speed_limit, accel=accel_limit)
     if boundary != "closed":
-        P, S, _ = _dp(*args, 0, w=w, a=a, primary_min=pm, boundary=boundary, backtrack=False, **lim)
+        P, S, _ = path_dp(*args, 0, w=w, a=a, primary_min=pm, boundary=boundary, backtrack=False, **lim)
         return P, S
-    one = lambda k0: _dp(*args, k0, w=w, a=a, primary_min=pm, boundary="closed", backtrack=False,  # noqa: E731
+    one = lambda k0: path_dp(*args, k0, w=w, a=a, primary_min=pm, boundary="closed", backtrack=False,  # noqa: E731
                          **lim)[:2]
     P, S = jax.lax.map(one, jnp.arange(n), batch_size=start_batch)
     best = jnp.argmax(jnp.where(P == jnp.max(P), S, -jnp.inf))

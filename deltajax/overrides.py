@@ -14,7 +14,7 @@ from typing import Iterable, Optional
 
 from omegaconf import DictConfig, OmegaConf
 
-__all__ = ["check_overrides", "composition_error_line", "sweep_jobs"]
+__all__ = ["check_overrides", "composition_error_line", "compose_config", "sweep_jobs"]
 
 #: Hydra flags after which the next argument is the flag's value, not an override.
 _FLAGS_WITH_VALUE = {"--cfg", "-c", "--package", "-p", "--info", "-i"}
@@ -23,7 +23,8 @@ _FLAGS_HYDRA_ONLY = {"--config-path", "-cp", "--config-name", "-cn", "--config-d
                      "--shell-completion", "-sc", "--version", "--hydra-help", "--info", "-i"}
 
 
-def _compose(overrides: list, config_dir: str):
+def compose_config(overrides: list, config_dir: str):
+    """The composed config (Hydra's compose API) for ``overrides`` with ``config_dir`` as the primary config dir."""
     from hydra import compose, initialize_config_dir
 
     with initialize_config_dir(config_dir=config_dir, version_base="1.3"):
@@ -34,7 +35,7 @@ def _keys_at(parent: str, overrides: list, config_dir: str) -> Optional[list]:
     """The keys of the composed config's block ``parent`` ("" for the top level), or None if it cannot be
     composed (for a block no schema describes)."""
     try:
-        node = _compose(overrides, config_dir)
+        node = compose_config(overrides, config_dir)
         node = OmegaConf.select(node, parent) if parent else node
     except Exception:  # noqa: BLE001 - only an error message's detail: the caller reports the original error
         return None
@@ -181,7 +182,7 @@ def check_overrides(args: Iterable[str], config_dir: str) -> Optional[str]:
         combos = [overrides]
     for ov in combos:
         try:
-            _compose(ov, config_dir)
+            compose_config(ov, config_dir)
         except HydraException as e:
             return composition_error_line(e, ov, config_dir)
     return None

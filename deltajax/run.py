@@ -537,12 +537,12 @@ def _check_sweep_main(args: list) -> int:
     """The child process of :func:`check_sweep`: each job's config composed and validated in turn."""
     from hydra.errors import HydraException
 
-    from .overrides import _compose, sweep_jobs
+    from .overrides import compose_config, sweep_jobs
 
     logging.getLogger().setLevel(logging.ERROR)  # the child's only output is the refusal
     for i, overrides in enumerate(sweep_jobs(args)):
         try:
-            _validated(_compose(overrides, CONFIG_DIR))
+            _validated(compose_config(overrides, CONFIG_DIR))
         except HydraException as e:
             problem = composition_error_line(e, overrides)
         except _user_errors() as e:

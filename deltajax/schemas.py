@@ -202,7 +202,7 @@ class DatasheetSchema:
     gear_ratio: float = _REQ
 
 
-# ga_reconfig has no schema here: its job's reader checks every key and value (config._v_ga_reconfig).
+# ga_reconfig has no schema here: its job's reader checks every key and value (config.validate_ga_reconfig).
 
 
 #: experiment name -> schema, registered as ``schema/experiment/<name>``.

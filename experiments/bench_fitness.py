@@ -1,6 +1,6 @@
 """GA-fitness benchmark (issue 9): population 256 of the weighted-sum ``ga_reconfig`` problem of 2026-12-01
 (``experiments/bench_fitness_problem.yaml``, :class:`deltajax.optimize.Problem`), split by term,
-new core kernel vs the frozen pre-issue-9 kernel (:mod:`deltajax.baseline_kernel`) in the same
+new core kernel vs the frozen pre-issue-9 kernel (:mod:`deltajax.benchmarks.frozen_kernel`) in the same
 process; fitness values must agree to 1e-12.
 
     python experiments/bench_fitness.py [--population 256] [--repeats 3]
@@ -34,7 +34,7 @@ import numpy as np  # noqa: E402
 from omegaconf import OmegaConf  # noqa: E402
 
 import deltajax as dj  # noqa: E402
-from deltajax import baseline_kernel as _kernel_baseline  # noqa: E402
+from deltajax.benchmarks import frozen_kernel as _kernel_baseline  # noqa: E402
 from deltajax.optimize import DesignSpace, Problem, evaluate_design, evaluate_population, make_fitness  # noqa: E402
 from deltajax.optimize import objectives as _objectives  # noqa: E402
 from deltajax.optimize.screens import TASK_CHUNK, reach_cover, task_cover  # noqa: E402
@@ -63,7 +63,7 @@ def _old_ee_speed(robot, pts, motor_speed):
 
 @contextlib.contextmanager
 def _old_fitness():
-    """The fitness as it was: the frozen kernel (:func:`deltajax.baseline_kernel.patch_old_kernel`) and the
+    """The fitness as it was: the frozen kernel (:func:`deltajax.benchmarks.frozen_kernel.patch_old_kernel`) and the
     frozen peak-speed term; the per-design sweeps are selected by ``screen=False``. Must wrap tracing."""
     saved = _objectives._ee_speed
     try:

@@ -206,8 +206,7 @@ def test_workspace_fields_fast_method_matches_exact():
 
 
 def test_benchmark_hook_and_minimal_loop():
-    from deltajax.workspace import bench_kernel_rates, bench_numba
-    from deltajax.workspace._nb_bench import minimal_loop, minimal_loop_newton
+    from deltajax.benchmarks.numba_loops import bench_kernel_rates, bench_numba, minimal_loop, minimal_loop_newton
 
     pts = _points(3000)
     pts[:, 1] = np.abs(pts[:, 1])

@@ -15,7 +15,7 @@ def test_cycle_names_live_in_cycle_and_import_patches_no_module():
     import deltajax.dynamics as dynamics
 
     assert dj.Limits is dj.cycle.Limits and dj.cycle_metrics is dj.cycle.cycle_metrics
-    assert dj.cycle_profile is dj.cycle.cycle_profile and dj.CycleMetrics is dj.cycle.CycleMetrics
+    assert dj.cycle_profile is dj.cycle.cycle_profile and dj.cycle.CycleMetrics is dj.cycle.CycleMetrics
     # importing deltajax sets no attribute on another module: dynamics holds only what it defines or imports
     assert not {"Limits", "CycleProfile", "CycleMetrics", "cycle_profile", "cycle_metrics", "within_limits",
                 "min_cycle_time_bisection"} & set(vars(dynamics))

@@ -172,7 +172,7 @@ def test_passive_angles_meaning():
     rb = FRANCO.at(0.25)
     th = dj.ik(rb, p).theta
     th2, th3 = dj.passive_angles(rb, p, th)
-    u = np.asarray(dj.forearm_units(rb, p, th))
+    u = np.asarray(dj.kinematics.forearm_units(rb, p, th))
     t12 = np.asarray(th + th2)
     s3 = np.sin(np.asarray(th3))
     np.testing.assert_allclose(u, np.stack([s3 * np.cos(t12), np.cos(np.asarray(th3)), s3 * np.sin(t12)], -1),

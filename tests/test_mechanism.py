@@ -149,7 +149,7 @@ def test_reconfiguration_drive_reports_motor_torque_along_R():
     robot = dj.presets.franco2026(fixed_R=0.2, with_mass=True)
     cyc = dj.trajectory.with_R_profile(
         dj.trajectory.point_to_point([-0.05, 0.0, 0.38], [0.05, 0.02, 0.42], duration=0.5, n_samples=21), 0.20, 0.26)
-    prof, drv = dj.reconfiguration_drive(robot, cyc, MECH)
+    prof, drv = dj.mechanism.reconfiguration_drive(robot, cyc, MECH)
     assert bool(jnp.all(prof.ok)) and bool(jnp.all(drv.ok))
     # virtual work: motor power = F_R Rdot / eta while driving, * eta_back when back-driven
     p_motor = np.asarray(drv.effort * drv.q_dot)
@@ -157,4 +157,4 @@ def test_reconfiguration_drive_reports_motor_torque_along_R():
     eta = np.where(p_load >= 0, 1 / float(MECH.efficiency), float(MECH.back_efficiency))
     np.testing.assert_allclose(p_motor, p_load * eta, rtol=1e-10, atol=1e-12)
     with pytest.raises(ValueError, match="cycle.R is None"):
-        dj.reconfiguration_drive(robot, dj.trajectory.point_to_point([0, 0, 0.4], [0.01, 0, 0.4]), MECH)
+        dj.mechanism.reconfiguration_drive(robot, dj.trajectory.point_to_point([0, 0, 0.4], [0.01, 0, 0.4]), MECH)

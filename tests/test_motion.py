@@ -58,7 +58,7 @@ def test_robot_instance_exact_limits_and_baselines(tiny):
         w, a = res.bands
         assert res.score == _brute(tab, dt, w, a, float(lim.force), aggregate, boundary)
         assert res.ok and mo.path_constraints_ok(res, lim, dt, 0.02)
-        fixed = dj.fixed_path(tab, lim, aggregate, dt)
+        fixed = dj.motion.fixed_path(tab, lim, aggregate, dt)
         assert fixed.ok and res.score >= fixed.score
     assert res.bands == (recon.n_R - 1, 2 * (recon.n_R - 1))   # unlimited drive
 
@@ -66,7 +66,7 @@ def test_robot_instance_exact_limits_and_baselines(tiny):
 @pytest.mark.slow
 def test_pointwise_equals_workspace_resolver(tiny):
     recon, cyc, tab = tiny
-    pw = dj.pointwise_path(tab, dt=0.1)
+    pw = dj.motion.pointwise_path(tab, dt=0.1)
     ref = dj.workspace.resolve_redundancy(recon, cyc.x, "sigma_min_v")
     np.testing.assert_array_equal(np.asarray(ref.ok), True)
     np.testing.assert_allclose(pw.value, np.asarray(ref.value), rtol=1e-12)
@@ -100,7 +100,7 @@ def test_limits_validation_names_field():
 
 def test_task_path_rates_are_derivatives():
     pts = [[0.0, 0.0, 0.35], [0.1, 0.05, 0.40], [-0.08, 0.1, 0.38]]
-    cyc = dj.task_path(pts, segment_duration=0.4, samples_per_segment=41)
+    cyc = dj.motion.task_path(pts, segment_duration=0.4, samples_per_segment=41)
     assert cyc.n_samples == 81 and float(cyc.duration) == pytest.approx(0.8)
     x, xd, _ = cyc.rates()
     t = np.asarray(cyc.time())
@@ -108,7 +108,7 @@ def test_task_path_rates_are_derivatives():
     np.testing.assert_allclose(np.asarray(xd)[1:-1], fd[1:-1], atol=4e-3)   # O(dt^2) central differences
     np.testing.assert_allclose(np.asarray(x)[[0, 40, 80]], pts, atol=1e-15)
     with pytest.raises(ValueError, match="task points"):
-        dj.task_path([[0, 0, 0.3]])
+        dj.motion.task_path([[0, 0, 0.3]])
 
 
 @pytest.mark.slow

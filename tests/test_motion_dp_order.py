@@ -56,7 +56,7 @@ def test_min_order_with_traced_speed_and_accel_limits():
             for boundary in mo.BOUNDARIES:
                 bf = brute_force(tab, DT, w, a, 3.0, "min", boundary)
                 starts = range(n) if boundary == "closed" else [0]
-                got = [mo._dp_jit(*args, k0, w=n - 1, a=2 * (n - 1), primary_min=True, boundary=boundary,
+                got = [mo.path_dp_jit(*args, k0, w=n - 1, a=2 * (n - 1), primary_min=True, boundary=boundary,
                                   backtrack=True, speed=speed, accel=accel) for k0 in starts]
                 P, S, path = max(((float(P), float(S), np.asarray(k)) for P, S, k in got), key=lambda r: r[:2])
                 assert P == bf[0], (seed, speed, accel, boundary)

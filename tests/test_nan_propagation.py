@@ -16,6 +16,7 @@ import pytest
 
 import deltajax as dj
 from deltajax import constraints as C
+from deltajax.indices import point_kernel
 
 BASE = dj.presets.franco2026(fixed_R=0.2)
 LINKS = C.LinkModel(plate_overhang=0.03)
@@ -70,10 +71,10 @@ FUNCS = {
     "indices_svd": lambda r, p, t, s: dj.indices(r, p, t, sv_method="svd"),
     "indices_full3x4": lambda r, p, t, s: dj.indices(r, p, t, matrix="full3x4"),
     "point_indices": lambda r, p, t, s: dj.point_indices(r, p)[1],
-    "point_kernel": lambda r, p, t, s: dj.point_kernel(r, p).indices,
+    "point_kernel": lambda r, p, t, s: point_kernel(r, p).indices,
     "classify_singularity": lambda r, p, t, s: dj.classify_singularity(r, p, t),
     "passive_angles": lambda r, p, t, s: dj.passive_angles(r, p, t),
-    "forearm_units": lambda r, p, t, s: dj.forearm_units(r, p, t),
+    "forearm_units": lambda r, p, t, s: dj.kinematics.forearm_units(r, p, t),
     "elbows": lambda r, p, t, s: dj.elbows(r, t),
     "joint_angles": lambda r, p, t, s: dj.joint_angles(r, p, t, s.joints),
     "joint_margin": lambda r, p, t, s: C.joint_margin(r, p, t, s.joints),

@@ -189,7 +189,7 @@ def test_path_mode_at_least_as_good_as_fixed_R_and_per_task(small):
 
 
 def test_dp_with_traced_limits_equals_bands_and_brute_force():
-    """motion._dp with the traced speed/accel masks inside wide static bands = the DP with the exact bands
+    """motion.path_dp with the traced speed/accel masks inside wide static bands = the DP with the exact bands
     (w, a) from the same limits = brute force over every sample path (tiny instance)."""
     rng = np.random.default_rng(5)
     K, n = 5, 4
@@ -201,9 +201,9 @@ def test_dp_with_traced_limits_equals_bands_and_brute_force():
     for speed, accel in ((0.1, 1.0), (0.2, 1.0), (0.1, 2.0), (math.inf, 1.0)):
         w = n - 1 if math.isinf(speed) else int(math.floor(speed * dt / dR * (1 + 1e-9)))
         a = min(2 * w, int(math.floor(accel * dt * dt / dR * (1 + 1e-9))))
-        P1, S1, _ = motion._dp_jit(val, fe, coef, wts, dR, dt, 1.0, 0, w=w, a=a, primary_min=False, boundary="free",
+        P1, S1, _ = motion.path_dp_jit(val, fe, coef, wts, dR, dt, 1.0, 0, w=w, a=a, primary_min=False, boundary="free",
                                backtrack=True)
-        P2, S2, path = motion._dp_jit(val, fe, coef, wts, dR, dt, 1.0, 0, w=n - 1, a=2 * (n - 1), primary_min=False,
+        P2, S2, path = motion.path_dp_jit(val, fe, coef, wts, dR, dt, 1.0, 0, w=n - 1, a=2 * (n - 1), primary_min=False,
                                   boundary="free", backtrack=True, speed=speed, accel=accel)
         best = -np.inf
         fe_np, val_np = np.asarray(fe), np.asarray(val)

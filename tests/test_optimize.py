@@ -96,7 +96,7 @@ def test_ga_converges_stays_in_bounds_and_is_reproducible():
 
 
 def test_kill_and_resume_is_bit_identical(tmp_path):
-    from deltajax.jobs.ga_reconfig import _load_checkpoint, _put_checkpoint
+    from deltajax.jobs.designer_state import load_checkpoint, put_checkpoint
     from deltajax.io import ResultsFile
 
     full = run_ga(sphere, 4, CFG)
@@ -104,12 +104,12 @@ def test_kill_and_resume_is_bit_identical(tmp_path):
     res = ResultsFile(path)
 
     def save(ck):
-        _put_checkpoint(res, ck)
+        put_checkpoint(res, ck)
         res.flush()
 
     killed = run_ga(sphere, 4, CFG, save_checkpoint=save, stop_after=8)  # "killed" after the first checkpoint
     assert killed.generations_done == 8
-    ck = _load_checkpoint(path)  # what a new process finds on disk
+    ck = load_checkpoint(path)  # what a new process finds on disk
     assert ck["generations_done"] == 8
     resumed = run_ga(sphere, 4, CFG, checkpoint=ck)
     assert resumed.resumed_from == 8

@@ -166,7 +166,7 @@ def test_tampered_stopped_run_is_refused_on_resume(stopped_run, tmp_path, tamper
 def test_library_reads_of_a_tampered_checkpoint_refuse_it(stopped_run, tmp_path):
     """The job's own reads (not only the run directory's claim) verify: the checkpoint loader and the re-staging
     of a resume never use or re-checksum edited data."""
-    from deltajax.optimize import workflow as W
+    from deltajax.jobs import designer_state as W
 
     path = _copy(stopped_run, tmp_path) / "results.h5"
     assert W.load_checkpoint(path)["generations_done"] == 2
@@ -230,7 +230,7 @@ def test_plots_stage_is_marked_only_after_its_figures_are_on_disk(toy_run, tmp_p
     d.mkdir()
     # the finished run up to its results stage, written legitimately (as a run killed before its plots)
     res = dio.ResultsFile(d / "results.h5")
-    from deltajax.optimize.workflow import restage
+    from deltajax.jobs.designer_state import restage
 
     restage(res, full)
     res.set_attrs(ga_reconfig_stages="screen,ga,pareto,refine,verify,results")

@@ -1,5 +1,5 @@
 """Build library objects from (Hydra/OmegaConf or plain dict) configuration, validating first: the only code
-that knows config paths. Field readers and :class:`ConfigError` live in ``_readers.py``, the main job's reader in
+that knows config paths. Field readers and :class:`ConfigError` live in ``readers.py``, the main job's reader in
 ``ga_reconfig.py``; everything else (robot, mass, grids, every other experiment's spec, validators) is here.
 
 Every error raised here names the config field and the value, before anything is compiled.
@@ -18,8 +18,9 @@ __all__ = ["ConfigError", "robot_from_config", "mass_from_config", "validate_con
            "EXPERIMENT_VALIDATORS", "EXPERIMENT_SCHEMAS"]
 
 
-from ._readers import ConfigError, _choice, _field, _fits, _names, _vector  # noqa: E402,F401  the one set of readers
-from .ga_reconfig import (GaReconfigSettings, _v_ga_reconfig, _v_ga_reconfig_run_dir,  # noqa: E402,F401
+from .readers import (ConfigError, check_fits, read_choice, read_field, read_names,  # noqa: E402,F401
+                      read_vector)  # the one set of readers
+from .ga_reconfig import (GaReconfigSettings, validate_ga_reconfig, validate_ga_reconfig_run_dir,  # noqa: E402,F401
                           ga_reconfig_build, ga_reconfig_settings)
 
 def robot_from_config(cfg: Mapping[str, Any], prefix: str = "robot") -> Tuple[Delta, Optional[ReconfigurableDelta]]:
@@ -35,10 +36,10 @@ def robot_from_config(cfg: Mapping[str, Any], prefix: str = "robot") -> Tuple[De
     Raises:
         ConfigError: a missing or invalid field; the message names ``robot.<field>`` and the value.
     """
-    kw = {key: _field(f"{prefix}.{key}", cfg.get(key), unit="m")
+    kw = {key: read_field(f"{prefix}.{key}", cfg.get(key), unit="m")
           for key in ("base_radius", "platform_radius", "upper_arm", "forearm")}
-    lo = _field(f"{prefix}.theta_min_deg", cfg.get("theta_min_deg"), none=True, unit="deg")
-    hi = _field(f"{prefix}.theta_max_deg", cfg.get("theta_max_deg"), none=True, unit="deg")
+    lo = read_field(f"{prefix}.theta_min_deg", cfg.get("theta_min_deg"), none=True, unit="deg")
+    hi = read_field(f"{prefix}.theta_max_deg", cfg.get("theta_max_deg"), none=True, unit="deg")
     mass_cfg = cfg.get("mass") if hasattr(cfg, "get") else None
     mass = None
     if mass_cfg is not None:
@@ -51,9 +52,9 @@ def robot_from_config(cfg: Mapping[str, Any], prefix: str = "robot") -> Tuple[De
     if rng is None:
         return robot, None
     p = f"{prefix}.R_range"
-    r_min, r_max, r_step = (_field(f"{p}.{k}", rng.get(k), unit="m") for k in ("min", "max", "step"))
+    r_min, r_max, r_step = (read_field(f"{p}.{k}", rng.get(k), unit="m") for k in ("min", "max", "step"))
     if r_step > 0 and r_max >= r_min:  # the R samples (one float64 each at least), before anything holds them
-        _fits(f"{p}.step", r_step, 8.0 * _n_steps(r_min, r_max, r_step), "the R samples", unit="m")
+        check_fits(f"{p}.step", r_step, 8.0 * _n_steps(r_min, r_max, r_step), "the R samples", unit="m")
     try:
         recon = ReconfigurableDelta.from_range(robot, r_min, r_max, r_step)
     except GeometryError as e:
@@ -90,13 +91,13 @@ TOP_LEVEL_KEYS = ("robot", "experiment", "seed", "precision", "plots", "progress
 SOURCE_EXPERIMENTS = ("datasheet",)
 
 def _validate_top(cfg: Mapping[str, Any]) -> None:
-    _field("seed", cfg.get("seed"), kind="int", lo=0, hi=2 ** 32 - 1)  # NumPy's and JAX's seed range
-    _choice("precision", cfg.get("precision"), ("float64", "float32"))
+    read_field("seed", cfg.get("seed"), kind="int", lo=0, hi=2 ** 32 - 1)  # NumPy's and JAX's seed range
+    read_choice("precision", cfg.get("precision"), ("float64", "float32"))
     for k in ("plots", "progress", "fresh"):
         if k in cfg:
-            _field(k, cfg.get(k), kind="bool")
-    n_shards = _field("n_shards", cfg.get("n_shards", 1), kind="int", lo=1)
-    _field("shard", cfg.get("shard", 0), kind="int", lo=0, hi=n_shards - 1)
+            read_field(k, cfg.get(k), kind="bool")
+    n_shards = read_field("n_shards", cfg.get("n_shards", 1), kind="int", lo=1)
+    read_field("shard", cfg.get("shard", 0), kind="int", lo=0, hi=n_shards - 1)
 
 
 def _grid_fits(path: str, h: float, axes, bytes_per_point: float) -> None:
@@ -104,7 +105,7 @@ def _grid_fits(path: str, h: float, axes, bytes_per_point: float) -> None:
     axes do not fit in memory, from the axis lengths alone (before any axis is built)."""
     n = [math.floor((hi - lo) / h + 1e-6) + 1 for lo, hi in axes]
     total = float(n[0]) * n[1] * n[2]
-    _fits(path, h, max(total * bytes_per_point, 16.0 * max(n)),
+    check_fits(path, h, max(total * bytes_per_point, 16.0 * max(n)),
           f"a grid of {n[0]} x {n[1]} x {n[2]} = {total:.3g} points", unit="m")
 
 
@@ -116,7 +117,7 @@ def workspace_grid_from_config(g: Mapping[str, Any], robot=None, bytes_per_point
     from ..workspace import make_grid
     from ..workspace.driver import reach_box
 
-    h = _field("experiment.grid.h", g.get("h"), lo=0, lo_open=True, unit="m")
+    h = read_field("experiment.grid.h", g.get("h"), lo=0, lo_open=True, unit="m")
     box = reach_box(robot) if robot is not None else None
 
     def pair(i, key):
@@ -127,7 +128,7 @@ def workspace_grid_from_config(g: Mapping[str, Any], robot=None, bytes_per_point
                 n = math.ceil(max(-lo, hi) / h - 1e-9)
                 return -n * h, n * h
             return math.floor(lo / h + 1e-9) * h, math.ceil(hi / h - 1e-9) * h
-        lo, hi = _vector(f"experiment.grid.{key}", v, 2)
+        lo, hi = read_vector(f"experiment.grid.{key}", v, 2)
         if not hi > lo:  # a zero-width box has no volume: its "volume" would be count h^3 of a plane
             raise ConfigError(f"experiment.grid.{key} must be [lo, hi] with lo < hi (m), got {[lo, hi]!r}")
         return lo, hi
@@ -141,7 +142,7 @@ def workspace_grid_from_config(g: Mapping[str, Any], robot=None, bytes_per_point
         if not hasattr(bounds, "__len__") or len(bounds) != 3:
             raise ConfigError(f"experiment.grid.bounds must be null or [[x0,x1],[y0,y1],[z0,z1]] (m), "
                               f"got {bounds!r}")
-        bounds = [_vector(f"experiment.grid.bounds[{i}]", b, 2) for i, b in enumerate(bounds)]
+        bounds = [read_vector(f"experiment.grid.bounds[{i}]", b, 2) for i, b in enumerate(bounds)]
         for (lo, hi), k in zip(bounds, "xyz"):
             if not hi > lo:
                 raise ConfigError(f"experiment.grid.bounds ({k}) must have lo < hi (m), got {[lo, hi]!r}")
@@ -158,7 +159,7 @@ def paper_grid_from_config(e: Mapping[str, Any], bytes_per_point: float = 1.0):
     its points at ``bytes_per_point`` do not fit in memory."""
     from ..workspace import franco2026_grid
 
-    h = _field("experiment.h", e.get("h", 0.002), lo=0, lo_open=True, unit="m")
+    h = read_field("experiment.h", e.get("h", 0.002), lo=0, lo_open=True, unit="m")
     _grid_fits("experiment.h", h, ((-0.4, 0.4), (-0.4, 0.4), (0.0, 0.6 - h)), bytes_per_point)
     try:
         return franco2026_grid(h)
@@ -169,29 +170,29 @@ def paper_grid_from_config(e: Mapping[str, Any], bytes_per_point: float = 1.0):
 def _v_workspace_grid(e, cfg, robot, recon) -> None:
     from ..indices import INDEX_NAMES
 
-    store = _names("experiment.store", e.get("store"), INDEX_NAMES)
+    store = read_names("experiment.store", e.get("store"), INDEX_NAMES)
     itemsize = 8 if cfg.get("precision") == "float64" else 4
     # per point of this shard: the reachable mask (1 byte) and every stored index field
     workspace_grid_from_config(e.get("grid") or {}, robot,
                                bytes_per_point=(1 + itemsize * len(store)) / int(cfg.get("n_shards", 1) or 1))
-    _field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
-    _field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True)
-    _field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
-    _field("experiment.chunk_points", e.get("chunk_points"), kind="int", lo=1)
-    _choice("experiment.backend", e.get("backend", "auto"), ("auto", "jax", "numba"))
+    read_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
+    read_field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True)
+    read_field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
+    read_field("experiment.chunk_points", e.get("chunk_points"), kind="int", lo=1)
+    read_choice("experiment.backend", e.get("backend", "auto"), ("auto", "jax", "numba"))
     dev = e.get("devices", "all")
     if dev not in ("all", None):
-        _field("experiment.devices", dev, kind="int", lo=1)
-    _field("experiment.checkpoint_s", e.get("checkpoint_s"), lo=0, unit="s")
-    _field("experiment.resume", e.get("resume", True), kind="bool")
-    _field("experiment.stop_after", e.get("stop_after"), kind="int", lo=1, none=True)
+        read_field("experiment.devices", dev, kind="int", lo=1)
+    read_field("experiment.checkpoint_s", e.get("checkpoint_s"), lo=0, unit="s")
+    read_field("experiment.resume", e.get("resume", True), kind="bool")
+    read_field("experiment.stop_after", e.get("stop_after"), kind="int", lo=1, none=True)
 
 
 def _v_paper_grid(e, cfg, robot, recon, bytes_per_point: float = 2.0) -> None:
     # reconfig_workspace: two reachable masks (fixed R, some R) of 1 byte per point
     paper_grid_from_config(e, bytes_per_point)
-    _field("experiment.chunk_points", e.get("chunk_points"), kind="int", lo=1)
-    _field("experiment.checkpoint", e.get("checkpoint", True), kind="bool")
+    read_field("experiment.chunk_points", e.get("chunk_points"), kind="int", lo=1)
+    read_field("experiment.checkpoint", e.get("checkpoint", True), kind="bool")
     if recon is None:
         raise ConfigError(f"experiment={e.get('name')} needs a reconfigurable robot: robot.R_range is null")
 
@@ -199,33 +200,33 @@ def _v_paper_grid(e, cfg, robot, recon, bytes_per_point: float = 2.0) -> None:
 def _v_reconfig_indices(e, cfg, robot, recon) -> None:
     from ..indices import INDEX_NAMES
 
-    store = _names("experiment.store_fields", e.get("store_fields"), INDEX_NAMES)
+    store = read_names("experiment.store_fields", e.get("store_fields"), INDEX_NAMES)
     # per point: two masks, R* and every stored field at R* and at fixed R (float32), the slice index field
     _v_paper_grid(e, cfg, robot, recon, bytes_per_point=2 + 4 * (2 * len(store) + 2))
     grid = paper_grid_from_config(e, 0.0)
-    _field("beta", cfg.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
-    _field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
-    _field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True)
-    _choice("experiment.criterion", e.get("criterion"), INDEX_NAMES)
-    _choice("experiment.mode", e.get("mode"), ("fast", "exact"))
-    _choice("experiment.slice_index", e.get("slice_index"), INDEX_NAMES)
+    read_field("beta", cfg.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
+    read_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
+    read_field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True)
+    read_choice("experiment.criterion", e.get("criterion"), INDEX_NAMES)
+    read_choice("experiment.mode", e.get("mode"), ("fast", "exact"))
+    read_choice("experiment.slice_index", e.get("slice_index"), INDEX_NAMES)
     z0, z1 = float(grid.z[0]), float(grid.z[-1])
     for i, z in enumerate(e.get("slices_z") or []):  # a plane of the grid below the base (the nearest is drawn)
-        _field(f"experiment.slices_z[{i}]", z, lo=max(z0, 0.0), hi=z1, lo_open=z0 <= 0.0, unit="m")
+        read_field(f"experiment.slices_z[{i}]", z, lo=max(z0, 0.0), hi=z1, lo_open=z0 <= 0.0, unit="m")
 
 
 def _v_bench_kernel(e, cfg, robot, recon) -> None:
     for k in ("n_points", "n_baseline", "block", "repeats"):
-        _field(f"experiment.{k}", e.get(k), kind="int", lo=1)
+        read_field(f"experiment.{k}", e.get(k), kind="int", lo=1)
     for k in ("n_points", "n_baseline"):  # the points (3 coordinates) and their index values, float64
-        _fits(f"experiment.{k}", e.get(k), float(e.get(k)) * 8 * 12, f"{e.get(k)} points")
-    _field("experiment.R", e.get("R"), lo=0, lo_open=True, unit="m")
-    _names("experiment.dtypes", e.get("dtypes"), ("float32", "float64"), min_len=1)
+        check_fits(f"experiment.{k}", e.get(k), float(e.get(k)) * 8 * 12, f"{e.get(k)} points")
+    read_field("experiment.R", e.get("R"), lo=0, lo_open=True, unit="m")
+    read_names("experiment.dtypes", e.get("dtypes"), ("float32", "float64"), min_len=1)
 
 
 def _point_below_base(path: str, v: Any) -> list:
     """A platform position (m) in the half-space z > 0 below the base (the base frame's z points down)."""
-    p = _vector(path, v, 3)
+    p = read_vector(path, v, 3)
     if not p[2] > 0:
         raise ConfigError(f"{path}={p!r} m lies above the base plane: a platform position needs z > 0 m (the base "
                           f"frame's z points down), got z = {p[2]!r} m")
@@ -238,23 +239,23 @@ def indices_examples_spec(e, cfg=None, robot=None, recon=None) -> dict:
         raise ConfigError("experiment=indices_examples needs a reconfigurable robot: robot.R_range is null")
     from ..indices import INDEX_NAMES
 
-    R_step = _field("experiment.R_step", e.get("R_step"), lo=0, lo_open=True, unit="m")
+    R_step = read_field("experiment.R_step", e.get("R_step"), lo=0, lo_open=True, unit="m")
     points = [_point_below_base(f"experiment.points[{i}]", p) for i, p in enumerate(e.get("points") or [])]
     n_R = _n_steps(float(recon.R_min), float(recon.R_max), R_step)  # every index at every R of each point's curve
-    _fits("experiment.R_step", R_step, 8.0 * n_R * max(1, len(points)) * len(INDEX_NAMES),
+    check_fits("experiment.R_step", R_step, 8.0 * n_R * max(1, len(points)) * len(INDEX_NAMES),
           f"{n_R:.3g} R samples of each point's index curves", unit="m")
     return dict(R_step=R_step, points=points,
-                b_v=_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True),
-                b_f=_field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True),
-                beta=_field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True),
-                matrix=_choice("experiment.matrix", e.get("matrix"), ("theta3x3", "full3x4")))
+                b_v=read_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True),
+                b_f=read_field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True),
+                beta=read_field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True),
+                matrix=read_choice("experiment.matrix", e.get("matrix"), ("theta3x3", "full3x4")))
 
 
 def _cycle_setup(s, path: str) -> dict:
-    out = dict(centre=_vector(f"{path}.centre", s.get("centre"), 3),
-               heading_deg=_field(f"{path}.heading_deg", s.get("heading_deg"), unit="deg"))
+    out = dict(centre=read_vector(f"{path}.centre", s.get("centre"), 3),
+               heading_deg=read_field(f"{path}.heading_deg", s.get("heading_deg"), unit="deg"))
     for k, unit in (("duration", "s"), ("torque_limit", "N m"), ("speed_limit", "rad/s")):
-        out[k] = _field(f"{path}.{k}", s.get(k), lo=0, lo_open=True, unit=unit)
+        out[k] = read_field(f"{path}.{k}", s.get(k), lo=0, lo_open=True, unit=unit)
     return out
 
 
@@ -269,7 +270,7 @@ def dynamics_cycle_spec(e, cfg=None, robot=None, recon=None) -> dict:
                           f"(robot.mass), robot {(cfg or {}).get('robot', {}).get('name')!r} has none")
     robots = list(e.get("robots") or [])
     for name in robots:
-        _choice("experiment.robots entry", name, presets.PRESETS)
+        read_choice("experiment.robots entry", name, presets.PRESETS)
     cfg_name = "robot" if cfg is None else str(cfg.get("robot", {}).get("name", "robot"))
     blocks = e.get("setups") or {}
     setups = {}
@@ -279,24 +280,24 @@ def dynamics_cycle_spec(e, cfg=None, robot=None, recon=None) -> dict:
             raise ConfigError(f"experiment.setups.{name} (or experiment.setups.default) is required")
         setups[name] = _cycle_setup(blocks.get(key), f"experiment.setups.{key}")
     gm = e.get("ga_motion") or {}
-    amp = _field("experiment.recon_R_amplitude", e.get("recon_R_amplitude"), lo=0, unit="m")
+    amp = read_field("experiment.recon_R_amplitude", e.get("recon_R_amplitude"), lo=0, unit="m")
     if recon is not None and amp != 0.0:
         R0, lo, hi = float(recon.robot.base_radius), float(recon.R_min), float(recon.R_max)
         if not (lo <= R0 - amp and R0 + amp <= hi + 1e-12):
             raise ConfigError(f"experiment.recon_R_amplitude={amp!r} m takes R = {R0} +- {amp} m outside "
                               f"[{lo}, {hi}] m")
-    n_samples = _field("experiment.n_samples", e.get("n_samples"), kind="int", lo=11)
+    n_samples = read_field("experiment.n_samples", e.get("n_samples"), kind="int", lo=11)
     # positions, velocities and accelerations of every analysed robot's cycle (float64), at least
-    _fits("experiment.n_samples", n_samples, 72.0 * n_samples * len(setups), f"{len(setups)} cycles of "
+    check_fits("experiment.n_samples", n_samples, 72.0 * n_samples * len(setups), f"{len(setups)} cycles of "
           f"{n_samples} samples")
-    return dict(method=_choice("experiment.method", e.get("method"), ("virtual_work", "lagrange")),
+    return dict(method=read_choice("experiment.method", e.get("method"), ("virtual_work", "lagrange")),
                 n_samples=n_samples,
-                law=_choice("experiment.law", e.get("law"), MOTION_LAWS),
-                blend=_field("experiment.blend", e.get("blend"), lo=0, hi=1, hi_open=True),
+                law=read_choice("experiment.law", e.get("law"), MOTION_LAWS),
+                blend=read_field("experiment.blend", e.get("blend"), lo=0, hi=1, hi_open=True),
                 robots=robots, cfg_name=cfg_name, setups=setups,
-                ga_amplitude=_field("experiment.ga_motion.amplitude", gm.get("amplitude"), lo=0, lo_open=True,
+                ga_amplitude=read_field("experiment.ga_motion.amplitude", gm.get("amplitude"), lo=0, lo_open=True,
                                     unit="rad"),
-                ga_duration=_field("experiment.ga_motion.duration", gm.get("duration"), lo=0, lo_open=True, unit="s"),
+                ga_duration=read_field("experiment.ga_motion.duration", gm.get("duration"), lo=0, lo_open=True, unit="s"),
                 recon_R_amplitude=amp)
 
 
@@ -335,15 +336,15 @@ def datasheet_spec(e, cfg=None, robot=None, recon=None) -> dict:
     else:
         raise ConfigError(f"source={src!r} is neither a preset ({', '.join(sorted(presets.PRESETS))}) nor a run "
                           "directory with a results.h5")
-    pos = lambda k, unit: _field(f"experiment.{k}", e.get(k), lo=0, lo_open=True, unit=unit)  # noqa: E731
-    payloads = [_field(f"experiment.payloads[{i}]", p, lo=0, unit="kg") for i, p in enumerate(e.get("payloads") or [])]
+    pos = lambda k, unit: read_field(f"experiment.{k}", e.get(k), lo=0, lo_open=True, unit=unit)  # noqa: E731
+    payloads = [read_field(f"experiment.payloads[{i}]", p, lo=0, unit="kg") for i, p in enumerate(e.get("payloads") or [])]
     if not payloads:
         raise ConfigError("experiment.payloads must list at least one payload (kg)")
     grid = e.get("cylinder_grid") or []
     if len(grid) != 3:
         raise ConfigError(f"experiment.cylinder_grid must be [rings, angles, levels], got {list(grid)!r}")
     mcfg = e.get("motor") or {}
-    motor = {k: _field(f"experiment.motor.{k}", mcfg.get(k), lo=0, lo_open=(k != "rotor_inertia"), unit=u)
+    motor = {k: read_field(f"experiment.motor.{k}", mcfg.get(k), lo=0, lo_open=(k != "rotor_inertia"), unit=u)
              for k, u in (("peak_torque", "N m"), ("rated_torque", "N m"), ("max_speed", "rad/s"),
                           ("corner_speed", "rad/s"), ("rotor_inertia", "kg m^2"), ("efficiency", "1"))}
     for lo_k, hi_k, unit in (("rated_torque", "peak_torque", "N m"), ("corner_speed", "max_speed", "rad/s")):
@@ -354,14 +355,14 @@ def datasheet_spec(e, cfg=None, robot=None, recon=None) -> dict:
         raise ConfigError(f"experiment.motor.efficiency must be in (0, 1], got {motor['efficiency']!r}")
     centre = e.get("centre")
     R = e.get("R")
-    return dict(source=src, kind=kind, payloads=payloads, vendor_dwell=_field("experiment.vendor_dwell",
+    return dict(source=src, kind=kind, payloads=payloads, vendor_dwell=read_field("experiment.vendor_dwell",
                                                                               e.get("vendor_dwell"), lo=0, unit="s"),
                 hd_ratio=pos("hd_ratio", "1"), volume_h=pos("volume_h", "m"),
-                n_samples=_field("experiment.n_samples", e.get("n_samples"), kind="int", lo=3),
-                cylinder_grid=tuple(_field(f"experiment.cylinder_grid[{i}]", g, kind="int", lo=2)
+                n_samples=read_field("experiment.n_samples", e.get("n_samples"), kind="int", lo=3),
+                cylinder_grid=tuple(read_field(f"experiment.cylinder_grid[{i}]", g, kind="int", lo=2)
                                     for i, g in enumerate(grid)),
-                centre=None if centre is None else _vector("experiment.centre", centre, 3),
-                R=None if R is None else _field("experiment.R", R, lo=0, lo_open=True, unit="m"),
+                centre=None if centre is None else read_vector("experiment.centre", centre, 3),
+                R=None if R is None else read_field("experiment.R", R, lo=0, lo_open=True, unit="m"),
                 motor=motor, gear_ratio=pos("gear_ratio", "motor speed / arm speed"))
 
 
@@ -369,14 +370,14 @@ def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
     """``experiment.*`` of boundary_search as plain values (m, deg)."""
     from ..workspace import boundary as B
 
-    pos = lambda k, unit: _field(f"experiment.{k}", e.get(k), lo=0, lo_open=True, unit=unit)  # noqa: E731
+    pos = lambda k, unit: read_field(f"experiment.{k}", e.get(k), lo=0, lo_open=True, unit=unit)  # noqa: E731
     out = dict(eps=pos("eps", "m"), rho_max=pos("rho_max", "m"), grid_h=pos("grid_h", "m"),
                sweep_step_deg=pos("sweep_step_deg", "deg"),
-               centre=_vector("experiment.centre", e.get("centre"), 3))
+               centre=read_vector("experiment.centre", e.get("centre"), 3))
     _search_centre("experiment.centre", out["centre"], out["centre"], robot)
     if out["rho_max"] <= out["eps"]:
         raise ConfigError(f"experiment.rho_max must exceed experiment.eps, got {out['rho_max']} m <= {out['eps']} m")
-    steps = [_field(f"experiment.steps_deg[{i}]", s, lo=0, lo_open=True, unit="deg")
+    steps = [read_field(f"experiment.steps_deg[{i}]", s, lo=0, lo_open=True, unit="deg")
              for i, s in enumerate(e.get("steps_deg") or [])]
     if not steps:
         raise ConfigError("experiment.steps_deg must list at least one angular step (deg)")
@@ -386,13 +387,13 @@ def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
         except (ValueError, TypeError) as err:
             raise ConfigError(f"experiment.steps_deg: {err}") from None
     out["steps_deg"] = steps
-    out["predictor"] = _choice("experiment.predictor", e.get("predictor"), B.PREDICTORS)
-    out["volume_rule"] = _choice("experiment.volume_rule", e.get("volume_rule"), B.VOLUME_RULES)
-    out["profile_samples"] = _field("experiment.profile_samples", e.get("profile_samples"), kind="int", lo=2)
+    out["predictor"] = read_choice("experiment.predictor", e.get("predictor"), B.PREDICTORS)
+    out["volume_rule"] = read_choice("experiment.volume_rule", e.get("volume_rule"), B.VOLUME_RULES)
+    out["profile_samples"] = read_field("experiment.profile_samples", e.get("profile_samples"), kind="int", lo=2)
     box = e.get("grid_box")
     if not hasattr(box, "__len__") or len(box) != 3:
         raise ConfigError(f"experiment.grid_box must be [[x0, x1], [y0, y1], [z0, z1]] (m), got {box!r}")
-    box = [_vector(f"experiment.grid_box[{i}]", b, 2) for i, b in enumerate(box)]
+    box = [read_vector(f"experiment.grid_box[{i}]", b, 2) for i, b in enumerate(box)]
     for (a, b), name in zip(box, "xyz"):
         if not b > a:
             raise ConfigError(f"experiment.grid_box {name} side must have lo < hi (m), got {[a, b]!r}")
@@ -401,12 +402,12 @@ def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
             raise ConfigError(f"experiment.grid_box {name} side ({a}, {b}) m is not a whole number of "
                               f"experiment.grid_h = {out['grid_h']} m")
     out["grid_box"] = box
-    out["centre_sweep_z"] = [_field(f"experiment.centre_sweep_z[{i}]", z, unit="m")
+    out["centre_sweep_z"] = [read_field(f"experiment.centre_sweep_z[{i}]", z, unit="m")
                              for i, z in enumerate(e.get("centre_sweep_z") or [])]
     for i, z in enumerate(out["centre_sweep_z"]):  # each swept centre starts a search as the centre does
         _search_centre(f"experiment.centre_sweep_z[{i}]", z, [out["centre"][0], out["centre"][1], z], robot)
-    out["half_space"] = _field("experiment.half_space", e.get("half_space", True), kind="bool")
-    out["timing_repeats"] = _field("experiment.timing_repeats", e.get("timing_repeats", 3), kind="int", lo=1)
+    out["half_space"] = read_field("experiment.half_space", e.get("half_space", True), kind="bool")
+    out["timing_repeats"] = read_field("experiment.timing_repeats", e.get("timing_repeats", 3), kind="int", lo=1)
     return out
 
 
@@ -435,16 +436,16 @@ def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dic
         raise ConfigError("experiment=reconfig_motion needs a reconfigurable robot: robot.R_range is null")
     if recon.robot.mass is None:
         raise ConfigError("experiment=reconfig_motion needs a mass model: robot.mass is null")
-    pos = lambda k, unit="": _field(f"experiment.{k}", e.get(k), lo=0, lo_open=True, unit=unit)  # noqa: E731
-    out = dict(criterion=_choice("experiment.criterion", e.get("criterion", "k_tilde"), INDEX_NAMES),
-               aggregate=_choice("experiment.aggregate", e.get("aggregate", "integral"), AGGREGATES),
+    pos = lambda k, unit="": read_field(f"experiment.{k}", e.get(k), lo=0, lo_open=True, unit=unit)  # noqa: E731
+    out = dict(criterion=read_choice("experiment.criterion", e.get("criterion", "k_tilde"), INDEX_NAMES),
+               aggregate=read_choice("experiment.aggregate", e.get("aggregate", "integral"), AGGREGATES),
                b_v=pos("b_v"), b_f=pos("b_f"), R_step=pos("R_step", "m"), torque_limit=pos("torque_limit", "N m"),
                speed_limit=pos("speed_limit", "rad/s"),
-               beta=_field("experiment.beta", e.get("beta", 0.5), lo=0, hi=1, lo_open=True, hi_open=True))
+               beta=read_field("experiment.beta", e.get("beta", 0.5), lo=0, hi=1, lo_open=True, hi_open=True))
     d = e.get("drive")
     if d is None:
         raise ConfigError("experiment.drive is required (speed m/s, acceleration m/s^2, force N)")
-    lim = {k: _field(f"experiment.drive.{k}", d.get(k), lo=0, lo_open=True, unit=unit)
+    lim = {k: read_field(f"experiment.drive.{k}", d.get(k), lo=0, lo_open=True, unit=unit)
            for k, unit in (("speed", "m/s"), ("acceleration", "m/s^2"), ("force", "N"))}
     out["drive"] = RDriveLimits(**lim)
     try:  # the DP's R samples: the robot's range at experiment.R_step
@@ -453,15 +454,15 @@ def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dic
     except GeometryError as err:
         raise ConfigError(f"experiment.R_step={out['R_step']!r} m: {err}") from None
     # the DP's table: every R sample at every time sample of a case (3 at least)
-    _fits("experiment.R_step", out["R_step"], 3 * 8.0 * out["recon"].n_R,
+    check_fits("experiment.R_step", out["R_step"], 3 * 8.0 * out["recon"].n_R,
           f"{out['recon'].n_R:.3g} R samples at each time sample", unit="m")
     mech = dict(e.get("mechanism") or {})
-    kind = _choice("experiment.mechanism.kind", mech.pop("kind", "screw_linkage"), MECHANISMS)
+    kind = read_choice("experiment.mechanism.kind", mech.pop("kind", "screw_linkage"), MECHANISMS)
     for k, v in mech.items():  # in the units the config gives them (the linkage stores lead as a pitch in m/rad)
         if k in MECHANISM_FIELDS:
             rule = dict(MECHANISM_FIELDS[k])
             choices = rule.pop("choices", None)
-            mech[k] = _field(f"experiment.mechanism.{k}", v, **rule)
+            mech[k] = read_field(f"experiment.mechanism.{k}", v, **rule)
             if choices is not None and mech[k] not in choices:
                 raise ConfigError(f"experiment.mechanism.{k} must be one of {', '.join(map(str, choices))}, "
                                   f"got {v!r}")
@@ -475,10 +476,10 @@ def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dic
     except (TypeError, ValueError) as err:
         raise ConfigError(f"experiment.mechanism: {err}") from None
     ref = e.get("refine") or {}
-    out["refine"] = dict(enabled=_field("experiment.refine.enabled", ref.get("enabled", True), kind="bool"),
-                         n_ctrl=_field("experiment.refine.n_ctrl", ref.get("n_ctrl", 16), kind="int", lo=6),
-                         steps=_field("experiment.refine.steps", ref.get("steps", 150), kind="int", lo=1),
-                         learning_rate=_field("experiment.refine.learning_rate", ref.get("learning_rate", 2e-4),
+    out["refine"] = dict(enabled=read_field("experiment.refine.enabled", ref.get("enabled", True), kind="bool"),
+                         n_ctrl=read_field("experiment.refine.n_ctrl", ref.get("n_ctrl", 16), kind="int", lo=6),
+                         steps=read_field("experiment.refine.steps", ref.get("steps", 150), kind="int", lo=1),
+                         learning_rate=read_field("experiment.refine.learning_rate", ref.get("learning_rate", 2e-4),
                                               lo=0, lo_open=True))
     cases = e.get("cases")
     if not cases:
@@ -487,30 +488,30 @@ def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dic
     out["cases"] = {}
     for name, c in cases.items():
         p = f"experiment.cases.{name}"
-        kind = _choice(f"{p}.kind", c.get("kind"), ("adept", "task"))
-        boundary = _choice(f"{p}.boundary", c.get("boundary", "free"), BOUNDARIES)
-        law = _choice(f"{p}.law", c.get("law", "poly5"), tr.MOTION_LAWS)
+        kind = read_choice(f"{p}.kind", c.get("kind"), ("adept", "task"))
+        boundary = read_choice(f"{p}.boundary", c.get("boundary", "free"), BOUNDARIES)
+        law = read_choice(f"{p}.law", c.get("law", "poly5"), tr.MOTION_LAWS)
         # the cycle's samples (position, velocity, acceleration) and the DP's table over them and the R samples
         key = "n_samples" if kind == "adept" else "samples_per_segment"
-        per = _field(f"{p}.{key}", c.get(key), kind="int", lo=3 if kind == "adept" else 2)
+        per = read_field(f"{p}.{key}", c.get(key), kind="int", lo=3 if kind == "adept" else 2)
         n_t = per * (1 if kind == "adept" else max(1, len(c.get("points") or [])))
-        _fits(f"{p}.{key}", per, n_t * (72.0 + 8.0 * out["recon"].n_R),
+        check_fits(f"{p}.{key}", per, n_t * (72.0 + 8.0 * out["recon"].n_R),
               f"{n_t} cycle samples x {out['recon'].n_R} R samples (the DP's table)")
         try:
             if kind == "adept":
-                cyc = tr.adept_cycle(_vector(f"{p}.centre", c.get("centre"), 3),
-                                     heading=math.radians(_field(f"{p}.heading_deg", c.get("heading_deg"), unit="deg")),
-                                     duration=_field(f"{p}.duration", c.get("duration"), lo=0, lo_open=True, unit="s"),
-                                     law=law, blend=_field(f"{p}.blend", c.get("blend", 0.5), lo=0, hi=1, hi_open=True),
-                                     n_samples=_field(f"{p}.n_samples", c.get("n_samples"), kind="int", lo=3),
+                cyc = tr.adept_cycle(read_vector(f"{p}.centre", c.get("centre"), 3),
+                                     heading=math.radians(read_field(f"{p}.heading_deg", c.get("heading_deg"), unit="deg")),
+                                     duration=read_field(f"{p}.duration", c.get("duration"), lo=0, lo_open=True, unit="s"),
+                                     law=law, blend=read_field(f"{p}.blend", c.get("blend", 0.5), lo=0, hi=1, hi_open=True),
+                                     n_samples=read_field(f"{p}.n_samples", c.get("n_samples"), kind="int", lo=3),
                                      dtype=dtype)
             else:
-                pts = [_vector(f"{p}.points[{i}]", q, 3) for i, q in enumerate(c.get("points") or [])]
-                cyc = tr.task_path(pts, segment_duration=_field(f"{p}.segment_duration", c.get("segment_duration"),
+                pts = [read_vector(f"{p}.points[{i}]", q, 3) for i, q in enumerate(c.get("points") or [])]
+                cyc = tr.task_path(pts, segment_duration=read_field(f"{p}.segment_duration", c.get("segment_duration"),
                                                                 lo=0, lo_open=True, unit="s"),
-                                   law=law, samples_per_segment=_field(f"{p}.samples_per_segment",
+                                   law=law, samples_per_segment=read_field(f"{p}.samples_per_segment",
                                                                        c.get("samples_per_segment"), kind="int", lo=2),
-                                   closed=_field(f"{p}.closed", c.get("closed", False), kind="bool"), dtype=dtype)
+                                   closed=read_field(f"{p}.closed", c.get("closed", False), kind="bool"), dtype=dtype)
         except ValueError as err:
             if isinstance(err, ConfigError):
                 raise
@@ -534,13 +535,13 @@ EXPERIMENT_VALIDATORS = {
     "dynamics_cycle": dynamics_cycle_spec,
     "boundary_search": boundary_search_spec,
     "reconfig_motion": reconfig_motion_spec,
-    "ga_reconfig": _v_ga_reconfig,
+    "ga_reconfig": validate_ga_reconfig,
     "datasheet": datasheet_spec,
 }
 
 
 #: experiment name -> a check of its settings against the run directory (``run_dir``), where a setting can name it
-RUN_DIR_CHECKS = {"ga_reconfig": _v_ga_reconfig_run_dir}
+RUN_DIR_CHECKS = {"ga_reconfig": validate_ga_reconfig_run_dir}
 
 
 def validate_config(cfg: Mapping[str, Any], robot=None, recon=None, *, run_dir=None) -> None:
@@ -635,9 +636,9 @@ def mass_from_config(mass_cfg: Mapping[str, Any], geometry_kwargs: Optional[Mapp
         if v is None:
             continue
         if k == "forearm_model":
-            values[k] = str(_choice(f"{prefix}.forearm_model", v, FOREARM_MODELS))
+            values[k] = str(read_choice(f"{prefix}.forearm_model", v, FOREARM_MODELS))
         else:
-            values[k] = _field(f"{prefix}.{k}", v, unit=units.get(k, ""), **ranges[kinds.get(k, "nonneg")])
+            values[k] = read_field(f"{prefix}.{k}", v, unit=units.get(k, ""), **ranges[kinds.get(k, "nonneg")])
     if values.get("forearm_model") == "point_split" and "forearm_inertia_factor" in values:
         raise ConfigError(f"{prefix}.forearm_inertia_factor={values['forearm_inertia_factor']!r} applies to "
                           "forearm_model: rigid_rod only (point_split's inertia is that of its two end masses)")

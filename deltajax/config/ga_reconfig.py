@@ -7,7 +7,10 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Mapping, Optional
 
-from ._readers import ConfigError, _choice, _field, _fits
+from .readers import ConfigError, check_fits, read_choice, read_field
+
+__all__ = ["GaReconfigSettings", "ga_reconfig_settings", "ga_reconfig_build", "validate_ga_reconfig",
+           "validate_ga_reconfig_run_dir", "DESIGN_POINT_BYTES", "RECOMMEND_RULES"]
 
 # ---- ga_reconfig: the designer's problem (every field, unknown keys included); owner: designer ----
 # The one reader of experiment.* for experiment=ga_reconfig (the job and the validator call it); the design space,
@@ -75,16 +78,16 @@ def _ga_block(e: Mapping[str, Any], name: str) -> dict:
 def _ga_num(b: Mapping[str, Any], key: str, where: str, *, lo: Optional[float] = None, hi: Optional[float] = None,
             lo_open: bool = False, integer: bool = False, allow_none: bool = False, unit: str = "") -> Any:
     path = f"experiment.{where}.{key}" if where else f"experiment.{key}"
-    return _field(path, b.get(key), kind="int" if integer else "float", lo=lo, hi=hi, lo_open=lo_open,
+    return read_field(path, b.get(key), kind="int" if integer else "float", lo=lo, hi=hi, lo_open=lo_open,
                   none=allow_none, unit=unit)
 
 
 def _ga_flag(b, key, where):
-    return _field(f"experiment.{where}.{key}", b.get(key), kind="bool")
+    return read_field(f"experiment.{where}.{key}", b.get(key), kind="bool")
 
 
 def _ga_choice(b, key, where, options):
-    return _choice(f"experiment.{where}.{key}", b.get(key), options)
+    return read_choice(f"experiment.{where}.{key}", b.get(key), options)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -204,7 +207,7 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
                "n_phi": _ga_num(rw, "n_phi", "regular_workspace", lo=2, integer=True),
                "n_z": _ga_num(rw, "n_z", "regular_workspace", lo=2, integer=True)}
     search_refine = ()
-    if _field("experiment.regular_workspace.search_refine", rw.get("search_refine", False), kind="bool"):
+    if read_field("experiment.regular_workspace.search_refine", rw.get("search_refine", False), kind="bool"):
         steps, samples = rw.get("search_refine_steps", [10, 8]), rw.get("search_refine_samples", [3, 2, 3])
         for key, v, n, lo in (("search_refine_steps", steps, 2, 1), ("search_refine_samples", samples, 3, 2)):
             if not (isinstance(v, (list, tuple)) and len(v) == n and all(isinstance(x, int) and not
@@ -264,7 +267,7 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
     for path, size in (("experiment.ga.population_size", ga.get("population_size")),
                        ("experiment.pareto.population_size", pareto["population_size"])):
         if isinstance(size, (int, float)) and not isinstance(size, bool) and size > 0:
-            _fits(path, size, float(size) * per_design * DESIGN_POINT_BYTES,
+            check_fits(path, size, float(size) * per_design * DESIGN_POINT_BYTES,
                   f"{size:.3g} designs x {per_design} evaluated points each at once (a 3x3 Jacobian per point)")
     recommend = e.get("recommend")
     if recommend not in RECOMMEND_RULES:
@@ -296,7 +299,7 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
     # the verification's fine grids, one design at least evaluated at once
     fine = verify["n_R"] * (verify["task_n_r"] * verify["task_n_phi"] * verify["task_n_z"] + verify["rw_n_r"] *
                             verify["rw_n_phi"] * verify["rw_n_z"]) + verify["n_R_operating"] * verify["cycle_samples"]
-    _fits("experiment.verify", verify, float(fine) * DESIGN_POINT_BYTES, f"{fine:.3g} evaluated points of a design")
+    check_fits("experiment.verify", verify, float(fine) * DESIGN_POINT_BYTES, f"{fine:.3g} evaluated points of a design")
     return GaReconfigSettings(resume=resume, stop_after=sa, n_R=n_R, bounds=dict(d["bounds"]), task=task, good=good,
                     joints=joints, links=links, motor=motor, cycle=cycle, regular=regular, mode=mode,
                     objectives=tuple(names), primary=primary, weights=weights, constraints=cons, ga=ga,
@@ -305,10 +308,11 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
                     reconfig=_operating_settings(e), continue_from=cont, **optional)
 
 
-def _v_ga_reconfig(e, cfg, robot, recon) -> None:
+def validate_ga_reconfig(e, cfg, robot, recon) -> None:
     s = ga_reconfig_build(e, robot, recon)[0]  # every field, the design space, the GA settings, the problem
     if s.continue_from is not None:           # the earlier run: finished, of the same problem (its file only)
-        from ..optimize.workflow import SetupError, earlier_run
+        from ..jobs.designer_state import earlier_run
+        from ..optimize.workflow import SetupError
 
         try:
             earlier_run(s.continue_from, cfg)
@@ -316,12 +320,12 @@ def _v_ga_reconfig(e, cfg, robot, recon) -> None:
             raise ConfigError(str(err)) from None
 
 
-def _v_ga_reconfig_run_dir(e, run_dir) -> None:
+def validate_ga_reconfig_run_dir(e, run_dir) -> None:
     """The run directory is not the run that ``experiment.continue_from`` reads (with fresh=true its claim would
     delete what this run continues)."""
     from pathlib import Path
 
-    from ..optimize.workflow import continued_file
+    from ..jobs.designer_state import continued_file
 
     cont = e.get("continue_from")
     if cont is not None and continued_file(cont).resolve() == (Path(run_dir) / "results.h5").resolve():

@@ -3,9 +3,9 @@
 Measured in the same process (ratios are what we report; absolute rates depend on the machine and its load):
 (a) the new core kernel ``point_indices`` as one plain ``jit(vmap(...))`` (the whole kernel is one XLA:CPU loop,
 :mod:`deltajax.fastmath`; fast closed form and exact Jacobi form) and in blocks
-(:func:`deltajax.indices.map_points`, the previous form), f64 and f32; (b) the frozen pre-issue-9 kernel (:mod:`deltajax.baseline_kernel`, main 9f54c88) as the baseline; (c) the
+(:func:`deltajax.indices.map_points`, the previous form), f64 and f32; (b) the frozen pre-issue-9 kernel (:mod:`deltajax.benchmarks.frozen_kernel`, main 9f54c88) as the baseline; (c) the
 independent NumPy reference (:mod:`deltajax.reference`); (d) Numba (exact kernel + minimal loop ceiling),
-:func:`deltajax.workspace.bench_kernel_rates`.
+:func:`deltajax.benchmarks.numba_loops.bench_kernel_rates`.
 Every JAX result is checked against the NumPy reference before timing; XLA fusion counts are printed.
 """
 
@@ -22,7 +22,9 @@ import numpy as np
 from .. import reference
 from ..config import ConfigError
 from ..indices import POINT_BLOCK, map_points, point_indices
-from .. import baseline_kernel as _kernel_baseline
+from ..benchmarks import frozen_kernel as _kernel_baseline
+
+__all__ = ["run", "fusion_count"]
 
 
 def _sample_points(n: int, seed: int) -> np.ndarray:
@@ -49,8 +51,8 @@ def fusion_count(compiled) -> int:
 
 
 def _numba_rates(points: np.ndarray, geo: list, repeats: int):
-    """Numba figures, ``deltajax.workspace.bench_kernel_rates(points, geo, repeats)`` -> {label: (n, wall s, CPU s)}."""
-    from ..workspace import bench_kernel_rates
+    """Numba figures, ``deltajax.benchmarks.numba_loops.bench_kernel_rates(points, geo, repeats)`` -> {label: (n, wall s, CPU s)}."""
+    from ..benchmarks.numba_loops import bench_kernel_rates
 
     return bench_kernel_rates(points, geo, repeats)
 

@@ -28,6 +28,8 @@ from ..config import boundary_search_spec
 from ..papers import BOUNDARY_SEARCH as PAPER
 from ..workspace import boundary as B
 
+__all__ = ["run"]
+
 
 def _timed_search(robot, p, step, method, reps):
     """Run one search: first call (compile + run) and the best of ``reps`` warm calls (s)."""

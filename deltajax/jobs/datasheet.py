@@ -23,6 +23,8 @@ from ..config import ConfigError, datasheet_spec
 from ..constraints import Motor
 from ..datasheet import MOTOR_FIELDS, ROW_FIELDS, UNITS, datasheet
 
+__all__ = ["run", "run_designs", "write", "save"]
+
 
 def _designs_from_run(run_dir: str, ctx):
     """[(name, robot, motor, gear ratio, R)] of a ga_reconfig run's baseline and recommended designs."""
@@ -83,9 +85,9 @@ def write(ctx, designs, **kwargs) -> None:
 
 
 def _designs_from_preset(name: str, spec):
-    from .dynamics_cycle import _preset_robot   # the presets with a mass model, as the dynamics job analyses them
+    from .dynamics_cycle import preset_robot   # the presets with a mass model, as the dynamics job analyses them
 
-    robot = _preset_robot(name)
+    robot = preset_robot(name)
     if robot is None:
         raise ConfigError(f"source={name!r}: the preset has no mass model, a datasheet needs one")
     return [(name, robot, Motor(**spec["motor"]), spec["gear_ratio"], spec["R"])]

@@ -32,11 +32,13 @@ from ..config import ConfigError, dynamics_cycle_spec
 from ..cycle import Limits, cycle_metrics, cycle_profile, metrics_by_forearm_model
 from ..mass import FOREARM_MODELS
 
+__all__ = ["run", "preset_robot", "CASE_FIELDS"]
+
 CASE_FIELDS = (("p", "m"), ("p_dot", "m/s"), ("p_ddot", "m/s^2"), ("theta", "rad"), ("theta_dot", "rad/s"),
                ("theta_ddot", "rad/s^2"), ("tau", "N m"), ("force_R", "N"), ("R", "m"), ("R_dot", "m/s"))
 
 
-def _preset_robot(name):
+def preset_robot(name):
     if name == "franco2026":
         return presets.franco2026(fixed_R=0.200, with_mass=True)
     rob = presets.get(name)
@@ -109,7 +111,7 @@ def run(ctx) -> None:
     robots = {cfg_name: ctx.robot}
     for name in spec["robots"]:
         if name not in robots:
-            rob = _preset_robot(name)
+            rob = preset_robot(name)
             if rob is None:
                 raise ConfigError(f"experiment.robots: preset {name!r} has no mass model")
             robots[name] = rob

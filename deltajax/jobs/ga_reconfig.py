@@ -15,7 +15,7 @@ Stages (the library: :mod:`deltajax.optimize.workflow`; each stored in ``results
 baseline -> screen (Sobol, seeds the GA) -> ga (checkpointed) -> pareto (NSGA-II) -> refine (optax) ->
 verify (fine grids, recommendation) -> results (summary) -> plots -> report (``report.html``, the self-contained
 run report of :mod:`deltajax.runreport`). ``experiment.continue_from`` (more budget for
-a finished run, :func:`deltajax.optimize.workflow.earlier_run`): its verified front seeds the GA and NSGA-II and
+a finished run, :func:`deltajax.jobs.designer_state.earlier_run`): its verified front seeds the GA and NSGA-II and
 joins the verified candidates with its stored metrics, so the recommendation cannot be one its recommendation
 dominates.
 The GA paper's claims are *not* compared here (different metrics); see docs/REPRODUCTION.md §5.
@@ -31,7 +31,7 @@ import numpy as np
 from ..config import ConfigError, GaReconfigSettings as Settings, ga_reconfig_build, ga_reconfig_settings
 from ..io import ChecksumError
 from ..rundir import CheckpointError
-from ..optimize.workflow import load_checkpoint as _load_checkpoint, put_checkpoint as _put_checkpoint
+from . import designer_state as ST
 
 __all__ = ["run", "build", "settings_from_config", "Settings", "STAGES"]
 
@@ -46,7 +46,7 @@ def _claim(ctx, s, path, fp, W):
     """Stages already finished in ``path`` (everything on disk staged into the results), or refuse."""
     old_fp, done = None, []
     try:
-        old_fp, done = W.stages_done(path)                        # verified attributes (integrity record)
+        old_fp, done = ST.stages_done(path)                        # verified attributes (integrity record)
     except ChecksumError as err:
         raise CheckpointError(f"cannot resume: {err}; add fresh=true to start over") from None
     except OSError as err:
@@ -55,17 +55,17 @@ def _claim(ctx, s, path, fp, W):
     if old_fp is not None and old_fp != fp:
         raise ConfigError(f"{path} holds a ga_reconfig run with different settings (fingerprint {old_fp} vs "
                           f"{fp}); choose another hydra.run.dir (nothing was changed)")
-    if path.exists() and old_fp is None and s.resume != "never" and _load_checkpoint(path) is None:
+    if path.exists() and old_fp is None and s.resume != "never" and ST.load_checkpoint(path) is None:
         raise ConfigError(f"{path} exists but holds no ga_reconfig run; choose another hydra.run.dir "
                           "(nothing was changed)")
     if s.resume == "never":
         return []
     if path.exists():
         try:
-            W.restage(ctx.results, path)       # verified, and nothing already on disk is ever dropped
+            ST.restage(ctx.results, path)       # verified, and nothing already on disk is ever dropped
         except ChecksumError as err:
             raise CheckpointError(f"cannot resume: {err}; add fresh=true to start over") from None
-    if s.resume == "must" and "ga" not in done and _load_checkpoint(path) is None:
+    if s.resume == "must" and "ga" not in done and ST.load_checkpoint(path) is None:
         raise ConfigError(f"experiment.resume=must but {path} holds no GA checkpoint")
     return done
 
@@ -85,10 +85,10 @@ def run(ctx) -> None:
     ga_cfg = dataclasses.replace(ga_cfg, seed=int(ctx.cfg.seed))
     res, path, seed = ctx.results, ctx.run_dir / "results.h5", int(ctx.cfg.seed)
     try:   # more budget for a finished run: its verified front seeds the searches and joins the candidates
-        earlier = None if s.continue_from is None else W.earlier_run(s.continue_from, ctx.cfg)
+        earlier = None if s.continue_from is None else ST.earlier_run(s.continue_from, ctx.cfg)
     except W.SetupError as err:
         raise ConfigError(str(err)) from None
-    fp = W.job_fingerprint(ctx.cfg)
+    fp = ST.job_fingerprint(ctx.cfg)
     done = _claim(ctx, s, path, fp, W)
     res.set_attrs(ga_reconfig_fingerprint=fp)
     if "report" in done:
@@ -179,14 +179,14 @@ def run(ctx) -> None:
             else np.where(np.asarray(objs) == primary, scale, 0.0))
     ga_what = ("weighted sum " + " + ".join(f"{s.weights.get(o, 0.0):g} x {o}" for o in objs)
                if s.mode == "weighted" else f"primary objective {primary}")
-    ck = None if s.resume == "never" else _load_checkpoint(path)
+    ck = None if s.resume == "never" else ST.load_checkpoint(path)
     ctx.log("GA stage already finished: reusing its checkpoint" if "ga" in done else
             f"resuming the GA from generation {ck['generations_done']}" if ck else f"starting the GA ({ga_what})")
     bar = ctx.progress(total=ga_cfg.generations, desc=f"GA {ga_cfg.algorithm}")
     bar.update(int(ck["generations_done"]) if ck else 0)
 
     def save(c):
-        _put_checkpoint(res, c)
+        ST.put_checkpoint(res, c)
         res.flush()
 
     try:
@@ -313,7 +313,7 @@ def run(ctx) -> None:
         bar.close()
         if earlier is not None:                                     # the earlier run's front, as it verified it
             try:
-                mv = W.carry_earlier(mv, earlier, objs)
+                mv = ST.carry_earlier(mv, earlier, objs)
             except W.SetupError as err:
                 raise ConfigError(str(err)) from None
             cand, names = np.concatenate([cand, carried]), names + list(earlier.names)

@@ -16,6 +16,8 @@ from ..indices import INDEX_NAMES, indices
 from ..kinematics import ik
 from ..papers import FRANCO2026_EXAMPLE_INDICES, FRANCO2026_EXAMPLES, FRANCO2026_MISPRINTS
 
+__all__ = ["run", "SCALAR_INDICES", "UNITS"]
+
 SCALAR_INDICES = tuple(n for n in INDEX_NAMES)
 UNITS = {"manipulability": "m^3/rad^3", "imi": "rad^3/m^3"}
 

@@ -20,6 +20,8 @@ import numpy as np
 from ..config import ConfigError, paper_grid_from_config
 from ..indices import INDEX_NAMES
 
+__all__ = ["run", "STATS"]
+
 STATS = ("min", "max", "mean")
 
 

@@ -37,6 +37,8 @@ from ..config import reconfig_motion_spec
 from ..cycle import Limits
 from ..motion_refine import path_report, refine_path
 
+__all__ = ["run", "METHODS", "SUMMARY"]
+
 METHODS = ("fixed", "pointwise", "path_dp", "path_refined")
 SUMMARY = (("mean_value", "1"), ("min_value", "1"), ("max_abs_R_dot", "m/s"), ("max_abs_R_ddot", "m/s^2"),
            ("max_abs_force_R", "N"), ("max_abs_screw_torque", "N m"), ("max_screw_speed", "rad/s"),

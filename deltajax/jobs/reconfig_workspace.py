@@ -13,6 +13,8 @@ import numpy as np
 from ..config import ConfigError, paper_grid_from_config
 from ..papers import FRANCO2026_VOLUMES as PAPER
 
+__all__ = ["run"]
+
 
 def run(ctx) -> None:
     from .. import plots

@@ -7,7 +7,7 @@ task and runs the cycle at one R, chosen among ``n_R_operating`` candidates by t
 ``path`` (:func:`path_operating`, issue 14 item 4): the robot moves R *during* the cycle, around that per-task R.
 For one design (pure, jit/vmap-able over a population):
 
-1. **Plan** (exact DP of :mod:`deltajax.motion`: :func:`deltajax.motion.path_tables` and its Viterbi ``_dp``) on
+1. **Plan** (exact DP of :mod:`deltajax.motion`: :func:`deltajax.motion.path_tables` and its Viterbi ``path_dp``) on
    a planning grid: time = the M + 1 control-point instants u = m / M of a periodic spline (``segments`` M), R =
    a window of ``n_R`` samples R_lo + k delta inside [R_min, R_max] holding the per-task R as a sample, with
    delta = min(speed h, accel h^2, range / n_R) (h = T_plan / M), so the drive can move one step per control
@@ -60,7 +60,7 @@ from .. import constraints as C
 from ..cycle import cycle_profile, log_bisect
 from ..mechanism import Mechanism, drive_profile, example_screw_linkage
 from ..geometry import ReconfigurableDelta
-from ..motion import AGGREGATES, _dp, path_tables, with_R
+from ..motion import AGGREGATES, path_dp, path_tables, with_R
 from ..motion_refine import spline_basis
 from ..trajectory import Cycle
 
@@ -315,9 +315,9 @@ def path_operating(pb, design, R_op, T_plan, task_joint_margin, task_interferenc
     a = min(2 * w, _A_CAP)
     args = (tab.value, feasible, coef, tab.weights, dR, h, jnp.asarray(1.0, dt))
     kw = dict(w=w, a=a, primary_min=spec.aggregate == "min", speed=spec.speed, accel=spec.accel)
-    P, S = jax.lax.map(lambda k0: _dp(*args, k0, boundary="closed", backtrack=False, **kw)[:2], jnp.arange(n))
+    P, S = jax.lax.map(lambda k0: path_dp(*args, k0, boundary="closed", backtrack=False, **kw)[:2], jnp.arange(n))
     k0 = jnp.argmax(jnp.where(P == jnp.max(P), S, -jnp.inf))
-    P, S, plan = _dp(*args, k0, boundary="closed", backtrack=True, **kw)
+    P, S, plan = path_dp(*args, k0, boundary="closed", backtrack=True, **kw)
     planned = jnp.isfinite(P)
 
     # (2) realise: periodic cubic B-spline through the plan's control points. Candidates: the spline, the

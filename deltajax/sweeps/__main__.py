@@ -17,6 +17,8 @@ from .layout import find_runs
 from .merge import ShardError, merge_shards, merge_sweep
 from .summary import summarize_sweep
 
+__all__ = ["main"]
+
 
 def _not_a_sweep(path: Path, prog: str):
     """Why ``path`` is not a sweep directory (a single run's directory, or no runs at all), or None."""

@@ -31,11 +31,8 @@ from . import boundary
 from .measure import WorkspaceVolume, reach_box, volume  # one-call volume of any robot
 
 
-def __getattr__(name):
-    """The Numba benchmark hooks, imported on first use: importing numba costs ~0.5 s, paid by every CLI process
-    (and every test subprocess) whether or not it runs a Numba kernel."""
-    if name in ("bench_kernel_rates", "bench_numba"):
-        from . import _nb_bench
-
-        return getattr(_nb_bench, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+__all__ = ["FIELD_NAMES", "Grid", "franco2026_grid", "index_fields", "make_grid", "mirrored_point_indices",
+           "point_indices", "reachable_fraction", "reachable_mask", "Redundancy", "indices_at_host", "reach_interval",
+           "reach_k_range_host", "reconfigurable_reachable", "resolve_redundancy", "resolve_redundancy_host",
+           "sample_value", "CheckpointMismatch", "GridJob", "fixed_workspace", "reconfigurable_workspace",
+           "redundancy_grid", "run_chunks", "index_stats", "boundary", "WorkspaceVolume", "reach_box", "volume"]

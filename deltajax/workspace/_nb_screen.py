@@ -20,6 +20,9 @@ from ._nb_kernel import (INLINE, INV_COND, JACOBI, K_TILDE, MANIPULABILITY, OMEG
                          SIGMA_MIN_V, as_tuple4, criterion_of, ik_ok_all, jacobian_blocks, point_kernel, point_value,
                          sigma_tilde, sv_matrix)
 
+__all__ = ["tcubic", "tcubic2", "eig_cubic_parts", "eig_with_bound", "screen_window", "TRIM_BLOCK", "trim_window",
+           "point_window", "window_buffers", "VERIFY_BATCH", "resolve_screened", "screen_audit"]
+
 
 _EPS = 2.220446049250313e-16
 #: eigenvalue rounding of both solvers (Jacobi: backward stable, ~eps ||A|| per rotation, 12 rotations; the

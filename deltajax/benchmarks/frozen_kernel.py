@@ -6,10 +6,13 @@ from __future__ import annotations
 
 import jax.numpy as jnp
 
-from .geometry import CHAIN_ANGLES
-from .indices import Indices, k_tilde
+from ..geometry import CHAIN_ANGLES
+from ..indices import Indices, k_tilde
 
 import math
+
+__all__ = ["to_chain_frames", "ik_cos_sin", "singular_values_closed_form", "indices_from_singular_values", "point_indices",
+           "redundancy_kernel", "mirrored_point_indices", "ik_cos_sin_result", "patch_old_kernel"]
 
 _COS_A = tuple(math.cos(a) for a in CHAIN_ANGLES)
 _SIN_A = tuple(math.sin(a) for a in CHAIN_ANGLES)
@@ -219,7 +222,7 @@ def mirrored_point_indices(robot, p, *, b_v=2.0, b_f=4.2, beta=0.5, sv_method=No
 
 def ik_cos_sin_result(robot, p, branch="outer"):
     """The old algebraic IK in the public IKCosSin shape (reason codes zero: the fitness never reads them)."""
-    from .kinematics import IKCosSin
+    from ..kinematics import IKCosSin
 
     cos, sin, ok = ik_cos_sin(robot, p)
     return IKCosSin(cos=cos, sin=sin, ok=ok, reason=jnp.zeros(3, jnp.int32))
@@ -230,8 +233,8 @@ def patch_old_kernel():
     (the fitness baseline of ``experiments/bench_fitness.py``). Must wrap tracing (``jax.jit(...)`` calls)."""
     import contextlib
 
-    from .optimize import objectives
-    from .workspace import grid, redundancy
+    from ..optimize import objectives
+    from ..workspace import grid, redundancy
 
     # dynamics (the cycle terms) calls the core's loop_closure directly since the flat rewrite: it runs the
     # current core on both sides of the comparison

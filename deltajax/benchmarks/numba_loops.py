@@ -3,8 +3,8 @@
 :func:`bench_kernel_rates` is the hook the kernel benchmark calls; :func:`bench_numba` the same figures for one
 robot as a dict. Labels:
 
-* ``exact (jacobi)`` / ``fast (cubic)``: the production field loop (:func:`._nb.fixed_fields`, the mirror's
-  :func:`._nb_kernel.point_kernel` with either eigenvalue solver) over every point;
+* ``exact (jacobi)`` / ``fast (cubic)``: the production field loop (:func:`deltajax.workspace._nb.fixed_fields`, the mirror's
+  :func:`deltajax.workspace._nb_kernel.point_kernel` with either eigenvalue solver) over every point;
 * ``exact on reachable`` / ``fast on reachable``: the same on the reachable points only (the issue's figure);
 * ``minimal loop ceiling``: :func:`minimal_loop`, the same algebra stripped to the bone (reciprocals instead
   of divisions where the core divides, no input guards, no repeated-eigenvalue fix-up), the ceiling the
@@ -27,7 +27,7 @@ from llvmlite import ir
 from numba.core import types
 from numba.extending import intrinsic
 
-from ._nb_kernel import (FAST, INLINE, JACOBI, N_IDX, OPTS, _T_POLY, as_tuple4, chain_local, jx_row, kt_tuple,
+from ..workspace._nb_kernel import (FAST, INLINE, JACOBI, N_IDX, OPTS, _T_POLY, as_tuple4, chain_local, jx_row, kt_tuple,
                          limits_tuple, sv_matrix)
 
 __all__ = ["bench_kernel_rates", "bench_numba", "minimal_loop", "minimal_loop_newton"]
@@ -197,7 +197,7 @@ def bench_kernel_rates(points: np.ndarray, geo, repeats: int = 3) -> dict:
         geo: [R, r, L1, L2, theta_min, theta_max] (m, rad).
         repeats: timed repetitions (best CPU time is reported).
     """
-    from . import _nb
+    from ..workspace import _nb
 
     R, r, L1, L2, lo, hi = (float(v) for v in geo)
     pts = np.asarray(points, np.float64).reshape(-1, 3)

@@ -6,12 +6,15 @@ import math
 from typing import Any, Optional
 
 
+__all__ = ["ConfigError", "read_field", "read_choice", "read_names", "read_vector", "memory_bytes", "check_fits"]
+
+
 class ConfigError(ValueError):
     """Invalid configuration; the message names the field (dotted path) and the value."""
 
 
 # ---- the one set of field readers: every value of the configuration goes through these ----
-def _field(path: str, v: Any, *, kind: str = "float", lo: Optional[float] = None, hi: Optional[float] = None,
+def read_field(path: str, v: Any, *, kind: str = "float", lo: Optional[float] = None, hi: Optional[float] = None,
            lo_open: bool = False, hi_open: bool = False, none: bool = False, unit: str = "") -> Any:
     """Check one value; ``kind`` is "float" (finite number), "int" or "bool". Returns it as a Python value.
     ``unit`` (the unit the user writes it in: "m", "deg", "s", ...) follows every bound and value in the message."""
@@ -55,23 +58,23 @@ def _field(path: str, v: Any, *, kind: str = "float", lo: Optional[float] = None
     return v
 
 
-def _choice(path: str, v: Any, options) -> str:
+def read_choice(path: str, v: Any, options) -> str:
     if v not in tuple(options):
         raise ConfigError(f"{path} must be one of {', '.join(map(str, sorted(options)))}, got {v!r}")
     return v
 
 
-def _names(path: str, v: Any, options, *, min_len: int = 0) -> list:
+def read_names(path: str, v: Any, options, *, min_len: int = 0) -> list:
     items = list(v or [])
     for x in items:
-        _choice(f"{path} entry", x, options)
+        read_choice(f"{path} entry", x, options)
     if len(items) < min_len:
         raise ConfigError(f"{path} must list at least {min_len} of {', '.join(map(str, sorted(options)))}, "
                           f"got {items!r}")
     return items
 
 
-def _vector(path: str, v: Any, n: int, unit: str = "m") -> list:
+def read_vector(path: str, v: Any, n: int, unit: str = "m") -> list:
     u = f" ({unit})" if unit else ""
     try:
         items = [float(t) for t in v]
@@ -105,7 +108,7 @@ def _gib(n: float) -> str:
     return f"{n / 2 ** 30:.3g} GiB"
 
 
-def _fits(path: str, v: Any, n_bytes: float, what: str, unit: str = "") -> None:
+def check_fits(path: str, v: Any, n_bytes: float, what: str, unit: str = "") -> None:
     """Refuse ``path=v`` when ``what`` needs at least ``n_bytes`` (a lower bound) and the machine has less."""
     cap = memory_bytes()
     if n_bytes > cap:
