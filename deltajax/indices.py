@@ -92,7 +92,8 @@ def sigma_tilde(sigma, a, b):
     inside = sigma <= b  # False for NaN and +inf
     s = jnp.where(inside, sigma, a)  # double where: inf/NaN never reach the squares (finite gradients)
     # multiply by the breakpoints' reciprocals (design scalars): a per-point divide would be its own XLA loop
-    left = 1.0 - ((s - a) * (1.0 / a)) ** 2
+    u = s * (1.0 / a)
+    left = u * (2.0 - u)                   # = 1 - (u - 1)^2, exactly 0 at s = 0 (a singular point scores 0)
     right = 1.0 - ((s - a) * (1.0 / (b - a))) ** 2
     val = jnp.where(inside, jnp.where(s <= a, left, right), 0.0)
     return jnp.where(jnp.isnan(sigma), jnp.nan, val)

@@ -27,6 +27,12 @@ import numpy as np
 from ..geometry import CHAIN_ANGLES, FULL_TURN_MIN
 from ..indices import INDEX_NAMES, _T_POLY as _CORE_T_POLY
 
+__all__ = ["OPTS", "INLINE", "N_IDX", "CRITERION", "JACOBI", "FAST", "CUBIC", "SV_METHODS", "limits_tuple", "kt_tuple",
+           "as_tuple4", "chain_local", "loop_closure", "loop_vectors", "jx_row", "jq_theta", "jx_det", "chain",
+           "chain_ok", "ik_ok_all", "ik_ok", "jacobian_blocks", "sv_matrix", "sym3_top2",
+           "singular_values_from_eig", "singular_values", "sigma_tilde", "indices_from_sv", "point_kernel",
+           "criterion_of", "point_value"]
+
 def _drop_stale_cache() -> None:
     """Numba's on-disk cache checks only the file that defines a function, but the drivers (:mod:`._nb`,
     :mod:`._nb_screen`) inline this module's functions: after an edit here their cached machine code would be
@@ -403,8 +409,12 @@ def singular_values(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2, met
 def sigma_tilde(sig, a, b):
     """The paper's piecewise quadratic: 1 - ((sig - a) / a)^2 up to a, 1 - ((sig - a) / (b - a))^2 up to b,
     0 above; NaN stays NaN."""
-    t = (sig - a) * (1.0 / a if sig <= a else 1.0 / (b - a))  # loop-invariant reciprocals
-    v = 1.0 - t * t
+    if sig <= a:
+        u = sig * (1.0 / a)                   # loop-invariant reciprocals
+        v = u * (2.0 - u)                     # = 1 - (u - 1)^2, exactly 0 at sig = 0, as the JAX definition
+    else:
+        t = (sig - a) * (1.0 / (b - a))
+        v = 1.0 - t * t
     return 0.0 if sig > b else v
 
 
