@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 from deltajax import constraints as C
-from deltajax.optimize.objectives import cylinder_points
+from deltajax.optimize.designer import cylinder_points
 
 SPEC = C.GoodSpec(joints=C.JointModel(limit=math.radians(55), elbow_neutral=math.radians(90),
                                       platform_neutral=math.radians(40)),

@@ -1,7 +1,7 @@
 """Benchmark-only code: the yardsticks the benchmarks measure against, not part of the library.
 
 * :mod:`deltajax.benchmarks.frozen_kernel`: a frozen copy of an earlier JAX kernel (the baseline of the
-  ``bench_kernel`` job and ``experiments/bench_fitness.py``); never fixed, never shared with the library.
+  ``bench_kernel`` job); never fixed, never shared with the library.
 * :mod:`deltajax.benchmarks.numba_loops`: the Numba kernel's throughput and the minimal tight loop of the same
   algorithm (the ceiling the kernel is compared with).
 

@@ -1,5 +1,5 @@
 """Frozen copy of the kernel as of main 9f54c88 (2026-12-01), the baseline of ``bench_kernel`` and
-``experiments/bench_fitness.py`` (issue 9: "keep a copy of the old kernel in the benchmark"). Not used by
+the kernel benchmarks (issue 9: "keep a copy of the old kernel in the benchmark"). Not used by
 the library; do not fix or share code with it, it is the yardstick."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ from ..indices import Indices, k_tilde
 import math
 
 __all__ = ["to_chain_frames", "ik_cos_sin", "singular_values_closed_form", "indices_from_singular_values", "point_indices",
-           "redundancy_kernel", "mirrored_point_indices", "ik_cos_sin_result", "patch_old_kernel"]
+           "redundancy_kernel", "mirrored_point_indices", "ik_cos_sin_result"]
 
 _COS_A = tuple(math.cos(a) for a in CHAIN_ANGLES)
 _SIN_A = tuple(math.sin(a) for a in CHAIN_ANGLES)
@@ -227,29 +227,3 @@ def ik_cos_sin_result(robot, p, branch="outer"):
     cos, sin, ok = ik_cos_sin(robot, p)
     return IKCosSin(cos=cos, sin=sin, ok=ok, reason=jnp.zeros(3, jnp.int32))
 
-
-def patch_old_kernel():
-    """Context manager: inside it, the workspace/objective/dynamics consumers call the frozen old kernel
-    (the fitness baseline of ``experiments/bench_fitness.py``). Must wrap tracing (``jax.jit(...)`` calls)."""
-    import contextlib
-
-    from ..optimize import objectives
-    from ..workspace import grid, redundancy
-
-    # dynamics (the cycle terms) calls the core's loop_closure directly since the flat rewrite: it runs the
-    # current core on both sides of the comparison
-    patches = [(redundancy, "_kernel", redundancy_kernel), (grid, "mirrored_point_indices", mirrored_point_indices),
-               (objectives, "mirrored_point_indices", mirrored_point_indices), (grid, "ik_cos_sin", ik_cos_sin_result),
-               (redundancy, "ik_cos_sin", ik_cos_sin_result)]
-
-    @contextlib.contextmanager
-    def ctx():
-        saved = [(m, n, getattr(m, n)) for m, n, _ in patches]
-        try:
-            for m, n, f in patches:
-                setattr(m, n, f)
-            yield
-        finally:
-            for m, n, f in saved:
-                setattr(m, n, f)
-    return ctx()

@@ -49,7 +49,7 @@ _GA_OPTIONAL = {"regular_workspace": {"search_refine", "search_refine_steps", "s
 #: of populations that cannot be evaluated at once
 DESIGN_POINT_BYTES = 9 * 4
 
-RECOMMEND_RULES = ("floor", "band", "knee", "primary")   # deltajax.optimize.workflow.recommend
+from ..optimize.workflow import RECOMMEND_RULES  # noqa: E402  the one list (the rules of workflow.recommend)
 
 
 def _ga_plain(x: Any) -> Any:

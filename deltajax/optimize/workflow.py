@@ -41,7 +41,7 @@ __all__ = ["SetupError", "setup", "designer_problem", "screen", "screen_front", 
            "RECOMMEND_RULES", "DESCENT_ROWS", "design_metrics", "batch_evaluator", "objective_matrix",
            "STORED_METRIC"]
 
-RECOMMEND_RULES = ("band", "knee", "primary")
+RECOMMEND_RULES = ("floor", "band", "knee", "primary")   # the rules of :func:`recommend`
 
 #: The name under which ``verify`` stores a metric of the fine-grid evaluation (written by
 #: :func:`deltajax.optimize.report.store_verify`, read back by :func:`deltajax.jobs.designer_state.carry_earlier`); others keep their own.
