@@ -5,7 +5,7 @@ CPU and timed. Run it first whenever a GPU is available and record the figures i
     python experiments/gpu_check.py --scale 1       # tiny: what tests/test_gpu_check.py runs on CPU
 
 Paths (float64): kernel ``jit(vmap(dj.point_indices))``; workspace index fields (``index_fields``) and JAX
-redundancy resolution (``resolve_redundancy``); GA fitness (``make_fitness`` of the default ga_reconfig
+redundancy resolution (``resolve_redundancy``); GA fitness (``workflow.ga_fitness`` of the default ga_reconfig
 problem); dynamics profiles over designs x cycles (``dj.cycle_profile`` via the public API); boundary search
 (``boundary_search`` on boundary2d). Each runs on ``jax.devices()[0]`` and on ``jax.devices("cpu")[0]``;
 results must agree (rtol 1e-9 on finite values, identical masks / selections); prints warm throughput.
@@ -70,12 +70,14 @@ def checks(scale: int):
     n_red = 256 * scale
     yield ("redundancy resolve_redundancy", n_red * recon.n_R, "(point, R) pairs",
            lambda p: dj.workspace.resolve_redundancy(recon, p), (pts[:n_red],))
-    import bench_fitness
+    import bench_ga
 
-    space, pb = bench_fitness.problem()
+    from deltajax.optimize.workflow import ga_fitness
+
+    s, space, pb = bench_ga.designer_problem(8)
     P = 64 * scale
     genes = jax.random.uniform(jax.random.PRNGKey(1), (P, space.dim), dtype=jnp.float64)
-    fit = dj.optimize.make_fitness(pb, space)
+    fit = ga_fitness(pb, space, [s.primary], [-1.0 / 195.0])   # picks/min, feasibility first
     yield "GA fitness", P, "designs", lambda g: fit(g)[0], (genes,)
     rm = dj.presets.franco2026(fixed_R=0.3, with_mass=True)
     n_d = 64 * scale
