@@ -43,7 +43,7 @@ from jaxtyping import Array, Bool, Float
 
 from .geometry import Delta
 from .jacobian import jq_theta, jx_det, jx_row
-from .kinematics import (_COS_A, _SIN_A, _branch_sign, _from_chain_frames, chain_local, design_ok, fk, limit_terms,
+from .kinematics import (COS_A, SIN_A, branch_sign, from_chain_frames, chain_local, design_ok, fk, limit_terms,
                          loop_closure, loop_vectors, safe_point, to_chain_frames)
 
 __all__ = [
@@ -149,7 +149,7 @@ def _solve3(A, b, *, transpose: bool = False):
 
 def _validity(robot: Delta, u_local, d, tol):
     """Away from type-1 (Jq) and type-2 (Jx) singularities, relative tolerance ``tol``."""
-    det_jx, _ = _adjugate_rows(_from_chain_frames(u_local))
+    det_jx, _ = _adjugate_rows(from_chain_frames(u_local))
     return (jnp.abs(det_jx) > tol) & jnp.all(jnp.abs(d) > tol * robot.upper_arm)
 
 
@@ -242,8 +242,8 @@ def flat_efforts(robot: Delta, chains, rows, det, p_ddot, R_ddot):
             tau_in[i] = tau_in[i] + J * L1 * (ch.c * wz - ch.s * wx)
             fR_in = fR_in + J * wx
             # -J sum_i w_i'' in the base frame = -3 J p'' + J sum_i B_i'' (B'' has no y component)
-            F[0] = F[0] - J * (p_ddot[0] - _COS_A[i] * bx)
-            F[1] = F[1] - J * (p_ddot[1] - _SIN_A[i] * bx)
+            F[0] = F[0] - J * (p_ddot[0] - COS_A[i] * bx)
+            F[1] = F[1] - J * (p_ddot[1] - SIN_A[i] * bx)
             F[2] = F[2] - J * (p_ddot[2] - bz)
     C = (_cross(rows[1], rows[2]), _cross(rows[2], rows[0]), _cross(rows[0], rows[1]))
     inv_det = 1.0 / jnp.where(det != 0, det, 1.0)
@@ -313,7 +313,7 @@ def joint_motion(robot: Delta, p: Float[Array, "3"], p_dot: Float[Array, "3"], p
 def flat_motion(robot: Delta, p, v, a, R_dot, R_ddot, *, branch: str = "outer", singular_tol: float = 1e-9):
     """The three chains' joint motion (scalars), validity, Jx rows and det Jx for one platform motion."""
     lim = limit_terms(robot.theta_min, robot.theta_max)
-    sign = _branch_sign(branch)
+    sign = branch_sign(branch)
     _, usable = safe_point(robot, jnp.stack(p))  # non-finite or huge p: a stand-in before any algebra
     p = tuple(jnp.where(usable, pk, jnp.zeros_like(pk)) for pk in p)
     chains = tuple(_chain_motion(robot, i, p, v, a, R_dot, R_ddot, lim, sign) for i in range(3))
@@ -338,7 +338,7 @@ def platform_motion(robot: Delta, theta: Float[Array, "3"], theta_dot: Float[Arr
     p = jnp.where(fwd.ok, fwd.p, jnp.asarray([0.0, 0.0, 1.0], dtype) * robot.forearm)
     w, u, d = _chain_terms(robot, p, theta)
     ok = fwd.ok & _validity(robot, u, d, singular_tol)
-    Jx = _from_chain_frames(u)
+    Jx = from_chain_frames(u)
     Jx_safe = jnp.where(ok, Jx, jnp.eye(3, dtype=dtype))
     b_dot, b_ddot = _elbow_rates(robot, theta, theta_dot, theta_ddot, R_dot, R_ddot)
     p_dot = _solve3(Jx_safe, jnp.sum(u * b_dot, axis=-1))
@@ -367,14 +367,14 @@ def _lagrange(robot: Delta, m: Motion):
     lhs_p = M * (m.p_ddot - g * ez)
     # Constraint gradients of Gamma_i = |w_i|^2 - L2^2, w_i = rot_i(p) + (r - R - L1 cos th, 0, -L1 sin th).
     w, _, _ = _chain_terms(robot, m.p, th, c, s)               # loop vectors from the core (chain frames)
-    dG_dp = 2.0 * _from_chain_frames(w)                       # (3 constraints, 3 coords), base frame
+    dG_dp = 2.0 * from_chain_frames(w)                       # (3 constraints, 3 coords), base frame
     dG_dR = -2.0 * w[:, 0]                                    # (3,)
     dG_dth = 2.0 * L1 * (w[:, 0] * s - w[:, 2] * c)           # (3,) diagonal
     if mm.forearm_model == "rigid_rod":
         # T_rod = T_split - J/2 sum_i |w_i'|^2 (mass.py): d/dt dT/dqdot - dT/dq of it adds -J w_i'' . dw_i/dq.
         J = mm.forearm_rotation_deficit()
         w_dd = _loop_acceleration(robot, m, c, s)
-        lhs_p = lhs_p - J * jnp.sum(_from_chain_frames(w_dd), axis=0)
+        lhs_p = lhs_p - J * jnp.sum(from_chain_frames(w_dd), axis=0)
         lhs_theta = lhs_theta + J * L1 * (c * w_dd[:, 2] - s * w_dd[:, 0])
         lhs_R = lhs_R + J * jnp.sum(w_dd[:, 0])
     lam = _solve3(dG_dp, lhs_p, transpose=True)
@@ -439,11 +439,11 @@ def _points(robot: Delta, q):
     rob = robot.with_base_radius(R)
     c_arm = mm.upper_arm_com_fraction * L1
     zero = jnp.zeros_like(theta)
-    com = _from_chain_frames(jnp.stack([R + c_arm * jnp.cos(theta), zero, c_arm * jnp.sin(theta)], axis=-1))
-    elbow = _from_chain_frames(jnp.stack([R + L1 * jnp.cos(theta), zero, L1 * jnp.sin(theta)], axis=-1))
-    carriage = _from_chain_frames(jnp.stack([R + zero, zero, zero], axis=-1))
+    com = from_chain_frames(jnp.stack([R + c_arm * jnp.cos(theta), zero, c_arm * jnp.sin(theta)], axis=-1))
+    elbow = from_chain_frames(jnp.stack([R + L1 * jnp.cos(theta), zero, L1 * jnp.sin(theta)], axis=-1))
+    carriage = from_chain_frames(jnp.stack([R + zero, zero, zero], axis=-1))
     p = fk(rob, theta).p
-    ends = p[None, :] + _from_chain_frames(jnp.stack([robot.platform_radius + zero, zero, zero], axis=-1))
+    ends = p[None, :] + from_chain_frames(jnp.stack([robot.platform_radius + zero, zero, zero], axis=-1))
     return com, elbow, carriage, p, ends
 
 

@@ -14,7 +14,7 @@ import jax
 import jax.numpy as jnp
 from jax import lax
 
-__all__ = ["sym3_top2", "recip", "rsqrt", "sqrt0", "fuse_outputs"]
+__all__ = ["sym3_top2", "T_POLY", "recip", "rsqrt", "sqrt0", "fuse_outputs"]
 
 # -- per-point arithmetic for XLA:CPU (public face: deltajax.fastmath, which explains why) -----------------------
 # (integer type, reciprocal magic, inverse-square-root magic, cubic-order Newton steps) per float type: the
@@ -150,7 +150,7 @@ _FAST = (recip, rsqrt, sqrt0)
 # -- the eigenvalue solvers --------------------------------------------------------------------------------------
 #: t = u P(u), u = sqrt(c), approximates the root t in [0, 1] of t^2 (t + 3) = c (c in [0, 4]) to 3.2e-6
 #: relative (least-squares Chebyshev fit); one Halley step then gives ~3e-16 relative (measured over 4e5 c).
-_T_POLY = (0.5773484152710456, -0.055513434266994274, 0.013131880611233873, -0.0035774990190131535,
+T_POLY = (0.5773484152710456, -0.055513434266994274, 0.013131880611233873, -0.0035774990190131535,
            0.0007894847448390405, -8.944924427049106e-05)
 
 
@@ -158,8 +158,8 @@ def _cubic_root01(c, ops=None):
     """The root t in [0, 1] of t^2 (t + 3) = c for c in [0, 4]: polynomial start in sqrt(c), one Halley step."""
     recip, _, sqrt0 = ops or _FAST
     u = sqrt0(c)
-    poly = _T_POLY[-1]
-    for a in _T_POLY[-2::-1]:
+    poly = T_POLY[-1]
+    for a in T_POLY[-2::-1]:
         poly = poly * u + a
     t = u * poly
     g = t * t * (t + 3.0) - c

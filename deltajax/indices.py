@@ -21,11 +21,11 @@ import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Bool, Float, Int
 
-from .eigen3 import _T_POLY, sym3_top2  # noqa: F401  (_T_POLY: the Numba mirror reads it from here)
+from .eigen3 import sym3_top2
 from .fastmath import fuse_outputs, recip, sqrt0
 from .geometry import Delta
-from .jacobian import _resolve_length, homogenise, jq_diagonal, jq_theta, jx_det, jx_row
-from .kinematics import (_branch_sign, _from_chain_frames, chain_local, design_ok, forearm_units,
+from .jacobian import resolve_length, homogenise, jq_diagonal, jq_theta, jx_det, jx_row
+from .kinematics import (branch_sign, from_chain_frames, chain_local, design_ok, forearm_units,
                          guarded_configuration, limit_terms, loop_closure, loop_vectors, passive_angles, safe_point)
 
 __all__ = [
@@ -391,9 +391,9 @@ def indices(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], *, mat
         raise ValueError(f"matrix must be one of {MATRICES}, got {matrix!r}")
     method = _resolve_sv_method(sv_method, "jacobi")
     robot, p, theta, ok = guarded_configuration(robot, p, theta)
-    L = _resolve_length(robot, length)
+    L = resolve_length(robot, length)
     u_local = forearm_units(robot, p, theta)
-    Jx = _from_chain_frames(u_local)
+    Jx = from_chain_frames(u_local)
     dhat = jq_diagonal(robot, u_local, theta) / L  # homogenised theta-block diagonal
     if matrix == "theta3x3":
         if method == "svd":
@@ -432,7 +432,7 @@ def point_indices(robot: Delta, p: Float[Array, "3"], *, branch: str = "outer", 
     """
     from .kinematics import ik_cos_sin
 
-    sign = _branch_sign(branch)
+    sign = branch_sign(branch)
     method = _resolve_sv_method(sv_method, "fast")
     if method == "svd":
         raise ValueError("point_indices supports sv_method 'fast' or 'jacobi'; use indices(..., sv_method='svd')")
@@ -517,7 +517,7 @@ def classify_singularity(robot: Delta, p: Float[Array, "3"], theta: Float[Array,
     type3 = jnp.sum(vertical).astype(jnp.int32)
     type4 = jnp.sum(stretched & ~vertical) >= 2
 
-    Jx = _from_chain_frames(u_local)
+    Jx = from_chain_frames(u_local)
     diag = jq_diagonal(robot, u_local, theta)
     Jq = jnp.concatenate([u_local[:, :1], jnp.diag(diag)], axis=1)
     sx = jnp.linalg.svd(Jx, compute_uv=False)

@@ -19,7 +19,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .geometry import Delta
-from .kinematics import _COS_A, _SIN_A, _from_chain_frames, forearm_units, guarded_configuration
+from .kinematics import COS_A, SIN_A, from_chain_frames, forearm_units, guarded_configuration
 
 __all__ = ["Jacobians", "jacobians", "jacobian", "homogenise", "jq_diagonal", "jx_row", "jq_theta", "jx_det"]
 
@@ -31,7 +31,7 @@ def jx_row(ux, uy, uz, i: int):
     """
     if i == 0:
         return ux, uy, uz
-    ca, sa = _COS_A[i], _SIN_A[i]
+    ca, sa = COS_A[i], SIN_A[i]
     return ca * ux - sa * uy, sa * ux + ca * uy, uz
 
 
@@ -77,7 +77,7 @@ def jacobians(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]) -> J
     (traced) design is invalid or p or theta is not finite (:func:`deltajax.kinematics.guarded_configuration`)."""
     robot, p, theta, ok = guarded_configuration(robot, p, theta)
     u_local = forearm_units(robot, p, theta)
-    Jx = _from_chain_frames(u_local)
+    Jx = from_chain_frames(u_local)
     diag = jq_diagonal(robot, u_local, theta)
     Jq = jnp.concatenate([u_local[:, :1], jnp.diag(diag)], axis=1)
     return Jacobians(Jx=jnp.where(ok, Jx, jnp.nan), Jq=jnp.where(ok, Jq, jnp.nan))
@@ -100,5 +100,5 @@ def homogenise(J: Float[Array, "3 4"], length: Float[Array, ""] | float) -> Floa
     return J * scale[None, :]
 
 
-def _resolve_length(robot: Delta, length: Optional[float]):
+def resolve_length(robot: Delta, length: Optional[float]):
     return robot.upper_arm if length is None else jnp.asarray(length, robot.upper_arm.dtype)

@@ -62,12 +62,12 @@ IK_OK, IK_UNREACHABLE, IK_JOINT_LIMIT, IK_NONFINITE, IK_INVALID_DESIGN = 0, 1, 2
 FK_OK, FK_NO_INTERSECTION, FK_DEGENERATE_CENTRES, FK_NONFINITE, FK_TANGENT, FK_JOINT_LIMIT, FK_INVALID_DESIGN = (
     0, 1, 2, 3, 4, 5, 6)
 
-_COS_A = tuple(math.cos(a) for a in CHAIN_ANGLES)
-_SIN_A = tuple(math.sin(a) for a in CHAIN_ANGLES)
+COS_A = tuple(math.cos(a) for a in CHAIN_ANGLES)
+SIN_A = tuple(math.sin(a) for a in CHAIN_ANGLES)
 
 
 def _rot_cols(dtype) -> tuple[jax.Array, jax.Array]:
-    return jnp.asarray(_COS_A, dtype=dtype), jnp.asarray(_SIN_A, dtype=dtype)
+    return jnp.asarray(COS_A, dtype=dtype), jnp.asarray(SIN_A, dtype=dtype)
 
 
 def to_chain_frames(p: Float[Array, "3"]) -> Float[Array, "3 3"]:
@@ -79,7 +79,7 @@ def to_chain_frames(p: Float[Array, "3"]) -> Float[Array, "3 3"]:
     return jnp.stack([px, py, pz], axis=-1)
 
 
-def _from_chain_frames(v_local: Float[Array, "3 3"]) -> Float[Array, "3 3"]:
+def from_chain_frames(v_local: Float[Array, "3 3"]) -> Float[Array, "3 3"]:
     """Rotate row i (a vector in chain i's local frame) back to the base frame."""
     ca, sa = _rot_cols(v_local.dtype)
     x = ca * v_local[:, 0] - sa * v_local[:, 1]
@@ -190,7 +190,7 @@ def chain_local(px, py, pz, i: int):
 
     ``i`` is a static chain number 0, 1, 2 (alpha_i = 2 pi i / 3).
     """
-    ca, sa = _COS_A[i], _SIN_A[i]
+    ca, sa = COS_A[i], SIN_A[i]
     if i == 0:
         return px, py, pz
     return ca * px + sa * py, ca * py - sa * px, pz
@@ -279,7 +279,7 @@ def loop_vectors(dx, py, pz, c, s, L1, L2):
     return (dx - L1 * c) * inv_L2, py * inv_L2, (pz - L1 * s) * inv_L2
 
 
-def _branch_sign(branch: str) -> float:
+def branch_sign(branch: str) -> float:
     if branch not in ("outer", "inner"):
         raise ValueError(f"branch must be 'outer' or 'inner', got {branch!r}")
     return 1.0 if branch == "outer" else -1.0
@@ -300,7 +300,7 @@ def ik_cos_sin(robot: Delta, p: Float[Array, "3"], *, branch: str = "outer") -> 
         :class:`IKCosSin` with per-chain cos, sin (NaN where the loop does not close), ok and reason. An
         invalid (traced) design gives ok=False, reason IK_INVALID_DESIGN on every chain.
     """
-    sign = _branch_sign(branch)
+    sign = branch_sign(branch)
     p = jnp.asarray(p)
     dtype = jnp.result_type(p.dtype, robot.upper_arm.dtype)
     p = p.astype(dtype)
@@ -355,7 +355,7 @@ def _elbows(robot: Delta, theta):
     L1 = robot.upper_arm
     local = jnp.stack([robot.base_radius + L1 * jnp.cos(theta), jnp.zeros_like(theta), L1 * jnp.sin(theta)],
                       axis=-1)
-    return _from_chain_frames(local)
+    return from_chain_frames(local)
 
 
 class FKResult(NamedTuple):
@@ -403,7 +403,7 @@ def fk(robot: Delta, theta: Float[Array, "3"], *, mode: str = "lower", tangent_t
     L1, L2 = robot.upper_arm, robot.forearm
     local = jnp.stack([robot.R_minus_r + L1 * jnp.cos(theta_safe), jnp.zeros_like(theta_safe),
                        L1 * jnp.sin(theta_safe)], axis=-1)
-    c = _from_chain_frames(local)
+    c = from_chain_frames(local)
     # Trilateration in the frame (ex, ey, ez) spanned by the centres.
     d21 = c[1] - c[0]
     d31 = c[2] - c[0]

@@ -114,7 +114,7 @@ def numpy_torques(d, mm, p, pd, pdd):
 def old_jax_torque(robot, p, pd, pdd):
     """The pre-issue-9 JAX form (copied from deltajax/dynamics.py at 9f54c88, point-split forearms): per-point
     (3,) vectors and (3, 3) matrices, theta by atan2 and cos/sin again, Jacobians from ``dj.jacobians``."""
-    from deltajax.kinematics import _from_chain_frames, to_chain_frames
+    from deltajax.kinematics import from_chain_frames, to_chain_frames
 
     def cross_rows(A):
         C = jnp.stack([jnp.cross(A[1], A[2]), jnp.cross(A[2], A[0]), jnp.cross(A[0], A[1])])
@@ -132,7 +132,7 @@ def old_jax_torque(robot, p, pd, pdd):
                        loc[:, 2] - L1 * s], axis=-1)
         u = w / robot.forearm
         d = L1 * (u[:, 2] * c - u[:, 0] * s)
-        det_jx, _ = cross_rows(_from_chain_frames(u))
+        det_jx, _ = cross_rows(from_chain_frames(u))
         ok = ik_ok & (jnp.abs(det_jx) > 1e-9) & jnp.all(jnp.abs(d) > 1e-9 * L1)
         d_safe = jnp.where(jnp.abs(d) > 0, d, 1.0)
         pd_loc, pdd_loc = to_chain_frames(pd_), to_chain_frames(pdd_)

@@ -243,7 +243,7 @@ def main() -> None:
     import deltajax as dj
     from deltajax import workspace as ws
     from deltajax.workspace import _nb
-    from deltajax.workspace.redundancy import _nb_params
+    from deltajax.workspace.redundancy import nb_params
 
     rec = dj.presets.franco2026()
     fixed = dj.presets.franco2026(fixed_R=0.2)
@@ -322,7 +322,7 @@ def main() -> None:
           f"{(other + rdr_ns) * scale / ncpu:.0f}; exact {(other + rdr_ex) * scale:.0f} / "
           f"{(other + rdr_ex) * scale / ncpu:.0f}")
     if args.audit:
-        q = _nb_params(rec)
+        q = nb_params(rec)
         uniq = np.ascontiguousarray(pts)
         k_lo, k_stop = ws.reach_k_range_host(rec, uniq)
         out = np.empty((len(uniq), 4))

@@ -20,13 +20,13 @@ import pytest
 import deltajax as dj
 from deltajax import workspace as ws
 from deltajax.workspace import _nb, _nb_screen
-from deltajax.workspace.redundancy import _nb_params
+from deltajax.workspace.redundancy import nb_params
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
 from check_reconfig_indices import compare  # noqa: E402
 
 REC = dj.presets.franco2026()
-Q = _nb_params(REC)
+Q = nb_params(REC)
 KT = _nb.kt_tuple(2.0, 4.2, 0.5)
 
 

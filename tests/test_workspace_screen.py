@@ -15,10 +15,10 @@ from hypothesis import strategies as st
 import deltajax as dj
 from deltajax import workspace as ws
 from deltajax.workspace import _nb
-from deltajax.workspace.redundancy import _nb_params
+from deltajax.workspace.redundancy import nb_params
 
 REC = dj.presets.franco2026()
-Q = _nb_params(REC)
+Q = nb_params(REC)
 G40 = ws.franco2026_grid(0.04)  # 21 x 21 x 15
 C = _nb.CRITERION  # criterion codes by index name
 KT = C["k_tilde"]

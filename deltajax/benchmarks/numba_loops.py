@@ -27,7 +27,7 @@ from llvmlite import ir
 from numba.core import types
 from numba.extending import intrinsic
 
-from ..workspace._nb_kernel import (FAST, INLINE, JACOBI, N_IDX, OPTS, _T_POLY, as_tuple4, chain_local, jx_row, kt_tuple,
+from ..workspace._nb_kernel import (FAST, INLINE, JACOBI, N_IDX, OPTS, T_POLY, as_tuple4, chain_local, jx_row, kt_tuple,
                          limits_tuple, sv_matrix)
 
 __all__ = ["bench_kernel_rates", "bench_numba", "minimal_loop", "minimal_loop_newton"]
@@ -103,7 +103,7 @@ def _min_chain(x, y, z, R, r, L1, h1, iL2, c0, lim, i, div, sqrt0):
 @nb.njit(**INLINE)
 def _root01(cc, sqrt0):
     u = sqrt0(cc)
-    t = u * (((((_T_POLY[5] * u + _T_POLY[4]) * u + _T_POLY[3]) * u + _T_POLY[2]) * u + _T_POLY[1]) * u + _T_POLY[0])
+    t = u * (((((T_POLY[5] * u + T_POLY[4]) * u + T_POLY[3]) * u + T_POLY[2]) * u + T_POLY[1]) * u + T_POLY[0])
     g = t * t * (t + 3.0) - cc
     g1 = 3.0 * t * (t + 2.0)
     return t, g, g1, max(2.0 * g1 * g1 - g * 6.0 * (t + 1.0), 1e-150)  # 0 at a double root (t = 0)

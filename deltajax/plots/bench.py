@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .core import _plt
+from .core import pyplot
 
 __all__ = ["bench_rates", "bench_rates_from_results"]
 
@@ -17,7 +17,7 @@ def bench_rates(rates: dict, baseline: str, title: str = "kernel throughput"):
         baseline: the label the ratios are taken against (e.g. the NumPy reference).
         title: figure title (say what was measured and where).
     """
-    plt = _plt()
+    plt = pyplot()
     names = list(rates)
     v = np.asarray([rates[n] for n in names], float)
     fig, ax = plt.subplots(figsize=(7.5, 0.55 * len(names) + 1.4), layout="constrained")

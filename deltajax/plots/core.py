@@ -10,7 +10,7 @@ import numpy as np
 __all__ = ["robust_limits", "actuator_lines", "ACTUATOR_STYLES"]
 
 
-def _plt():
+def pyplot():
     """pyplot, on whatever backend is selected: the CLI (:mod:`deltajax.run`) selects Agg once before a job runs;
     a library user (a notebook) keeps their own."""
     import matplotlib.pyplot as plt
@@ -18,7 +18,7 @@ def _plt():
     return plt
 
 
-def _boundary(mask: np.ndarray) -> np.ndarray:
+def mask_boundary(mask: np.ndarray) -> np.ndarray:
     """Points of ``mask`` with at least one unreachable 6-neighbour (the workspace surface)."""
     m = np.asarray(mask, bool)
     p = np.pad(m, 1, constant_values=False)
@@ -29,7 +29,7 @@ def _boundary(mask: np.ndarray) -> np.ndarray:
     return m & ~inner
 
 
-def _limits(masks: dict, axes) -> list:
+def mask_limits(masks: dict, axes) -> list:
     """Common (lo, hi) of every axis over the points reachable in any of the masks (one cell of margin)."""
     any_mask = np.zeros_like(np.asarray(next(iter(masks.values())), bool))
     for m in masks.values():
@@ -44,7 +44,7 @@ def _limits(masks: dict, axes) -> list:
     return out
 
 
-def _inner_ticks(axis, lo: float, hi: float, n: int = 5) -> None:
+def inner_ticks(axis, lo: float, hi: float, n: int = 5) -> None:
     """About ``n`` round ticks strictly inside (lo, hi), none within 6 % of an end: labels of neighbouring
     panels (or of two axes meeting at a corner) cannot run into each other."""
     from matplotlib.ticker import MaxNLocator

@@ -6,7 +6,7 @@ import math
 
 import numpy as np
 
-from .core import _plt
+from .core import pyplot
 
 __all__ = ["datasheet_page"]
 
@@ -18,7 +18,7 @@ def _fmt(v, digits=3) -> str:
 def datasheet_page(ds, title: str = ""):
     """A4-portrait page: key figures, the working-range sketch (side view, z down), picks/min vs payload and the
     payload table."""
-    plt = _plt()
+    plt = pyplot()
     fig = plt.figure(figsize=(8.27, 11.69))
     fig.suptitle(title or f"deltajax datasheet: {ds.name}", fontsize=14, fontweight="bold", y=0.985)
     m = ds.motor

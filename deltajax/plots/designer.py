@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .core import _plt
+from .core import pyplot
 
 __all__ = ["convergence_series", "ga_convergence", "ga_pareto"]
 
@@ -73,7 +73,7 @@ def ga_convergence(G, picks_per_fitness=None, seeds="the seeds"):
     c = convergence_series(G, picks_per_fitness)
     if c is None:
         return None
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(1, 2, figsize=(11, 4.6), gridspec_kw={"width_ratios": [1.6, 1]})
     gens = c["generation"]
     objective = str(G.get("attrs", {}).get("objective", ""))
@@ -118,7 +118,7 @@ def ga_pareto(V, objs, s, units, floor=None):
     "1/min", "regular_volume": "m^3"}``;
     ``floor``: ``(objective, value)`` of the recommendation rule's floor in that objective's units, drawn as a line
     (:func:`deltajax.optimize.report.floor_line`), or None); None without them."""
-    plt = _plt()
+    plt = pyplot()
     if V is None or len(objs) < 2:
         return None
     o0, o1 = objs[0], objs[1]

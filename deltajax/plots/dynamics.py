@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from .core import _plt, actuator_lines
+from .core import pyplot, actuator_lines
 
 __all__ = ["cycle_platform", "cycle_torques", "adept_profiles"]
 
 
 def cycle_platform(prof, title: str):
     """Platform position, velocity and acceleration (x, y, z) along a cycle (like the GA paper's Fig. 5)."""
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(3, 1, figsize=(7, 8), sharex=True)
     t = np.asarray(prof.t)
     for ax, key, unit in zip(axes, ("p", "p_dot", "p_ddot"), ("m", "m/s", "m/s$^2$")):
@@ -26,7 +26,7 @@ def cycle_platform(prof, title: str):
 
 def cycle_torques(prof, title: str):
     """Actuator torques along a cycle (the GA paper's Fig. 6), and the R actuator's force when R moves."""
-    plt = _plt()
+    plt = pyplot()
     has_R = np.any(np.abs(np.asarray(prof.R_dot)) > 0)
     fig, axes = plt.subplots(2 if has_R else 1, 1, figsize=(7, 6 if has_R else 3.6), sharex=True, squeeze=False)
     t = np.asarray(prof.t)
@@ -45,7 +45,7 @@ def cycle_torques(prof, title: str):
 def adept_profiles(name: str, prof_nom, prof_min, T_min: float):
     """Torque, joint speed and acceleration of the standard cycle at its nominal duration (left) and at the
     minimum cycle time ``T_min`` (s, right), one y scale per row."""
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(3, 2, figsize=(11, 8), sharex="col", sharey="row")  # columns compared row by row
     cases = ((prof_nom, "nominal duration"), (prof_min, f"minimum cycle time {T_min:.3f} s"))
     for col, (prof, label) in enumerate(cases):

@@ -7,14 +7,14 @@ import math
 
 import numpy as np
 
-from .core import _plt
+from .core import pyplot
 
 __all__ = ["motion_landscape", "motion_profiles", "motion_torques"]
 
 
 def motion_landscape(name, t, Rg, table, paths, crit):
     """reconfig_motion: the index ``crit`` over (t, R) (``table``, NaN unreachable) and the methods' R(t) ``paths``."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(9, 5))
     im = ax.pcolormesh(t, Rg, table.T, shading="nearest", cmap="viridis")
     fig.colorbar(im, ax=ax, label=f"{crit} (NaN: unreachable)")
@@ -32,7 +32,7 @@ def motion_landscape(name, t, Rg, table, paths, crit):
 def motion_profiles(name, t, data, criterion, drive_speed, drive_force):
     """reconfig_motion: index, R(t), Rdot, R force and screw torque per method (``data``: method -> arrays), with
     the R drive's speed and force limits dotted."""
-    plt = _plt()
+    plt = pyplot()
     keys = (("value", criterion, None), ("R", "R (m)", None), ("R_dot", "Rdot (m/s)", float(drive_speed)),
             ("force_R", "F_R (N)", float(drive_force)), ("screw_torque", "screw motor torque (N m)", None))
     fig, axes = plt.subplots(len(keys), 1, figsize=(9, 12), sharex=True)
@@ -63,7 +63,7 @@ def motion_profiles(name, t, data, criterion, drive_speed, drive_force):
 
 def motion_torques(name, t, data):
     """reconfig_motion: the three arm torques per method at the nominal duration."""
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(3, 1, figsize=(9, 7), sharex=True)
     # colours as in the profiles; wide solid under dashed/dotted, so methods that agree stay distinguishable
     styles = {"fixed": dict(color="C0", ls="-", lw=2.8, alpha=0.6), "pointwise": dict(color="C3", ls=":", lw=1.2),

@@ -7,7 +7,7 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from .core import _boundary, _inner_ticks, _limits, _plt, robust_limits
+from .core import mask_boundary, inner_ticks, mask_limits, pyplot, robust_limits
 
 __all__ = ["workspace_3d", "index_slices", "plot_index_curves", "workspace_grid", "boundary_slice", "boundary_surface"]
 
@@ -25,15 +25,15 @@ def workspace_3d(x, y, z, masks: dict, max_points: int = 40000, seed: int = 0):
     """
     import matplotlib.colors as mcolors
 
-    plt = _plt()
-    lims = _limits(masks, (x, y, z))
+    plt = pyplot()
+    lims = mask_limits(masks, (x, y, z))
     norm = mcolors.Normalize(vmin=lims[2][0], vmax=lims[2][1])
     fig = plt.figure(figsize=(5.2 * len(masks) + 0.8, 5), layout="constrained")
     rng = np.random.default_rng(seed)
     sc = None
     for i, (title, mask) in enumerate(masks.items()):
         ax = fig.add_subplot(1, len(masks), i + 1, projection="3d")
-        b = np.argwhere(_boundary(mask))
+        b = np.argwhere(mask_boundary(mask))
         if len(b) > max_points:
             b = b[rng.choice(len(b), max_points, replace=False)]
         px, py, pz = x[b[:, 0]], y[b[:, 1]], z[b[:, 2]]
@@ -47,7 +47,7 @@ def workspace_3d(x, y, z, masks: dict, max_points: int = 40000, seed: int = 0):
         ax.set_zlabel("z [m] (down)")
         ax.invert_zaxis()
         for axis, (lo, hi) in zip((ax.xaxis, ax.yaxis), lims[:2]):
-            _inner_ticks(axis, lo, hi)  # x's last and y's first label meet at the corner otherwise
+            inner_ticks(axis, lo, hi)  # x's last and y's first label meet at the corner otherwise
         count = int(np.count_nonzero(mask))
         cell = float(np.prod([np.mean(np.diff(np.asarray(a, float))) if len(a) > 1 else np.nan for a in (x, y, z)]))
         vol = f", V = {count * cell:.4g} m$^3$" if np.isfinite(cell) else ""
@@ -73,7 +73,7 @@ def index_slices(x, y, z_values: Sequence[float], columns: dict, label: str = "i
         vmin, vmax: colour range (default: robust common range of all panels).
         units: the index's units ("1": dimensionless).
     """
-    plt = _plt()
+    plt = pyplot()
     vals = np.concatenate([np.asarray(v, float).ravel() for v in columns.values()])
     finite = vals[np.isfinite(vals)]
     r_lo, r_hi = robust_limits(finite)
@@ -97,7 +97,7 @@ def index_slices(x, y, z_values: Sequence[float], columns: dict, label: str = "i
                 ax.set_xlabel("x [m]")
     # ticks strictly inside the panels (shared by every panel): neighbours' end labels ("0.4-0.4") cannot clash
     for axis, (lo, hi) in ((axes[0, 0].xaxis, axes[0, 0].get_xlim()), (axes[0, 0].yaxis, axes[0, 0].get_ylim())):
-        _inner_ticks(axis, lo, hi)
+        inner_ticks(axis, lo, hi)
     if im is not None:
         extend = {(False, False): "neither", (True, False): "min", (False, True): "max", (True, True): "both"}[
             (bool(finite.size and finite.min() < vmin), bool(finite.size and finite.max() > vmax))]
@@ -118,7 +118,7 @@ def plot_index_curves(R, points, values: dict, feasible, argmax: dict):
         feasible: (m, n) IK feasibility.
         argmax: index name -> (m,) maximising R.
     """
-    plt = _plt()
+    plt = pyplot()
     m = len(points)
     fig, axes = plt.subplots(m, 2, figsize=(12, 3.6 * m), squeeze=False, sharex=True)  # one R axis to compare
     groups = (("omega_v", "sigma_min_v", "k_tilde"), ("omega_f", "sigma_min_f", "inv_cond", "k_tilde"))
@@ -150,7 +150,7 @@ def workspace_grid(grid, reach):
         grid: the job's grid (axes ``x``, ``y``, ``z`` and spacing ``h``, m).
         reach: bool (nx, ny, nz) reachability.
     """
-    plt = _plt()
+    plt = pyplot()
     area = reach.sum(axis=(0, 1)) * grid.h ** 2
     fig, (a1, a2) = plt.subplots(1, 2, figsize=(9, 3.6))
     a1.plot(grid.z, area)
@@ -174,7 +174,7 @@ def boundary_slice(X, Z, mask, centre, base_radius, polar, azimuth, conti, cont,
         conti, cont: (result, profile) of the Conti bisection and of the continuation search.
         step: the angular step of those searches (deg).
     """
-    plt = _plt()
+    plt = pyplot()
     res_c, prof_c = conti
     res_n, _ = cont
     polar, azimuth = np.asarray(polar), np.asarray(azimuth)
@@ -208,7 +208,7 @@ def boundary_slice(X, Z, mask, centre, base_radius, polar, azimuth, conti, cont,
 def boundary_surface(q, ns):
     """The boundary_search job's boundary points ``q`` (n, m, 3) seen from the centre; ``ns`` marks the rays that
     leave and re-enter."""
-    plt = _plt()
+    plt = pyplot()
     fig = plt.figure(figsize=(7, 6))
     ax = fig.add_subplot(projection="3d")
     sel = ~ns

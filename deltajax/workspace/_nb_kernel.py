@@ -25,7 +25,8 @@ import numba as nb
 import numpy as np
 
 from ..geometry import CHAIN_ANGLES, FULL_TURN_MIN
-from ..indices import INDEX_NAMES, _T_POLY as _CORE_T_POLY
+from ..eigen3 import T_POLY
+from ..indices import INDEX_NAMES
 
 __all__ = ["OPTS", "INLINE", "N_IDX", "CRITERION", "JACOBI", "FAST", "CUBIC", "SV_METHODS", "limits_tuple", "kt_tuple",
            "as_tuple4", "chain_local", "loop_closure", "loop_vectors", "jx_row", "jq_theta", "jx_det", "chain",
@@ -67,10 +68,10 @@ OPTS = dict(cache=True, fastmath=False, nogil=True, error_model="numpy")
 INLINE = dict(forceinline=True, **OPTS)
 
 #: cos, sin of the chain angles (the core's constants; compile-time constants inside the kernels)
-_COS_A = tuple(math.cos(a) for a in CHAIN_ANGLES)
-_SIN_A = tuple(math.sin(a) for a in CHAIN_ANGLES)
-CA0, CA1, CA2 = _COS_A
-SA0, SA1, SA2 = _SIN_A
+COS_A = tuple(math.cos(a) for a in CHAIN_ANGLES)
+SIN_A = tuple(math.sin(a) for a in CHAIN_ANGLES)
+CA0, CA1, CA2 = COS_A
+SA0, SA1, SA2 = SIN_A
 
 #: column of each index in the kernels' outputs and its criterion code: :data:`deltajax.INDEX_NAMES` order
 N_IDX = len(INDEX_NAMES)
@@ -112,8 +113,8 @@ def _rotate_z(a, b, c, i, sign):
     """(a, b, c) rotated about z by -sign alpha_i (sign +1: base -> chain frame, -1: back); chain 0 unchanged."""
     if i == 0:
         return a, b, c
-    ca = _COS_A[i]
-    sa = sign * _SIN_A[i]
+    ca = COS_A[i]
+    sa = sign * SIN_A[i]
     return ca * a + sa * b, ca * b - sa * a, c
 
 
@@ -315,7 +316,6 @@ def _eig_top2_jacobi(x00, x11, x22, x01, x02, x12):
     return hi, x00 + x11 + x22 - hi - lo
 
 
-_T_POLY = _CORE_T_POLY
 _EPS = 2.220446049250313e-16
 
 
@@ -323,8 +323,8 @@ _EPS = 2.220446049250313e-16
 def _cubic_root01(c):
     """The root t in [0, 1] of t^2 (t + 3) = c, c in [0, 4]: polynomial start in sqrt(c), one Halley step."""
     u = math.sqrt(c)
-    t = u * (((((_T_POLY[5] * u + _T_POLY[4]) * u + _T_POLY[3]) * u + _T_POLY[2]) * u + _T_POLY[1]) * u
-             + _T_POLY[0])
+    t = u * (((((T_POLY[5] * u + T_POLY[4]) * u + T_POLY[3]) * u + T_POLY[2]) * u + T_POLY[1]) * u
+             + T_POLY[0])
     g = t * t * (t + 3.0) - c
     g1 = 3.0 * t * (t + 2.0)
     g2 = 6.0 * (t + 1.0)

@@ -336,10 +336,10 @@ def reconfigurable_workspace(recon: ReconfigurableDelta, grid: Grid, *, chunk_si
     Each point tests only the samples of its closed-form reach range and stops at the first feasible one.
     """
     from . import _nb
-    from .redundancy import _nb_params, reach_k_range_host
+    from .redundancy import nb_params, reach_k_range_host
 
     lay = _Layout(grid, mirror)
-    q = _nb_params(recon)
+    q = nb_params(recon)
 
     def compute(start, stop):
         pts = lay.points(start, stop)

@@ -229,7 +229,7 @@ def _reach_k_range(recon, p):
     return k_lo.astype(jnp.int32), k_hi.astype(jnp.int32)
 
 
-def _nb_params(recon: ReconfigurableDelta):
+def nb_params(recon: ReconfigurableDelta):
     from . import _nb
 
     rb = recon.robot
@@ -242,7 +242,7 @@ def reach_k_range_host(recon: ReconfigurableDelta, points: np.ndarray) -> tuple[
     """Closed-form sample range [k_lo, k_stop) per point (host, NumPy); see :func:`reach_interval`."""
     from . import _nb
 
-    q = _nb_params(recon)
+    q = nb_params(recon)
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     k_lo = np.empty(pts.shape[0], np.int64)
     k_stop = np.empty(pts.shape[0], np.int64)
@@ -286,7 +286,7 @@ def resolve_redundancy_host(recon: ReconfigurableDelta, points: np.ndarray, crit
         raise ValueError(f"screen_margin must be a finite number >= 0, got {screen_margin!r}")
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     n_all = pts.shape[0]
-    q = _nb_params(recon)
+    q = nb_params(recon)
     if mode == "fast" and mirror and n_all:
         keyed = np.stack([pts[:, 0], np.abs(pts[:, 1]), pts[:, 2]], axis=-1)
         uniq, inverse = np.unique(keyed, axis=0, return_inverse=True)
@@ -334,7 +334,7 @@ def indices_at_host(recon: ReconfigurableDelta, points: np.ndarray, k: np.ndarra
     """Every index (columns in :data:`deltajax.INDEX_NAMES` order) at sample ``k`` per point, (N, 8); NaN where k < 0."""
     from . import _nb
 
-    q = _nb_params(recon)
+    q = nb_params(recon)
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     x, y, z = (np.ascontiguousarray(pts[:, i]) for i in range(3))
     out = np.empty((_nb.N_IDX, pts.shape[0]))  # structure of arrays: the kernel loop vectorises
