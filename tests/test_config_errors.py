@@ -24,7 +24,7 @@ def test_config_errors_give_the_value_in_the_users_unit_on_one_line():
               "robot.theta_min_deg must be a number (deg), got 'low'"),
              (lambda: C._cycle_setup({"centre": [0, 0, 0.4], "heading_deg": 0, "duration": 0}, "experiment.setups.x"),
               "experiment.setups.x.duration must be > 0 s, got 0.0 s"),
-             (lambda: C._choice("experiment.mode", "slow", ("fast", "exact")),
+             (lambda: C.read_choice("experiment.mode", "slow", ("fast", "exact")),
               "experiment.mode must be one of exact, fast, got 'slow'")]
     for call, message in cases:
         with pytest.raises(ConfigError) as err:
