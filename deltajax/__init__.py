@@ -35,5 +35,6 @@ from .runreport import ReportError, write_report  # the main job's HTML run repo
 from .datasheet import Datasheet, DatasheetError
 from .datasheet import datasheet as datasheet  # the function; the module stays importable as deltajax.datasheet
 from . import export
+from . import tolerance  # Monte Carlo over manufacturing and model tolerances (deltajax.tolerance.analyse)
 
 __version__ = "0.1.0"
