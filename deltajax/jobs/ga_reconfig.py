@@ -13,8 +13,9 @@ in the good workspace, passive joints, interference, motor envelope and RMS rati
 Stages (the library: :mod:`deltajax.optimize.workflow`; each stored in ``results.h5``, a rerun into the same
 ``hydra.run.dir`` resumes after the last finished one and a finished run is a no-op):
 baseline -> screen (Sobol, seeds the GA) -> ga (checkpointed) -> pareto (NSGA-II) -> refine (optax) ->
-verify (fine grids, recommendation) -> results (summary) -> plots -> report (``report.html``, the self-contained
-run report of :mod:`deltajax.runreport`). ``experiment.continue_from`` (more budget for
+verify (fine grids, recommendation) -> tolerance (Monte Carlo over manufacturing and model tolerances,
+:mod:`deltajax.optimize.robust`; ``experiment.robust``: the robust recommendation) -> results (summary) ->
+plots -> report (``report.html``, the self-contained run report of :mod:`deltajax.runreport`). ``experiment.continue_from`` (more budget for
 a finished run, :func:`deltajax.optimize.workflow.earlier_run`): its verified front seeds the GA and NSGA-II and
 joins the verified candidates with its stored metrics, so the recommendation cannot be one its recommendation
 dominates.
