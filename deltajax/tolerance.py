@@ -30,6 +30,10 @@ for the task), and the picks/min is the sample's fastest feasible cycle: a slowe
 cycle, only slower, so a tolerance shows in the picks/min distribution (and ``p_reaches_nominal_picks``) rather
 than in the cycle-rate constraint unless ``min_picks_per_min`` is set.
 
+``operating_R="nominal"`` holds a reconfigurable design at its nominal operating R instead (moved by the R
+actuator's deviation, that of R_min): the stricter question "does the built robot hold at the R its datasheet
+gives", where the default lets it re-choose its R among the problem's candidates.
+
 A NaN (unreachable) margin counts as a violated constraint (the designer's rule), and a NaN picks/min never becomes
 a number: it ranks below every number in the percentiles (a percentile that falls on it is NaN), the mean is over
 the finite samples, and the count is reported (``picks_nan``).
@@ -171,8 +175,20 @@ def perturb(pb, design, dev):
     return pb, design
 
 
-def _program(pb, space):
-    """``(genes (B, d), dev (B, K)) -> {metric: (B, ...)}``: one sample per row, jitted, shared by content."""
+def _frozen(pb, design, r_op, d_lo):
+    """(problem, design) whose only operating-R candidate is ``r_op`` (the nominal operating R) moved by the
+    R actuator's deviation ``d_lo``; the R range's top (hence the base plate) stays the sample's."""
+    import equinox as eqx
+
+    top = design.R_max
+    lo = r_op + d_lo
+    design = eqx.tree_at(lambda r: (r.R_min, r.R_step), design, (lo, (top - lo) / max(design.n_R - 1, 1)))
+    return dataclasses.replace(pb, n_R_operating=1), design
+
+
+def _program(pb, space, frozen: bool = False):
+    """``(genes (B, d), dev (B, K), r_op (B,)) -> {metric: (B, ...)}``: one sample per row, jitted, shared by
+    content; ``frozen``: the operating R held at ``r_op`` (a reconfigurable design)."""
     from .optimize.programs import shared_program
 
     def build():
@@ -180,14 +196,30 @@ def _program(pb, space):
 
         from .optimize.designer import evaluate_designer
 
-        def one(genes, dev):
+        def one(genes, dev, r_op):
             p, des = perturb(pb, space.decode(genes), dev)
+            if frozen:
+                p, des = _frozen(p, des, r_op, dev[_COL["base_radius_or_R_min"]])
             out = evaluate_designer(p, des, regular=False)
             return {k: out[k] for k in _KEPT}
 
         return jax.jit(jax.vmap(one))
 
-    return shared_program("tolerance_samples", pb, space, (), build)
+    return shared_program("tolerance_samples", pb, space, (bool(frozen),), build)
+
+
+def _rows(f, rows_g, rows_d, rows_r, chunk, progress) -> dict:
+    """``f`` over the rows in chunks of ``chunk`` (the last padded with the first row to the compiled size)."""
+    total, parts = len(rows_g), []
+    for s0 in range(0, total, chunk):
+        a, b, r = rows_g[s0:s0 + chunk], rows_d[s0:s0 + chunk], rows_r[s0:s0 + chunk]
+        m = len(a)
+        if m < chunk:
+            a, b, r = (np.concatenate([x, np.repeat(x[:1], chunk - m, axis=0)]) for x in (a, b, r))
+        parts.append({k: np.asarray(v)[:m] for k, v in f(a, b, r).items()})
+        if progress is not None:
+            progress(m)
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
 def _ranked_percentiles(x: np.ndarray, sense: int, qs=PERCENTILES) -> np.ndarray:
@@ -210,7 +242,8 @@ def _clopper_pearson_lower(k: np.ndarray, n: int, conf: float = 0.95) -> np.ndar
 
 
 def analyse(pb, space, genes, tolerances: Optional[Tolerances] = None, *, samples: int = DEFAULT_SAMPLES,
-            seed: int = 0, chunk: int = 256, progress: Optional[Callable[[int], Any]] = None) -> dict:
+            seed: int = 0, chunk: int = 256, operating_R: str = "chosen",
+            progress: Optional[Callable[[int], Any]] = None) -> dict:
     """Monte Carlo tolerance analysis of designs of the designer's problem.
 
     Args:
@@ -221,6 +254,9 @@ def analyse(pb, space, genes, tolerances: Optional[Tolerances] = None, *, sample
         samples: Monte Carlo samples per design (the same deviations for every design: common random numbers).
         seed: seed of the deviations (:func:`deviations`).
         chunk: samples evaluated at once (memory is bounded by one chunk).
+        operating_R: ``"chosen"``: each sample's operating R chosen by the problem's rule (the built robot set up
+            for its task); ``"nominal"``: held at the nominal design's operating R (plus the R actuator's deviation,
+            that of R_min), as a robot run at its datasheet's R. The same for a fixed design.
         progress: called with the number of samples done after each chunk.
 
     Returns:
@@ -240,6 +276,8 @@ def analyse(pb, space, genes, tolerances: Optional[Tolerances] = None, *, sample
     tol = Tolerances() if tolerances is None else tolerances
     if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
         raise ToleranceError(f"chunk must be an integer >= 1, got {chunk!r}")
+    if operating_R not in ("chosen", "nominal"):
+        raise ToleranceError(f"operating_R must be 'chosen' or 'nominal', got {operating_R!r}")
     G = np.atleast_2d(np.asarray(genes, float))
     dev = deviations(tol, samples, seed)
     n, S = len(G), int(samples)
@@ -247,19 +285,12 @@ def analyse(pb, space, genes, tolerances: Optional[Tolerances] = None, *, sample
     D = np.concatenate([np.zeros((1, dev.shape[1])), dev])
     rows_g = np.repeat(G, S + 1, axis=0)
     rows_d = np.tile(D, (n, 1))
-    f = _program(pb, space)
-    total, parts = len(rows_g), []
-    for s0 in range(0, total, chunk):
-        a, b = rows_g[s0:s0 + chunk], rows_d[s0:s0 + chunk]
-        m = len(a)
-        if m < chunk:   # pad to the compiled size with the first row
-            a = np.concatenate([a, np.repeat(a[:1], chunk - m, axis=0)])
-            b = np.concatenate([b, np.repeat(b[:1], chunk - m, axis=0)])
-        out = f(a, b)
-        parts.append({k: np.asarray(v)[:m] for k, v in out.items()})
-        if progress is not None:
-            progress(min(m, total - s0))
-    out = {k: np.concatenate([p[k] for p in parts]).reshape((n, S + 1) + parts[0][k].shape[1:]) for k in _KEPT}
+    frozen = operating_R == "nominal" and space.reconfigurable
+    r_op = np.zeros(len(G))
+    if frozen:   # the nominal designs' operating R, by the problem's rule
+        r_op = _rows(_program(pb, space), G, np.zeros((len(G), dev.shape[1])), r_op, chunk, None)["R_operating"]
+    out = _rows(_program(pb, space, frozen), rows_g, rows_d, np.repeat(r_op, S + 1), chunk, progress)
+    out = {k: v.reshape((n, S + 1) + v.shape[1:]) for k, v in out.items()}
     nom = {k: v[:, 0] for k, v in out.items()}
     smp = {k: v[:, 1:] for k, v in out.items()}
     # the size budget limits the drawing: judged on the nominal lengths, not on each built robot's
@@ -287,7 +318,7 @@ def analyse(pb, space, genes, tolerances: Optional[Tolerances] = None, *, sample
         "p_reaches_nominal_picks": np.mean(picks >= nom["picks_per_min"][:, None] * (1 - 1e-12), axis=1),
         "g_percentiles": _ranked_percentiles(np.swapaxes(np.where(np.isnan(smp["g"]), 1.0, smp["g"]), 1, 2), -1),
         "metric_percentiles": metric_pct,
-        "samples": S, "seed": int(seed), "tolerances": tol.as_dict(), "deviations": dev,
+        "samples": S, "seed": int(seed), "tolerances": tol.as_dict(), "deviations": dev, "operating_R": operating_R,
         "constraint_names": tuple(CONSTRAINT_NAMES), "enabled": enabled,
     }
 
@@ -303,7 +334,7 @@ def select(results: Sequence[Mapping[str, Any]], picks: Sequence[tuple]) -> dict
     ``picks`` = ``[(result index, design index), ...]`` (the shared entries come from the first result)."""
     first = results[0]
     for r in results[1:]:
-        if r["seed"] != first["seed"] or r["samples"] != first["samples"] or r["tolerances"] != first["tolerances"]:
+        if any(r[k] != first[k] for k in ("seed", "samples", "tolerances", "operating_R")):
             raise ToleranceError("select: results of different Monte Carlo samples cannot be combined")
     out = {k: v for k, v in first.items() if k not in PER_DESIGN}
     for k in PER_DESIGN:

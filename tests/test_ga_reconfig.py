@@ -82,6 +82,7 @@ def test_toy_run_front_feasible_summary_and_units(full_run):
     assert np.all((T["p_all"] >= 0) & (T["p_all"] <= T["p_holds"].min(axis=1)))
     assert T["units"]["picks_percentiles"] == "1/min" and T["picks_percentiles"].shape == (2, 5)
     assert S["attrs"]["recommended_p_all_constraints_hold"] == T["p_all"][1]
+    assert list(T["frozen_R"]["role"]) == roles and T["frozen_R"]["p_all"].shape == (2,)   # at the nominal R
     log = (full_run.parent / "run.log").read_text()
     assert f"recommended ({S['attrs']['recommended']}): every constraint holds in {100 * T['p_all'][1]:.1f} %" in log
     # the refined winners: accepted only if feasible and no objective worse, and verified like every candidate

@@ -55,6 +55,10 @@ def test_zero_tolerances_reproduce_the_nominal_feasibility_and_picks_exactly(toy
     np.testing.assert_allclose(a["picks_min"], nom["picks_per_min"], rtol=1e-12)
     np.testing.assert_allclose(a["picks_mean"], nom["picks_per_min"], rtol=1e-12)
     assert np.all(a["p_reaches_nominal_picks"] == 1.0)
+    # held at the nominal operating R: zero deviations leave it the design's chosen R, so the same verdicts
+    z = dj.tolerance.analyse(pb, space, genes, ZERO, samples=2, seed=3, chunk=8, operating_R="nominal")
+    np.testing.assert_array_equal(z["p_all"], nom["feasible"].astype(float))
+    np.testing.assert_allclose(z["picks_percentiles"][:, 2], nom["picks_per_min"], rtol=1e-12)
 
 
 @pytest.mark.slow   # compiles the designer's program for its problem (~20 CPU-s)

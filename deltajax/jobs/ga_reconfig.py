@@ -450,8 +450,13 @@ def _tolerance(ctx, res, V, s, space, objs, sense, jp) -> None:
     sel = TL.select(results, [(e[1] if isinstance(e[1], tuple) else (0, e[1])) for e in entries])
     roles = [e[0] for e in entries]
     RB.store_tolerance(res, roles, [names[e[2]] for e in entries], [e[2] for e in entries], sel, text)
+    frozen = None
+    if space.reconfigurable:    # the stricter question: each built robot run at its design's nominal operating R
+        frozen = TL.analyse(pb_fine, space_v, genes[[e[2] for e in entries]], tol, samples=n_s,
+                            seed=int(s.tolerance["seed"]), operating_R="nominal")
+        RB.store_frozen(res, roles, [names[e[2]] for e in entries], [e[2] for e in entries], frozen, text)
     for line in RB.headline_lines(dict(sel, role=roles, design_name=[names[e[2]] for e in entries],
-                                       attrs={"samples": n_s}), roles):
+                                       attrs={"samples": n_s}, frozen_R=frozen), roles):
         ctx.log(line)
 
 

@@ -23,7 +23,8 @@ from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["tolerances_of", "robust_choice", "RobustChoice", "store_tolerance", "store_robust", "headline_lines",
+__all__ = ["tolerances_of", "robust_choice", "RobustChoice", "store_tolerance", "store_robust", "store_frozen",
+           "headline_lines",
            "cost_lines", "summary_attrs"]
 
 
@@ -204,6 +205,13 @@ def store_robust(res, rc: RobustChoice, design_names: Sequence[str], nominal: in
                   **cost)
 
 
+def store_frozen(res, roles, names, rows, a: dict, tol_text: str) -> None:
+    """Group ``tolerance/frozen_R``: the same samples with each design held at its nominal operating R."""
+    _put_design_block(res, "tolerance/frozen_R", names, rows, a, tol_text, roles=roles)
+    res.set_attrs("tolerance/frozen_R", operating_R="each sample run at its design's nominal operating R (moved by "
+                  "the R actuator's deviation, that of R_min); group tolerance: the R re-chosen per sample")
+
+
 def headline_lines(T, roles: Sequence[str]) -> list:
     """Printed lines of the ``tolerance`` group (as loaded): for each of ``roles`` the probability that every
     constraint holds and the picks/min percentiles."""
@@ -224,6 +232,12 @@ def headline_lines(T, roles: Sequence[str]) -> list:
                    f"samples (95 % lower bound {100 * float(T['p_all_lower95'][i]):.1f} %); picks/min p5 {pp[q.index(5.0)]:.4g}"
                    f" / p50 {pp[q.index(50.0)]:.4g} / p95 {pp[q.index(95.0)]:.4g} (nominal "
                    f"{float(T['nominal_picks_per_min'][i]):.4g})" + (f"; holds: {', '.join(weak)}" if weak else ""))
+        Fz = T.get("frozen_R")
+        if Fz is not None:
+            held = np.asarray(Fz["p_holds"], float)[i]
+            weak = [f"{c} {100 * h:.1f} %" for c, h in zip(cn, held) if h < 1.0]
+            out.append(f"    at its nominal operating R (not re-chosen per built robot): every constraint holds in "
+                       f"{100 * float(Fz['p_all'][i]):.1f} %" + (f"; holds: {', '.join(weak)}" if weak else ""))
     return out
 
 
@@ -237,6 +251,8 @@ def summary_attrs(T) -> dict:
     for i, who in enumerate(str(x) for x in T["role"]):
         pp = np.asarray(T["picks_percentiles"], float)[i]
         out[f"{who}_p_all_constraints_hold"] = float(T["p_all"][i])
+        if "frozen_R" in T:
+            out[f"{who}_p_all_constraints_hold_at_nominal_R"] = float(T["frozen_R"]["p_all"][i])
         for p in (5.0, 50.0, 95.0):
             out[f"{who}_picks_p{p:g}"] = float(pp[q.index(p)])
     out["tolerance_samples"] = int(T["attrs"]["samples"])
