@@ -24,7 +24,7 @@ from .datasheet import Datasheet, DatasheetError
 from .datasheet import datasheet as datasheet  # the function; the module stays importable as deltajax.datasheet
 from .runreport import ReportError, write_report  # the main job's HTML run report (plotly imported on use)
 from . import (constraints, cycle, dynamics, export, io, kinematics, mechanism, motion, optimize, reference,
-               trajectory, workspace)
+               tolerance, trajectory, workspace)
 
 __version__ = "0.1.0"
 
@@ -42,6 +42,8 @@ __all__ = [
     "picks_per_minute", "regular_workspace",
     # reconfiguration in motion
     "RDriveLimits", "resolve_path", "refine_path",
+    # trusting a design: tolerances (deltajax.tolerance.analyse)
+    "tolerance",
     # taking a design out
     "datasheet", "Datasheet", "DatasheetError", "write_report", "ReportError",
     # modules

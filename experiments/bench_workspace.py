@@ -242,7 +242,7 @@ def main() -> None:
         return
     import deltajax as dj
     from deltajax import workspace as ws
-    from deltajax.workspace import _nb
+    from deltajax.workspace import numba_fields
     from deltajax.workspace.redundancy import nb_params
 
     rec = dj.presets.franco2026()
@@ -326,8 +326,8 @@ def main() -> None:
         uniq = np.ascontiguousarray(pts)
         k_lo, k_stop = ws.reach_k_range_host(rec, uniq)
         out = np.empty((len(uniq), 4))
-        _nb.screen_audit(uniq, k_lo, k_stop, q["R_min"], q["R_step"], q["r"], q["L1"], q["L2"], q["lim"],
-                         _nb.kt_tuple(2.0, 4.2, args.beta), _nb.CRITERION["k_tilde"], out)
+        numba_fields.screen_audit(uniq, k_lo, k_stop, q["R_min"], q["R_step"], q["r"], q["L1"], q["L2"], q["lim"],
+                         numba_fields.kt_tuple(2.0, 4.2, args.beta), numba_fields.CRITERION["k_tilde"], out)
         print(f"AUDIT {int(out[:, 3].sum())} feasible samples: max |k~ screen - exact| {out[:, 0].max():.3g}, "
               f"max error / bound {out[:, 1].max():.3g}, violations {int(out[:, 2].sum())}")
     print(f"Table 6 check (beta {args.beta}): RDR omega_v mean {s_rdr['omega_v']['mean']:.4f}, "

@@ -1,4 +1,4 @@
-"""Every backend agrees: the JAX core, its Numba mirror (``deltajax.workspace._nb_kernel``) and the independent
+"""Every backend agrees: the JAX core, its Numba mirror (``deltajax.workspace.numba_kernel``) and the independent
 NumPy reference (``deltajax.reference``), function by function on random inputs, then the whole kernel on a
 mixed batch (reachable, unreachable, joint-limit, on-axis, huge and non-finite points).
 
@@ -18,7 +18,7 @@ from deltajax import reference as ref
 from deltajax.indices import indices_from_sv, point_kernel, singular_values, sym3_top2
 from deltajax.jacobian import jq_theta, jx_det, jx_row
 from deltajax.kinematics import chain_local, limit_terms, loop_closure, loop_vectors
-from deltajax.workspace import _nb, _nb_kernel as nbk
+from deltajax.workspace import numba_fields, numba_kernel as nbk
 
 ROBOT = dj.presets.franco2026(fixed_R=0.2)
 R, r, L1, L2 = 0.2, 0.065, 0.2, 0.4
@@ -42,10 +42,10 @@ def _points(n, rng=RNG):
 
 def _nb_fields(pts, method):
     x, y, z = (np.ascontiguousarray(pts[:, i]) for i in range(3))
-    out = np.empty((_nb.N_IDX, len(pts)))
+    out = np.empty((numba_fields.N_IDX, len(pts)))
     ok = np.empty(len(pts), np.bool_)
     # the drivers pass mirror-canonical points (|y|); y >= 0 here so nothing is changed
-    _nb.fixed_fields(x, y, z, R, r, L1, L2, np.array(nbk.limits_tuple(TH_MIN, TH_MAX)), np.array(KT), _nb.rows(out),
+    numba_fields.fixed_fields(x, y, z, R, r, L1, L2, np.array(nbk.limits_tuple(TH_MIN, TH_MAX)), np.array(KT), numba_fields.rows(out),
                      ok, method)
     return ok, out
 

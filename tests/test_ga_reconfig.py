@@ -72,7 +72,19 @@ def test_toy_run_front_feasible_summary_and_units(full_run):
     assert S["recommended_fixed_R"][1] <= S["recommended"][1] + 1e-15   # R per point can only add
     assert V["units"]["picks_per_min"] == "1/min" and V["units"]["regular_volume"] == "m^3"
     assert "ga/checkpoint" in {k for k in _datasets(full_run)[1]}
-    assert data["attrs"]["ga_reconfig_stages"] == "screen,ga,pareto,refine,verify,results,plots,export,report"
+    assert data["attrs"]["ga_reconfig_stages"] == ("screen,ga,pareto,refine,verify,tolerance,results,plots,export,"
+                                                   "report")
+    # the tolerance stage: the baseline and the recommendation, their probability printed with the summary
+    T = data["tolerance"]
+    roles = list(T["role"])
+    assert roles == ["baseline", "recommended"] and T["attrs"]["samples"] == 200
+    assert list(T["design_name"]) == ["baseline", S["attrs"]["recommended"]]
+    assert np.all((T["p_all"] >= 0) & (T["p_all"] <= T["p_holds"].min(axis=1)))
+    assert T["units"]["picks_percentiles"] == "1/min" and T["picks_percentiles"].shape == (2, 5)
+    assert S["attrs"]["recommended_p_all_constraints_hold"] == T["p_all"][1]
+    assert list(T["frozen_R"]["role"]) == roles and T["frozen_R"]["p_all"].shape == (2,)   # at the nominal R
+    log = (full_run.parent / "run.log").read_text()
+    assert f"recommended ({S['attrs']['recommended']}): every constraint holds in {100 * T['p_all'][1]:.1f} %" in log
     # the refined winners: accepted only if feasible and no objective worse, and verified like every candidate
     R = data["refine"]
     acc = np.asarray(R["accepted"]).astype(bool)
@@ -112,8 +124,8 @@ def test_rerun_three_times_into_one_dir(full_run, tmp_path, caplog, monkeypatch)
     with pytest.raises(KeyboardInterrupt):
         run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
     assert "resuming the GA from generation 2" in _logged(caplog)
-    # killed after the verify stage: every stage up to it is in the file, the summary is not
-    assert load(tmp_path / "results.h5")["attrs"]["ga_reconfig_stages"] == "screen,ga,pareto,refine,verify"
+    # killed after the verify and tolerance stages: every stage up to them is in the file, the summary is not
+    assert load(tmp_path / "results.h5")["attrs"]["ga_reconfig_stages"] == "screen,ga,pareto,refine,verify,tolerance"
     monkeypatch.setattr(job, "summary", real)
     p = run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
     snap = tmp_path / "after_resume.h5"

@@ -16,7 +16,7 @@ PKG = Path(__file__).resolve().parents[1] / "deltajax"
 APP = ("run", "overrides", "schemas", "rundir", "sweep", "merge", "report", "runreport", "config", "jobs", "sweeps",
        "plots", "benchmarks")
 #: The engines over the core.
-ENGINES = ("workspace", "motion", "motion_refine", "optimize", "datasheet", "export")
+ENGINES = ("workspace", "motion", "motion_refine", "optimize", "datasheet", "export", "tolerance")
 #: Third-party libraries of the results file and the configuration: io and the application only.
 APP_LIBRARIES = ("h5py", "omegaconf", "hydra", "hydra_plugins", "h5netcdf", "xarray")
 
@@ -105,12 +105,12 @@ def test_no_private_name_is_imported_across_modules():
         for line, mod, name in _imports(f, modname):
             if not mod.startswith("deltajax"):
                 continue
-            # a private submodule may be imported by its own package (``from . import _nb`` in deltajax.workspace)
+            # a private submodule may be imported by its own package (``from . import numba_fields`` in deltajax.workspace)
             own_submodule = (PKG.parent / Path(*f"{mod}.{name}".split("."))).with_suffix(".py").exists() and (
                 modname == mod or modname.startswith(mod + "."))
             if name is not None and _private(name) and not own_submodule:
                 bad.append(f"{modname}:{line} imports {name} from {mod}")
-            # a private module (deltajax.workspace._nb, ...) only from inside its own package
+            # a private module (deltajax.workspace.numba_fields, ...) only from inside its own package
             parts = mod.split(".")
             for i, p in enumerate(parts):
                 pkg = ".".join(parts[:i])

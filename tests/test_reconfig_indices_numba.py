@@ -1,8 +1,8 @@
 """Numba side of the Table-6 job: the faster host paths give bitwise the results of the plain ones.
 
-* ``_nb.fixed_fields`` (IK pass, reachable points gathered, kernel, scatter) equals ``_nb.fixed_fields_dense``
+* ``numba_fields.fixed_fields`` (IK pass, reachable points gathered, kernel, scatter) equals ``numba_fields.fixed_fields_dense``
   (the kernel on every point) bitwise, both singular-value methods;
-* the vectorised window trimming of the screen (``_nb_screen.trim_window``) equals the scalar first/last
+* the vectorised window trimming of the screen (``numba_screen.trim_window``) equals the scalar first/last
   feasible sample search;
 * the fast (screened) redundancy resolution equals the exact sweep on random points, edges included;
 * end to end: ``reconfig_indices`` at toy size in fast mode and in exact mode store the same selection and
@@ -19,7 +19,7 @@ import pytest
 
 import deltajax as dj
 from deltajax import workspace as ws
-from deltajax.workspace import _nb, _nb_screen
+from deltajax.workspace import numba_fields, numba_screen
 from deltajax.workspace.redundancy import nb_params
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
@@ -27,10 +27,10 @@ from check_reconfig_indices import compare  # noqa: E402
 
 REC = dj.presets.franco2026()
 Q = nb_params(REC)
-KT = _nb.kt_tuple(2.0, 4.2, 0.5)
+KT = numba_fields.kt_tuple(2.0, 4.2, 0.5)
 
 
-@pytest.mark.parametrize("method", [_nb.JACOBI, _nb.FAST])
+@pytest.mark.parametrize("method", [numba_fields.JACOBI, numba_fields.FAST])
 def test_compacted_fields_equal_dense(method):
     g = ws.franco2026_grid(0.02)
     p = g.points().reshape(-1, 3)
@@ -39,8 +39,8 @@ def test_compacted_fields_equal_dense(method):
     out_c, out_d = np.empty((8, n)), np.empty((8, n))
     ok_c, ok_d = np.empty(n, bool), np.empty(n, bool)
     args = (float(REC.robot.base_radius), Q["r"], Q["L1"], Q["L2"], Q["lim"], KT)
-    _nb.fixed_fields(x, y, z, *args, _nb.rows(out_c), ok_c, method)
-    _nb.fixed_fields_dense(x, y, z, *args, _nb.rows(out_d), ok_d, method)
+    numba_fields.fixed_fields(x, y, z, *args, numba_fields.rows(out_c), ok_c, method)
+    numba_fields.fixed_fields_dense(x, y, z, *args, numba_fields.rows(out_d), ok_d, method)
     assert 0 < ok_c.sum() < n
     np.testing.assert_array_equal(ok_c, ok_d)
     np.testing.assert_array_equal(out_c, out_d)  # NaN where NaN, every bit of the rest
@@ -51,17 +51,17 @@ def test_trim_window_equals_scalar_search():
     pts = np.stack([rng.uniform(-0.45, 0.45, 3000), np.abs(rng.uniform(-0.45, 0.45, 3000)),
                     rng.uniform(0.0, 0.62, 3000)], -1)
     k_lo, k_stop = ws.reach_k_range_host(REC, pts)
-    tb = np.empty(_nb_screen.TRIM_BLOCK, np.bool_)
+    tb = np.empty(numba_screen.TRIM_BLOCK, np.bool_)
     a = (Q["R_min"], Q["R_step"], Q["r"], Q["L1"], Q["L2"], Q["lim"])
     hit = 0
     for j in range(len(pts)):
         x, y, z = pts[j]
         k0, k1 = int(k_lo[j]), int(k_stop[j])
-        while k0 < k1 and not _nb.ik_ok(x, y, z, a[0] + k0 * a[1], *a[2:]):
+        while k0 < k1 and not numba_fields.ik_ok(x, y, z, a[0] + k0 * a[1], *a[2:]):
             k0 += 1
-        while k1 > k0 and not _nb.ik_ok(x, y, z, a[0] + (k1 - 1) * a[1], *a[2:]):
+        while k1 > k0 and not numba_fields.ik_ok(x, y, z, a[0] + (k1 - 1) * a[1], *a[2:]):
             k1 -= 1
-        got = _nb_screen.trim_window.py_func(x, y, z, int(k_lo[j]), int(k_stop[j]), *a, tb)
+        got = numba_screen.trim_window.py_func(x, y, z, int(k_lo[j]), int(k_stop[j]), *a, tb)
         assert got == (k0, k1), j
         hit += k1 > k0
     assert 300 < hit < 3000  # reachable and unreachable points both covered

@@ -11,7 +11,7 @@ from hypothesis import strategies as st
 
 import deltajax as dj
 from deltajax import workspace as ws
-from deltajax.workspace import _nb
+from deltajax.workspace import numba_fields
 
 REC = dj.presets.franco2026()
 FIXED = dj.presets.franco2026(fixed_R=0.2)
@@ -149,10 +149,10 @@ def test_ties_go_to_smallest_R():
     # b_v tiny: sigma~_v = 0 for every sample, so k~ = 0 everywhere and the first feasible sample wins
     pts = np.array([[0.0, 0.0, 0.3], [0.1, -0.05, 0.45], [0.0, 0.0, 0.05]])
     red, _ = ws.resolve_redundancy_host(REC, pts, mode="fast", b_v=1e-9)
-    lim = _nb.limits_tuple(float(REC.robot.theta_min), float(REC.robot.theta_max))
+    lim = numba_fields.limits_tuple(float(REC.robot.theta_min), float(REC.robot.theta_max))
     for i, p in enumerate(pts):
         first = next((k for k in range(REC.n_R)
-                      if _nb._ik_ok(p[0], abs(p[1]), p[2], 0.138 + 0.001 * k, 0.065, 0.2, 0.4, lim)), -1)
+                      if numba_fields._ik_ok(p[0], abs(p[1]), p[2], 0.138 + 0.001 * k, 0.065, 0.2, 0.4, lim)), -1)
         assert red.k[i] == first
         if first >= 0:
             assert red.value[i] == 0.0
@@ -162,8 +162,8 @@ def test_ties_go_to_smallest_R():
 @given(st.floats(-0.45, 0.45), st.floats(-0.45, 0.45), st.floats(0.0, 0.62))
 def test_reach_range_contains_every_feasible_sample(x, y, z):
     lo, stop = ws.reach_k_range_host(REC, np.array([[x, y, z]]))
-    lim = _nb.limits_tuple(-math.inf, math.inf)  # unlimited joints: the widest feasible set
-    feas = [k for k in range(REC.n_R) if _nb._ik_ok(x, abs(y), z, 0.138 + 0.001 * k, 0.065, 0.2, 0.4, lim)]
+    lim = numba_fields.limits_tuple(-math.inf, math.inf)  # unlimited joints: the widest feasible set
+    feas = [k for k in range(REC.n_R) if numba_fields._ik_ok(x, abs(y), z, 0.138 + 0.001 * k, 0.065, 0.2, 0.4, lim)]
     assert all(lo[0] <= k < stop[0] for k in feas)
 
 

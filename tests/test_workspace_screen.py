@@ -1,6 +1,6 @@
 """Fast mode's screen-and-verify redundancy resolution: identical to the exact sweep, and the screen's error bound.
 
-The screen (``_nb.screen_window``) approximates the criterion of every sample of a point's window by the
+The screen (``numba_fields.screen_window``) approximates the criterion of every sample of a point's window by the
 trigonometric eigenvalue formula (no Jacobi) and returns an interval that must contain the exact kernel's
 value; the fast mode evaluates the exact kernel only where an interval reaches the largest lower end.
 """
@@ -14,13 +14,13 @@ from hypothesis import strategies as st
 
 import deltajax as dj
 from deltajax import workspace as ws
-from deltajax.workspace import _nb
+from deltajax.workspace import numba_fields
 from deltajax.workspace.redundancy import nb_params
 
 REC = dj.presets.franco2026()
 Q = nb_params(REC)
 G40 = ws.franco2026_grid(0.04)  # 21 x 21 x 15
-C = _nb.CRITERION  # criterion codes by index name
+C = numba_fields.CRITERION  # criterion codes by index name
 KT = C["k_tilde"]
 
 
@@ -32,7 +32,7 @@ def _audit(pts, crit=KT, beta=0.5):
     pts = np.ascontiguousarray(pts, dtype=np.float64)
     k_lo, k_stop = ws.reach_k_range_host(REC, pts)
     out = np.empty((len(pts), 4))
-    _nb.screen_audit(pts, k_lo, k_stop, *_args(), _nb.kt_tuple(2.0, 4.2, beta), crit, out)
+    numba_fields.screen_audit(pts, k_lo, k_stop, *_args(), numba_fields.kt_tuple(2.0, 4.2, beta), crit, out)
     return out
 
 
@@ -77,7 +77,7 @@ def test_failed_bound_falls_back_to_the_exact_sweep(grid_points):
     k_lo, k_stop = ws.reach_k_range_host(REC, pts)
     n = len(pts)
     bk, bv, nf, fb = (np.empty(n, np.int64), np.empty(n), np.empty(n, np.int64), np.empty(n, np.int64))
-    _nb.resolve_screened(pts, k_lo, k_stop, *_args(), _nb.kt_tuple(2.0, 4.2, 0.5), KT, -1.0, bk, bv, nf, fb)
+    numba_fields.resolve_screened(pts, k_lo, k_stop, *_args(), numba_fields.kt_tuple(2.0, 4.2, 0.5), KT, -1.0, bk, bv, nf, fb)
     exact, _ = ws.resolve_redundancy_host(REC, pts, mode="exact", return_indices=False)
     np.testing.assert_array_equal(bk, exact.k)
     np.testing.assert_array_equal(bv[bk >= 0], exact.value[exact.ok])
@@ -97,13 +97,13 @@ def test_ties_go_to_smallest_R_through_the_screen():
 # -- the screen's error bound ----------------------------------------------------------------------------
 def test_tcubic_solves_the_cardano_cubic():
     w = np.concatenate([np.linspace(0.0, 4.0, 20001), 4.0 - np.logspace(-18, 0, 200), np.logspace(-20, 0, 200)])
-    t = np.array([_nb._tcubic(v) for v in w])
+    t = np.array([numba_fields._tcubic(v) for v in w])
     tl = np.sqrt(w.astype(np.longdouble) / 3)
     for _ in range(60):  # extended-precision Newton reference
         tl = tl - (tl * tl * (tl + 3) - w) / np.maximum(3 * tl * (tl + 2), 1e-300)
     assert float(np.max(np.abs(t - tl))) < 2e-15  # _T_NEWTON = 1e-14 is the bound used
     # the paired solver of the screen (one shared division), both roots t(w) and t(4 - w)
-    t2 = np.array([_nb._tcubic2(v, 4.0 - v) for v in w])
+    t2 = np.array([numba_fields._tcubic2(v, 4.0 - v) for v in w])
     assert float(np.max(np.abs(t2[:, 0] - tl))) < 2e-15
     tl4 = np.sqrt((4.0 - w).astype(np.longdouble) / 3)
     for _ in range(60):

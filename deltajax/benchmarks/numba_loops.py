@@ -3,8 +3,8 @@
 :func:`bench_kernel_rates` is the hook the kernel benchmark calls; :func:`bench_numba` the same figures for one
 robot as a dict. Labels:
 
-* ``exact (jacobi)`` / ``fast (cubic)``: the production field loop (:func:`deltajax.workspace._nb.fixed_fields`, the mirror's
-  :func:`deltajax.workspace._nb_kernel.point_kernel` with either eigenvalue solver) over every point;
+* ``exact (jacobi)`` / ``fast (cubic)``: the production field loop (:func:`deltajax.workspace.numba_fields.fixed_fields`, the mirror's
+  :func:`deltajax.workspace.numba_kernel.point_kernel` with either eigenvalue solver) over every point;
 * ``exact on reachable`` / ``fast on reachable``: the same on the reachable points only (the issue's figure);
 * ``minimal loop ceiling``: :func:`minimal_loop`, the same algebra stripped to the bone (reciprocals instead
   of divisions where the core divides, no input guards, no repeated-eigenvalue fix-up), the ceiling the
@@ -27,7 +27,7 @@ from llvmlite import ir
 from numba.core import types
 from numba.extending import intrinsic
 
-from ..workspace._nb_kernel import (FAST, INLINE, JACOBI, N_IDX, OPTS, T_POLY, as_tuple4, chain_local, jx_row, kt_tuple,
+from ..workspace.numba_kernel import (FAST, INLINE, JACOBI, N_IDX, OPTS, T_POLY, as_tuple4, chain_local, jx_row, kt_tuple,
                          limits_tuple, sv_matrix)
 
 __all__ = ["bench_kernel_rates", "bench_numba", "minimal_loop", "minimal_loop_newton"]
@@ -197,7 +197,7 @@ def bench_kernel_rates(points: np.ndarray, geo, repeats: int = 3) -> dict:
         geo: [R, r, L1, L2, theta_min, theta_max] (m, rad).
         repeats: timed repetitions (best CPU time is reported).
     """
-    from ..workspace import _nb
+    from ..workspace import numba_fields
 
     R, r, L1, L2, lo, hi = (float(v) for v in geo)
     pts = np.asarray(points, np.float64).reshape(-1, 3)
@@ -207,7 +207,7 @@ def bench_kernel_rates(points: np.ndarray, geo, repeats: int = 3) -> dict:
     out, ok = np.empty((N_IDX, n)), np.empty(n, np.bool_)
     res = {}
     for label, m in (("exact (jacobi)", JACOBI), ("fast (cubic)", FAST)):
-        w, c = _best(lambda: _nb.fixed_fields(x, y, z, R, r, L1, L2, lim, kt, _nb.rows(out), ok, m), repeats)
+        w, c = _best(lambda: numba_fields.fixed_fields(x, y, z, R, r, L1, L2, lim, kt, numba_fields.rows(out), ok, m), repeats)
         res[label] = (n, w, c)
     sel = ok.copy()
     xr, yr, zr = (np.ascontiguousarray(a[sel]) for a in (x, y, z))
@@ -215,7 +215,7 @@ def bench_kernel_rates(points: np.ndarray, geo, repeats: int = 3) -> dict:
     if nr:
         o2, k2 = np.empty((N_IDX, nr)), np.empty(nr, np.bool_)
         for label, m in (("exact on reachable", JACOBI), ("fast on reachable", FAST)):
-            w, c = _best(lambda: _nb.fixed_fields(xr, yr, zr, R, r, L1, L2, lim, kt, _nb.rows(o2), k2, m), repeats)
+            w, c = _best(lambda: numba_fields.fixed_fields(xr, yr, zr, R, r, L1, L2, lim, kt, numba_fields.rows(o2), k2, m), repeats)
             res[label] = (nr, w, c)
         w, c = _best(lambda: minimal_loop(xr, yr, zr, R, r, L1, L2, lim, kt, o2, k2), repeats)
         res["minimal loop ceiling (reachable)"] = (nr, w, c)

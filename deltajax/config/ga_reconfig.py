@@ -19,7 +19,7 @@ __all__ = ["GaReconfigSettings", "ga_reconfig_settings", "ga_reconfig_build", "v
 _GA_KEYS = {
     "": {"name", "resume", "stop_after", "continue_from", "design", "task", "good_workspace", "joints", "links",
          "motor", "cycle", "regular_workspace", "objectives", "constraints", "screen", "ga", "pareto", "refine",
-         "recommend", "recommend_band", "recommend_floor", "floor_solve", "verify",
+         "recommend", "recommend_band", "recommend_floor", "floor_solve", "verify", "tolerance", "robust",
          "reconfig"},  # rtmode: experiment.reconfig is checked by deltajax.optimize.operating
     "screen": {"enabled", "log2_size", "seed_fraction"},
     "refine": {"enabled", "steps", "learning_rate", "penalty"},
@@ -38,6 +38,9 @@ _GA_KEYS = {
     "constraints": {"task_in_good_workspace", "passive_joints", "interference", "min_picks_per_min",
                     "max_arm_sum"},
     "pareto": {"enabled", "population_size", "generations", "ref_min_factor"},
+    "tolerance": {"enabled", "samples", "seed", "distribution", "length_mm", "joint_offset_deg", "mass_percent",
+                  "motor_percent"},
+    "robust": {"enabled", "probability", "confirm_seed", "max_candidates"},
     "verify": {"n_R", "n_R_operating", "task_n_r", "task_n_phi", "task_n_z", "cycle_samples", "rw_n_r", "rw_n_phi",
                "rw_n_z"},
 }
@@ -125,6 +128,10 @@ class GaReconfigSettings:
     # levels) of the unit cylinder) for deltajax.constraints.refine_cylinder (the verification keeps its defaults)
     search_refine: tuple = ()
     reconfig: dict = dataclasses.field(default_factory=dict)  # rtmode: operating.settings_from_block
+    # the tolerance stage (deltajax.tolerance: Monte Carlo over manufacturing and model tolerances); absent: off
+    tolerance: dict = dataclasses.field(default_factory=lambda: {"enabled": False})
+    # the robust recommendation (holds every constraint in >= probability of the Monte Carlo samples); absent: off
+    robust: dict = dataclasses.field(default_factory=lambda: {"enabled": False})
     # a finished run (its directory or results.h5) this run continues with more budget; None: a new search
     continue_from: Optional[str] = None
 
@@ -289,6 +296,22 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
         optional["floor_solve"] = {"enabled": _ga_flag(fs, "enabled", "floor_solve"),
                                    "rounds": _ga_num(fs, "rounds", "floor_solve", lo=1, integer=True),
                                    "candidates": _ga_num(fs, "candidates", "floor_solve", lo=1, integer=True)}
+    if "tolerance" in e:
+        optional["tolerance"] = _tolerance_settings(e)
+    if "robust" in e:
+        rb = _ga_block(e, "robust")
+        optional["robust"] = {"enabled": _ga_flag(rb, "enabled", "robust"),
+                              "probability": _ga_num(rb, "probability", "robust", lo=0, lo_open=True, hi=1),
+                              "confirm_seed": _ga_num(rb, "confirm_seed", "robust", lo=0, hi=2 ** 32 - 1,
+                                                      integer=True),
+                              "max_candidates": _ga_num(rb, "max_candidates", "robust", lo=1, integer=True)}
+        tl = optional.get("tolerance", {"enabled": False})
+        if optional["robust"]["enabled"] and not tl["enabled"]:
+            raise ConfigError("experiment.robust.enabled=true needs the tolerance stage: set "
+                              "experiment.tolerance.enabled=true")
+        if optional["robust"]["enabled"] and optional["robust"]["confirm_seed"] == tl["seed"]:
+            raise ConfigError(f"experiment.robust.confirm_seed={optional['robust']['confirm_seed']!r} must differ "
+                              f"from experiment.tolerance.seed (the confirmation is a fresh Monte Carlo)")
     v = _ga_block(e, "verify")
     verify = {k: _ga_num(v, k, "verify", lo=1, integer=True) for k in v}
     for k in ("n_R", "task_n_phi", "task_n_z", "rw_n_r", "rw_n_phi", "rw_n_z"):
@@ -306,6 +329,21 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
                     pareto=pareto, recommend=recommend, verify=verify, screen=screen, refine=refine,
                     recommend_band=band, recommend_floor=floor, search_refine=search_refine,
                     reconfig=_operating_settings(e), continue_from=cont, **optional)
+
+
+def _tolerance_settings(e: Mapping[str, Any]) -> dict:
+    """``experiment.tolerance``: the Monte Carlo of :mod:`deltajax.tolerance` (lengths in mm, masses and motor
+    constants in percent)."""
+    t = _ga_block(e, "tolerance")
+    out = {"enabled": _ga_flag(t, "enabled", "tolerance"),
+           "samples": _ga_num(t, "samples", "tolerance", lo=1, hi=10 ** 7, integer=True),
+           "seed": _ga_num(t, "seed", "tolerance", lo=0, hi=2 ** 32 - 1, integer=True),
+           "distribution": _ga_choice(t, "distribution", "tolerance", ("uniform", "normal")),
+           "length_mm": _ga_num(t, "length_mm", "tolerance", lo=0, hi=10, unit="mm"),
+           "joint_offset_deg": _ga_num(t, "joint_offset_deg", "tolerance", lo=0, hi=5, unit="deg"),
+           "mass_percent": _ga_num(t, "mass_percent", "tolerance", lo=0, hi=50, unit="%"),
+           "motor_percent": _ga_num(t, "motor_percent", "tolerance", lo=0, hi=50, unit="%")}
+    return out
 
 
 def validate_ga_reconfig(e, cfg, robot, recon) -> None:

@@ -133,7 +133,9 @@ def stages_done(path: Path) -> tuple[Optional[str], list]:
 #: rule) must equal the earlier run's, so that its verified metrics hold here.
 BUDGET_SETTINGS = ("seed", "experiment.continue_from", "experiment.screen", "experiment.ga",
                    "experiment.pareto.enabled", "experiment.pareto.population_size", "experiment.pareto.generations",
-                   "experiment.refine", "experiment.floor_solve")
+                   "experiment.refine", "experiment.floor_solve",
+                   # the tolerance analysis reads the verified designs and changes none of their numbers
+                   "experiment.tolerance", "experiment.robust")
 
 
 @dataclasses.dataclass(frozen=True)
@@ -186,7 +188,7 @@ def earlier_run(where: str, cfg) -> EarlierRun:
     if diffs:
         raise SetupError(f"{key}: {p} is a run of another problem ({describe_differences(diffs)}); a continued run "
                          "may change only the search budget (seed, experiment.screen, .ga, .pareto population_size "
-                         "and generations, .refine, .floor_solve)")
+                         "and generations, .refine, .floor_solve, .tolerance, .robust)")
     V = data["verify"]
     rows = np.asarray(V["front"], int).reshape(-1)
     genes = np.asarray(V["genes"], float)

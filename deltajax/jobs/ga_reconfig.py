@@ -13,8 +13,9 @@ in the good workspace, passive joints, interference, motor envelope and RMS rati
 Stages (the library: :mod:`deltajax.optimize.workflow`; each stored in ``results.h5``, a rerun into the same
 ``hydra.run.dir`` resumes after the last finished one and a finished run is a no-op):
 baseline -> screen (Sobol, seeds the GA) -> ga (checkpointed) -> pareto (NSGA-II) -> refine (optax) ->
-verify (fine grids, recommendation) -> results (summary) -> plots -> report (``report.html``, the self-contained
-run report of :mod:`deltajax.runreport`). ``experiment.continue_from`` (more budget for
+verify (fine grids, recommendation) -> tolerance (Monte Carlo over manufacturing and model tolerances,
+:mod:`deltajax.optimize.robust`; ``experiment.robust``: the robust recommendation) -> results (summary) ->
+plots -> report (``report.html``, the self-contained run report of :mod:`deltajax.runreport`). ``experiment.continue_from`` (more budget for
 a finished run, :func:`deltajax.jobs.designer_state.earlier_run`): its verified front seeds the GA and NSGA-II and
 joins the verified candidates with its stored metrics, so the recommendation cannot be one its recommendation
 dominates.
@@ -35,7 +36,7 @@ from . import designer_state as ST
 
 __all__ = ["run", "build", "settings_from_config", "Settings", "STAGES"]
 
-STAGES = ("screen", "ga", "pareto", "refine", "verify", "results", "plots", "report")
+STAGES = ("screen", "ga", "pareto", "refine", "verify", "tolerance", "results", "plots", "report")
 SCREEN_FRONT_EVAL = 1024  # at most this many feasible screen designs (best primary first) get the regular workspace
 REFINE_MAX = 8          # winners refined: the GA's best and the front's best 7 on the primary objective
 settings_from_config = ga_reconfig_settings
@@ -367,6 +368,10 @@ def run(ctx) -> None:
                 f"hypervolume {hv:.4g}; recommended: {names[rec] if rec >= 0 else 'none'} ({R.rule_text(s)})")
         mark("verify")
 
+    if s.tolerance["enabled"] and "tolerance" not in done:   # reads only what verify stored (a resume recomputes it)
+        _tolerance(ctx, res, load(path)["verify"], s, space, objs, sense, jp)
+        mark("tolerance")
+
     if "results" not in done:
         R.summary(ctx, res, load(path), space, objs, s)
         res.set_attrs("ga_reconfig", **{f"time_{k}_s": v for k, v in timings.items()})
@@ -378,6 +383,81 @@ def run(ctx) -> None:
     ctx.write_figures()                      # the stage is done once its figures are on disk, not before
     mark("plots")
     _finish(ctx, path, space, s, done, mark)
+
+
+def _tolerance(ctx, res, V, s, space, objs, sense, jp) -> None:
+    """The tolerance stage (:mod:`deltajax.optimize.robust`): the Monte Carlo of the baseline and the recommendation
+    on the verification problem (group ``tolerance``) and, with ``experiment.robust.enabled``, the robust
+    recommendation (group ``tolerance/robust``; ``verify``'s ``recommended`` becomes it, ``recommended_nominal``
+    keeps the nominal one)."""
+    from .. import tolerance as TL
+    from ..optimize import report as R
+    from ..optimize import robust as RB
+    from ..optimize import workflow as W
+
+    space_v = dataclasses.replace(space, n_R=s.verify["n_R"]) if space.reconfigurable else space
+    pb_fine = W.designer_problem(s, fine=True)
+    tol = RB.tolerances_of(s)
+    text = TL.describe(tol)
+    names = [str(n) for n in V["design_name"]]
+    genes = np.asarray(V["genes"], float).reshape(len(names), -1)
+    rec = int(V["attrs"]["recommended"])
+    n_s = int(s.tolerance["samples"])
+
+    def analyse_rows(rows, seed):
+        bar = ctx.progress(total=len(rows) * (n_s + 1), desc=f"tolerance (Monte Carlo, seed {seed})")
+        try:
+            return TL.analyse(pb_fine, space_v, genes[list(rows)], tol, samples=n_s, seed=seed, progress=bar.update)
+        finally:
+            bar.close()
+
+    ctx.log(f"tolerance: {n_s} Monte Carlo samples of {text}")
+    rows = [0] + ([rec] if rec > 0 else [])
+    a = analyse_rows(rows, int(s.tolerance["seed"]))
+    entries = [("baseline", 0, 0)] + ([("recommended", rows.index(rec), rec)] if rec >= 0 else [])
+    results = [a]
+    if s.robust["enabled"]:
+        Fv = np.asarray(V["F"], float).reshape(len(names), -1)
+
+        def rule(nd):
+            return W.recommend(Fv, nd, s.recommend, jp, band=s.recommend_band, floor=s.recommend_floor, sense=sense)
+
+        known = {r: TL.select([a], [(0, i)]) for i, r in enumerate(rows)}
+        rc = RB.robust_choice(analyse_rows, Fv, np.asarray(V["feasible"]).astype(bool), rule,
+                              float(s.robust["probability"]), int(s.tolerance["seed"]), int(s.robust["confirm_seed"]),
+                              int(s.robust["max_candidates"]), known=known, log=ctx.log)
+        RB.store_robust(res, rc, names, rec, V, s, text)
+        entries = [e for e in entries if e[0] != "recommended"]
+        if rec >= 0:
+            entries.append(("nominal_recommended", rows.index(rec), rec))
+        if rc.chosen >= 0:
+            results.append(rc.results[rc.chosen])
+            entries.append(("recommended", (len(results) - 1, 0), rc.chosen))
+            res.set_attrs("verify", recommended=int(rc.chosen), recommended_nominal=rec,
+                          recommended_by=R.robust_text(s))
+            ctx.log(f"robust recommendation: {names[rc.chosen]} (every constraint holds in "
+                    f"{100 * rc.p_selection[rc.checked.index(rc.chosen)]:.1f} % of the samples, "
+                    f"{100 * float(rc.confirm['p_all'][0]):.1f} % of a fresh Monte Carlo, seed "
+                    f"{s.robust['confirm_seed']}); nominal: {names[rec]}; {len(rc.checked)} candidates checked")
+        else:
+            res.set_attrs("verify", recommended_nominal=rec)
+            if rec >= 0:
+                entries.append(("recommended", rows.index(rec), rec))
+            ctx.log(f"WARNING robust: no verified candidate holds every constraint in >= "
+                    f"{100 * s.robust['probability']:g} % of the samples ({len(rc.checked)} checked"
+                    + (", every feasible one" if rc.exhausted else "") + "); the recommendation stays the nominal "
+                    f"one ({names[rec] if rec >= 0 else 'none'}), which does not meet experiment.robust.probability")
+    sel = TL.select(results, [(e[1] if isinstance(e[1], tuple) else (0, e[1])) for e in entries])
+    roles = [e[0] for e in entries]
+    RB.store_tolerance(res, roles, [names[e[2]] for e in entries], [e[2] for e in entries], sel, text)
+    frozen = None
+    if space.reconfigurable:    # the stricter question: each built robot run at its design's nominal operating R
+        frozen = TL.analyse(pb_fine, space_v, genes[[e[2] for e in entries]], tol, samples=n_s,
+                            seed=int(s.tolerance["seed"]), operating_R="nominal")
+        RB.store_frozen(res, roles, [names[e[2]] for e in entries], [e[2] for e in entries], frozen, text)
+    for line in RB.headline_lines(dict(sel, role=roles, design_name=[names[e[2]] for e in entries],
+                                       attrs={"samples": n_s}, frozen_R=frozen), roles):
+        ctx.log(line)
 
 
 def _finish(ctx, path, space, s, done, mark) -> None:

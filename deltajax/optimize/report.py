@@ -66,13 +66,19 @@ def summary(ctx, res, data, space, objs, s) -> None:
             units="1", dims=("parameter",))
     res.put("summary", "baseline_params", params[0], units="mixed", dims=("parameter",))
     res.put("summary", "recommended_params", params[rec], units="mixed", dims=("parameter",))
-    res.set_attrs("summary", recommended=names[rec], rule=s.recommend, rule_text=rule_text(s), objectives=",".join(objs),
+    robust = V["attrs"].get("recommended_by")       # the tolerance stage's robust recommendation, when it found one
+    res.set_attrs("summary", recommended=names[rec], rule=s.recommend,
+                  rule_text=rule_text(s) + (f"; {robust}" if robust else ""), objectives=",".join(objs),
                   fixed_R_variant="R frozen at the operating R chosen for the task (same constraints); its picks/min "
                                   "and margins equal the reconfigurable design's at that R (mode per_task; with "
                                   "mode=path the reconfigurable design runs the cycle with R(t)), its regular "
                                   "workspace is the good set at that R alone (base plate as the reconfigurable "
                                   "design's)", operating_mode=s.reconfig.get("mode", "per_task"),
                   evaluation="fine verification grids (group verify)")
+    if "tolerance" in data:   # the tolerance stage's headline figures (group tolerance holds the rest)
+        from .robust import summary_attrs
+
+        res.set_attrs("summary", **summary_attrs(data["tolerance"]))
 
 
 def change_text(baseline: float, recommended: float, sense: int) -> str:
@@ -122,6 +128,13 @@ def print_summary(ctx, data) -> None:
             ctx.log(f"  {who} on the fine grids: " + ("feasible (every constraint met)" if bool(V["feasible"][i])
                                                        else "infeasible" + (f", violates {', '.join(bad)}" if bad
                                                                             else "")))
+    T = data.get("tolerance")
+    if T is not None and "role" in T:
+        from .robust import cost_lines, headline_lines
+
+        ctx.log(f"  tolerance analysis (group tolerance; {T['attrs'].get('tolerances', '')}):")
+        for line in headline_lines(T, ("baseline", "recommended", "nominal_recommended")) + cost_lines(T):
+            ctx.log(line)
     pn, pu = list(S["parameter_name"]), list(S["parameter_units"])
     ctx.log("  parameters: " + "; ".join(f"{n} [{u}] {x:.4g} -> {y:.4g}" for n, u, x, y in
                                           zip(pn, pu, S["baseline_params"], S["recommended_params"])))
@@ -186,6 +199,13 @@ def rule_text(s) -> str:
     if s.recommend == "knee":
         return "knee of the verified front (objectives normalised over the front)"
     return f"best {s.primary} on the verified front"
+
+
+def robust_text(s) -> str:
+    """The robust recommendation's requirement in words (``experiment.robust``)."""
+    return (f"robust: the rule applied among verified candidates holding every constraint in >= "
+            f"{100 * s.robust['probability']:g} % of {s.tolerance['samples']} Monte Carlo samples "
+            f"(seed {s.tolerance['seed']}), confirmed by a fresh Monte Carlo (seed {s.robust['confirm_seed']})")
 
 
 def store_floor(res, fo, names, first: int, objs, s) -> None:

@@ -324,7 +324,7 @@ def plane_statistics(ok: np.ndarray, values: np.ndarray) -> dict[str, np.ndarray
         [k, n_index] over the reachable points whose value is finite (min/max are +inf/-inf for none), in the
         dtype of ``values``.
 
-    One pass over the values (:func:`deltajax.workspace._nb.plane_stats`, Numba) instead of NumPy's five full-size
+    One pass over the values (:func:`deltajax.workspace.numba_fields.plane_stats`, Numba) instead of NumPy's five full-size
     temporaries, which took half of a 2 mm ``workspace_grid`` run; the same numbers bit for bit (the sums in
     NumPy's order for this layout: each plane's points one after the other, masked entries as +0.0; tested
     against the NumPy form in tests/test_workspace_plane_stats.py).
@@ -337,9 +337,9 @@ def plane_statistics(ok: np.ndarray, values: np.ndarray) -> dict[str, np.ndarray
     out = {"plane_count": np.empty(k, np.int64), "plane_n": np.empty((k, c), np.int64),
            "plane_sum": np.empty((k, c), values.dtype), "plane_min": np.empty((k, c), values.dtype),
            "plane_max": np.empty((k, c), values.dtype)}
-    from . import _nb                                  # Numba on first use: importing this module stays cheap
+    from . import numba_fields                                  # Numba on first use: importing this module stays cheap
 
-    _nb.plane_stats(ok, values, out["plane_count"], out["plane_n"], out["plane_sum"], out["plane_min"],
+    numba_fields.plane_stats(ok, values, out["plane_count"], out["plane_n"], out["plane_sum"], out["plane_min"],
                           out["plane_max"])
     return out
 

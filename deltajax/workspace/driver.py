@@ -91,10 +91,10 @@ class _Layout:
 
     def points_into(self, start: int, x: np.ndarray, y: np.ndarray, z: np.ndarray) -> None:
         """Coordinates of items start, start + 1, ... (``len(x)`` of them) written into preallocated buffers."""
-        from . import _nb
+        from . import numba_fields
 
         g = self.grid
-        _nb.grid_points(np.asarray(g.x, np.float64), np.asarray(g.y, np.float64), np.asarray(g.z, np.float64),
+        numba_fields.grid_points(np.asarray(g.x, np.float64), np.asarray(g.y, np.float64), np.asarray(g.z, np.float64),
                         self.j0, self.shape[1], start, x, y, z)
 
     def take(self, full: np.ndarray, start: int, stop: int) -> np.ndarray:
@@ -149,9 +149,9 @@ class _ChunkStats:
 
     def add(self, chunk: int, start: int, vals: np.ndarray) -> None:
         """Partial statistics of chunk ``chunk`` (items from ``start``), ``vals`` (len(names), n)."""
-        from . import _nb
+        from . import numba_fields
 
-        _nb.partial_stats(vals, start, self.lay.shape[2], self.lay.shape[1], *self.lay.weights,
+        numba_fields.partial_stats(vals, start, self.lay.shape[2], self.lay.shape[1], *self.lay.weights,
                           np.asarray(self.parts[chunk]))
         if isinstance(self.parts, np.memmap):
             self.parts.flush()  # before run_chunks records the chunk as done
@@ -257,16 +257,16 @@ def fixed_workspace(robot: Delta, grid: Grid, *, fields: bool = True, b_v: float
         sv_method: ``"jacobi"`` (exact singular values, default) or ``"fast"`` (the closed-form cubic of
             :func:`deltajax.indices.sym3_top2`, ~1e-9 relative, ~1e-8 within 1e-5 m of the robot's axis).
     """
-    from . import _nb
+    from . import numba_fields
 
     keep = _check_keep(keep, INDEX_NAMES) if fields else ()
-    if sv_method not in _nb.SV_METHODS:
-        raise ValueError(f"sv_method must be one of {tuple(_nb.SV_METHODS)}, got {sv_method!r}")
-    method = _nb.SV_METHODS[sv_method]
+    if sv_method not in numba_fields.SV_METHODS:
+        raise ValueError(f"sv_method must be one of {tuple(numba_fields.SV_METHODS)}, got {sv_method!r}")
+    method = numba_fields.SV_METHODS[sv_method]
     lay = _Layout(grid, mirror)
     q = _robot_desc(robot)
-    lim = _nb.limits_tuple(q["theta_min"], q["theta_max"])
-    kt = _nb.kt_tuple(b_v, b_f, beta)
+    lim = numba_fields.limits_tuple(q["theta_min"], q["theta_max"])
+    kt = numba_fields.kt_tuple(b_v, b_f, beta)
     outputs = {"ok": (np.bool_, False)}
     outputs.update({n: (field_dtype, np.nan) for n in keep})
     n_chunks = max(1, math.ceil(lay.n / chunk_size))
@@ -275,8 +275,8 @@ def fixed_workspace(robot: Delta, grid: Grid, *, fields: bool = True, b_v: float
     m = min(chunk_size, lay.n)
     xb, yb, zb = np.empty(m), np.empty(m), np.empty(m)
     okb = np.empty(m, np.bool_)
-    outb = np.empty((_nb.N_IDX, m)) if fields else None
-    castb = outb if (outb is None or np.dtype(field_dtype) == np.float64) else np.empty((_nb.N_IDX, m), field_dtype)
+    outb = np.empty((numba_fields.N_IDX, m)) if fields else None
+    castb = outb if (outb is None or np.dtype(field_dtype) == np.float64) else np.empty((numba_fields.N_IDX, m), field_dtype)
     cols = {n: i for i, n in enumerate(INDEX_NAMES)}
     R, r, L1, L2 = q["base_radius"], q["platform_radius"], q["upper_arm"], q["forearm"]
 
@@ -285,11 +285,11 @@ def fixed_workspace(robot: Delta, grid: Grid, *, fields: bool = True, b_v: float
         x, y, z, ok = xb[:n], yb[:n], zb[:n], okb[:n]
         lay.points_into(start, x, y, z)
         if not fields:
-            _nb.parallel(lambda a, b: _nb.fixed_mask(x[a:b], y[a:b], z[a:b], R, r, L1, L2, lim, ok[a:b]), n)
+            numba_fields.parallel(lambda a, b: numba_fields.fixed_mask(x[a:b], y[a:b], z[a:b], R, r, L1, L2, lim, ok[a:b]), n)
             return {"ok": ok}
         out = outb[:, :n]
-        _nb.parallel(lambda a, b: _nb.fixed_fields(x[a:b], y[a:b], z[a:b], R, r, L1, L2, lim, kt,
-                                                   _nb.rows(out, a, b), ok[a:b], method), n)
+        numba_fields.parallel(lambda a, b: numba_fields.fixed_fields(x[a:b], y[a:b], z[a:b], R, r, L1, L2, lim, kt,
+                                                   numba_fields.rows(out, a, b), ok[a:b], method), n)
         vals = castb[:, :n]
         if vals is not out:
             vals[...] = out
@@ -302,7 +302,7 @@ def fixed_workspace(robot: Delta, grid: Grid, *, fields: bool = True, b_v: float
     _progress_total(progress, lay.n)
     fp = {"job": "fixed", "robot": q, "grid": _grid_desc(grid), "fields": fields, "kt": [b_v, b_f, beta],
           "mirror": lay.mirror}
-    if keep != tuple(INDEX_NAMES) or acc is not None or method != _nb.JACOBI:  # older checkpoints stay valid
+    if keep != tuple(INDEX_NAMES) or acc is not None or method != numba_fields.JACOBI:  # older checkpoints stay valid
         fp.update(keep=list(keep), stats=acc is not None, sv_method=sv_method)
     arrays, complete = run_chunks(lay.n, chunk_size, compute, outputs, checkpoint_dir=checkpoint_dir,
                                   fingerprint=fp, progress=progress, max_chunks=max_chunks)
@@ -335,7 +335,7 @@ def reconfigurable_workspace(recon: ReconfigurableDelta, grid: Grid, *, chunk_si
 
     Each point tests only the samples of its closed-form reach range and stops at the first feasible one.
     """
-    from . import _nb
+    from . import numba_fields
     from .redundancy import nb_params, reach_k_range_host
 
     lay = _Layout(grid, mirror)
@@ -345,7 +345,7 @@ def reconfigurable_workspace(recon: ReconfigurableDelta, grid: Grid, *, chunk_si
         pts = lay.points(start, stop)
         k_lo, k_stop = reach_k_range_host(recon, pts)
         ok = np.empty(len(pts), np.bool_)
-        _nb.parallel(lambda a, b: _nb.any_reach(pts[a:b], k_lo[a:b], k_stop[a:b], q["R_min"], q["R_step"], q["r"],
+        numba_fields.parallel(lambda a, b: numba_fields.any_reach(pts[a:b], k_lo[a:b], k_stop[a:b], q["R_min"], q["R_step"], q["r"],
                                                 q["L1"], q["L2"], q["lim"], ok[a:b]), len(pts))
         return {"ok": ok}
 

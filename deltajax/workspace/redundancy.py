@@ -20,9 +20,9 @@ Two implementations return the identical selection (tested):
      [p_x,i + r - sqrt((L2'+L1)^2 - p_z^2), p_x,i + r + sqrt((L2'+L1)^2 - p_z^2)] for every chain; the
      intersection (widened by one sample for rounding) bounds the sample range of each point.
   2. *IK pre-test.* Inside that range each sample first runs the cheap IK test (joint limits included);
-     the Jacobian and singular-value work runs only where it passes (the Numba kernel in :mod:`._nb`).
+     the Jacobian and singular-value work runs only where it passes (the Numba kernel in :mod:`.numba_fields`).
   3. *Screen and verify* (``screen=True``, the default). A vectorised Numba loop over the window
-     (:func:`._nb.screen_window`) evaluates every sample with the same IK, Jacobian and matrix S or T as the
+     (:func:`.numba_fields.screen_window`) evaluates every sample with the same IK, Jacobian and matrix S or T as the
      exact kernel (the same floating-point expressions, hence the same feasibility decisions and the same
      matrix), but takes the eigenvalues from the trigonometric Cardano formula instead of 4 Jacobi sweeps,
      written without inverse trigonometry (lambda_max = q + p (1 + t), lambda_mid = q + p (t' - t), where
@@ -44,7 +44,7 @@ Two implementations return the identical selection (tested):
 
      Measured on every sample of the 10 mm job: max |k~_screen - k~_exact| <= 2.6e-8 for beta 0.25-0.75
      (1.1e-7 on the axis), at most 0.4 % of the bound (``tests/test_workspace_screen.py``,
-     ``_nb.screen_audit``). With T the largest lower end over the feasible samples, a sample with hi < T
+     ``numba_fields.screen_audit``). With T the largest lower end over the feasible samples, a sample with hi < T
      has a value below T <= the value of the sample that defines T, so it can be neither the maximum nor a
      tie: only the candidates (hi >= T, ~1.15 per point) run the exact kernel, in increasing k with the
      exact mode's strict comparison. The result is then certified: if the best exact candidate value is
@@ -230,23 +230,23 @@ def _reach_k_range(recon, p):
 
 
 def nb_params(recon: ReconfigurableDelta):
-    from . import _nb
+    from . import numba_fields
 
     rb = recon.robot
     f = lambda v: float(np.asarray(v))  # noqa: E731
     return dict(R_min=f(recon.R_min), R_step=f(recon.R_step), r=f(rb.platform_radius), L1=f(rb.upper_arm),
-                L2=f(rb.forearm), lim=_nb.limits_tuple(f(rb.theta_min), f(rb.theta_max)))
+                L2=f(rb.forearm), lim=numba_fields.limits_tuple(f(rb.theta_min), f(rb.theta_max)))
 
 
 def reach_k_range_host(recon: ReconfigurableDelta, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Closed-form sample range [k_lo, k_stop) per point (host, NumPy); see :func:`reach_interval`."""
-    from . import _nb
+    from . import numba_fields
 
     q = nb_params(recon)
     pts = np.ascontiguousarray(points, dtype=np.float64).reshape(-1, 3)
     k_lo = np.empty(pts.shape[0], np.int64)
     k_stop = np.empty(pts.shape[0], np.int64)
-    _nb.parallel(lambda a, b: _nb.reach_k_range(pts[a:b], q["R_min"], q["R_step"], recon.n_R, q["r"], q["L1"], q["L2"],
+    numba_fields.parallel(lambda a, b: numba_fields.reach_k_range(pts[a:b], q["R_min"], q["R_step"], recon.n_R, q["r"], q["L1"], q["L2"],
                                                 k_lo[a:b], k_stop[a:b]), pts.shape[0])
     return k_lo, k_stop
 
@@ -255,7 +255,7 @@ def resolve_redundancy_host(recon: ReconfigurableDelta, points: np.ndarray, crit
                             mode: str = "fast", b_v: float = 2.0, b_f: float = 4.2, beta: float = 0.5,
                             mirror: bool = True, return_indices: bool = True, screen: bool = True,
                             screen_margin: float = SCREEN_MARGIN) -> tuple[Redundancy, dict]:
-    """Redundancy resolution on the host (Numba kernel, see :mod:`._nb`), NumPy in and out.
+    """Redundancy resolution on the host (Numba kernel, see :mod:`.numba_fields`), NumPy in and out.
 
     Args:
         recon: the reconfigurable robot (concrete values).
@@ -276,7 +276,7 @@ def resolve_redundancy_host(recon: ReconfigurableDelta, points: np.ndarray, crit
         kernels), "points", "screened" (samples screened), "fallback" (points whose screen could not be
         certified and were swept exactly)).
     """
-    from . import _nb
+    from . import numba_fields
 
     _check_criterion(criterion)
     if mode not in ("fast", "exact"):
@@ -303,15 +303,15 @@ def resolve_redundancy_host(recon: ReconfigurableDelta, points: np.ndarray, crit
     best_v = np.empty(n, np.float64)
     n_full = np.empty(n, np.int64)
     n_fb = np.zeros(n, np.int64)
-    kt = _nb.kt_tuple(b_v, b_f, beta)
+    kt = numba_fields.kt_tuple(b_v, b_f, beta)
     crit = INDEX_NAMES.index(criterion)
     use_screen = mode == "fast" and screen
     if use_screen:
-        _nb.parallel(lambda a, b: _nb.resolve_screened(
+        numba_fields.parallel(lambda a, b: numba_fields.resolve_screened(
             uniq[a:b], k_lo[a:b], k_stop[a:b], q["R_min"], q["R_step"], q["r"], q["L1"], q["L2"], q["lim"], kt,
             crit, screen_margin, best_k[a:b], best_v[a:b], n_full[a:b], n_fb[a:b]), n)
     else:
-        _nb.parallel(lambda a, b: _nb.resolve(uniq[a:b], k_lo[a:b], k_stop[a:b], q["R_min"], q["R_step"], q["r"],
+        numba_fields.parallel(lambda a, b: numba_fields.resolve(uniq[a:b], k_lo[a:b], k_stop[a:b], q["R_min"], q["R_step"], q["r"],
                                               q["L1"], q["L2"], q["lim"], kt, crit, best_k[a:b], best_v[a:b],
                                               n_full[a:b]), n)
     n_samples = int(np.sum(k_stop - k_lo))
@@ -332,14 +332,14 @@ def resolve_redundancy_host(recon: ReconfigurableDelta, points: np.ndarray, crit
 def indices_at_host(recon: ReconfigurableDelta, points: np.ndarray, k: np.ndarray, *, b_v: float = 2.0,
                     b_f: float = 4.2, beta: float = 0.5) -> np.ndarray:
     """Every index (columns in :data:`deltajax.INDEX_NAMES` order) at sample ``k`` per point, (N, 8); NaN where k < 0."""
-    from . import _nb
+    from . import numba_fields
 
     q = nb_params(recon)
     pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
     x, y, z = (np.ascontiguousarray(pts[:, i]) for i in range(3))
-    out = np.empty((_nb.N_IDX, pts.shape[0]))  # structure of arrays: the kernel loop vectorises
+    out = np.empty((numba_fields.N_IDX, pts.shape[0]))  # structure of arrays: the kernel loop vectorises
     k = np.ascontiguousarray(k, np.int64)
-    kt = _nb.kt_tuple(b_v, b_f, beta)
-    _nb.parallel(lambda a, b: _nb.fields_at(x[a:b], y[a:b], z[a:b], k[a:b], q["R_min"], q["R_step"], q["r"], q["L1"],
-                                            q["L2"], q["lim"], kt, _nb.rows(out, a, b)), pts.shape[0])
+    kt = numba_fields.kt_tuple(b_v, b_f, beta)
+    numba_fields.parallel(lambda a, b: numba_fields.fields_at(x[a:b], y[a:b], z[a:b], k[a:b], q["R_min"], q["R_step"], q["r"], q["L1"],
+                                            q["L2"], q["lim"], kt, numba_fields.rows(out, a, b)), pts.shape[0])
     return out.T

@@ -1,8 +1,8 @@
-"""Screen-and-verify redundancy resolution (fast mode) on the Numba kernel of :mod:`._nb_kernel`.
+"""Screen-and-verify redundancy resolution (fast mode) on the Numba kernel of :mod:`.numba_kernel`.
 
 The screen evaluates an approximation of the criterion at every sample of a point's window together with a
 bound on its difference from the exact kernel's value; only samples that can still be the exact argmax are
-then evaluated by the exact kernel (:func:`._nb_kernel.point_value`, Jacobi eigenvalues). See
+then evaluated by the exact kernel (:func:`.numba_kernel.point_value`, Jacobi eigenvalues). See
 :func:`resolve_screened` and the module docstring of :mod:`.redundancy` for the argument; the constants below
 are the bound's ingredients. The screen and the exact kernel share the per-chain loop closure, Jacobian blocks
 and the matrix whose eigenvalues give the singular values (the same inlined functions, hence the same
@@ -16,7 +16,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ._nb_kernel import (INLINE, INV_COND, JACOBI, K_TILDE, MANIPULABILITY, OMEGA_F, OMEGA_V, OPTS, SIGMA_MIN_F,
+from .numba_kernel import (INLINE, INV_COND, JACOBI, K_TILDE, MANIPULABILITY, OMEGA_F, OMEGA_V, OPTS, SIGMA_MIN_F,
                          SIGMA_MIN_V, as_tuple4, criterion_of, ik_ok_all, jacobian_blocks, point_kernel, point_value,
                          sigma_tilde, sv_matrix)
 
@@ -38,7 +38,7 @@ _T_NEWTON = 1e-14
 
 
 # -- the screen's eigenvalues: trigonometric Cardano form with an error bound ---------------------------------
-# (the kernel's fast cubic, :func:`._nb_kernel._eig_top2_fast`, has the same roots; this form exposes q, p and
+# (the kernel's fast cubic, :func:`.numba_kernel._eig_top2_fast`, has the same roots; this form exposes q, p and
 # the roots t, t' that the bound below needs.)
 #: least-squares fit of t / s, s = sqrt(w / 3), on [0, 2 / sqrt 3] (max error of the guess 1.1e-5)
 _TC4, _TC3, _TC2, _TC1, _TC0 = (0.004862740934509117, -0.02386905831264214, 0.06417057523483471,
@@ -177,7 +177,7 @@ def screen_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, kt, crit, tol,
     where no bound is available). Straight-line loop body (no inverse trig, no early exit) so that LLVM can
     vectorise it over the samples.
 
-    Eigenvalues: the exact kernel's matrix (:func:`._nb_kernel.sv_matrix`), by the trigonometric Cardano
+    Eigenvalues: the exact kernel's matrix (:func:`.numba_kernel.sv_matrix`), by the trigonometric Cardano
     formula (:func:`eig_cubic_parts`) instead of Jacobi.
     """
     lim, kt = as_tuple4(lim), as_tuple4(kt)
@@ -249,7 +249,7 @@ TRIM_BLOCK = 8
 def trim_window(x, y, z, k0, k1, R_min, R_step, r, L1, L2, lim, tb):
     """[k0, k1) trimmed to its first and last IK-feasible samples (k0 == k1 where none is feasible).
 
-    The IK test (:func:`._nb_kernel.ik_ok_all`, the exact kernel's loop closures) runs on blocks of
+    The IK test (:func:`.numba_kernel.ik_ok_all`, the exact kernel's loop closures) runs on blocks of
     :data:`TRIM_BLOCK` samples from each end, branch-free inside a block (4x faster than the scalar test with
     early exit, measured); ``tb`` is a (TRIM_BLOCK,) bool scratch array. Samples past the window's end in the
     last block are tested but never used.
@@ -297,7 +297,7 @@ VERIFY_BATCH = 256
 @nb.njit(**OPTS)
 def _values_at(cx, cy, cz, ck, n, R_min, R_step, r, L1, L2, lim, kt, crit, cf, cv):
     """(feasible, criterion value) of the exact kernel at the candidates c < n (canonical point (cx, cy, cz)[c],
-    sample ck[c]): :func:`._nb_kernel.point_value` on each, in one branch-free loop over the candidates
+    sample ck[c]): :func:`.numba_kernel.point_value` on each, in one branch-free loop over the candidates
     (vectorised across points; the same expressions, hence the same values as the scalar call)."""
     for c in range(n):
         f, i0, i1, i2, i3, i4, i5, i6, i7 = point_kernel(cx[c], cy[c], cz[c], R_min + ck[c] * R_step, r, L1, L2,
@@ -309,12 +309,12 @@ def _values_at(cx, cy, cz, ck, n, R_min, R_step, r, L1, L2, lim, kt, crit, cf, c
 @nb.njit(**OPTS)
 def resolve_screened(pts, k_start, k_stop, R_min, R_step, r, L1, L2, lim, kt, crit, tol, best_k, best_v, n_full,
                      n_fallback):
-    """Screen-and-verify version of :func:`._nb.resolve`: the identical selection, far fewer exact kernels.
+    """Screen-and-verify version of :func:`.numba_fields.resolve`: the identical selection, far fewer exact kernels.
 
     Per point: :func:`screen_window` gives intervals [lo_k, hi_k] around the exact value v_k of every
     feasible sample; with T = max_k lo_k, a sample with hi_k < T has v_k < T <= v_m for the sample m of the
     largest lo, so it cannot be the (first) argmax. The exact kernel then runs on the candidates
-    (hi_k >= T) and they are compared in increasing k with the comparison of :func:`._nb.resolve` (strict >:
+    (hi_k >= T) and they are compared in increasing k with the comparison of :func:`.numba_fields.resolve` (strict >:
     ties to the smallest k). Certification: every non-candidate has v_k <= hi_k < T, so if the best exact
     candidate value is >= T the result is the exact sweep's; otherwise (only possible if a bound failed, e.g. a
     NaN exact value at the sample defining T) the point falls back to the full exact sweep of its window

@@ -5,7 +5,7 @@ One small scalar function per step of the core's decomposition (:mod:`deltajax.k
 inputs (``tests/test_backends.py``). Every function takes and returns plain floats (no arrays, no allocation),
 is inlined into its caller by LLVM (:data:`INLINE`) and branch-free (selects, no early exit), so that a loop over
 points or R samples that calls them compiles to one straight-line body LLVM can vectorise. The drivers
-(:mod:`._nb`) and the screen (:mod:`._nb_screen`) are built from these functions only: the loop-closure algebra
+(:mod:`.numba_fields`) and the screen (:mod:`.numba_screen`) are built from these functions only: the loop-closure algebra
 exists once in Numba.
 
 Conventions (SPEC §1): point P = (x, y, z) in the base frame (z down); chain i lies at angle alpha_i about z
@@ -35,21 +35,21 @@ __all__ = ["OPTS", "INLINE", "N_IDX", "CRITERION", "JACOBI", "FAST", "CUBIC", "S
            "criterion_of", "point_value"]
 
 def _drop_stale_cache() -> None:
-    """Numba's on-disk cache checks only the file that defines a function, but the drivers (:mod:`._nb`,
-    :mod:`._nb_screen`) inline this module's functions: after an edit here their cached machine code would be
-    stale. Key the cache on all three sources and drop it when they change."""
+    """Numba's on-disk cache checks only the file that defines a function, but the drivers (:mod:`.numba_fields`,
+    :mod:`.numba_screen`) inline this module's functions: after an edit here their cached machine code would be
+    stale. Key the cache on every such source and drop it when they change."""
     import hashlib
     from pathlib import Path
 
     here = Path(__file__).parent
-    digest = hashlib.sha256(b"".join((here / f).read_bytes() for f in ("_nb_kernel.py", "_nb_screen.py", "_nb.py")
-                                     if (here / f).exists())).hexdigest()
+    sources = ("numba_kernel.py", "numba_screen.py", "numba_fields.py")
+    digest = hashlib.sha256(b"".join((here / f).read_bytes() for f in sources if (here / f).exists())).hexdigest()
     cache = here / "__pycache__"
-    stamp = cache / "_nb_sources.sha256"
+    stamp = cache / "numba_sources.sha256"
     try:
         if stamp.exists() and stamp.read_text() == digest:
             return
-        for f in cache.glob("_nb*.nb[ic]"):
+        for f in cache.glob("numba_fields*.nb[ic]"):
             f.unlink()
         cache.mkdir(exist_ok=True)
         stamp.write_text(digest)

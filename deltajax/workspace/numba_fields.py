@@ -2,9 +2,9 @@
 
 Why Numba and not JAX here: a per-point loop can *skip* work per (point, R) pair -- the full kernel runs only
 where the IK succeeds -- and the branch-free kernel compiles to one vectorised loop body. The maths is the
-Numba mirror of the JAX core in :mod:`._nb_kernel` (loop closure -> loop vectors -> Jacobian blocks ->
+Numba mirror of the JAX core in :mod:`.numba_kernel` (loop closure -> loop vectors -> Jacobian blocks ->
 singular values -> indices, name for name, each tested against its JAX twin); the screen of the fast
-redundancy mode is in :mod:`._nb_screen`. This module only loops over points and samples.
+redundancy mode is in :mod:`.numba_screen`. This module only loops over points and samples.
 
 Index order in the output rows: :data:`deltajax.INDEX_NAMES` (inv_cond, sigma_min_v, sigma_min_f, omega_v,
 omega_f, k_tilde, manipulability, imi).
@@ -17,9 +17,9 @@ import math
 import numba as nb
 import numpy as np
 
-from ._nb_kernel import (CA0, CA1, CA2, CRITERION, CUBIC, FAST, INLINE, JACOBI, N_IDX, OPTS, SA0, SA1, SA2,
+from .numba_kernel import (CA0, CA1, CA2, CRITERION, CUBIC, FAST, INLINE, JACOBI, N_IDX, OPTS, SA0, SA1, SA2,
                          SV_METHODS, as_tuple4, ik_ok, ik_ok_all, kt_tuple, limits_tuple, point_indices, point_value)
-from ._nb_screen import resolve_screened, screen_audit, screen_window, tcubic, tcubic2
+from .numba_screen import resolve_screened, screen_audit, screen_window, tcubic, tcubic2
 
 __all__ = ["N_IDX", "CRITERION", "SV_METHODS", "JACOBI", "FAST", "limits_tuple", "kt_tuple", "fixed_fields",
            "fixed_fields_dense", "fields_at", "rows", "fixed_mask", "resolve", "resolve_screened", "screen_window", "screen_audit", "any_reach",
