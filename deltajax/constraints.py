@@ -286,7 +286,7 @@ def segment_disc_distance(q0: Float[Array, "3"], q1: Float[Array, "3"], radius: 
     in t (the distance to a convex set along a line) and C1, so its minimiser is an end of [0, 1] (decided by
     the sign of h' there: closed form) or the root of the monotone h'(t), found by Newton's method on h'
     safeguarded by the bracket that each step's sign of h' shrinks (a step leaving the bracket bisects it),
-    :data:`PLATE_NEWTON_STEPS` steps unrolled (no data-dependent loop, so vmap and jit(vmap(grad)) run at once;
+    :data:`PLATE_NEWTON_STEPS` steps in a fixed-count loop (no data-dependent loop, so vmap and jit(vmap(grad)) run;
     h is quadratic near an interior minimum, so the distance is exact to rounding once t is to ~1e-8). The
     derivative comes from the value at the minimiser (envelope theorem: the minimiser's own derivative does not
     enter), so the search is not differentiated; sqrt at a touching segment has the double-where guard.
@@ -336,21 +336,28 @@ def segment_disc_distance(q0: Float[Array, "3"], q1: Float[Array, "3"], radius: 
     # start: the best of PLATE_SAMPLES + 1 even samples of the piece; h convex, so the minimiser lies between that
     # sample's neighbours (the bracket). Newton from a far start crawls where h' bends (a segment grazing the rim)
     n = PLATE_SAMPLES
-    ts = [lo + (j / n) * (hi - lo) for j in range(n + 1)]
-    t, h_best = ts[0], None
-    for tj in ts:                                   # running minimum (first on ties), h from the fused rsqrt
-        h_j = _plate_h(q0s, ds, tj, rs)
-        if h_best is None:
-            h_best = h_j
-        else:
-            t, h_best = jnp.where(h_j < h_best, tj, t), jnp.minimum(h_j, h_best)
-    step = (hi - lo) / n
+    width = hi - lo
+
+    def sample(j, best):                            # running minimum over the samples (first on ties)
+        t_b, h_b = best
+        tj = lo + (j / n) * width
+        hj = _plate_h(q0s, ds, tj, rs)
+        return jnp.where(hj < h_b, tj, t_b), jnp.where(hj < h_b, hj, h_b)
+
+    t, _ = jax.lax.fori_loop(1, n + 1, sample, (lo, _plate_h(q0s, ds, lo, rs)))
+    step = width / n
     lo, hi = jnp.maximum(t - step, end_a), jnp.minimum(t + step, end_b)
-    for _ in range(PLATE_NEWTON_STEPS):            # safeguarded: a step that leaves the bracket bisects it
+
+    def newton(_, state):                           # safeguarded: a step that leaves the bracket bisects it
+        lo, hi, t = state
         g, H = _plate_slope(q0s, ds, t, rs)
         lo, hi = jnp.where(g > 0.0, lo, t), jnp.where(g > 0.0, t, hi)
         tn = t - g * recip(jnp.where(H > 0.0, H, 1.0))
-        t = jnp.where((H > 0.0) & (tn >= lo) & (tn <= hi), tn, 0.5 * (lo + hi))   # converged: tn = t stays
+        return lo, hi, jnp.where((H > 0.0) & (tn >= lo) & (tn <= hi), tn, 0.5 * (lo + hi))   # converged: stays
+
+    # loops, not unrolled: traced once, and unrolled they made the search evaluator's program 7x slower (XLA:CPU
+    # fused the unrolled search into each consumer of the good-point test)
+    _, _, t = jax.lax.fori_loop(0, PLATE_NEWTON_STEPS, newton, (lo, hi, t))
     t_side = jnp.where(g_a >= 0.0, end_a, jnp.where(g_b <= 0.0, end_b, t))   # an end of the piece, or the root
     t_min = sg(jnp.where(inside, t_in, t_side))
     ex, z = _plate_excess(q0, d, t_min, radius)
