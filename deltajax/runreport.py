@@ -104,18 +104,25 @@ def _good_workspace(design, reconfigurable: bool, pb, n_xy: int):
 
 def _motor_points(design, reconfigurable: bool, R_op: float, T: float, pb):
     """(motor torque (K, 3) N m, motor speed (K, 3) rad/s, every sample reachable) along the verification cycle
-    at the operating R ``R_op`` (m) and motion time ``T`` (s), with the job's payload and motor."""
+    at the operating R ``R_op`` (m) and motion time ``T`` (s), with the job's payload and motor (one jitted
+    program: run op by op, the inverse dynamics dispatched hundreds of small operations)."""
+    import jax
     import jax.numpy as jnp
 
     from . import constraints as C
     from .cycle import cycle_profile
 
     robot = design.at(R_op) if reconfigurable else design
-    n = robot.mass.gear_ratio
-    prof = cycle_profile(C.with_drive(robot, pb.motor, n, pb.payload), pb.cycle,
-                         jnp.asarray(T, robot.upper_arm.dtype))
-    tau, om = C.motor_side(prof.tau, prof.theta_dot, pb.motor, n)
-    return np.asarray(tau), np.asarray(om), bool(np.all(np.asarray(prof.ok)))
+    n = float(robot.mass.gear_ratio)
+
+    @jax.jit
+    def along(driven, T):
+        prof = cycle_profile(driven, pb.cycle, T)
+        tau, om = C.motor_side(prof.tau, prof.theta_dot, pb.motor, n)
+        return tau, om, jnp.all(prof.ok)
+
+    tau, om, ok = along(C.with_drive(robot, pb.motor, n, pb.payload), jnp.asarray(T, robot.upper_arm.dtype))
+    return np.asarray(tau), np.asarray(om), bool(ok)
 
 
 def write_report(results_path, out_path=None, *, workspace_points: int = WORKSPACE_POINTS) -> Path:
