@@ -61,7 +61,7 @@ from .fastmath import recip, rsqrt
 from .fields import float_leaf
 from .geometry import CHAIN_ANGLES, Delta
 from .indices import point_kernel
-from .kinematics import _elbows, _forearm_units, guarded_configuration
+from .kinematics import elbows_unguarded, forearm_units_unguarded, guarded_configuration
 from .mass import check_field
 from .regular import (REFINE_BISECT, REFINE_GOLDEN, REFINE_SAMPLES, RegularWorkspace, cylinder_samples,  # noqa: F401
                       largest_cylinder, polar_grid, refine_cylinder, regular_workspace)  # the designer's constraints
@@ -151,7 +151,7 @@ def joint_angles(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], j
 
 def _joint_angles(robot: Delta, p, theta, joints: JointModel) -> JointAngles:
     """:func:`joint_angles` of a configuration already guarded (:func:`guarded_configuration`'s stand-ins)."""
-    u = _forearm_units(robot, p, theta)                      # (3, 3) chain frames, B -> C
+    u = forearm_units_unguarded(robot, p, theta)                      # (3, 3) chain frames, B -> C
     th = jnp.asarray(theta)
     z = jnp.zeros_like(th)
     n_e = jnp.stack([jnp.cos(th + joints.elbow_neutral), z, jnp.sin(th + joints.elbow_neutral)], axis=-1)
@@ -389,7 +389,7 @@ def interference(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], l
 def _interference(robot: Delta, p, theta, ok, links: LinkModel, plate_radius) -> Interference:
     """:func:`interference` of a configuration already guarded (:func:`guarded_configuration`'s stand-ins and its
     ``ok``): each consumer of one configuration guards it once (:func:`good_point`)."""
-    B = _elbows(robot, theta)                                         # (3, 3) base frame
+    B = elbows_unguarded(robot, theta)                                         # (3, 3) base frame
     dirs = jnp.asarray([[math.cos(a), math.sin(a), 0.0] for a in CHAIN_ANGLES], B.dtype)  # chain x axes
     C = p[None, :] + robot.platform_radius * dirs                     # forearm ends at the platform
     A = robot.base_radius * dirs

@@ -348,10 +348,11 @@ def elbows(robot: Delta, theta: Float[Array, "3"]) -> Float[Array, "3 3"]:
     theta is not finite (:func:`guarded_configuration`)."""
     theta = jnp.asarray(theta)
     robot, _, theta_g, ok = guarded_configuration(robot, jnp.zeros((3,), theta.dtype), theta)
-    return jnp.where(ok, _elbows(robot, theta_g), jnp.nan)
+    return jnp.where(ok, elbows_unguarded(robot, theta_g), jnp.nan)
 
 
-def _elbows(robot: Delta, theta):
+def elbows_unguarded(robot: Delta, theta):
+    """:func:`elbows` for a configuration already checked (:func:`guarded_configuration`): no guard, no NaN."""
     L1 = robot.upper_arm
     local = jnp.stack([robot.base_radius + L1 * jnp.cos(theta), jnp.zeros_like(theta), L1 * jnp.sin(theta)],
                       axis=-1)
@@ -450,10 +451,11 @@ def forearm_units(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]) 
     theta is not finite (:func:`guarded_configuration`).
     """
     robot, p, theta, ok = guarded_configuration(robot, p, theta)
-    return jnp.where(ok, _forearm_units(robot, p, theta), jnp.nan)
+    return jnp.where(ok, forearm_units_unguarded(robot, p, theta), jnp.nan)
 
 
-def _forearm_units(robot: Delta, p, theta):
+def forearm_units_unguarded(robot: Delta, p, theta):
+    """:func:`forearm_units` for a configuration already checked (:func:`guarded_configuration`): no guard."""
     c, s = jnp.cos(theta), jnp.sin(theta)
     rows = []
     for i in range(3):
@@ -485,7 +487,7 @@ def passive_angles(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]
 
 
 def _passive_angles(robot: Delta, p, theta):
-    u = _forearm_units(robot, p, theta)
+    u = forearm_units_unguarded(robot, p, theta)
     uy = jnp.clip(u[:, 1], -1.0, 1.0)
     theta3 = jnp.arccos(uy)
     theta12 = jnp.arctan2(u[:, 2], u[:, 0])

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from deltajax.io import load
-from deltajax.optimize import report as R
+from deltajax.jobs import designer_report as R
 from deltajax.plots import convergence_series
 
 BASE = 120.0   # baseline picks/min on the search grids: the GA's fitness is -picks / BASE

@@ -110,7 +110,7 @@ def test_rerun_three_times_into_one_dir(full_run, tmp_path, caplog, monkeypatch)
     # summary is written); 3: resumed and completed; 4: a no-op that says so (the run's lines go through the
     # "deltajax" logger: console and run.log). Both kills in one directory: one job run, not two (this test and
     # test_kill_and_resume_is_bit_identical each ran the whole toy job, ~90 s cold each)
-    import deltajax.optimize.report as job
+    import deltajax.jobs.designer_report as job
 
     caplog.set_level(logging.INFO, logger="deltajax")
     run_experiment("ga_reconfig", TOY + ["experiment.stop_after=2"], run_dir=tmp_path)

@@ -158,7 +158,7 @@ def test_only_run_selects_a_matplotlib_backend():
     # a fresh interpreter: the backend a user selected (here "svg") survives importing every figure module
     code = ("import matplotlib; matplotlib.use('svg'); import deltajax.plots, deltajax.plots.core, "
             "deltajax.plots.workspace, deltajax.plots.bench, deltajax.plots.dynamics, deltajax.plots.motion, "
-            "deltajax.plots.designer, deltajax.optimize.report, deltajax.jobs.reconfig_motion; "
+            "deltajax.plots.designer, deltajax.jobs.designer_report, deltajax.jobs.reconfig_motion; "
             "import matplotlib.pyplot as plt; fig = deltajax.plots.bench_rates({'a': 1.0, 'b': 2.0}, 'a'); "
             "print(matplotlib.get_backend()); plt.close(fig)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True,
@@ -171,7 +171,7 @@ def test_ga_pareto_draws_the_floor_and_the_floor_step_designs():
     # are what a reader needs to see why the recommendation is where it is
     from types import SimpleNamespace
 
-    from deltajax.optimize.report import floor_line
+    from deltajax.jobs.designer_report import floor_line
     from deltajax.plots.designer import ga_pareto
 
     names = ["baseline", "ga_best", "pareto_0", "pareto_1", "pareto_2", "floor_0", "floor_1"]

@@ -76,7 +76,7 @@ def run(ctx) -> None:
 
     from ..io import load
     from ..optimize import GAError, run_ga
-    from ..optimize import report as R
+    from . import designer_report as R
     from ..optimize import workflow as W
     from ..optimize.designer import CONSTRAINT_NAMES, DESIGN_SENSE, DESIGN_UNITS, FEASIBILITY_TOL
     from ..optimize.pareto import hypervolume, non_dominated, nsga2
@@ -392,7 +392,7 @@ def _tolerance(ctx, res, V, s, space, objs, sense, jp) -> None:
     recommendation (group ``tolerance/robust``; ``verify``'s ``recommended`` becomes it, ``recommended_nominal``
     keeps the nominal one)."""
     from .. import tolerance as TL
-    from ..optimize import report as R
+    from . import designer_report as R
     from ..optimize import robust as RB
     from ..optimize import workflow as W
 

@@ -117,7 +117,7 @@ def ga_pareto(V, objs, s, units, floor=None):
     ``verify`` group; ``s``: the job's settings; ``units``: each objective's unit, e.g. ``{"picks_per_min":
     "1/min", "regular_volume": "m^3"}``;
     ``floor``: ``(objective, value)`` of the recommendation rule's floor in that objective's units, drawn as a line
-    (:func:`deltajax.optimize.report.floor_line`), or None); None without them."""
+    (:func:`deltajax.jobs.designer_report.floor_line`), or None); None without them."""
     plt = pyplot()
     if V is None or len(objs) < 2:
         return None

@@ -32,7 +32,7 @@ def _fixed_value(V, m: str, i: int) -> float:  # rtmode
 def summary(ctx, res, data, space, objs, s) -> None:
     """Stage baseline vs recommended design, per metric with units and direction, and the parameters of each
     design (``data``: the results file as loaded after the verify stage)."""
-    from .designer import DESIGN_SENSE, DESIGN_UNITS
+    from ..optimize.designer import DESIGN_SENSE, DESIGN_UNITS
 
     V = data["verify"]
     rec = int(V["attrs"]["recommended"])
@@ -76,7 +76,7 @@ def summary(ctx, res, data, space, objs, s) -> None:
                                   "design's)", operating_mode=s.reconfig.get("mode", "per_task"),
                   evaluation="fine verification grids (group verify)")
     if "tolerance" in data:   # the tolerance stage's headline figures (group tolerance holds the rest)
-        from .robust import summary_attrs
+        from ..optimize.robust import summary_attrs
 
         res.set_attrs("summary", **summary_attrs(data["tolerance"]))
 
@@ -99,8 +99,8 @@ def change_text(baseline: float, recommended: float, sense: int) -> str:
 
 
 def print_summary(ctx, data) -> None:
-    from .designer import DESIGN_SENSE, FEASIBILITY_TOL
-    from .workflow import STORED_METRIC
+    from ..optimize.designer import DESIGN_SENSE, FEASIBILITY_TOL
+    from ..optimize.workflow import STORED_METRIC
 
     S = data.get("summary")
     if not S or "metric_name" not in S:
@@ -130,7 +130,7 @@ def print_summary(ctx, data) -> None:
                                                                             else "")))
     T = data.get("tolerance")
     if T is not None and "role" in T:
-        from .robust import cost_lines, headline_lines
+        from ..optimize.robust import cost_lines, headline_lines
 
         ctx.log(f"  tolerance analysis (group tolerance; {T['attrs'].get('tolerances', '')}):")
         for line in headline_lines(T, ("baseline", "recommended", "nominal_recommended")) + cost_lines(T):
@@ -150,7 +150,7 @@ def print_summary(ctx, data) -> None:
 def plots(ctx, data, objs, s) -> None:
     """Plots drawn from the staged results only (so a resumed run draws the same figures)."""
     from .. import plots as P
-    from .designer import DESIGN_UNITS
+    from ..optimize.designer import DESIGN_UNITS
 
     G = data.get("ga", {})
     # the GA minimises -picks/min / |baseline picks/min| when picks/min is its only objective
@@ -176,8 +176,8 @@ def floor_line(V, objs, s):
     its own units (the verified baseline's value times ``recommend_floor`` if maximised, divided if minimised: the
     rule's :func:`deltajax.optimize.workflow.floor_limits` in the objective's units); None for another rule or when
     the primary is not one of the two plotted objectives."""
-    from .designer import DESIGN_SENSE
-    from .workflow import floor_limits
+    from ..optimize.designer import DESIGN_SENSE
+    from ..optimize.workflow import floor_limits
 
     if s.recommend != "floor" or s.primary not in objs[:2] or len(objs) < 2:
         return None
@@ -235,8 +235,8 @@ def store_verify(res, space, cand, names, mv, Fv, nd, rec, hv, hv_base, ref, obj
     import jax
     import jax.numpy as jnp
 
-    from .designer import CONSTRAINT_NAMES, DESIGN_UNITS
-    from .workflow import STORED_METRIC
+    from ..optimize.designer import CONSTRAINT_NAMES, DESIGN_UNITS
+    from ..optimize.workflow import STORED_METRIC
 
     res.put_axis("verify", "design", np.arange(len(cand)), units="1")
     res.put_axis("verify", "gene", np.arange(space.dim), units="1")
