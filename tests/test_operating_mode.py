@@ -245,10 +245,12 @@ def test_job_runs_with_mode_path_and_reports_both_variants(tmp_path):
     # evaluation without the regular workspace, refine and the floor step its gradient): from an empty XLA cache,
     # under load ~9, the stages took screen 259 s, GA 354 s, refine 646 s wall (2026-12-01). Nothing below reads
     # the screen, refine or the floor step; the GA, NSGA-II, verification and summary in path mode are checked.
+    # The tolerance stage is off too: its Monte Carlo runs the path mode per sample (4.5 min of the suite's time),
+    # and tests/test_tolerance.py checks it.
     p = run_experiment("ga_reconfig", TOY + VERIFY_AS_SEARCH + [
         "experiment.reconfig.mode=path", "experiment.reconfig.n_R=9", "experiment.reconfig.segments=4",
         "experiment.screen.enabled=false", "experiment.refine.enabled=false",
-        "experiment.floor_solve.enabled=false"], run_dir=tmp_path)
+        "experiment.floor_solve.enabled=false", "experiment.tolerance.enabled=false"], run_dir=tmp_path)
     with h5py.File(p, "r") as f:
         V, S = f["verify"], f["summary"]
         for k, u in (("R_speed_margin", "m/s"), ("R_accel_margin", "m/s^2"), ("R_force_margin", "N"),

@@ -233,7 +233,7 @@ def test_plots_stage_is_marked_only_after_its_figures_are_on_disk(toy_run, tmp_p
     from deltajax.jobs.designer_state import restage
 
     restage(res, full)
-    res.set_attrs(ga_reconfig_stages="screen,ga,pareto,refine,verify,results")
+    res.set_attrs(ga_reconfig_stages="screen,ga,pareto,refine,verify,tolerance,results")
     res.flush()
     manifest = json.loads((full.parent / MANIFEST).read_text())
     manifest["status"] = "running"
