@@ -1,7 +1,7 @@
 """Constraints a Delta designer checks, as pure functions of one design and one configuration (vmap to batch).
 
 Every function here is built on the public core (:func:`deltajax.ik`, :func:`deltajax.elbows`,
-:func:`deltajax.forearm_units`, :func:`deltajax.point_indices`, :func:`deltajax.cycle_profile`) and returns
+:func:`deltajax.kinematics.forearm_units`, :func:`deltajax.point_indices`, :func:`deltajax.cycle_profile`) and returns
 *margins*: a signed number that is >= 0 when the constraint holds, in the units of the quantity (rad, m, or
 a utilisation ratio). A margin can be used as a constraint (``margin >= 0``) or as an objective (maximise it).
 Unreachable configurations give NaN margins (failure as data; a NaN margin never counts as satisfied).
@@ -669,7 +669,7 @@ def picks_per_minute(robot: Delta, cycle, motor: Motor, gear_ratio, *, dwell=0.0
 
 class GoodSpec(eqx.Module):
     """What makes a point of the workspace *good*: reachable, ``index >= threshold``, passive joints within
-    limits, links clear. ``index`` is a field of :class:`deltajax.Indices` (static)."""
+    limits, links clear. ``index`` is a field of :class:`deltajax.indices.Indices` (static)."""
 
     joints: JointModel
     links: LinkModel

@@ -95,7 +95,7 @@ class Redundancy(NamedTuple):
         R: selected base radius R* = R_min + k R_step (m; NaN where none).
         value: criterion value at R* (NaN where none).
         ok: some R sample is feasible.
-        indices: every index at R* (:class:`deltajax.Indices`, each field of shape (N,), singular values (N, 3)).
+        indices: every index at R* (:class:`deltajax.indices.Indices`, each field of shape (N,), singular values (N, 3)).
     """
 
     k: Int[Array, "n"]
