@@ -387,8 +387,8 @@ def run(ctx) -> None:
 
 
 def _tolerance(ctx, res, V, s, space, objs, sense, jp) -> None:
-    """The tolerance stage (:mod:`deltajax.optimize.robust`): the Monte Carlo of the baseline and the recommendation
-    on the verification problem (group ``tolerance``) and, with ``experiment.robust.enabled``, the robust
+    """The tolerance stage (:mod:`deltajax.tolerance`, :mod:`deltajax.optimize.robust`): the Monte Carlo of the
+    baseline and the recommendation on the verification problem (group ``tolerance``) and, with ``experiment.robust.enabled``, the robust
     recommendation (group ``tolerance/robust``; ``verify``'s ``recommended`` becomes it, ``recommended_nominal``
     keeps the nominal one)."""
     from .. import tolerance as TL
@@ -398,7 +398,7 @@ def _tolerance(ctx, res, V, s, space, objs, sense, jp) -> None:
 
     space_v = dataclasses.replace(space, n_R=s.verify["n_R"]) if space.reconfigurable else space
     pb_fine = W.designer_problem(s, fine=True)
-    tol = RB.tolerances_of(s)
+    tol = R.tolerances_of(s)
     text = TL.describe(tol)
     names = [str(n) for n in V["design_name"]]
     genes = np.asarray(V["genes"], float).reshape(len(names), -1)
@@ -427,7 +427,7 @@ def _tolerance(ctx, res, V, s, space, objs, sense, jp) -> None:
         rc = RB.robust_choice(analyse_rows, Fv, np.asarray(V["feasible"]).astype(bool), rule,
                               float(s.robust["probability"]), int(s.tolerance["seed"]), int(s.robust["confirm_seed"]),
                               int(s.robust["max_candidates"]), known=known, log=ctx.log)
-        RB.store_robust(res, rc, names, rec, V, s, text)
+        R.store_robust(res, rc, names, rec, V, s, text)
         entries = [e for e in entries if e[0] != "recommended"]
         if rec >= 0:
             entries.append(("nominal_recommended", rows.index(rec), rec))
@@ -450,13 +450,13 @@ def _tolerance(ctx, res, V, s, space, objs, sense, jp) -> None:
                     f"one ({names[rec] if rec >= 0 else 'none'}), which does not meet experiment.robust.probability")
     sel = TL.select(results, [(e[1] if isinstance(e[1], tuple) else (0, e[1])) for e in entries])
     roles = [e[0] for e in entries]
-    RB.store_tolerance(res, roles, [names[e[2]] for e in entries], [e[2] for e in entries], sel, text)
+    R.store_tolerance(res, roles, [names[e[2]] for e in entries], [e[2] for e in entries], sel, text)
     frozen = None
     if space.reconfigurable:    # the stricter question: each built robot run at its design's nominal operating R
         frozen = TL.analyse(pb_fine, space_v, genes[[e[2] for e in entries]], tol, samples=n_s,
                             seed=int(s.tolerance["seed"]), operating_R="nominal")
-        RB.store_frozen(res, roles, [names[e[2]] for e in entries], [e[2] for e in entries], frozen, text)
-    for line in RB.headline_lines(dict(sel, role=roles, design_name=[names[e[2]] for e in entries],
+        R.store_frozen(res, roles, [names[e[2]] for e in entries], [e[2] for e in entries], frozen, text)
+    for line in R.headline_lines(dict(sel, role=roles, design_name=[names[e[2]] for e in entries],
                                        attrs={"samples": n_s}, frozen_R=frozen), roles):
         ctx.log(line)
 
