@@ -63,6 +63,7 @@ from .geometry import CHAIN_ANGLES, Delta
 from .indices import point_kernel
 from .kinematics import elbows_unguarded, forearm_units_unguarded, guarded_configuration
 from .mass import check_field
+from .tracing import traced_once
 from .regular import (REFINE_BISECT, REFINE_GOLDEN, REFINE_SAMPLES, RegularWorkspace, cylinder_samples,  # noqa: F401
                       largest_cylinder, polar_grid, refine_cylinder, regular_workspace)  # the designer's constraints
 
@@ -272,6 +273,7 @@ PLATE_NEWTON_STEPS = 8
 PLATE_SAMPLES = 8
 
 
+@traced_once
 def segment_disc_distance(q0: Float[Array, "3"], q1: Float[Array, "3"], radius: Float[Array, ""]
                           ) -> Float[Array, ""]:
     """Signed clearance (m) between the segment [q0, q1] (base frame, z down) and the base plate, the disc
@@ -686,6 +688,7 @@ class PointCheck(NamedTuple):
     interference_margin: Float[Array, ""]
 
 
+@traced_once
 def good_point(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, plate_radius=None) -> PointCheck:
     """Is ``p`` (m, base frame) in the good workspace of ``robot`` (R frozen)? Margins NaN if unreachable."""
     # the IK solved once: the index kernel's loop closures give the configuration (its ok and cos/sin are

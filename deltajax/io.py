@@ -711,3 +711,82 @@ def open_xarray(path: os.PathLike, group: str, *, verify: bool = True):
 
 
 __all__ += ["open_xarray", "to_python"]
+
+
+#: attributes that differ between two runs of the same computation: when, where and by which commit it ran, and
+#: how long it took (everything else in a results file is a function of the code, the config and the seed)
+RUN_ATTRS = ("start_time", "end_time", "git_commit", "wall_time_s", "host", "hostname", "checksum")
+
+
+def differences(path_a: os.PathLike, path_b: os.PathLike, *, ignore: Sequence[str] = (),
+                rtol: float = 0.0) -> list[str]:
+    """What differs between two results files: every group, dataset and attribute present in one only, every
+    dataset whose dtype, shape or values differ (NaN equals NaN; ``rtol`` > 0 compares floats to that relative
+    tolerance, 0: bit for bit), and every attribute whose value differs. One line per difference, ``[]`` when
+    the files hold the same results.
+
+    Attributes named in :data:`RUN_ATTRS` (time, commit, wall time, the checksums that follow the values) and the
+    datasets, groups or attributes matching a pattern of ``ignore`` (``fnmatch`` on ``group/name`` and on
+    ``group@attribute``; e.g. ``"*/timing*"``, ``"*@*_s"``) are not compared. Both files are read verified.
+    """
+    import fnmatch
+
+    a, b = read(path_a, verify=True), read(path_b, verify=True)
+
+    def skip(name: str) -> bool:
+        return any(fnmatch.fnmatchcase(name, pat) for pat in ignore)
+
+    def same(x, y) -> bool:
+        x, y = np.asarray(x), np.asarray(y)
+        if x.dtype != y.dtype or x.shape != y.shape:
+            return False
+        if x.dtype.kind in "fc":
+            if rtol > 0:
+                return bool(np.allclose(x, y, rtol=rtol, atol=0.0, equal_nan=True))
+            return bool(np.array_equal(x, y, equal_nan=True))
+        return bool(np.array_equal(x, y))
+
+    def attrs_diff(where: str, ax: Mapping, bx: Mapping) -> list[str]:
+        out = []
+        for k in sorted(set(ax) | set(bx)):
+            if k in RUN_ATTRS or skip(f"{where}@{k}"):
+                continue
+            if k not in bx or k not in ax:
+                out.append(f"{where}@{k}: only in {'a' if k in ax else 'b'}")
+            elif not same(ax[k], bx[k]):
+                out.append(f"{where}@{k}: {ax[k]!r} != {bx[k]!r}"[:300])
+        return out
+
+    out = attrs_diff("/", a.attrs, b.attrs)
+    for g in sorted(set(a.group_attrs) | set(b.group_attrs)):
+        if g and skip(g):
+            continue
+        if g not in a.group_attrs or g not in b.group_attrs:
+            out.append(f"{g}/: group only in {'a' if g in a.group_attrs else 'b'}")
+            continue
+        if g:
+            out += attrs_diff(g, a.group_attrs[g], b.group_attrs[g])
+        va, vb = a.variables.get(g, {}), b.variables.get(g, {})
+        for n in sorted(set(va) | set(vb)):
+            name = f"{g}/{n}" if g else n
+            if skip(name):
+                continue
+            if n not in va or n not in vb:
+                out.append(f"{name}: dataset only in {'a' if n in va else 'b'}")
+                continue
+            x, y = np.asarray(va[n].data), np.asarray(vb[n].data)
+            if x.dtype != y.dtype or x.shape != y.shape:
+                out.append(f"{name}: {x.dtype}{list(x.shape)} != {y.dtype}{list(y.shape)}")
+            elif not same(x, y):
+                if x.dtype.kind in "fc":
+                    d = np.abs(x.astype(complex) - y.astype(complex))
+                    d = np.where(np.isnan(x) & np.isnan(y), 0.0, d)
+                    out.append(f"{name}: values differ at {int(np.count_nonzero(d))} of {x.size} elements "
+                               f"(largest difference {np.nanmax(d):.3g})")
+                else:
+                    out.append(f"{name}: values differ at {int(np.count_nonzero(x != y))} of {x.size} elements")
+            out += attrs_diff(name, va[n].attrs, vb[n].attrs)
+    return out
+
+
+__all__ += ["differences", "RUN_ATTRS"]

@@ -149,13 +149,13 @@ def refine_cylinder(good_fn: Callable[[Array], Array], start: RegularWorkspace, 
             ok = jnp.all(jax.vmap(good_fn)(centre[None, :] + mid * unit))
             return jnp.where(ok, mid, lo), jnp.where(ok, hi, mid)
 
-        lo, _ = jax.lax.fori_loop(0, n_bisect, body, (jnp.zeros((), dt), d_hi))
+        lo, _ = jax.lax.fori_loop(0, n_bisect, body, (0.0 * d_hi, d_hi))
         return lo
 
     g = (math.sqrt(5.0) - 1.0) / 2.0
     a, b = c0 - 2.0 * dz, c0 + 2.0 * dz
     c, d = b - g * (b - a), a + g * (b - a)
-    nan = jnp.asarray(jnp.nan, dt)
+    nan = c0 * jnp.nan
 
     # one loop, one call of d_at (one compiled copy of the good test): steps 0-2 evaluate c, d and the grid's
     # centre c0; then golden-section steps

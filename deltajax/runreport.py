@@ -31,6 +31,8 @@ from typing import Any, Mapping
 
 import numpy as np
 
+from .tracing import traced_once
+
 __all__ = ["ReportError", "write_report", "report_path", "WORKSPACE_POINTS", "JOB"]
 
 #: grid points per horizontal axis of the good-workspace view (the vertical axis gets the same spacing)
@@ -74,10 +76,8 @@ def _run_problem(data: Mapping[str, Any], path: Path):
 
 def _good_workspace(design, reconfigurable: bool, pb, n_xy: int):
     """(good grid points (n, 3) m, spacing h m, grid size): the design's good workspace, R chosen per point."""
-    import jax
     import jax.numpy as jnp
 
-    from . import constraints as C
     from .workspace import make_grid
 
     reg = pb.settings["regular"]
@@ -88,41 +88,53 @@ def _good_workspace(design, reconfigurable: bool, pb, n_xy: int):
     pts = np.stack(np.meshgrid(grid.x, grid.y, grid.z, indexing="ij"), axis=-1).reshape(-1, 3)
     # the base plate as evaluate_designer models it: the largest R plus the plate's overhang
     if reconfigurable:
-        Rs, plate, at = design.R_samples(), design.R_max + pb.links.plate_overhang, design.at
+        Rs, plate = design.R_samples(), design.R_max + pb.links.plate_overhang
     else:
-        Rs, plate, at = design.base_radius[None], design.base_radius + pb.links.plate_overhang, design.with_base_radius
+        Rs, plate = design.base_radius[None], design.base_radius + pb.links.plate_overhang
     dt = jnp.asarray(Rs).dtype
-
-    @jax.jit
-    def good_any(Rs, P):
-        chk = jax.vmap(lambda R: jax.vmap(lambda p: C.good_point(at(R), p, pb.good, plate_radius=plate))(P))(Rs)
-        return jnp.any(chk.good, axis=0)
-
-    good = np.asarray(good_any(jnp.asarray(Rs, dt), jnp.asarray(pts, dt)))
+    good = np.asarray(_good_any(design, reconfigurable, jnp.asarray(Rs, dt), jnp.asarray(pts, dt), plate, pb.good))
     return pts[good], h, len(pts)
+
+
+@traced_once   # one program for every design of every report in this process (a fresh closure traced each call)
+def _good_any(design, reconfigurable: bool, Rs, P, plate, good):
+    """Is each point of ``P`` good at any R of ``Rs``? (P,) bool."""
+    import jax
+    import jax.numpy as jnp
+
+    from . import constraints as C
+
+    at = design.at if reconfigurable else design.with_base_radius
+    chk = jax.vmap(lambda R: jax.vmap(lambda p: C.good_point(at(R), p, good, plate_radius=plate))(P))(Rs)
+    return jnp.any(chk.good, axis=0)
 
 
 def _motor_points(design, reconfigurable: bool, R_op: float, T: float, pb):
     """(motor torque (K, 3) N m, motor speed (K, 3) rad/s, every sample reachable) along the verification cycle
     at the operating R ``R_op`` (m) and motion time ``T`` (s), with the job's payload and motor (one jitted
     program: run op by op, the inverse dynamics dispatched hundreds of small operations)."""
-    import jax
+    import jax.numpy as jnp
+
+    from . import constraints as C
+
+    robot = design.at(R_op) if reconfigurable else design
+    n = float(robot.mass.gear_ratio)
+    dt = robot.upper_arm.dtype
+    tau, om, ok = _along(C.with_drive(robot, pb.motor, n, pb.payload), pb.cycle, pb.motor, jnp.asarray(n, dt),
+                         jnp.asarray(T, dt))
+    return np.asarray(tau), np.asarray(om), bool(ok)
+
+
+@traced_once   # one program for the baseline's and the recommendation's cycles
+def _along(driven, cycle, motor, n, T):
     import jax.numpy as jnp
 
     from . import constraints as C
     from .cycle import cycle_profile
 
-    robot = design.at(R_op) if reconfigurable else design
-    n = float(robot.mass.gear_ratio)
-
-    @jax.jit
-    def along(driven, T):
-        prof = cycle_profile(driven, pb.cycle, T)
-        tau, om = C.motor_side(prof.tau, prof.theta_dot, pb.motor, n)
-        return tau, om, jnp.all(prof.ok)
-
-    tau, om, ok = along(C.with_drive(robot, pb.motor, n, pb.payload), jnp.asarray(T, robot.upper_arm.dtype))
-    return np.asarray(tau), np.asarray(om), bool(ok)
+    prof = cycle_profile(driven, cycle, T)
+    tau, om = C.motor_side(prof.tau, prof.theta_dot, motor, n)
+    return tau, om, jnp.all(prof.ok)
 
 
 def write_report(results_path, out_path=None, *, workspace_points: int = WORKSPACE_POINTS) -> Path:

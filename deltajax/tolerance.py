@@ -205,7 +205,7 @@ def _program(pb, space, frozen: bool = False):
 
         return jax.jit(jax.vmap(one))
 
-    return shared_program("tolerance_samples", pb, space, (bool(frozen),), build)
+    return shared_program("tolerance_samples", pb, space, (bool(frozen),), build, persist=True)
 
 
 def _rows(f, rows_g, rows_d, rows_r, chunk, progress) -> dict:

@@ -2,6 +2,8 @@
 rules and the designer's optax refinement. Tiny sizes: population 8, 16 generations, coarse samples."""
 
 
+import os
+
 import jax.numpy as jnp
 import numpy as np
 import pytest
@@ -183,6 +185,8 @@ def test_refine_designs_accepts_only_feasible_improvements_and_fails_loudly(desi
 
     kept = dict(PR._PROGRAMS)
     PR._PROGRAMS.clear()  # the descent is kept by the problem's content: trace it afresh with the broken loss
+    cache = os.environ.get("DELTAJAX_PROGRAM_CACHE")
+    os.environ["DELTAJAX_PROGRAM_CACHE"] = ""   # ... and not from the programs kept on disk (same content)
     try:
         D.evaluate_designer = broken
         with pytest.raises(FloatingPointError, match="non-finite gradient of the designer's loss for design 0"):
@@ -190,6 +194,10 @@ def test_refine_designs_accepts_only_feasible_improvements_and_fails_loudly(desi
                            penalty=10.0, evaluate=ev, evaluate_cheap=ev_cheap)
     finally:
         D.evaluate_designer = real
+        if cache is None:
+            os.environ.pop("DELTAJAX_PROGRAM_CACHE", None)
+        else:
+            os.environ["DELTAJAX_PROGRAM_CACHE"] = cache
         PR._PROGRAMS.clear()
         PR._PROGRAMS.update(kept)
 

@@ -85,7 +85,7 @@ def descent_paths(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.n
         return descend
 
     settings = (primary, repr(sp), reg, int(steps), repr(float(learning_rate)), repr(float(penalty)))
-    descend = shared_program("refine_descent", pb, space, settings, build)
+    descend = shared_program("refine_descent", pb, space, settings, build, persist=True)
     # in batches of DESCENT_ROWS rows (padded): one compiled descent for any number of starts (the job refines
     # at most 8; a stage with fewer, e.g. without a Pareto front, reuses it)
     hist, path, fin = padded_batch(descend, DESCENT_ROWS)(genes)

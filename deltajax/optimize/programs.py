@@ -16,7 +16,7 @@ from typing import Any, Callable, Mapping, Sequence
 
 import numpy as np
 
-__all__ = ["design_metrics", "batch_evaluator", "objective_matrix", "shared_program", "content_key"]
+__all__ = ["design_metrics", "batch_evaluator", "objective_matrix", "shared_program", "content_key", "stable_key"]
 
 
 # -- compiled per-design programs, shared by value -----------------------------------------------------------------
@@ -53,9 +53,37 @@ def content_key(x) -> Any:
     return ("id", id(x))
 
 
-def shared_program(kind: str, pb, space, settings: tuple, build: Callable[[], Any]) -> Any:
+def stable_key(*objs) -> Any:
+    """A string naming the content of ``objs`` in every process (:func:`content_key`'s value, hashed), or None
+    when part of it is only known by identity (such a program is not kept across processes)."""
+    import hashlib
+
+    def by_value(k) -> bool:
+        if isinstance(k, tuple):
+            if len(k) == 2 and k[0] == "id":
+                return False
+            return all(by_value(v) for v in k)
+        return True
+
+    k = tuple(content_key(o) for o in objs)
+    return hashlib.sha256(repr(k).encode()).hexdigest() if by_value(k) else None
+
+
+def shared_program(kind: str, pb, space, settings: tuple, build: Callable[[], Any], *,
+                   persist: bool = False) -> Any:
     """The program ``build()`` for (``kind``, the content of ``pb`` and ``space``, ``settings``), built once per
-    process (least recently used dropped beyond ``_PROGRAMS_MAX``)."""
+    process (least recently used dropped beyond ``_PROGRAMS_MAX``). ``persist``: ``build()`` is a jitted function
+    of arrays whose lowered program is also kept across processes (:func:`deltajax.tracing.persistent`), when the
+    content is known by value (:func:`stable_key`)."""
+    if persist:
+        inner = build
+
+        def build():
+            from ..tracing import persistent
+
+            key = stable_key(pb, space, settings)
+            return inner() if key is None else persistent(inner(), kind, key)
+
     key = (kind, content_key(pb), content_key(space), settings)
     if key in _PROGRAMS:
         _PROGRAMS[key] = _PROGRAMS.pop(key)          # most recently used last
@@ -91,7 +119,8 @@ def batch_evaluator(pb, space, batch: int, *, regular: bool = True) -> Callable[
 
         from .pareto import padded_batch
 
-        f = jax.jit(jax.vmap(design_metrics(pb, space, regular=regular)))
+        f = shared_program("batch_program", pb, space, (bool(regular),),
+                           lambda: jax.jit(jax.vmap(design_metrics(pb, space, regular=regular))), persist=True)
         call = padded_batch(f, batch)
         return lambda X: {k: np.asarray(v) for k, v in call(np.asarray(X)).items()}
 

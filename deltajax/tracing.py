@@ -1,0 +1,186 @@
+"""Trace a kernel once per process, however many programs call it.
+
+A function decorated with :func:`traced_once` is traced by JAX the first time it is called with a given
+structure (the non-array arguments by value, the arrays by shape and dtype) and every later call -- from another
+call site of the same program, another program, under ``vmap``, ``jvp`` or ``grad`` -- reuses that trace: JAX
+transforms the cached program instead of running the Python again. ``jax.jit(..., inline=True)`` does this and
+then inlines the program at each call site, so every caller computes exactly what it computed with the function
+traced in place (a nested, not inlined call can change the last bit of a result inside a loop).
+
+Why: the designer's evaluator calls :func:`deltajax.constraints.good_point` at three sites (the sample grid and
+the two cylinder searches), and each of those calls the base-plate distance at three forearms; tracing the
+Python of each call site again was most of the time a run of the main job spent building its programs.
+"""
+
+from __future__ import annotations
+
+import functools
+from typing import Callable, TypeVar
+
+import jax
+
+__all__ = ["traced_once", "persistent", "program_cache_dir", "STATS", "PROGRAMS_KEPT"]
+
+F = TypeVar("F", bound=Callable)
+
+
+def _is_array(x) -> bool:
+    return isinstance(x, jax.Array) or hasattr(x, "__array__") and hasattr(x, "dtype") and hasattr(x, "shape")
+
+
+def traced_once(fn: F) -> F:
+    """``fn`` with its trace shared by every call of the same structure (see the module docstring).
+
+    The arguments may be any pytrees (equinox modules, NamedTuples, dicts): their array leaves (JAX arrays,
+    tracers, NumPy arrays and scalars) are the traced inputs; every other leaf (Python numbers, strings, None,
+    tuples of them) is part of the cache key, as it is a constant of the traced program.
+    """
+    @functools.partial(jax.jit, static_argnums=(0, 1), inline=True)
+    def run(treedef, static, dynamic):
+        leaves = list(static)
+        it = iter(dynamic)
+        leaves = [next(it) if s is _ARRAY else s for s in leaves]
+        args, kwargs = jax.tree_util.tree_unflatten(treedef, leaves)
+        return fn(*args, **kwargs)
+
+    @functools.wraps(fn)
+    def call(*args, **kwargs):
+        leaves, treedef = jax.tree_util.tree_flatten((args, kwargs))
+        arrays = [x for x in leaves if _is_array(x)]
+        static = tuple(_ARRAY if _is_array(x) else x for x in leaves)
+        return run(treedef, static, arrays)
+
+    call.__wrapped_trace__ = run
+    return call  # type: ignore[return-value]
+
+
+class _ArrayMarker:
+    """Stands for an array leaf in the static part of the key."""
+
+    __slots__ = ()
+
+    def __repr__(self) -> str:
+        return "<array>"
+
+
+_ARRAY = _ArrayMarker()
+
+
+# -- programs kept across processes ---------------------------------------------------------------------------
+# JAX's persistent compilation cache keeps the *compiled* programs between processes, but every process still
+# runs the Python that builds them (tracing, batching, lowering to StableHLO) before it can look them up: for the
+# designer's evaluators that was most of a warm run's program-building time. :func:`persistent` keeps the lowered
+# program itself (``jax.export``'s serialisation) on disk, keyed by everything that determines it: the caller's
+# key (the content of the problem it closes over), the input shapes and dtypes, this package's source, the
+# versions of the libraries that trace it, and the numerics settings. A process that finds it deserialises it and
+# only compiles it (a persistent-cache hit); the numbers are the exported program's in every process, the first
+# one included (a test checks them against the program traced in place, bit for bit).
+
+def _source_fingerprint() -> str:
+    import hashlib
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parent
+    h = hashlib.sha256()
+    for p in sorted(root.rglob("*.py")):
+        h.update(str(p.relative_to(root)).encode())
+        h.update(p.read_bytes())
+    return h.hexdigest()
+
+
+@functools.lru_cache(maxsize=None)
+def _environment_key() -> str:
+    import importlib.metadata as md
+    import os
+
+    parts = [_source_fingerprint()]
+    for dist in ("jax", "jaxlib", "equinox", "numpy"):
+        try:
+            parts.append(f"{dist}=={md.version(dist)}")
+        except md.PackageNotFoundError:
+            parts.append(f"{dist}==none")
+    parts += [f"x64={jax.config.jax_enable_x64}", f"backend={jax.default_backend()}",
+              f"device={jax.devices()[0].device_kind}", f"XLA_FLAGS={os.environ.get('XLA_FLAGS', '')}",
+              f"precision={jax.config.jax_default_matmul_precision}"]
+    return "\n".join(parts)
+
+
+def program_cache_dir():
+    """Where :func:`persistent` keeps programs: ``$DELTAJAX_PROGRAM_CACHE`` (empty: nowhere), else ``programs/``
+    beside JAX's persistent compilation cache (``compilation_cache`` of the run's config), else nowhere (each
+    process then traces its programs, as before)."""
+    import os
+    from pathlib import Path
+
+    env = os.environ.get("DELTAJAX_PROGRAM_CACHE")
+    if env is not None:
+        return Path(env).expanduser() if env else None
+    d = jax.config.jax_compilation_cache_dir
+    return Path(d).expanduser().parent / "programs" if d else None
+
+
+#: programs kept per kind; beyond it the least recently written go (each edit of the package's source, each new
+#: problem content or input shape adds one)
+PROGRAMS_KEPT = 64
+
+#: programs exported or read by this process: (kind, key) -> jitted call of the exported program
+_LOADED: dict = {}
+#: what :func:`persistent` did in this process (``exported``: traced and written, ``loaded``: read from disk)
+STATS = {"exported": 0, "loaded": 0}
+
+
+def persistent(fn: Callable, kind: str, key: str) -> Callable:
+    """``fn`` (a jitted function of arrays) built once for all processes: each call with a new input structure
+    looks for its exported program under ``kind`` / ``key`` (the content of whatever ``fn`` closes over, a
+    string) and the input shapes; if none is on disk it traces and exports ``fn`` and writes the program
+    (atomically). Either way the exported program runs, so every process computes the same numbers. With no
+    :func:`program_cache_dir`, ``fn`` itself runs."""
+    import hashlib
+
+    def call(*args):
+        root = program_cache_dir()
+        if root is None:
+            return fn(*args)
+        spec = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(jax.numpy.shape(a), jax.numpy.result_type(a)),
+                                      args)
+        h = hashlib.sha256("\n".join([_environment_key(), kind, key, repr(spec)]).encode()).hexdigest()[:32]
+        prog = _LOADED.get(h)
+        if prog is None:
+            prog = _load_or_export(fn, spec, root / kind / f"{h}.jaxexport")
+            _LOADED[h] = prog
+        return prog(*args)
+
+    return call
+
+
+def _load_or_export(fn: Callable, spec, path) -> Callable:
+    import os
+    import warnings
+
+    from jax import export
+
+    if path.is_file():
+        try:
+            exp = export.deserialize(bytearray(path.read_bytes()))
+            STATS["loaded"] += 1
+            return jax.jit(exp.call)
+        except Exception as err:  # noqa: BLE001 - a damaged cache entry is rebuilt (it holds no results)
+            warnings.warn(f"rebuilding the cached program {path} ({type(err).__name__}: {err})", stacklevel=3)
+    exp = export.export(fn if hasattr(fn, "lower") else jax.jit(fn))(*spec)
+    blob = exp.serialize()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    tmp.write_bytes(blob)
+    os.replace(tmp, path)
+    STATS["exported"] += 1
+    _evict(path.parent)
+    return jax.jit(export.deserialize(bytearray(blob)).call)
+
+
+def _evict(folder) -> None:
+    files = sorted(folder.glob("*.jaxexport"), key=lambda p: p.stat().st_mtime)
+    for p in files[:max(len(files) - PROGRAMS_KEPT, 0)]:
+        try:
+            p.unlink()
+        except OSError:   # another process removed it first
+            pass

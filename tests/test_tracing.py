@@ -1,0 +1,152 @@
+"""deltajax.tracing: a kernel traced once however many call sites and programs use it (same numbers as traced in
+place), and programs kept across processes (exported, read back, bit-identical to the program traced in place,
+keyed by their content and input shapes, a damaged entry rebuilt, off when there is no cache folder); the
+designer's evaluators are read back without running the designer's Python."""
+
+import os
+import subprocess
+import sys
+import textwrap
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from deltajax import tracing as T
+
+jax.config.update("jax_enable_x64", True)
+
+
+def test_traced_once_runs_the_python_once_for_every_call_site_and_transform():
+    calls = []
+
+    def kernel(x, scale, *, mode="sum"):
+        calls.append(mode)
+        y = jnp.sin(x) * scale
+        return jnp.sum(y) if mode == "sum" else jnp.max(y)
+
+    shared = T.traced_once(kernel)
+
+    def program(f):
+        def g(x):
+            a = f(x, 2.0)
+            b = jax.vmap(lambda r: f(r, 2.0))(jnp.stack([x, 2 * x]))
+            c = jax.grad(lambda r: f(r, 2.0))(x)
+            return a + jnp.sum(b) + jnp.sum(c)
+        return jax.jit(g)
+
+    x = jnp.linspace(0.0, 1.0, 5)
+    want = program(kernel)(x)
+    n_inplace = len(calls)
+    calls.clear()
+    got = program(shared)(x)
+    assert len(calls) == 1 < n_inplace          # one trace for the three call sites (vmap and grad transform it)
+    assert float(got) == float(want)            # inlined: the same numbers as traced in place
+    program(shared)(x + 1.0)                    # same structure: no new trace
+    assert len(calls) == 1
+    shared(x, 3.0)                              # another static value is another program
+    shared(x, 2.0, mode="max")
+    assert calls == ["sum", "sum", "max"]
+
+
+@pytest.fixture()
+def program_cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("DELTAJAX_PROGRAM_CACHE", str(tmp_path))
+    saved = dict(T._LOADED)
+    T._LOADED.clear()
+    yield tmp_path
+    T._LOADED.clear()
+    T._LOADED.update(saved)
+
+
+def _fn(x, y):
+    return {"s": jnp.cumsum(jnp.exp(-x) * y), "m": jnp.max(x)}
+
+
+def test_persistent_exports_once_reads_back_and_gives_the_numbers_of_the_program_itself(program_cache):
+    f = jax.jit(_fn)
+    x, y = np.linspace(0, 3, 7), np.linspace(1, 2, 7)
+    before = dict(T.STATS)
+    p = T.persistent(f, "demo", "content-a")
+    out = p(x, y)
+    assert T.STATS["exported"] == before["exported"] + 1
+    files = list((program_cache / "demo").glob("*.jaxexport"))
+    assert len(files) == 1
+    T._LOADED.clear()                                           # as a new process: read from disk
+    again = T.persistent(f, "demo", "content-a")(x, y)
+    assert T.STATS["loaded"] == before["loaded"] + 1
+    want = f(x, y)
+    for k in want:
+        np.testing.assert_array_equal(np.asarray(out[k]), np.asarray(want[k]))
+        np.testing.assert_array_equal(np.asarray(again[k]), np.asarray(want[k]))
+    # another content or another input shape is another program
+    T.persistent(f, "demo", "content-b")(x, y)
+    T.persistent(f, "demo", "content-a")(x[:3], y[:3])
+    assert len(list((program_cache / "demo").glob("*.jaxexport"))) == 3
+
+
+def test_a_damaged_program_is_rebuilt_with_a_warning(program_cache):
+    f = jax.jit(_fn)
+    x = np.ones(3)
+    T.persistent(f, "demo", "k")(x, x)
+    (path,) = (program_cache / "demo").glob("*.jaxexport")
+    path.write_bytes(b"not a program")
+    T._LOADED.clear()
+    with pytest.warns(UserWarning, match="rebuilding the cached program"):
+        out = T.persistent(f, "demo", "k")(x, x)
+    np.testing.assert_array_equal(np.asarray(out["s"]), np.asarray(f(x, x)["s"]))
+    assert path.read_bytes() != b"not a program"
+
+
+def test_no_cache_folder_runs_the_function_itself(monkeypatch, tmp_path):
+    monkeypatch.setenv("DELTAJAX_PROGRAM_CACHE", "")
+    assert T.program_cache_dir() is None
+    before = dict(T.STATS)
+    T.persistent(jax.jit(_fn), "demo", "k")(np.ones(2), np.ones(2))
+    assert T.STATS == before
+
+
+def test_a_program_key_changes_with_the_source_and_the_settings(program_cache):
+    key = T._environment_key()
+    assert "x64=True" in key and "jax==" in key
+    assert len(T._source_fingerprint()) == 64
+
+
+@pytest.mark.slow   # two processes build the designer's cheap evaluator at the toy size (~40 CPU-s cold)
+def test_a_second_process_reads_the_designers_evaluator_without_tracing_the_designer(tmp_path):
+    script = textwrap.dedent(f"""
+        import sys, numpy as np, jax
+        jax.config.update("jax_enable_x64", True)
+        sys.path.insert(0, {os.path.dirname(__file__)!r})
+        from _config_helpers import compose
+        from toy_jobs import JAX_CACHE
+        jax.config.update("jax_compilation_cache_dir", JAX_CACHE)
+        jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+        from test_tolerance import TOY_PROBLEM
+        from deltajax.config import ga_reconfig_build, robot_from_config
+        import deltajax.optimize.designer as D
+        from deltajax import tracing as T
+        from deltajax.optimize.programs import batch_evaluator
+        calls = []
+        real = D.evaluate_designer
+        D.evaluate_designer = lambda *a, **k: (calls.append(1), real(*a, **k))[1]
+        cfg = compose("ga_reconfig", *TOY_PROBLEM)
+        robot, recon = robot_from_config(cfg.robot)
+        _, space, pb, _ = ga_reconfig_build(cfg.experiment, robot, recon)
+        out = batch_evaluator(pb, space, 4, regular=False)(np.stack([space.baseline_genes()] * 2))
+        print("RESULT", len(calls), T.STATS["exported"], T.STATS["loaded"], out["picks_per_min"].tolist())
+    """)
+    env = {**os.environ, "DELTAJAX_PROGRAM_CACHE": str(tmp_path)}
+
+    def run():
+        r = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr[-3000:]
+        line = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT")][0].split(maxsplit=4)
+        return int(line[1]), int(line[2]), int(line[3]), line[4]
+
+    traced, exported, loaded, picks = run()
+    assert (traced, exported, loaded) == (1, 1, 0)
+    traced2, exported2, loaded2, picks2 = run()
+    assert (traced2, exported2, loaded2) == (0, 0, 1)          # the designer's Python did not run
+    assert picks2 == picks
