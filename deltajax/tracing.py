@@ -130,51 +130,71 @@ STATS = {"exported": 0, "loaded": 0}
 
 
 def persistent(fn: Callable, kind: str, key: str) -> Callable:
-    """``fn`` (a jitted function of arrays) built once for all processes: each call with a new input structure
-    looks for its exported program under ``kind`` / ``key`` (the content of whatever ``fn`` closes over, a
-    string) and the input shapes; if none is on disk it traces and exports ``fn`` and writes the program
-    (atomically). Either way the exported program runs, so every process computes the same numbers. With no
-    :func:`program_cache_dir`, ``fn`` itself runs."""
+    """``fn`` (a jitted function of pytrees of arrays) built once for all processes: each call with a new input
+    structure looks for its exported program under ``kind`` / ``key`` (the content of whatever ``fn`` closes
+    over, a string) and the input structure and shapes; if none is on disk it traces and exports ``fn`` and
+    writes the program (atomically). Either way the exported program runs, so every process computes the same
+    numbers. Inputs and outputs may be any registered pytrees (equinox modules, the GA's evosax state): the
+    program itself takes and returns their leaves. With no :func:`program_cache_dir`, ``fn`` itself runs."""
     import hashlib
 
     def call(*args):
         root = program_cache_dir()
         if root is None:
             return fn(*args)
-        spec = jax.tree_util.tree_map(lambda a: jax.ShapeDtypeStruct(jax.numpy.shape(a), jax.numpy.result_type(a)),
-                                      args)
-        h = hashlib.sha256("\n".join([_environment_key(), kind, key, repr(spec)]).encode()).hexdigest()[:32]
+        leaves, in_tree = jax.tree_util.tree_flatten(args)
+        spec = [jax.ShapeDtypeStruct(jax.numpy.shape(a), jax.numpy.result_type(a)) for a in leaves]
+        h = hashlib.sha256("\n".join([_environment_key(), kind, key, repr(in_tree), repr(spec)]).encode())
+        h = h.hexdigest()[:32]
         prog = _LOADED.get(h)
         if prog is None:
-            prog = _load_or_export(fn, spec, root / kind / f"{h}.jaxexport")
+            prog = _load_or_export(fn, in_tree, spec, root / kind / f"{h}.jaxexport")
             _LOADED[h] = prog
-        return prog(*args)
+        run, out_tree = prog
+        return jax.tree_util.tree_unflatten(out_tree, run(*leaves))
 
     return call
 
 
-def _load_or_export(fn: Callable, spec, path) -> Callable:
+_MAGIC = b"deltajax-program-1\n"
+
+
+def _load_or_export(fn: Callable, in_tree, spec, path):
     import os
+    import pickle
     import warnings
 
     from jax import export
 
     if path.is_file():
         try:
-            exp = export.deserialize(bytearray(path.read_bytes()))
+            data = path.read_bytes()
+            if not data.startswith(_MAGIC):
+                raise ValueError("not a deltajax program file")
+            n = int.from_bytes(data[len(_MAGIC):len(_MAGIC) + 8], "little")
+            head = len(_MAGIC) + 8
+            out_tree = pickle.loads(data[head:head + n])
+            exp = export.deserialize(bytearray(data[head + n:]))
             STATS["loaded"] += 1
-            return jax.jit(exp.call)
+            return jax.jit(exp.call), out_tree
         except Exception as err:  # noqa: BLE001 - a damaged cache entry is rebuilt (it holds no results)
             warnings.warn(f"rebuilding the cached program {path} ({type(err).__name__}: {err})", stacklevel=3)
-    exp = export.export(fn if hasattr(fn, "lower") else jax.jit(fn))(*spec)
-    blob = exp.serialize()
+    trees = {}
+
+    def flat(*leaves):
+        out, trees["out"] = jax.tree_util.tree_flatten(fn(*jax.tree_util.tree_unflatten(in_tree, leaves)))
+        return out
+
+    exp = export.export(jax.jit(flat))(*spec)
+    head = pickle.dumps(trees["out"])
+    blob = _MAGIC + len(head).to_bytes(8, "little") + head + exp.serialize()
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     tmp.write_bytes(blob)
     os.replace(tmp, path)
     STATS["exported"] += 1
     _evict(path.parent)
-    return jax.jit(export.deserialize(bytearray(blob)).call)
+    return jax.jit(export.deserialize(bytearray(exp.serialize())).call), trees["out"]
 
 
 def _evict(folder) -> None:

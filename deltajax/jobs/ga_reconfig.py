@@ -194,6 +194,7 @@ def run(ctx) -> None:
     try:
         gres = run_ga(W.ga_fitness(pb, space, objs, wvec), space.dim, ga_cfg, init_genes=seeds, checkpoint=ck,
                       save_checkpoint=save, stop_after=s.stop_after, progress=bar.update,
+                      program_key=W.ga_fitness_key(pb, space, objs, wvec),
                       fingerprint_extra={"space": [space.names, space.lower, space.upper, space.n_R,
                                                    space.reconfigurable], "job": fp})
     except GAError as err:

@@ -189,9 +189,11 @@ def fingerprint(cfg: GAConfig, num_dims: int, extra: Optional[Mapping[str, Any]]
 
 
 @functools.lru_cache(maxsize=16)   # like deltajax.optimize.workflow's programs: bounded in a long process
-def _engine(fitness_fn, d: int, cfg: GAConfig):
+def _engine(fitness_fn, d: int, cfg: GAConfig, program_key: Optional[str] = None):
     """Compiled init and chunk functions, cached per (fitness function, settings) so that repeated runs
-    (resume, tests, sweeps in one process) reuse compilations. Seed and seed genes are arguments."""
+    (resume, tests, sweeps in one process) reuse compilations. Seed and seed genes are arguments.
+    ``program_key`` (the content of ``fitness_fn``): the programs are also kept across processes
+    (:func:`deltajax.tracing.persistent`)."""
     strat, params = make_strategy(cfg, d)
     P = cfg.population_size
 
@@ -238,6 +240,11 @@ def _engine(fitness_fn, d: int, cfg: GAConfig):
         return (state, key), (rec, pop, fit)
 
     chunk_cache: dict[int, Callable] = {}
+    kept = program_key is not None and {"key": f"{program_key}|{cfg!r}|{d}"}
+    if kept:
+        from ..tracing import persistent
+
+        init_fn = persistent(init_fn, "ga_init", kept["key"])
 
     def chunk(n):
         if n not in chunk_cache:
@@ -245,7 +252,7 @@ def _engine(fitness_fn, d: int, cfg: GAConfig):
             def run_chunk(state, key):
                 (state, key), (recs, pops, fits) = jax.lax.scan(one_generation, (state, key), None, length=n)
                 return state, key, recs, pops[-1], fits[-1]
-            chunk_cache[n] = run_chunk
+            chunk_cache[n] = persistent(run_chunk, "ga_chunk", f"{kept['key']}|{n}") if kept else run_chunk
         return chunk_cache[n]
 
     return init_fn, chunk
@@ -256,7 +263,7 @@ def run_ga(fitness_fn: Callable[[jax.Array], tuple[jax.Array, Mapping[str, jax.A
            checkpoint: Optional[Mapping[str, Any]] = None,
            save_checkpoint: Optional[Callable[[dict[str, Any]], None]] = None,
            stop_after: Optional[int] = None, fingerprint_extra: Optional[Mapping[str, Any]] = None,
-           progress: Optional[Callable[[int], Any]] = None) -> GAResult:
+           progress: Optional[Callable[[int], Any]] = None, program_key: Optional[str] = None) -> GAResult:
     """Run (or resume) a GA.
 
     Args:
@@ -272,6 +279,9 @@ def run_ga(fitness_fn: Callable[[jax.Array], tuple[jax.Array, Mapping[str, jax.A
         stop_after: stop (as if killed) after this many generations in total (for kill-and-resume tests).
         fingerprint_extra: extra settings (objective, design space) that a checkpoint must match.
         progress: called with the number of generations completed by each chunk (e.g. a tqdm ``update``).
+        program_key: a string naming everything ``fitness_fn`` computes (e.g.
+            :func:`deltajax.optimize.workflow.ga_fitness_key`): the GA's programs are then kept across processes
+            (:func:`deltajax.tracing.persistent`), so a warm process does not trace the fitness again.
 
     Returns:
         :class:`GAResult`.
@@ -280,7 +290,7 @@ def run_ga(fitness_fn: Callable[[jax.Array], tuple[jax.Array, Mapping[str, jax.A
     fp = fingerprint(cfg, num_dims, fingerprint_extra)
     G = cfg.generations
     init_fn, chunk = _engine(fitness_fn, num_dims, dataclasses.replace(cfg, seed=0, generations=1,
-                                                                          checkpoint_every=1))
+                                                                          checkpoint_every=1), program_key)
     seed_genes = np.full((cfg.population_size, num_dims), np.nan)
     if init_genes is not None:
         ig = np.asarray(init_genes, float).reshape(-1, num_dims)[:cfg.population_size]

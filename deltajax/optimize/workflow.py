@@ -33,10 +33,12 @@ import numpy as np
 
 # the compiled programs and the refine descent live in their own modules; these names stay importable from here
 from .descent import DESCENT_ROWS, RefineOutcome, descent_paths, refine_designs
-from .programs import batch_evaluator, content_key, design_metrics, objective_matrix, shared_program
+from .programs import (batch_evaluator, content_key, design_metrics, objective_matrix, shared_program,
+                       stable_key)
 
 
-__all__ = ["SetupError", "setup", "designer_problem", "screen", "screen_front", "ga_fitness", "pareto_eval",
+__all__ = ["SetupError", "setup", "designer_problem", "screen", "screen_front", "ga_fitness", "ga_fitness_key",
+           "pareto_eval",
            "refine_designs", "RefineOutcome", "descent_paths", "verify", "floor_limits", "recommend",
            "RECOMMEND_RULES", "DESCENT_ROWS", "design_metrics", "batch_evaluator", "objective_matrix",
            "STORED_METRIC"]
@@ -212,6 +214,11 @@ def ga_fitness(pb, space, objs: Sequence[str], wvec: np.ndarray):
 
     # one function object per content: run_ga's compiled engine is cached per fitness function
     return shared_program("ga_fitness", pb, space, (objs, content_key(wvec)), build)
+
+
+def ga_fitness_key(pb, space, objs: Sequence[str], wvec: np.ndarray):
+    """The content of :func:`ga_fitness` (``run_ga``'s ``program_key``), or None if it is not known by value."""
+    return stable_key(pb, space, ("ga_fitness", tuple(objs), content_key(np.asarray(wvec, float))))
 
 
 def pareto_eval(evaluate: Callable[[np.ndarray], dict], objs: Sequence[str], scale: np.ndarray):
