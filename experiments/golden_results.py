@@ -1,8 +1,8 @@
 """Every CLI job's toy-size results, run before and after a change, compared dataset by dataset.
 
-    python experiments/golden_results.py run /tmp/before            # on the old tree
-    python experiments/golden_results.py run /tmp/after             # on the new tree
-    python experiments/golden_results.py compare /tmp/before /tmp/after
+    python experiments/golden_results.py run golden/before          # on the old tree
+    python experiments/golden_results.py run golden/after           # on the new tree
+    python experiments/golden_results.py compare golden/before golden/after
 
 ``run`` runs each job of :data:`deltajax.jobs.JOBS` through the command line (``python -m deltajax.run``, a fresh
 process each) at the suite's toy size (``tests/toy_jobs.py``) into ``DIR/<job>/``. ``compare`` reports, per job,
