@@ -164,6 +164,17 @@ def test_overlay_puts_the_certified_figures_in_place():
     assert CE.overlay({"verify": V}) is V
 
 
+def test_overlay_in_path_mode_certifies_the_fixed_R_cycle_only():
+    V = {"picks_per_min": np.asarray([10.0, 20]), "picks_per_min_fixed": np.asarray([9.0, 19]),
+         "regular_volume": np.asarray([1.0, 2]), "attrs": {"recommended": 1}}
+    Cg = {"row": np.asarray([1]), "picks_per_min": np.asarray([18.5]), "regular_volume": np.asarray([1.9]),
+          "attrs": {"recommended": 1, "cycle_variant": "fixed_R"}}
+    out = CE.overlay({"verify": V, "certify": Cg})
+    np.testing.assert_array_equal(out["picks_per_min"], [10.0, 20])             # R(t) along the cycle: as verified
+    np.testing.assert_array_equal(out["picks_per_min_fixed"], [9.0, 18.5])
+    np.testing.assert_array_equal(out["regular_volume"], [1.0, 1.9])
+
+
 @pytest.fixture(scope="module")
 def default_problem():
     from hydra import compose, initialize_config_dir

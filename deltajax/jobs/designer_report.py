@@ -377,10 +377,11 @@ def certify_lines(Cg) -> list:
     for j, name in enumerate(np.asarray(Cg["design_name"]).reshape(-1)):
         ch = {k[:-7]: float(np.asarray(Cg[k]).reshape(-1)[j]) for k in Cg if k.endswith("_change")}
         worst = [k for k, x in ch.items() if not x <= float(Cg["attrs"].get(f"tolerance_{k}", np.inf))]
-        out.append(f"  certified {name}: regular volume {1e3 * float(np.asarray(Cg['regular_volume']).reshape(-1)[j]):.4g}"
-                   f" L (doubling the density moved it {100 * ch.get('regular_volume', float('nan')):.2f} %, tolerance "
-                   f"{100 * tol:g} %)" + ("; every figure within its tolerance" if not worst else
-                                          f"; NOT within tolerance: {', '.join(worst)}"))
+        vol = 1e3 * float(np.asarray(Cg["regular_volume"]).reshape(-1)[j])
+        moved = 100 * ch.get("regular_volume", float("nan"))
+        out.append(f"  certified {name}: regular volume {vol:.4g} L (doubling the density moved it {moved:.2f} %, "
+                   f"tolerance {100 * tol:g} %)" + ("; every figure within its tolerance" if not worst else
+                                                    f"; NOT within tolerance: {', '.join(worst)}"))
     return out
 
 

@@ -343,6 +343,13 @@ def run(ctx) -> None:
                              penalty=s.refine["penalty"], rounds=s.floor_solve["rounds"],
                              n_fine=s.floor_solve["candidates"], progress=bar.update)
             bar.close()
+            # an iterate equal to a design already verified (e.g. one a continued run carried from the earlier run,
+            # whose own floor step descended from the same start) is not verified twice under two names
+            fresh = np.flatnonzero([not np.any(np.all(cand == g, axis=1)) for g in fo.genes])
+            if len(fresh) < len(fo.genes):
+                fo = dataclasses.replace(fo, genes=fo.genes[fresh], start=fo.start[fresh], step=fo.step[fresh],
+                                         metrics={k: v[fresh] for k, v in fo.metrics.items()},
+                                         predicted=fo.predicted[fresh])
             if len(fo.genes):
                 first = len(cand)
                 cand = np.concatenate([cand, fo.genes])
@@ -421,6 +428,7 @@ def _certify(ctx, res, V, s, space, objs, sense, jp, *, max_rounds: int = 4) -> 
     feas = np.asarray(V["feasible"]).astype(bool).reshape(-1).copy()
     rec0 = int(V["attrs"]["recommended"])
     cert: dict = {}
+    path = s.reconfig.get("mode", "per_task") == "path"
     bar = ctx.progress(total=2, desc="certify (worst cases, doubled density)")
 
     def run(i):
@@ -430,7 +438,8 @@ def _certify(ctx, res, V, s, space, objs, sense, jp, *, max_rounds: int = 4) -> 
         cert[i] = c
         bar.update(1)
         for k in CE.CERTIFIED_METRICS:
-            mv[k][i] = c[k]
+            if not (path and k in CE.CYCLE_METRICS):    # mode=path: the cycle's certified figures are the fixed R's
+                mv[k][i] = c[k]
         feas[i] = bool(CE.feasible_certified({k: np.asarray(v[i]) for k, v in mv.items()}, pb))
         ctx.log(f"certified {names[i]}: " + ", ".join(
             f"{k} {c[k]:.5g} (doubling moved it {c[k + '_change']:.2g}, tolerance {c[k + '_tolerance']:g})"
@@ -455,6 +464,8 @@ def _certify(ctx, res, V, s, space, objs, sense, jp, *, max_rounds: int = 4) -> 
     marg = CE.design_margins(mv, threshold=pb.good.threshold, min_picks=pb.min_picks, max_arm_sum=pb.max_arm_sum,
                              volume_floor=floor)
     R.store_certify(res, names, cert, feas, marg, front, Fv, rec, rec0, floor, s)
+    if path:
+        res.set_attrs("certify", cycle_variant="fixed_R")
     res.set_attrs("verify", recommended=int(rec), recommended_verified=int(rec0))
     if rec != rec0:
         ctx.log(f"certified recommendation: {names[rec] if rec >= 0 else 'none'} (the verification's was "

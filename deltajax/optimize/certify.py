@@ -44,7 +44,7 @@ from ..regular import RegularWorkspace
 
 __all__ = ["TOLERANCES", "RAY_DENSITY", "RAY_PASSES", "RayDensity", "ray_cylinders", "ray_cylinder",
            "worst_in_cylinder", "certify_design", "certified_program", "design_margins", "MARGIN_UNITS", "cycle_at",
-           "grid_cylinder_bounds", "CERTIFIED_METRICS", "feasible_certified", "overlay"]
+           "grid_cylinder_bounds", "CERTIFIED_METRICS", "CYCLE_METRICS", "feasible_certified", "overlay"]
 
 #: Stated accuracy of a certified figure: doubling the density moves it by no more than this.
 #: regular_volume: relative; joint margin: deg; clearance: m; utilisations: ratio (relative to 1).
@@ -446,8 +446,9 @@ def certify_design(pb, design, R_operating=None, *, density=None, task_samples=N
     evaluated at a density and at twice it (rays: ``density``, default the problem's ``rw_rays`` or
     :data:`RAY_DENSITY`; task cylinder samples (rings, angles, levels): ``task_samples``, default one ring, angles
     doubled and two levels more than the problem's task grid; cycle samples: ``cycle_samples``, default eight times
-    the problem's: the peak of a sampled torque converges as the square of the spacing). The returned figures are the denser ones, ``<name>_change`` the change doubling made (relative
-    for the volume, in the figure's units otherwise), ``<name>_tolerance`` and ``converged`` (every change within
+    the problem's: the peak of a sampled torque converges as the square of the spacing). The returned figures are
+    the denser ones, ``<name>_first`` the first density's, ``<name>_change`` the change doubling made (relative for
+    the volume, in the figure's units otherwise), ``<name>_tolerance`` and ``converged`` (every change within
     :data:`TOLERANCES`). The cycle is evaluated at its fastest feasible duration at each density. ``reference``:
     the figures already evaluated at the first density (e.g. by an earlier call): then only the doubled
     evaluation runs. Host function (numpy floats); jitted inside."""
@@ -539,6 +540,11 @@ def grid_cylinder_bounds(good: np.ndarray, r: np.ndarray, z: np.ndarray, hd_rati
 
 # -- the certified figures in place of the verified ones ---------------------------------------------------------------
 
+#: Certified metrics of the cycle run at the operating R: with ``experiment.reconfig.mode=path`` (R(t) along the
+#: cycle) they certify the fixed-R variant (``<metric>_fixed``), not the path's figures.
+CYCLE_METRICS = ("picks_per_min", "cycle_time", "peak_utilisation", "rms_utilisation", "speed_utilisation",
+                 "joint_margin_deg", "interference_margin")
+
 #: Metrics :func:`certify_design` returns that replace the verification's values of a certified design.
 CERTIFIED_METRICS = ("regular_volume", "regular_diameter", "regular_height", "regular_z_top", "regular_volume_fixed",
                      "regular_diameter_fixed", "task_index_min", "joint_margin_deg", "interference_margin",
@@ -578,7 +584,13 @@ def overlay(data: Mapping) -> dict:
         return V
     out = dict(V)
     rows = np.asarray(Cg["row"], int).reshape(-1)
+    path = Cg.get("attrs", {}).get("cycle_variant") == "fixed_R"     # mode=path: the cycle figures are the fixed R's
     for k in CERTIFIED_METRICS + ("feasible",):
+        if path and k in CYCLE_METRICS and f"{k}_fixed" in V:
+            b = np.array(V[f"{k}_fixed"], dtype=float, copy=True).reshape(-1)
+            b[rows] = np.asarray(Cg[k], float).reshape(-1)
+            out[f"{k}_fixed"] = b
+            continue
         if k in V and k in Cg:
             a = np.array(V[k], dtype=float, copy=True).reshape(-1)
             kf = f"{k}_fixed"       # the fixed-R variant's cycle figures: the same where R does not move (per_task)
