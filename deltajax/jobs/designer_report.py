@@ -148,9 +148,10 @@ def print_summary(ctx, data) -> None:
             i = names_v.index(name)
             g = np.asarray(V[STORED_METRIC["g"]], float)[i]
             bad = [str(c) for c, v in zip(V["constraint_names"], g) if not v <= FEASIBILITY_TOL]  # NaN: violated
-            ctx.log(f"  {who} ({where}): " + ("feasible (every constraint met)" if bool(V["feasible"][i])
-                                              else "infeasible" + (f", violates {', '.join(bad)} on the fine grids"
-                                                                   if bad else "")))
+            on = "certified" if "margin_name" in S else "on the fine grids"
+            ctx.log(f"  {who} {on}: " + ("feasible (every constraint met)" if bool(V["feasible"][i])
+                                         else "infeasible" + (f", violates {', '.join(bad)} on the fine grids"
+                                                              if bad else "")))
     if "margin_name" in S:
         ctx.log("  margins (>= 0: the constraint holds by that much; certified):")
         ctx.log(f"  {'margin':26s} {'units':7s} {'baseline':>10s} {'recommended':>11s}")
