@@ -23,6 +23,7 @@ from .motion_refine import refine_path
 from .datasheet import Datasheet, DatasheetError
 from .datasheet import datasheet as datasheet  # the function; the module stays importable as deltajax.datasheet
 from .runreport import ReportError, write_report  # the main job's HTML run report (plotly imported on use)
+from .optimize.certify import certify_design as certify  # worst cases found, the density doubled, margins
 from . import (constraints, cycle, dynamics, export, io, kinematics, mechanism, motion, optimize, reference,
                tolerance, trajectory, workspace)
 
@@ -42,8 +43,9 @@ __all__ = [
     "picks_per_minute", "regular_workspace",
     # reconfiguration in motion
     "RDriveLimits", "resolve_path", "refine_path",
-    # trusting a design: tolerances (deltajax.tolerance.analyse)
-    "tolerance",
+    # trusting a design: worst cases found and doubling checked (deltajax.optimize.certify), tolerances
+    # (deltajax.tolerance.analyse)
+    "certify", "tolerance",
     # taking a design out
     "datasheet", "Datasheet", "DatasheetError", "write_report", "ReportError",
     # modules

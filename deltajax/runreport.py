@@ -176,13 +176,19 @@ def write_report(results_path, out_path=None, *, workspace_points: int = WORKSPA
         stages = data.get("attrs", {}).get("ga_reconfig_stages", "")
         raise ReportError(f"{path}: the run has not finished its verification (stages done: {stages or 'none'}); "
                           "resume it first")
+    from .optimize.certify import MARGIN_UNITS, overlay
+
+    V = overlay(data)          # the certified figures and recommendation where the certify stage ran
     s, space, pb = _run_problem(data, path)
-    units = {**DESIGN_UNITS, **{k: u for k, u in V.get("units", {}).items() if isinstance(u, str) and u != "1"}}
+    units = {**DESIGN_UNITS, **{f"margin_{k}": u for k, u in MARGIN_UNITS.items()},
+             **{k: u for k, u in V.get("units", {}).items() if isinstance(u, str) and u != "1"}}
     names = [str(n) for n in np.asarray(V["design_name"]).reshape(-1)]
     rec = int(V["attrs"]["recommended"])
     sections = [("front", "Designs verified on the fine grids",
                  P.report.front_figure(V, list(s.objectives), units, space.names,
-                                       [space.units(n) for n in space.names]))]
+                                       [space.units(n) for n in space.names],
+                                       margins={k: v for k, v in (data.get("certify") or {}).items()
+                                                if k.startswith("margin_")}))]
     notes = []
     if rec >= 0:
         genes = np.asarray(V["genes"], float).reshape(len(names), -1)

@@ -65,15 +65,38 @@ def test_toy_run_front_feasible_summary_and_units(full_run):
     rec = list(V["design_name"]).index(S["attrs"]["recommended"])
     # the summary pairs the recommended design's numbers with its own parameters
     np.testing.assert_array_equal(S["recommended_params"], V["params"][rec])
-    np.testing.assert_allclose(S["recommended"][0], V["picks_per_min"][rec])
+    # the summary's figures are the certified ones (group certify), for the certified recommendation
+    Cg = data["certify"]
+    assert Cg["attrs"]["recommended_name"] == S["attrs"]["recommended"] and V["attrs"]["recommended"] == rec
+    rows = list(np.asarray(Cg["row"]).reshape(-1))
+    assert 0 in rows and rec in rows and Cg["certified"][rec] == 1 and Cg["certified"][0] == 1
+    j = rows.index(rec)
+    np.testing.assert_allclose(S["recommended"][0], Cg["picks_per_min"][j])
+    np.testing.assert_allclose(S["recommended"][1], Cg["regular_volume"][j])
+    assert Cg["feasible"][j] == 1
+    # certified at twice the density: the change is stated, with the tolerances as attributes
+    assert Cg["attrs"]["tolerance_regular_volume"] == 0.005 and Cg["attrs"]["tolerance_joint_margin_deg"] == 0.05
+    assert np.all(np.isfinite(Cg["regular_volume_change"])) and np.all(Cg["peak_utilisation_change"] >= 0)
+    # the verification found the regular workspace by the same rays: the first density is the verified figure
+    np.testing.assert_allclose(Cg["regular_volume_first"], np.asarray(V["regular_volume"])[rows], rtol=1e-9)
+    # every verified design carries its margins in units; the summary holds both designs' and the log prints them
+    n = len(V["design_name"])
+    assert Cg["margin_joint_margin_deg"].shape == (n,) and Cg["units"]["margin_interference_clearance_mm"] == "mm"
+    np.testing.assert_allclose(S["recommended_margins"][list(S["margin_name"]).index("task_index_margin")],
+                               Cg["task_index_min"][j] - 0.3)
+    cons = [i for i, k in enumerate(S["margin_name"]) if k != "regular_volume_over_floor"]   # the rule's, not a limit
+    rm = np.asarray(S["recommended_margins"])[cons]
+    assert np.all(rm[np.isfinite(rm)] >= -1e-9)                 # the certified recommendation meets every constraint
+    log = (full_run.parent / "run.log").read_text()
+    assert "margins (>= 0" in log and "interference_clearance_mm" in log and "certified baseline:" in log
     # fixed-R variant: same task at the same R, only the regular workspace differs
-    np.testing.assert_allclose(S["recommended_fixed_R"][0], V["picks_per_min"][rec])
-    np.testing.assert_allclose(S["recommended_fixed_R"][1], V["regular_volume_fixed"][rec])
+    np.testing.assert_allclose(S["recommended_fixed_R"][0], Cg["picks_per_min"][j])
+    np.testing.assert_allclose(S["recommended_fixed_R"][1], Cg["regular_volume_fixed"][j])
     assert S["recommended_fixed_R"][1] <= S["recommended"][1] + 1e-15   # R per point can only add
     assert V["units"]["picks_per_min"] == "1/min" and V["units"]["regular_volume"] == "m^3"
     assert "ga/checkpoint" in {k for k in _datasets(full_run)[1]}
-    assert data["attrs"]["ga_reconfig_stages"] == ("screen,ga,pareto,refine,verify,tolerance,results,plots,export,"
-                                                   "report")
+    assert data["attrs"]["ga_reconfig_stages"] == ("screen,ga,pareto,refine,verify,certify,tolerance,results,plots,"
+                                                   "export,report")
     # the tolerance stage: the baseline and the recommendation, their probability printed with the summary
     T = data["tolerance"]
     roles = list(T["role"])
@@ -83,7 +106,6 @@ def test_toy_run_front_feasible_summary_and_units(full_run):
     assert T["units"]["picks_percentiles"] == "1/min" and T["picks_percentiles"].shape == (2, 5)
     assert S["attrs"]["recommended_p_all_constraints_hold"] == T["p_all"][1]
     assert list(T["frozen_R"]["role"]) == roles and T["frozen_R"]["p_all"].shape == (2,)   # at the nominal R
-    log = (full_run.parent / "run.log").read_text()
     assert f"recommended ({S['attrs']['recommended']}): every constraint holds in {100 * T['p_all'][1]:.1f} %" in log
     # the refined winners: accepted only if feasible and no objective worse, and verified like every candidate
     R = data["refine"]
@@ -124,8 +146,9 @@ def test_rerun_three_times_into_one_dir(full_run, tmp_path, caplog, monkeypatch)
     with pytest.raises(KeyboardInterrupt):
         run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
     assert "resuming the GA from generation 2" in _logged(caplog)
-    # killed after the verify and tolerance stages: every stage up to them is in the file, the summary is not
-    assert load(tmp_path / "results.h5")["attrs"]["ga_reconfig_stages"] == "screen,ga,pareto,refine,verify,tolerance"
+    # killed after the verify, certify and tolerance stages: every stage up to them is in the file, the summary is not
+    assert load(tmp_path / "results.h5")["attrs"]["ga_reconfig_stages"] == ("screen,ga,pareto,refine,verify,certify,"
+                                                                           "tolerance")
     monkeypatch.setattr(job, "summary", real)
     p = run_experiment("ga_reconfig", TOY, run_dir=tmp_path)
     snap = tmp_path / "after_resume.h5"

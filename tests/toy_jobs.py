@@ -45,7 +45,7 @@ TOY = {
         "experiment.pareto.population_size=8", "experiment.pareto.generations=3", "experiment.verify.n_R=3",
         "experiment.verify.n_R_operating=2", "experiment.verify.task_n_r=1", "experiment.verify.task_n_phi=3",
         "experiment.verify.task_n_z=2", "experiment.verify.cycle_samples=13", "experiment.verify.rw_n_r=7",
-        "experiment.verify.rw_n_phi=2", "experiment.verify.rw_n_z=7", "experiment.screen.log2_size=6",
+        "experiment.verify.rw_n_phi=3", "experiment.verify.rw_n_z=7", "experiment.screen.log2_size=6",
         "experiment.refine.steps=3", "experiment.tolerance.samples=200"],
 }
 

@@ -11,7 +11,8 @@ if TYPE_CHECKING:
     from ..optimize.robust import RobustChoice
 
 __all__ = ["SUMMARY_METRICS", "FIXED_R_METRIC", "summary", "change_text", "print_summary", "plots", "tolerances_of",
-           "store_tolerance", "store_robust", "store_frozen", "headline_lines", "cost_lines", "summary_attrs"]
+           "store_tolerance", "store_robust", "store_frozen", "headline_lines", "cost_lines", "summary_attrs",
+           "store_certify", "certify_lines"]
 
 SUMMARY_METRICS = ("picks_per_min", "regular_volume", "regular_diameter", "peak_utilisation", "rms_utilisation",
                    "speed_utilisation", "task_good_fraction", "task_index_min", "joint_margin_deg",
@@ -38,9 +39,10 @@ def _fixed_value(V, m: str, i: int) -> float:  # rtmode
 def summary(ctx, res, data, space, objs, s) -> None:
     """Stage baseline vs recommended design, per metric with units and direction, and the parameters of each
     design (``data``: the results file as loaded after the verify stage)."""
+    from ..optimize.certify import MARGIN_UNITS, overlay
     from ..optimize.designer import DESIGN_SENSE, DESIGN_UNITS
 
-    V = data["verify"]
+    V = overlay(data)          # the certified figures where the certify stage ran
     rec = int(V["attrs"]["recommended"])
     if rec < 0:
         ctx.log("no feasible design was found on the fine grids: no recommendation (loosen the constraints)")
@@ -66,6 +68,18 @@ def summary(ctx, res, data, space, objs, s) -> None:
         res.put("summary", f"{col}_fixed_R", np.asarray([_fixed_value(V, m, i) for m in metrics]), units="mixed",
                 dims=("metric",), attrs={"design": names[i], "units_see": "metric_units",
                                          "variant": "fixed R = the operating R chosen for the task"})
+    Cg = data.get("certify") or {}
+    mn = [k for k in MARGIN_UNITS if f"margin_{k}" in Cg]
+    if mn:    # every constraint's margin in units, for both designs (group certify holds every verified design's)
+        res.put_axis("summary", "margin", np.arange(len(mn)), units="1")
+        res.put("summary", "margin_name", np.asarray(mn, dtype=object), units="1", dims=("margin",))
+        res.put("summary", "margin_units", np.asarray([MARGIN_UNITS[k] for k in mn], dtype=object), units="1",
+                dims=("margin",))
+        for col, i in (("baseline", 0), ("recommended", rec)):
+            res.put("summary", f"{col}_margins", np.asarray([float(np.asarray(Cg[f"margin_{k}"]).reshape(-1)[i])
+                                                             for k in mn]), units="mixed", dims=("margin",),
+                    attrs={"meaning": ">= 0: the constraint holds by that much", "units_see": "margin_units",
+                           "certified": int(np.asarray(Cg["certified"]).reshape(-1)[i])})
     res.put_axis("summary", "parameter", np.arange(space.dim), units="1")
     res.put("summary", "parameter_name", np.asarray(space.names, dtype=object), units="1", dims=("parameter",))
     res.put("summary", "parameter_units", np.asarray([space.units(n) for n in space.names], dtype=object),
@@ -80,7 +94,9 @@ def summary(ctx, res, data, space, objs, s) -> None:
                                   "mode=path the reconfigurable design runs the cycle with R(t)), its regular "
                                   "workspace is the good set at that R alone (base plate as the reconfigurable "
                                   "design's)", operating_mode=s.reconfig.get("mode", "per_task"),
-                  evaluation="fine verification grids (group verify)")
+                  evaluation=("certified: worst cases searched, the density doubled to check them (group certify); "
+                              "the other designs on the fine verification grids (group verify)") if mn else
+                  "fine verification grids (group verify)")
     if "tolerance" in data:   # the tolerance stage's headline figures (group tolerance holds the rest)
         res.set_attrs("summary", **summary_attrs(data["tolerance"]))
 
@@ -115,23 +131,34 @@ def print_summary(ctx, data) -> None:
     b, r = S["baseline"], S["recommended"]
     bf, rf = S["baseline_fixed_R"], S["recommended_fixed_R"]
     rec = S["attrs"]["recommended"]
+    where = "certified" if "margin_name" in S else "fine verification grids"
     ctx.log(f"baseline (franco2026 + motor) vs recommended design ({rec}; rule {S['attrs'].get('rule_text', '')}), "
-            "fine verification grids; reconfigurable (R per point) | fixed R (R frozen at the operating R):")
+            f"{where}; reconfigurable (R per point) | fixed R (R frozen at the operating R):")
     ctx.log(f"  {'metric':20s} {'units':6s} {'baseline':>9s} {'recommended':>11s} {'change':>15s} | "
             f"{'base fixR':>9s} {'rec fixR':>9s}  direction")
     for n, u, d, x, y, xf, yf in zip(names, units, dirs, b, r, bf, rf):
         ch = change_text(x, y, DESIGN_SENSE.get(n, 0))
         ctx.log(f"  {n:20s} {u:6s} {x:9.4g} {y:11.4g} {ch:>15s} | {xf:9.4g} {yf:9.4g}  {d}")
-    V = data.get("verify")
+    from ..optimize.certify import overlay
+
+    V = overlay(data)
     if V is not None and "feasible" in V:   # on the same fine grids as the table (the search grids may differ)
         names_v = list(V["design_name"])
         for who, name in (("baseline", names_v[0]), ("recommended", rec)):
             i = names_v.index(name)
             g = np.asarray(V[STORED_METRIC["g"]], float)[i]
             bad = [str(c) for c, v in zip(V["constraint_names"], g) if not v <= FEASIBILITY_TOL]  # NaN: violated
-            ctx.log(f"  {who} on the fine grids: " + ("feasible (every constraint met)" if bool(V["feasible"][i])
-                                                       else "infeasible" + (f", violates {', '.join(bad)}" if bad
-                                                                            else "")))
+            on = "certified" if "margin_name" in S else "on the fine grids"
+            ctx.log(f"  {who} {on}: " + ("feasible (every constraint met)" if bool(V["feasible"][i])
+                                         else "infeasible" + (f", violates {', '.join(bad)} on the fine grids"
+                                                              if bad else "")))
+    if "margin_name" in S:
+        ctx.log("  margins (>= 0: the constraint holds by that much; certified):")
+        ctx.log(f"  {'margin':26s} {'units':7s} {'baseline':>10s} {'recommended':>11s}")
+        for n, u, x, y in zip(S["margin_name"], S["margin_units"], S["baseline_margins"], S["recommended_margins"]):
+            ctx.log(f"  {n:26s} {u:7s} {x:10.4g} {y:11.4g}")
+        for line in certify_lines(data.get("certify") or {}):
+            ctx.log(line)
     T = data.get("tolerance")
     if T is not None and "role" in T:
         ctx.log(f"  tolerance analysis (group tolerance; {T['attrs'].get('tolerances', '')}):")
@@ -167,7 +194,9 @@ def plots(ctx, data, objs, s) -> None:
     fig = P.ga_convergence(G, picks_per_fitness=scale, seeds=", ".join(seeds) + ", random members")
     if fig is not None:
         ctx.savefig(fig, "ga_convergence")
-    V = data.get("verify")
+    from ..optimize.certify import overlay
+
+    V = overlay(data)          # the certified figures, front and margins where the certify stage ran
     fig = P.ga_pareto(V, objs, s, DESIGN_UNITS, floor=floor_line(V, objs, s) if V is not None else None)
     if fig is not None:
         ctx.savefig(fig, "ga_pareto")
@@ -276,6 +305,85 @@ def store_verify(res, space, cand, names, mv, Fv, nd, rec, hv, hv_base, ref, obj
                   grids=f"task {v['task_n_r']}x{v['task_n_phi']}x{v['task_n_z']}, cycle {v['cycle_samples']} samples, "
                         f"regular grid {v['rw_n_z']}x{v['rw_n_r']}x{v['rw_n_phi']}, n_R {v['n_R']}, operating-R "
                         f"candidates {v['n_R_operating']}")
+
+
+# -- the certify stage's group (deltajax.optimize.certify computes, this stores and prints) -----------------------
+
+def store_certify(res, names, cert: dict, feas, marg: dict, front, Fv, rec: int, rec0: int, floor, s) -> None:
+    """Group ``certify``: per verified design (``design``, verify's axis) its margins in units and whether it was
+    certified; per certified design (``certified_design``; ``row`` on verify's axis) every certified figure, the
+    first density's figure, the change doubling made and whether every change is within its tolerance; the front
+    and the normalised objectives with the certified figures in place; attributes: the tolerances, the method, the
+    certified recommendation."""
+    from ..optimize.certify import CERTIFIED_METRICS, MARGIN_UNITS, RAY_PASSES, TOLERANCES
+    from ..optimize.designer import DESIGN_UNITS
+
+    g = "certify"
+    n = len(names)
+    rows = sorted(cert)
+    res.put_axis(g, "design", np.arange(n), units="1")
+    res.put_axis(g, "certified_design", np.arange(len(rows)), units="1")
+    res.put(g, "certified", np.asarray([i in cert for i in range(n)], np.uint8), units="1", dims=("design",),
+            attrs={"meaning": "1: the design's figures are certified (worst cases searched, doubling checked)"})
+    for k, v in marg.items():
+        res.put(g, f"margin_{k}", np.asarray(v, float), units=MARGIN_UNITS[k], dims=("design",),
+                attrs={"meaning": "margin to the constraint (>= 0: met by that much); the certified figures where "
+                                  "certified, else the fine verification's"})
+    res.put(g, "row", np.asarray(rows, int), units="1", dims=("certified_design",),
+            attrs={"meaning": "row on verify's design axis"})
+    res.put(g, "design_name", np.asarray([names[i] for i in rows], dtype=object), units="1",
+            dims=("certified_design",))
+    for k in CERTIFIED_METRICS:
+        res.put(g, k, np.asarray([cert[i][k] for i in rows], float), units=DESIGN_UNITS.get(k, "1"),
+                dims=("certified_design",))
+    for k in TOLERANCES:
+        u = DESIGN_UNITS.get(k, "1")
+        res.put(g, f"{k}_first", np.asarray([cert[i][f"{k}_first"] for i in rows], float), units=u,
+                dims=("certified_design",), attrs={"meaning": "the figure at the verification's density"})
+        res.put(g, f"{k}_change", np.asarray([cert[i][f"{k}_change"] for i in rows], float),
+                units="1" if k == "regular_volume" else u, dims=("certified_design",),
+                attrs={"meaning": "change of the figure when the density is doubled"
+                                  + (" (relative)" if k == "regular_volume" else "")})
+    res.put(g, "converged", np.asarray([cert[i]["converged"] for i in rows], np.uint8), units="1",
+            dims=("certified_design",), attrs={"meaning": "1: every change within its tolerance"})
+    res.put(g, "feasible", np.asarray(feas, np.uint8)[rows], units="1", dims=("certified_design",))
+    res.put(g, "front", np.asarray(front, int), units="1", dims=("front_point",),
+            attrs={"meaning": "the verified front with the certified figures in place (rows of verify's design axis)"})
+    if Fv is not None:
+        res.put_axis(g, "objective", np.arange(Fv.shape[1]), units="1")
+        res.put(g, "F", np.asarray(Fv, float), units="1", dims=("design", "objective"),
+                attrs={"meaning": "minimised objectives with the certified figures in place: sense x metric / "
+                                  "|certified baseline metric|"})
+    v, t = s.verify, s.task
+    res.set_attrs(g, recommended=int(rec), recommended_name=names[rec] if rec >= 0 else "none",
+                  verified_recommended=names[rec0] if rec0 >= 0 else "none",
+                  **{f"tolerance_{k}": float(x) for k, x in TOLERANCES.items()},
+                  tolerance_units="regular_volume relative; joint_margin_deg deg; interference_margin m; "
+                                  "utilisations and index 1",
+                  volume_floor=float("nan") if floor is None else float(floor),
+                  method=f"regular workspace by rays ({v['rw_n_z']} levels x {v['rw_n_phi']} rays per pass, "
+                         f"{v['rw_n_r']} samples along a ray, passes {','.join(RAY_PASSES)}); task cylinder "
+                         f"{int(t['n_r']) + 1} x {2 * int(t['n_phi']) - 1} x {int(t['n_z']) + 2} samples + golden-"
+                         f"section search from the worst; cycle {2 * int(v['cycle_samples']) - 1} samples (the "
+                         "verification's task grid for the first); then every density doubled")
+
+
+def certify_lines(Cg) -> list:
+    """Printed lines of the ``certify`` group (as loaded): per certified design the regular volume and the change
+    doubling the density made, and whether every figure is within its tolerance."""
+    if not Cg or "row" not in Cg:
+        return []
+    out = []
+    tol = float(Cg["attrs"].get("tolerance_regular_volume", float("nan")))
+    for j, name in enumerate(np.asarray(Cg["design_name"]).reshape(-1)):
+        ch = {k[:-7]: float(np.asarray(Cg[k]).reshape(-1)[j]) for k in Cg if k.endswith("_change")}
+        worst = [k for k, x in ch.items() if not x <= float(Cg["attrs"].get(f"tolerance_{k}", np.inf))]
+        vol = 1e3 * float(np.asarray(Cg["regular_volume"]).reshape(-1)[j])
+        moved = 100 * ch.get("regular_volume", float("nan"))
+        out.append(f"  certified {name}: regular volume {vol:.4g} L (doubling the density moved it {moved:.2f} %, "
+                   f"tolerance {100 * tol:g} %)" + ("; every figure within its tolerance" if not worst else
+                                                    f"; NOT within tolerance: {', '.join(worst)}"))
+    return out
 
 
 # -- the tolerance stage's groups and summary lines (deltajax.optimize.robust chooses, this stores and prints) ----

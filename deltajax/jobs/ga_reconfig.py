@@ -13,8 +13,11 @@ in the good workspace, passive joints, interference, motor envelope and RMS rati
 Stages (the library: :mod:`deltajax.optimize.workflow`; each stored in ``results.h5``, a rerun into the same
 ``hydra.run.dir`` resumes after the last finished one and a finished run is a no-op):
 baseline -> screen (Sobol, seeds the GA) -> ga (checkpointed) -> pareto (NSGA-II) -> refine (optax) ->
-verify (fine grids, recommendation) -> tolerance (Monte Carlo over manufacturing and model tolerances,
-:mod:`deltajax.optimize.robust`; ``experiment.robust``: the robust recommendation) -> results (summary) ->
+verify (fine grids, the regular workspace found by rays, recommendation) -> certify (the baseline and the
+recommendation: worst cases searched at the verification's density and at twice it, margins in units,
+:mod:`deltajax.optimize.certify`; the recommendation re-derived with the certified figures) -> tolerance (Monte
+Carlo over manufacturing and model tolerances on the certified answer, :mod:`deltajax.optimize.robust`;
+``experiment.robust``: the robust recommendation) -> results (summary) ->
 plots -> report (``report.html``, the self-contained run report of :mod:`deltajax.runreport`). ``experiment.continue_from`` (more budget for
 a finished run, :func:`deltajax.jobs.designer_state.earlier_run`): its verified front seeds the GA and NSGA-II and
 joins the verified candidates with its stored metrics, so the recommendation cannot be one its recommendation
@@ -36,7 +39,7 @@ from . import designer_state as ST
 
 __all__ = ["run", "build", "settings_from_config", "Settings", "STAGES"]
 
-STAGES = ("screen", "ga", "pareto", "refine", "verify", "tolerance", "results", "plots", "report")
+STAGES = ("screen", "ga", "pareto", "refine", "verify", "certify", "tolerance", "results", "plots", "report")
 SCREEN_FRONT_EVAL = 1024  # at most this many feasible screen designs (best primary first) get the regular workspace
 REFINE_MAX = 8          # winners refined: the GA's best and the front's best 7 on the primary objective
 settings_from_config = ga_reconfig_settings
@@ -341,6 +344,13 @@ def run(ctx) -> None:
                              penalty=s.refine["penalty"], rounds=s.floor_solve["rounds"],
                              n_fine=s.floor_solve["candidates"], progress=bar.update)
             bar.close()
+            # an iterate equal to a design already verified (e.g. one a continued run carried from the earlier run,
+            # whose own floor step descended from the same start) is not verified twice under two names
+            fresh = np.flatnonzero([not np.any(np.all(cand == g, axis=1)) for g in fo.genes])
+            if len(fresh) < len(fo.genes):
+                fo = dataclasses.replace(fo, genes=fo.genes[fresh], start=fo.start[fresh], step=fo.step[fresh],
+                                         metrics={k: v[fresh] for k, v in fo.metrics.items()},
+                                         predicted=fo.predicted[fresh])
             if len(fo.genes):
                 first = len(cand)
                 cand = np.concatenate([cand, fo.genes])
@@ -370,8 +380,16 @@ def run(ctx) -> None:
                 f"hypervolume {hv:.4g}; recommended: {names[rec] if rec >= 0 else 'none'} ({R.rule_text(s)})")
         mark("verify")
 
-    if s.tolerance["enabled"] and "tolerance" not in done:   # reads only what verify stored (a resume recomputes it)
-        _tolerance(ctx, res, load(path)["verify"], s, space, objs, sense, jp)
+    # a run that went past verify before this stage existed stays as it was (its tolerance stage read the verified
+    # answer)
+    if "certify" not in done and "tolerance" not in done and "results" not in done:
+        _certify(ctx, res, load(path)["verify"], s, space, objs, sense, jp)
+        mark("certify")
+
+    if s.tolerance["enabled"] and "tolerance" not in done:   # reads what verify and certify stored
+        from ..optimize.certify import overlay
+
+        _tolerance(ctx, res, overlay(load(path)), s, space, objs, sense, jp)
         mark("tolerance")
 
     if "results" not in done:
@@ -385,6 +403,74 @@ def run(ctx) -> None:
     ctx.write_figures()                      # the stage is done once its figures are on disk, not before
     mark("plots")
     _finish(ctx, path, space, s, done, mark)
+
+
+def _certify(ctx, res, V, s, space, objs, sense, jp, *, max_rounds: int = 4) -> None:
+    """The certify stage (:mod:`deltajax.optimize.certify`): the baseline and the recommendation certified (worst
+    cases searched at the verification's density and at twice it, the change stated); the recommendation re-derived
+    by the job's rule from the verified metrics with the certified ones in place (floor from the certified
+    baseline), and certified in turn, until the rule's answer is a certified design (at most ``max_rounds``).
+    Group ``certify`` (:func:`deltajax.jobs.designer_report.store_certify`); ``verify``'s ``recommended`` becomes
+    the certified recommendation (``recommended_verified`` keeps the verification's)."""
+    import jax.numpy as jnp
+
+    from . import designer_report as R
+    from ..optimize import certify as CE
+    from ..optimize import workflow as W
+    from ..optimize.pareto import non_dominated
+
+    space_v = dataclasses.replace(space, n_R=s.verify["n_R"]) if space.reconfigurable else space
+    pb = W.designer_problem(s, fine=True)
+    names = [str(n) for n in np.asarray(V["design_name"]).reshape(-1)]
+    genes = np.asarray(V["genes"], float).reshape(len(names), -1)
+    R_op = np.asarray(V["R_operating"], float).reshape(-1)
+    mv = {k: np.array(V[k], dtype=float, copy=True).reshape(-1) for k in set(CE.CERTIFIED_METRICS) | {"arm_sum"}
+          if k in V}
+    feas = np.asarray(V["feasible"]).astype(bool).reshape(-1).copy()
+    rec0 = int(V["attrs"]["recommended"])
+    cert: dict = {}
+    path = s.reconfig.get("mode", "per_task") == "path"
+    bar = ctx.progress(total=2, desc="certify (worst cases, doubled density)")
+
+    def run(i):
+        if i in cert or i < 0:
+            return
+        c = CE.certify_design(pb, space_v.decode(jnp.asarray(genes[i])), R_op[i])
+        cert[i] = c
+        bar.update(1)
+        for k in CE.CERTIFIED_METRICS:
+            if not (path and k in CE.CYCLE_METRICS):    # mode=path: the cycle's certified figures are the fixed R's
+                mv[k][i] = c[k]
+        feas[i] = bool(CE.feasible_certified({k: np.asarray(v[i]) for k, v in mv.items()}, pb))
+        ctx.log(f"certified {names[i]}: " + ", ".join(
+            f"{k} {c[k]:.5g} (doubling moved it {c[k + '_change']:.2g}, tolerance {c[k + '_tolerance']:g})"
+            for k in CE.TOLERANCES) + ("" if c["converged"] else "; NOT within every tolerance")
+            + ("" if feas[i] else "; infeasible once certified"))
+
+    run(0)
+    rec, front, Fv = rec0, np.zeros((0,), int), None
+    for _ in range(max_rounds):
+        bv = np.asarray([mv[o][0] for o in objs])
+        Fv = W.objective_matrix(mv, objs, sense / np.abs(np.where(bv != 0, bv, 1.0)))
+        ok = np.flatnonzero(feas & np.all(np.isfinite(Fv), axis=1))
+        nd = ok[non_dominated(Fv[ok])] if len(ok) else np.zeros((0,), int)
+        front = nd[np.lexsort(Fv[nd].T[::-1])] if len(nd) else nd
+        rec = W.recommend(Fv, front, s.recommend, jp, band=s.recommend_band, floor=s.recommend_floor, sense=sense)
+        if rec < 0 or rec in cert:
+            break
+        run(rec)
+    bar.close()
+    floor = (float(s.recommend_floor) * mv["regular_volume"][0]
+             if s.recommend == "floor" and "regular_volume" in objs else None)
+    marg = CE.design_margins(mv, threshold=pb.good.threshold, min_picks=pb.min_picks, max_arm_sum=pb.max_arm_sum,
+                             volume_floor=floor)
+    R.store_certify(res, names, cert, feas, marg, front, Fv, rec, rec0, floor, s)
+    if path:
+        res.set_attrs("certify", cycle_variant="fixed_R")
+    res.set_attrs("verify", recommended=int(rec), recommended_verified=int(rec0))
+    if rec != rec0:
+        ctx.log(f"certified recommendation: {names[rec] if rec >= 0 else 'none'} (the verification's was "
+                f"{names[rec0] if rec0 >= 0 else 'none'})")
 
 
 def _tolerance(ctx, res, V, s, space, objs, sense, jp) -> None:

@@ -1,4 +1,5 @@
-"""Design optimisation: design space, the designer's problem, evosax GA, NSGA-II Pareto fronts, optax refinement.
+"""Design optimisation: design space, the designer's problem, evosax GA, NSGA-II Pareto fronts, optax refinement,
+worst cases found and certified (:mod:`deltajax.optimize.certify`).
 
 ::
 
@@ -19,6 +20,7 @@ from .ga import ALGORITHMS, GAConfig, GAError, GAResult, make_strategy, run_ga
 from .designer import (CONSTRAINT_NAMES, DESIGN_METRICS, DESIGN_SENSE, DESIGN_UNITS, OBJECTIVES, DesignerProblem,
                        cylinder_points, evaluate_designer, knee_point)
 from .pareto import ParetoResult, hypervolume, non_dominated, nsga2, zdt, zdt_front
+from .certify import TOLERANCES, certify_design, design_margins, ray_cylinder, ray_cylinders, worst_in_cylinder
 
 __all__ = [
     "PARAMETERS", "DesignSpace", "DesignSpaceError", "reflect_unit",
@@ -26,4 +28,5 @@ __all__ = [
     "ParetoResult", "hypervolume", "non_dominated", "nsga2", "zdt", "zdt_front",
     "CONSTRAINT_NAMES", "DESIGN_METRICS", "DESIGN_SENSE", "DESIGN_UNITS", "OBJECTIVES", "DesignerProblem",
     "evaluate_designer", "knee_point", "cylinder_points",
+    "TOLERANCES", "certify_design", "design_margins", "ray_cylinder", "ray_cylinders", "worst_in_cylinder",
 ]

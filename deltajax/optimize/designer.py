@@ -20,8 +20,10 @@ Metrics (:data:`DESIGN_METRICS`, units :data:`DESIGN_UNITS`, sense :data:`DESIGN
 * ``picks_per_min``: cycle rate at the operating R (1/min), :func:`deltajax.constraints.picks_per_minute`.
 * ``regular_volume`` / ``regular_diameter``: the largest cylinder with the configured H/D inside the good
   workspace with R chosen per point (any R sample; for a fixed design its R) (m^3, m); on the search grids the
-  grid's answer (:func:`deltajax.constraints.largest_cylinder`), on the verification grids refined to the
-  continuous measure (:func:`deltajax.constraints.refine_cylinder`, ``rw_refine``).
+  grid's answer (:func:`deltajax.constraints.largest_cylinder`) or its continuous refinement
+  (:func:`deltajax.constraints.refine_cylinder`, ``rw_refine``); on the verification grids found by rays
+  (:func:`deltajax.optimize.certify.ray_cylinders`, ``rw_rays``: the first bad radius of every ray, so a bad region
+  between the samples of a grid is found, not skipped).
 * ``regular_volume_fixed``: the same with R frozen at the operating R (what the design gives without
   reconfiguring during the task).
 * ``peak_utilisation`` / ``rms_utilisation`` / ``speed_utilisation``: motor loads at the picks/min cycle time.
@@ -120,7 +122,10 @@ class DesignerProblem:
         max_arm_sum: size budget L1 + L2 (m) or None.
         enabled: which of :data:`CONSTRAINT_NAMES` are active (the others are reported, not enforced).
         rw_refine: refine the grid's regular workspace to the continuous measure of
-            :func:`deltajax.constraints.refine_cylinder` (the verification stage; the search grids keep the grid's).
+            :func:`deltajax.constraints.refine_cylinder` (the search grids; or the grid's measure there).
+        rw_rays: the regular workspace found by rays instead (:func:`deltajax.optimize.certify.ray_cylinders`, the
+            fields of a :class:`deltajax.optimize.certify.RayDensity`; the verification): no point grid is
+            evaluated, ``rw_refine`` is unused.
         mode: operating mode of a reconfigurable design, ``"per_task"`` (one R per task, the candidates above) or
             ``"path"`` (R(t) along the cycle under the R drive's limits, :mod:`deltajax.optimize.operating`).
         operating: the :class:`deltajax.optimize.operating.OperatingSpec` (drive limits, mechanism) of ``mode``.
@@ -148,6 +153,7 @@ class DesignerProblem:
     rw_refine: bool = False                         # continuous regular workspace (constraints.refine_cylinder)
     rw_refine_steps: tuple = (C.REFINE_BISECT, C.REFINE_GOLDEN)   # (bisection, golden-section) steps
     rw_refine_samples: tuple = C.REFINE_SAMPLES     # (rings, angles, levels) of the unit cylinder
+    rw_rays: Optional[tuple] = None                 # regular workspace found by rays (certify.RayDensity)
 
     def __post_init__(self):  # rtmode
         if self.mode not in OP.MODES:
@@ -164,7 +170,8 @@ class DesignerProblem:
               min_picks: float, max_arm_sum: Optional[float], enabled: Sequence[str],
               operating: Optional[OP.OperatingSpec] = None, rw_refine: bool = False,
               rw_refine_steps: Sequence[int] = (C.REFINE_BISECT, C.REFINE_GOLDEN),
-              rw_refine_samples: Sequence[int] = C.REFINE_SAMPLES) -> "DesignerProblem":
+              rw_refine_samples: Sequence[int] = C.REFINE_SAMPLES,
+              rw_rays: Optional[Sequence[int]] = None) -> "DesignerProblem":
         """Build from validated plain values (see :mod:`deltajax.jobs.ga_reconfig` for the config)."""
         tp = cylinder_points(task["diameter"], task["height"], task["z_top"], int(task["n_r"]), int(task["n_phi"]),
                              int(task["n_z"]))
@@ -185,7 +192,8 @@ class DesignerProblem:
                                mode=operating.mode if operating is not None else "per_task", operating=operating,
                                rw_refine=bool(rw_refine),
                                rw_refine_steps=tuple(int(n) for n in rw_refine_steps),
-                               rw_refine_samples=tuple(int(n) for n in rw_refine_samples))
+                               rw_refine_samples=tuple(int(n) for n in rw_refine_samples),
+                               rw_rays=None if rw_rays is None else tuple(int(n) for n in rw_rays))
 
 
 def _violations(pb: DesignerProblem, m: Mapping[str, jax.Array], arm_sum) -> jax.Array:
@@ -236,7 +244,8 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         at = robot0.with_base_radius
     nc, ns = Rc.shape[0], Rs.shape[0]
     arm_sum = robot0.upper_arm + robot0.forearm
-    rw = jnp.asarray(pb.rw_points, dt).reshape(-1, 3) if regular else jnp.zeros((0, 3), dt)
+    rays = regular and pb.rw_rays is not None        # the regular workspace found by rays: no point grid
+    rw = jnp.asarray(pb.rw_points, dt).reshape(-1, 3) if regular and not rays else jnp.zeros((0, 3), dt)
     tp = jnp.asarray(pb.task_points, dt)
     cp = pb.cycle.x.astype(dt)
     n_rw, n_t = rw.shape[0], tp.shape[0]
@@ -270,7 +279,17 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
     out["gear_ratio"] = gear * jnp.ones((), dt)
     out["arm_sum"] = arm_sum
     nan = jnp.asarray(jnp.nan, dt)
-    if regular:
+    if rays:   # every ray search of both good sets (R per point; the operating R) in one call of the good test
+        from .certify import RayDensity, ray_cylinders
+
+        sets = [Rs, Rc[k][None]] if recon else [Rc[k][None]]
+        cyl = ray_cylinders(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good, sets,
+                            float(pb.rw_r[-1]), float(pb.rw_z[0]), float(pb.rw_z[-1]), pb.hd_ratio,
+                            RayDensity(*pb.rw_rays), dt)
+        reg, regf = cyl[0], cyl[-1]
+        out.update(regular_volume=reg.volume, regular_diameter=reg.diameter, regular_height=reg.height,
+                   regular_z_top=reg.z_top, regular_volume_fixed=regf.volume, regular_diameter_fixed=regf.diameter)
+    elif regular:
         r, z = jnp.asarray(pb.rw_r, dt), jnp.asarray(pb.rw_z, dt)
         grid = pb.rw_points.shape[:3]
         g_rw = chk.good[:, :n_rw].reshape((R_all.shape[0],) + grid)

@@ -15,8 +15,8 @@ only orders them, stores their outputs in ``results.h5`` and draws the plots.
 4. :func:`refine_designs`: optax Adam on the primary objective plus a constraint penalty from each winner;
    an iterate replaces nothing: it is added as a candidate only if it is feasible on the search grids and no
    objective is worse than at its start while the primary improves. A non-finite gradient raises.
-5. :func:`verify`: every candidate on the fine grids, with the continuous regular-workspace measure
-   (:func:`deltajax.constraints.refine_cylinder`) (progress bar), the verified front, the floor step
+5. :func:`verify`: every candidate on the fine grids, with the regular workspace found by rays
+   (:func:`deltajax.optimize.certify.ray_cylinders`) (progress bar), the verified front, the floor step
    (:func:`deltajax.optimize.floor.solve_floor`, rule ``floor``: the rule's answer solved for from the verified
    front with :func:`descent_paths`), and :func:`recommend` (rule ``floor``, ``band``, ``knee`` or ``primary``).
 
@@ -72,7 +72,13 @@ def designer_problem(s, *, fine: bool = False):
     n_op = s.cycle["n_R_operating"]
     # the continuous regular-workspace measure: full settings on the fine grids, the lighter search settings
     # (experiment.regular_workspace.search_refine) on the search grids, or the grid's measure there
-    refine = {"rw_refine": True} if fine else (
+    # the verification finds it by rays (deltajax.optimize.certify.ray_cylinders; verify.rw_n_phi rays per level,
+    # verify.rw_n_z levels per pass, verify.rw_n_r samples along a ray)
+    from .certify import RAY_DENSITY
+
+    v = s.verify
+    rays = tuple(RAY_DENSITY._replace(n_phi=v["rw_n_phi"], n_z=v["rw_n_z"], n_along=v["rw_n_r"]))
+    refine = {"rw_refine": True, "rw_rays": rays} if fine else (
         {"rw_refine": True, "rw_refine_steps": s.search_refine[0], "rw_refine_samples": s.search_refine[1]}
         if s.search_refine else {"rw_refine": False})
     if fine:

@@ -169,6 +169,12 @@ def ga_pareto(V, objs, s, units, floor=None):
         what = (f"band: {s.primary} within {100 * s.recommend_band:g} % of the best, then the most {o1}"
                 if s.recommend == "band" else s.recommend)
         ax.plot(x[rec] * sx, y[rec] * sy, "D", color="C3", ms=10, label=f"recommended ({what})")
+        M = V.get("margins") if isinstance(V, dict) else None      # certified margins (group certify)
+        if M:
+            txt = "\n".join(["margins (>= 0: met by)"] + [f"{k}: {float(v[rec]):.3g} {u}" for k, (v, u) in M.items()
+                                                          if np.isfinite(v[rec])])
+            ax.annotate(txt, (x[rec] * sx, y[rec] * sy), xytext=(10, -10), textcoords="offset points", fontsize=6,
+                        va="top", bbox=dict(boxstyle="round", fc="white", ec="C3", alpha=0.85))
         if "regular_volume_fixed" == o1 or o1 == "regular_volume":
             yf = float(V["regular_volume_fixed"][rec]) * sy if o1 == "regular_volume" else None
             if yf is not None:

@@ -25,11 +25,12 @@ def _suffix(unit: str) -> str:
     return "" if unit in ("1", "") else f" {unit}"
 
 
-def front_figure(V, objs, units, param_names, param_units):
+def front_figure(V, objs, units, param_names, param_units, margins=None):
     """The designs verified on the fine grids in the plane of the first two objectives: the verified Pareto front,
     the other candidates, the baseline (row 0) and the recommendation; each point's hover lists its objectives,
     picks/min, its parameters and the stored constraint values (``V``: the staged ``verify`` group;
-    ``units``: each metric's unit; ``param_names``/``param_units``: the columns of ``V["params"]``)."""
+    ``units``: each metric's unit; ``param_names``/``param_units``: the columns of ``V["params"]``; ``margins``:
+    ``{"margin_<name>": (n,)}`` every constraint's margin per design, group ``certify``, listed in the hover)."""
     import plotly.graph_objects as go
 
     names = [str(n) for n in np.asarray(V["design_name"]).reshape(-1)]
@@ -55,6 +56,10 @@ def front_figure(V, objs, units, param_names, param_units):
             rows.append(f"{m}: {float(np.asarray(V[m]).reshape(-1)[i]) * f:.5g}{_suffix(u)}")
         rows.append("<i>parameters</i>")
         rows += [f"{p}: {params[i, j]:.5g}{_suffix(u)}" for j, (p, u) in enumerate(zip(pnames, punits))]
+        if margins:
+            rows.append("<i>margins (&gt;= 0: met by that much)</i>")
+            rows += [f"{k[7:]}: {float(np.asarray(v).reshape(-1)[i]):.4g}{_suffix(units.get(k, '1'))}"
+                     for k, v in margins.items()]
         if cvals is not None:
             rows.append("<i>constraint values (&lt;= 0 satisfied)</i>")
             rows += [f"{c}: {cvals[i, j]:.3g}" for j, c in enumerate(cnames)]

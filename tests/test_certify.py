@@ -1,0 +1,235 @@
+"""Worst cases found, not sampled (deltajax.optimize.certify): the regular workspace by rays against a brute-force
+grid scan and against the old sampled measure where a bad region slips between its samples, converged when the
+density doubles, with one traced copy of the good test; the worst point of a task cylinder against a dense scan;
+the margins in units."""
+
+import math
+
+import jax
+import jax.numpy as jnp
+import numpy as np
+import pytest
+
+from deltajax import constraints as C
+from deltajax.optimize import certify as CE
+
+# a good set with a known shape: a barrel on the axis (radius 0.25 - 1.2 (z - 0.45)^2 for z in [0.2, 0.7]) minus a
+# bad island at 38-52 deg, rho >= 0.15, z in [0.35, 0.55] -- between the 0/30/60 deg samples of the old measure,
+# like the forearm that crosses the base plate in the default problem's baseline
+R_MAX, Z0, Z1, HD = 0.4, 0.15, 0.78, 0.5
+
+
+def _good(p):
+    rho = jnp.hypot(p[0], p[1])
+    phi = jnp.degrees(jnp.arctan2(p[1], p[0]))
+    barrel = (p[2] >= 0.2) & (p[2] <= 0.7) & (rho <= 0.25 - 1.2 * (p[2] - 0.45) ** 2)
+    island = (phi >= 38.0) & (phi <= 52.0) & (rho >= 0.15) & (p[2] >= 0.35) & (p[2] <= 0.55)
+    return barrel & ~island
+
+
+# a second set whose smallest radius moves in phi as z moves (a boundary sweeping across the wedge, as the
+# recommendation's limiting rays do) and whose ends are where the profile crosses D / 2
+def _sweep(p):
+    rho = jnp.hypot(p[0], p[1])
+    phi = jnp.arctan2(p[1], p[0])
+    centre = math.radians(10.0) + 4.0 * (p[2] - 0.3)                     # the dip's phi moves with z
+    dip = 0.03 * jnp.exp(-((phi - centre) / math.radians(4.0)) ** 2)
+    return (p[2] >= 0.2) & (p[2] <= 0.7) & (rho <= 0.26 - 1.5 * (p[2] - 0.45) ** 2 - dip)
+
+
+def _brute(good, n_r, n_phi, n_z, r_max=R_MAX):
+    pts, r, z = C.polar_grid(r_max, Z0, Z1, n_r, n_phi, n_z)
+    g = np.asarray(jax.jit(jax.vmap(good))(jnp.asarray(pts.reshape(-1, 3)))).reshape(pts.shape[:3])
+    return CE.grid_cylinder_bounds(g, r, z, HD)
+
+
+def _rays(good, dens):
+    return jax.jit(lambda: CE.ray_cylinder(good, R_MAX, Z0, Z1, HD, dens))()
+
+
+@pytest.fixture(scope="module")
+def synthetic():
+    dens = CE.RAY_DENSITY
+    return dens, _rays(_good, dens), _rays(_good, dens.doubled())
+
+
+def _samples(d):
+    return len(CE.RAY_PASSES) * d.n_phi * d.n_z * d.n_along * d.n_levels
+
+
+def test_ray_cylinder_agrees_with_a_brute_force_grid_scan_at_more_than_10x_the_density(synthetic):
+    dens, one, two = synthetic
+    n = (241, 31, 253)                      # 1.9 M points
+    assert np.prod(n) >= 10 * _samples(dens)
+    bf = _brute(_good, *n)
+    assert bf["lower"] <= bf["mid"] <= bf["upper"]
+    assert float(one.volume) == pytest.approx(bf["mid"], rel=0.01)
+    assert bf["lower"] * 0.995 <= float(one.volume) <= bf["upper"]
+    assert abs(float(two.volume) / float(one.volume) - 1.0) <= CE.TOLERANCES["regular_volume"]   # converged
+    # the island binds: without it the cylinder is larger (a brute force that ignores it would say so)
+    assert float(one.diameter) / 2.0 <= 0.15 + 1e-3
+
+
+def test_a_limiting_dip_that_moves_in_phi_with_z_is_found_and_converges():
+    dens = CE.RAY_DENSITY
+    one, two = _rays(_sweep, dens), _rays(_sweep, dens.doubled())
+    bf = _brute(_sweep, 161, 61, 321, r_max=0.28)
+    assert abs(float(two.volume) / float(one.volume) - 1.0) <= CE.TOLERANCES["regular_volume"]
+    assert float(one.volume) == pytest.approx(bf["mid"], rel=0.01)
+    assert float(one.volume) <= bf["upper"]
+
+
+def test_old_sampled_measure_overstates_where_a_bad_island_slips_between_its_samples(synthetic):
+    _, one, _ = synthetic
+    pts_old, r_old, z_old = C.polar_grid(R_MAX, Z0, Z1, 32, 3, 43)
+    old = jax.jit(lambda: C.regular_workspace(_good, pts_old, r_old, z_old, HD, refine=True))()
+    bf = _brute(_good, 241, 31, 253)
+    assert float(old.volume) > 1.1 * bf["upper"]                 # the island is not seen: >10 % over-stated
+    assert float(one.volume) <= bf["upper"]
+
+
+def test_ray_cylinder_is_zero_when_the_axis_is_bad():
+    out = _rays(lambda p: jnp.hypot(p[0], p[1]) > 0.05, CE.RayDensity(n_phi=3, n_z=6, n_along=5, n_levels=2))
+    assert float(out.volume) == 0.0
+
+
+def test_one_traced_good_test_serves_every_pass_and_both_good_sets():
+    calls = []
+
+    def good_R(R, p):
+        calls.append(1)                                      # once per trace, not per evaluation
+        return jnp.hypot(p[0], p[1]) <= 0.15 + R - 0.4 * (p[2] - 0.45) ** 2
+
+    dens = CE.RayDensity(n_phi=3, n_z=6, n_along=5, n_levels=2)
+    f = jax.jit(lambda: CE.ray_cylinders(good_R, [jnp.asarray([0.0, 0.05]), jnp.asarray([0.02])], R_MAX, Z0, Z1,
+                                         HD, dens))
+    both = f()
+    assert len(calls) == 1
+    # each set as if alone: R per point (any of 0 and 0.05: the larger) and the single R
+    alone = [_rays(lambda p, R=R: good_R(jnp.asarray(R), p), dens) for R in (0.05, 0.02)]
+    for a, b in zip(both, alone):
+        np.testing.assert_allclose(float(a.volume), float(b.volume), rtol=1e-12)
+    assert float(both[1].volume) < float(both[0].volume)
+
+
+def test_worst_in_cylinder_finds_a_minimum_between_the_samples():
+    p0 = jnp.asarray([0.1 * math.cos(math.radians(7.0)), 0.1 * math.sin(math.radians(7.0)), 0.437])
+
+    def f(p):                                  # a narrow well at phi = 7 deg, between the 0 and 15 deg samples
+        return 1.0 - jnp.exp(-jnp.sum((p - p0) ** 2) / 0.01 ** 2)
+
+    best, at = jax.jit(lambda: CE.worst_in_cylinder(f, 0.3, 0.1, 0.4, 3, 5, 5))()
+    sampled = jax.vmap(f)(jnp.asarray(C.polar_grid(0.15, 0.4, 0.5, 3, 5, 5)[0].reshape(-1, 3))).min()
+    assert float(sampled) > 0.5                                   # the samples miss the well
+    assert float(best) < 1e-4 and float(jnp.linalg.norm(at - p0)) < 2e-3
+
+
+def test_worst_in_cylinder_reports_nan_where_a_point_is_unreachable():
+    best, _ = jax.jit(lambda: CE.worst_in_cylinder(lambda p: jnp.where(p[2] > 0.49, jnp.nan, p[2]), 0.3, 0.1, 0.4,
+                                                   2, 3, 3))()
+    assert np.isnan(float(best))
+
+
+def test_design_margins_in_units():
+    m = {"task_index_min": np.asarray([0.35, np.nan]), "joint_margin_deg": np.asarray([3.0, 1.0]),
+         "interference_margin": np.asarray([0.0029, -0.001]), "peak_utilisation": np.asarray([0.8, 1.0]),
+         "rms_utilisation": np.asarray([1.0, 0.5]), "speed_utilisation": np.asarray([0.5, 0.5]),
+         "picks_per_min": np.asarray([200.0, 100.0]), "arm_sum": np.asarray([0.59, 0.6]),
+         "regular_volume": np.asarray([0.03, 0.02])}
+    out = CE.design_margins(m, threshold=0.3, min_picks=150.0, max_arm_sum=0.6, volume_floor=0.025)
+    np.testing.assert_allclose(out["task_index_margin"][0], 0.05)
+    assert np.isnan(out["task_index_margin"][1])                 # unreachable: NaN, never a number
+    np.testing.assert_allclose(out["interference_clearance_mm"], [2.9, -1.0])
+    np.testing.assert_allclose(out["rms_headroom"], [0.0, 0.5])
+    np.testing.assert_allclose(out["picks_over_min"], [50.0, -50.0])
+    np.testing.assert_allclose(out["size_budget_margin_mm"], [10.0, 0.0], atol=1e-9)
+    np.testing.assert_allclose(out["regular_volume_over_floor"], [0.005, -0.005])
+    assert set(out) == set(CE.MARGIN_UNITS)
+
+
+def test_overlay_puts_the_certified_figures_in_place():
+    V = {"design_name": np.asarray(["baseline", "a", "b"], dtype=object), "regular_volume": np.asarray([1.0, 2, 3]),
+         "picks_per_min": np.asarray([10.0, 20, 30]), "picks_per_min_fixed": np.asarray([10.0, 20, 30]),
+         "feasible": np.asarray([1, 1, 1], np.uint8), "front": np.asarray([1, 2]), "attrs": {"recommended": 2}}
+    Cg = {"row": np.asarray([0, 2]), "regular_volume": np.asarray([0.9, 2.5]), "picks_per_min": np.asarray([10.0, 29]),
+          "feasible": np.asarray([1, 0], np.uint8), "front": np.asarray([1]), "margin_joint_margin_deg":
+          np.asarray([1.0, 2.0, -0.5]), "attrs": {"recommended": 1}}
+    out = CE.overlay({"verify": V, "certify": Cg})
+    np.testing.assert_array_equal(out["regular_volume"], [0.9, 2, 2.5])
+    np.testing.assert_array_equal(out["picks_per_min_fixed"], [10.0, 20, 29])    # the same where R does not move
+    np.testing.assert_array_equal(out["feasible"], [1, 1, 0])
+    np.testing.assert_array_equal(out["front"], [1])
+    assert out["margins"]["joint_margin_deg"][1] == "deg"
+    np.testing.assert_array_equal(V["regular_volume"], [1.0, 2, 3])             # the verify group untouched
+    assert CE.overlay({"verify": V}) is V
+
+
+def test_overlay_in_path_mode_certifies_the_fixed_R_cycle_only():
+    V = {"picks_per_min": np.asarray([10.0, 20]), "picks_per_min_fixed": np.asarray([9.0, 19]),
+         "regular_volume": np.asarray([1.0, 2]), "attrs": {"recommended": 1}}
+    Cg = {"row": np.asarray([1]), "picks_per_min": np.asarray([18.5]), "regular_volume": np.asarray([1.9]),
+          "attrs": {"recommended": 1, "cycle_variant": "fixed_R"}}
+    out = CE.overlay({"verify": V, "certify": Cg})
+    np.testing.assert_array_equal(out["picks_per_min"], [10.0, 20])             # R(t) along the cycle: as verified
+    np.testing.assert_array_equal(out["picks_per_min_fixed"], [9.0, 18.5])
+    np.testing.assert_array_equal(out["regular_volume"], [1.0, 1.9])
+
+
+@pytest.fixture(scope="module")
+def default_problem():
+    from hydra import compose, initialize_config_dir
+
+    from deltajax.config import ga_reconfig_build, robot_from_config
+    from deltajax.optimize import workflow as W
+    from deltajax.run import CONFIG_DIR
+
+    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+        cfg = compose(config_name="config", overrides=["experiment=ga_reconfig"])
+    robot, recon = robot_from_config(cfg.robot)
+    s, space, _, _ = ga_reconfig_build(cfg.experiment, robot, recon)
+    return s, space, W.designer_problem(s, fine=True)
+
+
+@pytest.mark.slow
+def test_task_worst_joint_margin_within_tolerance_of_a_dense_scan(default_problem):
+    s, space, pb = default_problem
+    d = space.decode(jnp.asarray(space.baseline_genes()))
+    plate = d.R_max + pb.links.plate_overhang
+    R = jnp.asarray(0.16)
+    t = s.task
+
+    def jm(p):
+        return jnp.rad2deg(C.good_point(d.at(R), p, pb.good, plate_radius=plate).joint_margin)
+
+    def im(p):
+        return C.good_point(d.at(R), p, pb.good, plate_radius=plate).interference_margin
+
+    args = (t["diameter"], t["height"], t["z_top"], 4, 9, 7)
+    found_j, _ = jax.jit(lambda: CE.worst_in_cylinder(jm, *args))()
+    found_i, _ = jax.jit(lambda: CE.worst_in_cylinder(im, *args))()
+    pts = C.polar_grid(t["diameter"] / 2, t["z_top"], t["z_top"] + t["height"], 31, 121, 41)[0].reshape(-1, 3)
+    dense_j = float(jnp.min(jax.jit(jax.vmap(jm))(jnp.asarray(pts))))
+    dense_i = float(jnp.min(jax.jit(jax.vmap(im))(jnp.asarray(pts))))
+    assert float(found_j) <= dense_j + CE.TOLERANCES["joint_margin_deg"]
+    assert float(found_j) >= dense_j - 0.5                       # a real point of the cylinder, not a bound
+    assert float(found_i) <= dense_i + CE.TOLERANCES["interference_margin"]
+
+
+@pytest.mark.slow
+def test_cycle_peak_and_rms_converge_at_the_certification_density(default_problem):
+    _, space, pb = default_problem
+    d = space.decode(jnp.asarray(space.baseline_genes()))
+    rob = d.at(jnp.asarray(0.16))
+    n0 = pb.cycle.n_samples - 1
+    dense = CE.cycle_at(pb, 64 * n0 + 1)
+    out = []
+    for n in (8 * n0 + 1, 16 * n0 + 1):       # certify_design's first density and its double
+        r = C.cycle_rate(rob, CE.cycle_at(pb, n), pb.motor, rob.mass.gear_ratio, dwell=pb.dwell,
+                         payload_mass=pb.payload)
+        ld = C.drive_loads(rob, dense, pb.motor, rob.mass.gear_ratio, duration=r.cycle_time, dwell=pb.dwell,
+                           payload_mass=pb.payload)
+        out.append((float(r.loads.peak_utilisation), float(ld.peak_utilisation), float(ld.rms_utilisation)))
+    # the sampled peak is within the tolerance of the dense one at both densities, and so is the RMS
+    for peak, peak_dense, rms_dense in out:
+        assert abs(peak - peak_dense) <= CE.TOLERANCES["peak_utilisation"]
+        assert rms_dense <= 1.0 + CE.TOLERANCES["rms_utilisation"]      # the rating holds on the dense cycle
