@@ -435,7 +435,7 @@ def certified_program(pb, density: RayDensity, task_samples: tuple, cycle_sample
     def build():
         return jax.jit(lambda d, R: _certified_once(pb, d, R, RayDensity(*key[0]), key[1], key[2]))
 
-    return shared_program("certified", pb, None, key, build)
+    return shared_program("certified", pb, None, key, build, persist=True)
 
 
 def certify_design(pb, design, R_operating=None, *, density=None, task_samples=None,
