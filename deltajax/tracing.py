@@ -14,12 +14,15 @@ Python of each call site again was most of the time a run of the main job spent 
 
 from __future__ import annotations
 
+import dataclasses
 import functools
-from typing import Callable, TypeVar
+from typing import Any, Callable, Mapping, TypeVar
 
 import jax
+import numpy as np
 
-__all__ = ["traced_once", "persistent", "program_cache_dir", "STATS", "PROGRAMS_KEPT"]
+__all__ = ["traced_once", "persistent", "program_cache_dir", "STATS", "PROGRAMS_KEPT", "content_key",
+           "stable_key", "shared_program", "PROGRAMS", "PROGRAMS_MAX"]
 
 F = TypeVar("F", bound=Callable)
 
@@ -188,12 +191,19 @@ def _load_or_export(fn: Callable, in_tree, spec, path):
     exp = export.export(jax.jit(flat))(*spec)
     head = pickle.dumps(trees["out"])
     blob = _MAGIC + len(head).to_bytes(8, "little") + head + exp.serialize()
-    path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    tmp.write_bytes(blob)
-    os.replace(tmp, path)
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp.write_bytes(blob)
+        os.replace(tmp, path)
+        _evict(path.parent)
+    except OSError as err:   # a read-only or full cache folder: this process runs the program all the same
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        warnings.warn(f"cannot keep the program {path} ({err}); later processes will build it again", stacklevel=3)
     STATS["exported"] += 1
-    _evict(path.parent)
     return jax.jit(export.deserialize(bytearray(exp.serialize())).call), trees["out"]
 
 
@@ -204,3 +214,76 @@ def _evict(folder) -> None:
             p.unlink()
         except OSError:   # another process removed it first
             pass
+
+
+# -- programs shared by content within a process --------------------------------------------------------------
+# Every run builds its problem and design space afresh, and a jitted closure over a fresh object is traced and
+# compiled again (a toy run traces its stages for ~40 CPU-s before any compile). The stages' programs are kept
+# here under the *content* of the problem and space they close over, so a resumed run, a rerun or another run
+# with the same grids in the same process reuses them: the same content gives the same program, hence the same
+# numbers as compiling it afresh.
+PROGRAMS: dict = {}
+PROGRAMS_MAX = 24
+
+
+def content_key(x) -> Any:
+    """A hashable value of everything ``x`` holds (dataclasses and equinox modules field by field, arrays by
+    dtype, shape and bytes); an object it cannot see into is keyed by identity (never a false match: the cached
+    program keeps it alive)."""
+    if isinstance(x, (np.ndarray, np.generic)) or type(x).__module__.startswith("jax"):
+        try:
+            a = np.asarray(x)
+        except Exception:  # noqa: BLE001 - not an array after all (e.g. a tracer): identity
+            return ("id", id(x))
+        if a.dtype != object:
+            return ("array", a.dtype.str, a.shape, a.tobytes())
+        return ("objects", a.shape, tuple(content_key(v) for v in a.reshape(-1)))
+    if x is None or isinstance(x, (bool, int, float, complex, str, bytes)):
+        return (type(x).__name__, repr(x))
+    if dataclasses.is_dataclass(x) and not isinstance(x, type):
+        return (type(x).__module__, type(x).__qualname__,
+                tuple((f.name, content_key(getattr(x, f.name))) for f in dataclasses.fields(x)))
+    if isinstance(x, (tuple, list)):
+        return (type(x).__qualname__, tuple(content_key(v) for v in x))
+    if isinstance(x, Mapping):
+        return ("mapping", tuple(sorted((repr(k), content_key(v)) for k, v in x.items())))
+    return ("id", id(x))
+
+
+def stable_key(*objs) -> Any:
+    """A string naming the content of ``objs`` in every process (:func:`content_key`'s value, hashed), or None
+    when part of it is only known by identity (such a program is not kept across processes)."""
+    import hashlib
+
+    def by_value(k) -> bool:
+        if isinstance(k, tuple):
+            if len(k) == 2 and k[0] == "id":
+                return False
+            return all(by_value(v) for v in k)
+        return True
+
+    k = tuple(content_key(o) for o in objs)
+    return hashlib.sha256(repr(k).encode()).hexdigest() if by_value(k) else None
+
+
+def shared_program(kind: str, pb, space, settings: tuple, build: Callable[[], Any], *,
+                   persist: bool = False) -> Any:
+    """The program ``build()`` for (``kind``, the content of ``pb`` and ``space``, ``settings``), built once per
+    process (least recently used dropped beyond ``PROGRAMS_MAX``). ``persist``: ``build()`` is a jitted function
+    of arrays whose lowered program is also kept across processes (:func:`deltajax.tracing.persistent`), when the
+    content is known by value (:func:`stable_key`)."""
+    if persist:
+        inner = build
+
+        def build():
+            key = stable_key(pb, space, settings)
+            return inner() if key is None else persistent(inner(), kind, key)
+
+    key = (kind, content_key(pb), content_key(space), settings)
+    if key in PROGRAMS:
+        PROGRAMS[key] = PROGRAMS.pop(key)          # most recently used last
+    else:
+        PROGRAMS[key] = build()
+        while len(PROGRAMS) > PROGRAMS_MAX:
+            PROGRAMS.pop(next(iter(PROGRAMS)))
+    return PROGRAMS[key]

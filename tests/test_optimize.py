@@ -183,8 +183,8 @@ def test_refine_designs_accepts_only_feasible_improvements_and_fails_loudly(desi
         L1 = design.robot.upper_arm
         return {"picks_per_min": jnp.sqrt(L1 - 10.0), "g": jnp.zeros(len(D.CONSTRAINT_NAMES), L1.dtype)}
 
-    kept = dict(PR._PROGRAMS)
-    PR._PROGRAMS.clear()  # the descent is kept by the problem's content: trace it afresh with the broken loss
+    kept = dict(PR.PROGRAMS)
+    PR.PROGRAMS.clear()  # the descent is kept by the problem's content: trace it afresh with the broken loss
     cache = os.environ.get("DELTAJAX_PROGRAM_CACHE")
     os.environ["DELTAJAX_PROGRAM_CACHE"] = ""   # ... and not from the programs kept on disk (same content)
     try:
@@ -198,8 +198,8 @@ def test_refine_designs_accepts_only_feasible_improvements_and_fails_loudly(desi
             os.environ.pop("DELTAJAX_PROGRAM_CACHE", None)
         else:
             os.environ["DELTAJAX_PROGRAM_CACHE"] = cache
-        PR._PROGRAMS.clear()
-        PR._PROGRAMS.update(kept)
+        PR.PROGRAMS.clear()
+        PR.PROGRAMS.update(kept)
 
 
 @pytest.fixture(scope="module")

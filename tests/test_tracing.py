@@ -99,6 +99,18 @@ def test_a_damaged_program_is_rebuilt_with_a_warning(program_cache):
     assert path.read_bytes() != b"not a program"
 
 
+def test_an_unwritable_cache_folder_warns_and_runs_the_program(tmp_path, monkeypatch):
+    blocked = tmp_path / "file"
+    blocked.write_text("a file where the folder would be")
+    monkeypatch.setenv("DELTAJAX_PROGRAM_CACHE", str(blocked))
+    T._LOADED.clear()
+    x = np.arange(3.0)
+    with pytest.warns(UserWarning, match="cannot keep the program"):
+        out = T.persistent(jax.jit(_fn), "demo", "k")(x, x)
+    np.testing.assert_array_equal(np.asarray(out["s"]), np.asarray(_fn(x, x)["s"]))
+    T._LOADED.clear()
+
+
 def test_no_cache_folder_runs_the_function_itself(monkeypatch, tmp_path):
     monkeypatch.setenv("DELTAJAX_PROGRAM_CACHE", "")
     assert T.program_cache_dir() is None

@@ -22,7 +22,7 @@ Metrics (:data:`DESIGN_METRICS`, units :data:`DESIGN_UNITS`, sense :data:`DESIGN
   workspace with R chosen per point (any R sample; for a fixed design its R) (m^3, m); on the search grids the
   grid's answer (:func:`deltajax.constraints.largest_cylinder`) or its continuous refinement
   (:func:`deltajax.constraints.refine_cylinder`, ``rw_refine``); on the verification grids found by rays
-  (:func:`deltajax.optimize.certify.ray_cylinders`, ``rw_rays``: the first bad radius of every ray, so a bad region
+  (:func:`deltajax.optimize.rays.ray_cylinders`, ``rw_rays``: the first bad radius of every ray, so a bad region
   between the samples of a grid is found, not skipped).
 * ``regular_volume_fixed``: the same with R frozen at the operating R (what the design gives without
   reconfiguring during the task).
@@ -123,8 +123,8 @@ class DesignerProblem:
         enabled: which of :data:`CONSTRAINT_NAMES` are active (the others are reported, not enforced).
         rw_refine: refine the grid's regular workspace to the continuous measure of
             :func:`deltajax.constraints.refine_cylinder` (the search grids; or the grid's measure there).
-        rw_rays: the regular workspace found by rays instead (:func:`deltajax.optimize.certify.ray_cylinders`, the
-            fields of a :class:`deltajax.optimize.certify.RayDensity`; the verification): no point grid is
+        rw_rays: the regular workspace found by rays instead (:func:`deltajax.optimize.rays.ray_cylinders`, the
+            fields of a :class:`deltajax.optimize.rays.RayDensity`; the verification): no point grid is
             evaluated, ``rw_refine`` is unused.
         mode: operating mode of a reconfigurable design, ``"per_task"`` (one R per task, the candidates above) or
             ``"path"`` (R(t) along the cycle under the R drive's limits, :mod:`deltajax.optimize.operating`).
@@ -280,7 +280,7 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
     out["arm_sum"] = arm_sum
     nan = jnp.asarray(jnp.nan, dt)
     if rays:   # every ray search of both good sets (R per point; the operating R) in one call of the good test
-        from .certify import RayDensity, ray_cylinders
+        from .rays import RayDensity, ray_cylinders
 
         sets = [Rs, Rc[k][None]] if recon else [Rc[k][None]]
         cyl = ray_cylinders(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good, sets,

@@ -1,0 +1,336 @@
+"""The regular workspace found by rays, and the worst point of a field over a cylinder: pure geometry over a
+good-point predicate (what "good" means is :func:`deltajax.constraints.good_point`), used by the designer's
+verification (:mod:`deltajax.optimize.designer`) and by :mod:`deltajax.optimize.certify`.
+
+* :func:`ray_cylinders` / :func:`ray_cylinder`: the largest axis-centred cylinder with a given H/D inside a good
+  set, from *rays*: a ray (phi, z) of the 60 deg wedge (the Delta's three-fold + mirror symmetry) gives the first
+  bad radius rho*(phi, z) (dense samples along the ray, then the first bad interval searched again, ``n_levels``
+  times: a bad island between the old grid's rings, e.g. where a forearm passes through the base plate, is found,
+  not skipped). The profile rho(z) = min over phi of rho* is refined in the passes of :data:`RAY_PASSES`, each
+  placed where the previous one left the answer uncertain (coarse; levels zoomed onto the cylinder found so far;
+  phi rays zoomed onto each level's smallest radius; a final check of the winning cylinder that can only shrink
+  it). All passes run in one loop with one call of the good test: one traced copy per compiled program.
+* :func:`worst_in_cylinder`: the minimum of a scalar field over a task cylinder: dense samples, then a
+  coordinate-wise golden section in (rho, phi, z) from the worst samples.
+
+Pure JAX, float64, vmappable.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Callable, NamedTuple, Sequence
+
+import jax
+import jax.numpy as jnp
+
+from ..regular import RegularWorkspace
+
+__all__ = ["RAY_DENSITY", "RAY_PASSES", "RayDensity", "ray_cylinders", "ray_cylinder", "worst_in_cylinder"]
+
+_GOLD = (math.sqrt(5.0) - 1.0) / 2.0
+
+#: The passes of :func:`ray_cylinders`, in order (module docstring).
+RAY_PASSES = ("coarse", "zoom_z", "zoom_z", "zoom_z") + ("zoom_phi",) * 6 + ("check",)
+
+
+class RayDensity(NamedTuple):
+    """Density of :func:`ray_cylinders`: per pass ``n_z`` levels x ``n_phi`` rays (over the 60 deg wedge, both
+    ends), ``n_along`` samples along a ray in each of ``n_levels`` nested searches (resolution
+    r_max / (n_along - 1)^n_levels)."""
+
+    n_phi: int = 7
+    n_z: int = 16
+    n_along: int = 9
+    n_levels: int = 4
+
+    def doubled(self) -> "RayDensity":
+        """Twice the density in phi, z and along the rays (same end points: 2 n - 1 samples)."""
+        return self._replace(n_phi=2 * self.n_phi - 1, n_z=2 * self.n_z - 1, n_along=2 * self.n_along - 1)
+
+
+#: The verification's density (the fine evaluator, :func:`deltajax.optimize.designer.evaluate_designer`).
+RAY_DENSITY = RayDensity()
+
+
+def _golden_min(f, a, b, n):
+    """Golden-section search for a minimum of f on [a, b] (n steps); returns (x, f(x)) of the best point seen
+    (the two interior points; the ends are not evaluated). One f per step (single traced copy)."""
+    dt = jnp.result_type(a)
+    c, d = b - _GOLD * (b - a), a + _GOLD * (b - a)
+    inf = jnp.asarray(jnp.inf, dt)
+
+    def step(i, st):
+        a, b, c, d, fc, fd, xb, fb = st
+        left = fc <= fd                                   # the minimum lies in [a, d]
+        a2, b2 = jnp.where(left, a, c), jnp.where(left, d, b)
+        xg = jnp.where(left, b2 - _GOLD * (b2 - a2), a2 + _GOLD * (b2 - a2))
+        x = jnp.where(i == 0, c, jnp.where(i == 1, d, xg))
+        fx = f(x)
+        fx_ = jnp.where(jnp.isnan(fx), -inf, fx)          # NaN (unreachable) is the worst
+        better = fx_ < fb
+        xb, fb = jnp.where(better, x, xb), jnp.where(better, fx_, fb)
+        gs = i >= 2
+        return (jnp.where(gs, a2, a), jnp.where(gs, b2, b),
+                jnp.where(gs, jnp.where(left, x, d), c), jnp.where(gs, jnp.where(left, c, x), d),
+                jnp.where(gs, jnp.where(left, fx_, fd), jnp.where(i == 0, fx_, fc)),
+                jnp.where(gs, jnp.where(left, fc, fx_), jnp.where(i == 1, fx_, fd)), xb, fb)
+
+    st = jax.lax.fori_loop(0, 2 + n, step, (a, b, c, d, inf, inf, a, inf))
+    return st[6], st[7]
+
+
+# -- the regular workspace by rays ------------------------------------------------------------------------------
+
+def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: int):
+    """First bad radius along each ray, for each good set j (a point is good for set j when ``good_R(R, p)`` holds
+    at any R of ``R_sets[j]``): ``phi[j]``, ``z[j]``, ``r_hi[j]`` (N,) per set; returns a list of (N,). ``n_along``
+    samples in [0, r_hi], then the first bad interval searched again with ``n_along`` samples, ``n_levels`` times
+    in all (every level a dense search, so an island inside the interval is found too). The value is the last good
+    sample before the first bad one (never over-stated by the search), ``r_hi`` when every sample is good and 0
+    when the axis point is bad. Every (R, point) pair of every set goes through one vmapped call of ``good_R``."""
+    dt = jnp.result_type(z[0])
+    u = jnp.linspace(0.0, 1.0, n_along, dtype=dt)
+    cs = [(jnp.cos(ph), jnp.sin(ph)) for ph in phi]
+    sizes = [ph.shape[0] * n_along * Rj.shape[0] for ph, Rj in zip(phi, R_sets)]
+
+    def level(i, st):
+        rows = []
+        for j, (lo, hi, _, _) in enumerate(st):
+            s = lo[:, None] + u[None, :] * (hi - lo)[:, None]                          # (N, n_along)
+            p = jnp.stack([s * cs[j][0][:, None], s * cs[j][1][:, None], jnp.broadcast_to(z[j][:, None], s.shape)],
+                          axis=-1)
+            nR = R_sets[j].shape[0]
+            rows.append((jnp.broadcast_to(R_sets[j], s.shape + (nR,)).reshape(-1),
+                         jnp.broadcast_to(p[:, :, None, :], s.shape + (nR, 3)).reshape(-1, 3)))
+        Rf = jnp.concatenate([r for r, _ in rows])
+        Pf = jnp.concatenate([p for _, p in rows])
+        gf = jax.vmap(good_R)(Rf, Pf)                                                   # the one call
+        out, k = [], 0
+        for j, (lo, hi, done, axis_bad) in enumerate(st):
+            g = jnp.any(gf[k:k + sizes[j]].reshape(lo.shape[0], n_along, -1), axis=2)   # (N, n_along)
+            k += sizes[j]
+            s = lo[:, None] + u[None, :] * (hi - lo)[:, None]
+            jb = jnp.argmin(g, axis=1)
+            all_good = jnp.all(g, axis=1)
+            axis_bad = axis_bad | ((i == 0) & ~g[:, 0])
+            take = lambda idx: jnp.take_along_axis(s, idx[:, None], axis=1)[:, 0]  # noqa: E731
+            new_lo = jnp.where(all_good, hi, take(jnp.maximum(jb - 1, 0)))
+            new_hi = jnp.where(all_good, hi, take(jb))
+            out.append((jnp.where(done, lo, new_lo), jnp.where(done, hi, new_hi), done | all_good, axis_bad))
+        return out
+
+    init = [(jnp.zeros_like(zj), jnp.asarray(rh, dt) * jnp.ones_like(zj), jnp.zeros(zj.shape, bool),
+             jnp.zeros(zj.shape, bool)) for zj, rh in zip(z, r_hi)]
+    st = jax.lax.fori_loop(0, n_levels, level, init)
+    return [jnp.where(axis_bad, 0.0, lo) for lo, _, _, axis_bad in st]
+
+
+def _window_min(pz, pr, lo, hi):
+    """The smallest radius of the profile over [lo, hi]: the samples inside and the profile linearly interpolated
+    at both ends (samples ``pz``, ``pr``; empty slots have ``pr`` = inf); -1 when [lo, hi] leaves the sampled
+    range. Between two samples the profile is taken as linear: where the smallest radius changes rays (a kink of
+    a minimum over phi) that is below the true profile."""
+    fin = jnp.isfinite(pr)
+    inside = (pz >= lo) & (pz <= hi) & fin
+    m = jnp.min(jnp.where(inside, pr, jnp.inf))
+
+    def at(e):
+        below, above = fin & (pz <= e), fin & (pz >= e)
+        zb = jnp.max(jnp.where(below, pz, -jnp.inf))
+        za = jnp.min(jnp.where(above, pz, jnp.inf))
+        rb = jnp.min(jnp.where(below & (pz == zb), pr, jnp.inf))
+        ra = jnp.min(jnp.where(above & (pz == za), pr, jnp.inf))
+        w = jnp.where(za > zb, (e - zb) / jnp.where(za > zb, za - zb, 1.0), 0.0)
+        return jnp.where(za > zb, rb + w * (ra - rb), jnp.minimum(ra, rb))
+
+    ok = (lo >= jnp.min(jnp.where(fin, pz, jnp.inf))) & (hi <= jnp.max(jnp.where(fin, pz, -jnp.inf)))
+    return jnp.where(ok, jnp.minimum(m, jnp.minimum(at(lo), at(hi))), -1.0)
+
+
+def _diameter_at(pz, pr, c, hd_ratio, d_max, n_iter: int = 48):
+    """Largest D with D <= 2 x :func:`_window_min` over [c - hd D / 2, c + hd D / 2] (the span shrinks with D, so
+    the test is monotone: bisection)."""
+    def body(_, lh):
+        lo, hi = lh
+        mid = 0.5 * (lo + hi)
+        ok = 2.0 * _window_min(pz, pr, c - hd_ratio * mid / 2.0, c + hd_ratio * mid / 2.0) >= mid
+        return jnp.where(ok, mid, lo), jnp.where(ok, hi, mid)
+
+    lo, _ = jax.lax.fori_loop(0, n_iter, body, (jnp.zeros_like(c), jnp.asarray(d_max, c.dtype)))
+    return lo
+
+
+def _profile_cylinder(pz, pr, z_min, z_max, hd_ratio, d_max, n_c: int, n_golden: int = 24):
+    """(centre, D) of the largest cylinder over the profile samples (pz, pr): ``n_c`` centres over [z_min, z_max],
+    then a golden section around the best (no good test: cheap)."""
+    dt = pz.dtype
+    cs = jnp.linspace(z_min, z_max, n_c, dtype=dt)
+    Ds = jax.vmap(lambda c: _diameter_at(pz, pr, c, hd_ratio, d_max))(cs)
+    j = jnp.argmax(Ds)
+    dcs = cs[1] - cs[0]
+    c_g, negD = _golden_min(lambda c: -_diameter_at(pz, pr, c, hd_ratio, d_max), cs[j] - dcs, cs[j] + dcs, n_golden)
+    better = -negD > Ds[j]
+    return jnp.where(better, c_g, cs[j]), jnp.where(better, -negD, Ds[j])
+
+
+def ray_cylinders(good_R: Callable, R_sets: Sequence, r_max: float, z_min: float, z_max: float, hd_ratio: float,
+                  density: RayDensity = RAY_DENSITY, dtype=None) -> list:
+    """The regular workspace from rays (module docstring) of each good set: a point is good for set j when
+    ``good_R(R, p)`` (R scalar, p (3,) m, z down) holds at any R of ``R_sets[j]`` (an (n_j,) array: e.g. the
+    design's R samples, R chosen per point; or the operating R alone). The largest cylinder on the z axis with
+    height = ``hd_ratio`` x diameter inside [z_min, z_max] and radius <= ``r_max``. Pure, vmappable; returns one
+    :class:`deltajax.constraints.RegularWorkspace` per set (zeros when nothing fits). The passes of
+    :data:`RAY_PASSES` run in one loop, and every pass's rays of every set go through one call of ``good_R``.
+
+    Each profile sample is a *level*: its z, the smallest first-bad radius of its rays, the phi of that ray and the
+    phi span around it still unsearched. After the coarse pass, rays search [0, min(r_max, 0.65 D)] only (D: the
+    cylinder so far; a radius beyond that cannot bind), so the same samples give a finer radius."""
+    dt = jnp.result_type(float) if dtype is None else dtype
+    n = density
+    nz, nphi = n.n_z, n.n_phi
+    m = len(R_sets)
+    R_sets = [jnp.asarray(Rj, dt).reshape(-1) for Rj in R_sets]
+    nzoom = RAY_PASSES.count("zoom_z")
+    kinds, sub, seen = [], [], {}
+    for k in RAY_PASSES:
+        kinds.append(("coarse", "zoom_z", "zoom_phi", "check").index(k))
+        base = "zoom_z" if k == "zoom_phi" else k
+        sub.append(seen.get(base + k, 0) % max(nzoom, 1))
+        seen[base + k] = seen.get(base + k, 0) + 1
+    T = nz * (1 + nzoom)                       # the coarse levels, then each zoom_z pass's
+    wedge = math.pi / 3.0
+    d_max = 2.0 * r_max
+    phi0 = jnp.linspace(0.0, wedge, nphi, dtype=dt)
+    phi_mid = (jnp.arange(nphi, dtype=dt) + 0.5) / nphi * wedge       # the check's rays: between the grid's
+    dphi0 = wedge / (nphi - 1)
+    zg = jnp.linspace(z_min, z_max, nz, dtype=dt)
+    dz0 = (z_max - z_min) / (nz - 1)
+    ui = jnp.linspace(-1.0, 1.0, nphi, dtype=dt)
+    jz = jnp.arange(nz)
+    n_c = 4 * nz
+    inf = jnp.asarray(jnp.inf, dt)
+    kind_of, sub_of = jnp.asarray(kinds), jnp.asarray(sub)
+
+    def layout(i, st):
+        """Pass i's rays of one set: z (nz, nphi), phi (nz, nphi), r_hi (), the level slots it writes (nz,), the
+        phi half-width of its rays (nz,) and the zoomed range (lo, hi)."""
+        c, D = st["c"], st["D"]
+        top, bot = c - hd_ratio * D / 2.0, c + hd_ratio * D / 2.0
+        kind, k = kind_of[i], sub_of[i]
+        # zoom_z: the range is fixed by the first zoom_z pass (over the cylinder so far and 1.5 coarse spacings
+        # beyond each end); pass k takes every nzoom-th of nzoom x nz uniform levels from offset k
+        first = (kind == 1) & (k == 0)
+        lo = jnp.where(first, jnp.maximum(top - 1.5 * dz0, z_min), st["lo"])
+        hi = jnp.where(first, jnp.minimum(bot + 1.5 * dz0, z_max), st["hi"])
+        zz = lo + (nzoom * jz + k) * (hi - lo) / (nzoom * nz - 1)
+        slots = jnp.where(kind == 0, jz, (1 + k) * nz + jz)
+        z_ck = jnp.linspace(top, bot, nz)                                # check: top disc to bottom disc
+        zs = jnp.select([kind == 0, kind == 1, kind == 2], [zg, zz, st["z"][slots]], z_ck)
+        width = jnp.where(kind == 2, st["span"][slots], 0.0)
+        ps = jnp.select([kind <= 1, kind == 3], [jnp.broadcast_to(phi0, (nz, nphi)),
+                                                  jnp.broadcast_to(phi_mid, (nz, nphi))],
+                        jnp.clip(st["phi"][slots][:, None] + width[:, None] * ui[None, :], 0.0, wedge))
+        r_hi = jnp.where(kind == 3, D / 2.0, jnp.where((kind == 0) | (D <= 0), r_max, jnp.minimum(r_max, 0.65 * D)))
+        return jnp.broadcast_to(zs[:, None], (nz, nphi)), ps, r_hi, slots, width, lo, hi
+
+    def update(i, st, zs, ps, slots, width, lo, hi, rho):
+        """One set's state after pass i gave the radii ``rho`` (nz, nphi) of its rays."""
+        kind = kind_of[i]
+        row_r = jnp.min(rho, axis=1)
+        row_phi = ps[jz, jnp.argmin(rho, axis=1)]
+        add, zoom, chk = kind <= 1, kind == 2, kind == 3
+        old_r = st["r"][slots]
+        better = row_r < old_r
+        z = st["z"].at[slots].set(jnp.where(add, zs[:, 0], st["z"][slots]))
+        r = st["r"].at[slots].set(jnp.where(add, row_r, jnp.where(zoom, jnp.minimum(row_r, old_r), old_r)))
+        phi = st["phi"].at[slots].set(jnp.where(add | (zoom & better), row_phi, st["phi"][slots]))
+        span = st["span"].at[slots].set(jnp.where(add, dphi0, jnp.where(zoom, 2.0 * width / (nphi - 1),
+                                                                        st["span"][slots])))
+        c_new, D_new = _profile_cylinder(z, r, z_min, z_max, hd_ratio, d_max, n_c)
+        return dict(z=z, r=r, phi=phi, span=span, c=jnp.where(chk, st["c"], c_new), D=jnp.where(chk, st["D"], D_new),
+                    check=jnp.where(chk, jnp.min(row_r), st["check"]), lo=lo, hi=hi)
+
+    def one_pass(i, sts):
+        lay = [layout(i, st) for st in sts]
+        radii = _first_bad(good_R, R_sets, [a[1].reshape(-1) for a in lay], [a[0].reshape(-1) for a in lay],
+                           [jnp.broadcast_to(a[2], (nz * nphi,)) for a in lay], n.n_along, n.n_levels)
+        return [update(i, st, *a[:2], *a[3:], r.reshape(nz, nphi)) for st, a, r in zip(sts, lay, radii)]
+
+    st0 = dict(z=jnp.full((T,), inf), r=jnp.full((T,), inf), phi=jnp.zeros((T,), dt), span=jnp.full((T,), dphi0, dt),
+               c=jnp.asarray(0.5 * (z_min + z_max), dt), D=jnp.zeros((), dt), check=inf,
+               lo=jnp.asarray(z_min, dt), hi=jnp.asarray(z_max, dt))
+    sts = jax.lax.fori_loop(0, len(RAY_PASSES), one_pass, [dict(st0) for _ in range(m)])
+    out = []
+    for st in sts:
+        D = jnp.maximum(jnp.minimum(st["D"], 2.0 * st["check"]), 0.0)
+        H = hd_ratio * D
+        out.append(RegularWorkspace(volume=math.pi / 4.0 * D * D * H, diameter=D, height=H, z_top=st["c"] - H / 2.0))
+    return out
+
+
+def ray_cylinder(good_fn: Callable, r_max: float, z_min: float, z_max: float, hd_ratio: float,
+                 density: RayDensity = RAY_DENSITY, dtype=None) -> RegularWorkspace:
+    """:func:`ray_cylinders` of one good set given as ``good_fn(p) -> bool`` (p (3,), m, z down)."""
+    dt = jnp.result_type(float) if dtype is None else dtype
+    return ray_cylinders(lambda R, p: good_fn(p), [jnp.zeros((1,), dt)], r_max, z_min, z_max, hd_ratio, density,
+                         dt)[0]
+
+
+# -- worst points of a task cylinder ------------------------------------------------------------------------------
+
+def worst_in_cylinder(f: Callable, diameter: float, height: float, z_top: float, n_r: int, n_phi: int, n_z: int,
+                      *, n_golden: int = 10, n_start: int = 2, sweeps: int = 2):
+    """Minimum of the field ``f(p)`` (a scalar or an (m,) vector of fields, each minimised on its own; NaN:
+    unreachable, the worst) over the cylinder of ``diameter`` and ``height`` on the z axis from ``z_top`` (z down),
+    using the 60 deg wedge (the Delta's symmetry): samples rho in [0, D/2] (``n_r``) x phi in [0, 60 deg]
+    (``n_phi``) x z (``n_z``), then from the ``n_start`` worst samples of each field a coordinate-wise golden
+    section (``sweeps`` sweeps over rho, phi, z, each in +-1 sample spacing, clipped to the cylinder). Returns
+    (minimum, point (3,)), each with a leading (m,) axis for a vector field. Two call sites of ``f`` (the samples
+    and the search), so it is traced twice."""
+    rr = jnp.linspace(0.0, diameter / 2.0, n_r)
+    pp = jnp.linspace(0.0, math.pi / 3.0, n_phi)
+    zz = jnp.linspace(z_top, z_top + height, n_z)
+    Z, Rr, P = jnp.meshgrid(zz, rr, pp, indexing="ij")
+    q = jnp.stack([Rr.reshape(-1), P.reshape(-1), Z.reshape(-1)], axis=1)     # (rho, phi, z)
+
+    def at(x):
+        return jnp.stack([x[0] * jnp.cos(x[1]), x[0] * jnp.sin(x[1]), x[2]])
+
+    def fv(p):
+        return jnp.atleast_1d(f(p))
+
+    V = jax.vmap(lambda x: fv(at(x)))(q)                                      # (n, m)
+    V = jnp.where(jnp.isnan(V), -jnp.inf, V)
+    lo = jnp.asarray([0.0, 0.0, z_top])
+    hi = jnp.asarray([diameter / 2.0, math.pi / 3.0, z_top + height])
+    step = jnp.asarray([diameter / 2.0 / max(n_r - 1, 1), math.pi / 3.0 / max(n_phi - 1, 1),
+                        height / max(n_z - 1, 1)])
+    ns = min(n_start, q.shape[0])
+
+    def field(v, c):
+        _, idx = jax.lax.top_k(-v, ns)
+
+        def search(x0, f0):
+            def coord(i, st):
+                x, fx = st
+                d = i % 3
+                a = jnp.clip(x[d] - step[d], lo[d], hi[d])
+                b = jnp.clip(x[d] + step[d], lo[d], hi[d])
+                t, ft = _golden_min(lambda t: fv(at(x.at[d].set(t)))[c], a, b, n_golden)
+                better = ft < fx
+                return jnp.where(better, x.at[d].set(t), x), jnp.where(better, ft, fx)
+
+            return jax.lax.fori_loop(0, 3 * sweeps, coord, (x0, f0))
+
+        xs, fs = jax.vmap(search)(q[idx], v[idx])
+        j = jnp.argmin(fs)
+        best = jnp.minimum(fs[j], jnp.min(v))
+        return jnp.where(jnp.isinf(best) & (best < 0), jnp.nan, best), at(xs[j])
+
+    best, pts = jax.vmap(field, in_axes=(1, 0))(V, jnp.arange(V.shape[1]))
+    scalar = jnp.ndim(jax.eval_shape(f, jnp.zeros(3, q.dtype))) == 0
+    return (best[0], pts[0]) if scalar else (best, pts)
+
+
+# -- one design, certified ------------------------------------------------------------------------------------------
