@@ -18,6 +18,7 @@ import dataclasses
 import functools
 from typing import Any, Callable, Mapping, TypeVar
 
+import equinox as eqx
 import jax
 import numpy as np
 
@@ -25,10 +26,6 @@ __all__ = ["traced_once", "persistent", "program_cache_dir", "STATS", "PROGRAMS_
            "stable_key", "shared_program", "PROGRAMS", "PROGRAMS_MAX"]
 
 F = TypeVar("F", bound=Callable)
-
-
-def _is_array(x) -> bool:
-    return isinstance(x, jax.Array) or hasattr(x, "__array__") and hasattr(x, "dtype") and hasattr(x, "shape")
 
 
 def traced_once(fn: F) -> F:
@@ -49,8 +46,8 @@ def traced_once(fn: F) -> F:
     @functools.wraps(fn)
     def call(*args, **kwargs):
         leaves, treedef = jax.tree_util.tree_flatten((args, kwargs))
-        arrays = [x for x in leaves if _is_array(x)]
-        static = tuple(_ARRAY if _is_array(x) else x for x in leaves)
+        arrays = [x for x in leaves if eqx.is_array(x)]
+        static = tuple(_ARRAY if eqx.is_array(x) else x for x in leaves)
         return run(treedef, static, arrays)
 
     call.__wrapped_trace__ = run
@@ -188,9 +185,9 @@ def _load_or_export(fn: Callable, in_tree, spec, path):
         out, trees["out"] = jax.tree_util.tree_flatten(fn(*jax.tree_util.tree_unflatten(in_tree, leaves)))
         return out
 
-    exp = export.export(jax.jit(flat))(*spec)
+    program = export.export(jax.jit(flat))(*spec).serialize()
     head = pickle.dumps(trees["out"])
-    blob = _MAGIC + len(head).to_bytes(8, "little") + head + exp.serialize()
+    blob = _MAGIC + len(head).to_bytes(8, "little") + head + program
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -204,7 +201,7 @@ def _load_or_export(fn: Callable, in_tree, spec, path):
             pass
         warnings.warn(f"cannot keep the program {path} ({err}); later processes will build it again", stacklevel=3)
     STATS["exported"] += 1
-    return jax.jit(export.deserialize(bytearray(exp.serialize())).call), trees["out"]
+    return jax.jit(export.deserialize(bytearray(program)).call), trees["out"]
 
 
 def _evict(folder) -> None:

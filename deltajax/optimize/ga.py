@@ -240,11 +240,11 @@ def _engine(fitness_fn, d: int, cfg: GAConfig, program_key: Optional[str] = None
         return (state, key), (rec, pop, fit)
 
     chunk_cache: dict[int, Callable] = {}
-    kept = program_key is not None and {"key": f"{program_key}|{cfg!r}|{d}"}
-    if kept:
+    kept = None if program_key is None else f"{program_key}|{cfg!r}|{d}"
+    if kept is not None:
         from ..tracing import persistent
 
-        init_fn = persistent(init_fn, "ga_init", kept["key"])
+        init_fn = persistent(init_fn, "ga_init", kept)
 
     def chunk(n):
         if n not in chunk_cache:
@@ -252,7 +252,7 @@ def _engine(fitness_fn, d: int, cfg: GAConfig, program_key: Optional[str] = None
             def run_chunk(state, key):
                 (state, key), (recs, pops, fits) = jax.lax.scan(one_generation, (state, key), None, length=n)
                 return state, key, recs, pops[-1], fits[-1]
-            chunk_cache[n] = persistent(run_chunk, "ga_chunk", f"{kept['key']}|{n}") if kept else run_chunk
+            chunk_cache[n] = run_chunk if kept is None else persistent(run_chunk, "ga_chunk", f"{kept}|{n}")
         return chunk_cache[n]
 
     return init_fn, chunk
