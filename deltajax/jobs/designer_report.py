@@ -12,7 +12,8 @@ if TYPE_CHECKING:
 
 __all__ = ["SUMMARY_METRICS", "FIXED_R_METRIC", "summary", "change_text", "print_summary", "plots", "tolerances_of",
            "store_tolerance", "store_robust", "store_frozen", "headline_lines", "cost_lines", "summary_attrs",
-           "store_certify", "certify_lines"]
+           "store_certify", "certify_lines", "store_ga", "store_pareto", "store_refine", "store_floor", "store_verify",
+           "rule_text", "robust_text", "floor_line"]
 
 SUMMARY_METRICS = ("picks_per_min", "regular_volume", "regular_diameter", "peak_utilisation", "rms_utilisation",
                    "speed_utilisation", "task_good_fraction", "task_index_min", "joint_margin_deg",
@@ -237,6 +238,66 @@ def robust_text(s) -> str:
     return (f"robust: the rule applied among verified candidates holding every constraint in >= "
             f"{100 * s.robust['probability']:g} % of {s.tolerance['samples']} Monte Carlo samples "
             f"(seed {s.tolerance['seed']}), confirmed by a fresh Monte Carlo (seed {s.robust['confirm_seed']})")
+
+
+def store_ga(res, gres, space, ga_cfg, ga_what: str, base_genes, seeds, baseline_primary: float, best_params) -> None:
+    """Group ``ga``: the GA's per-generation history, its best design (genes and parameters), the gene bounds and
+    the run's settings (:func:`deltajax.optimize.run_ga`'s result ``gres``)."""
+    from ..optimize.designer import DESIGN_UNITS
+
+    res.put_axis("ga", "generation", np.arange(1, gres.generations_done + 1), units="1")
+    for k, v in gres.history.items():
+        if k == "gen_best_genes":
+            res.put("ga", k, v, units="1", dims=("generation", "gene"))
+        elif k.startswith("aux/"):
+            res.put("ga", f"gen_best_{k[4:]}", np.asarray(v, float), units=DESIGN_UNITS.get(k[4:], "1"),
+                    dims=("generation",))
+        else:
+            res.put("ga", k, v, units="1", dims=("generation",))
+    res.put_axis("ga", "gene", np.arange(space.dim), units="1")
+    gene_units = {"units_per_gene": ",".join(space.units(n) for n in space.names)}
+    res.put("ga", "gene_names", np.asarray(space.names, dtype=object), units="1", dims=("gene",))
+    res.put("ga", "lower", np.asarray(space.lower), units="mixed", dims=("gene",), attrs=gene_units)
+    res.put("ga", "upper", np.asarray(space.upper), units="mixed", dims=("gene",))
+    res.put("ga", "best_genes", gres.best_genes, units="1", dims=("gene",))
+    res.put("ga", "best_params", best_params, units="mixed", dims=("gene",), attrs=gene_units)
+    res.put("ga", "baseline_genes", base_genes, units="1", dims=("gene",))
+    res.set_attrs("ga", algorithm=ga_cfg.algorithm, population_size=ga_cfg.population_size,
+                  generations=ga_cfg.generations, sigma=ga_cfg.sigma, seed=ga_cfg.seed,
+                  fitness_best=gres.best_fitness, objective=ga_what, resumed_from=gres.resumed_from,
+                  fingerprint=gres.fingerprint, seeded_with=len(seeds), baseline_primary=baseline_primary,
+                  constraint_handling="feasibility_first (1e3 + violation)")
+
+
+def store_pareto(res, front, extra_X, objs, s) -> None:
+    """Group ``pareto``: NSGA-II's feasible front on the search grids (genes, normalised objectives), the
+    feasible final-population designs off it, and the hypervolume history."""
+    res.put_axis("pareto", "point", np.arange(len(front.X)), units="1")
+    res.put_axis("pareto", "gene", np.arange(extra_X.shape[1]), units="1")
+    res.put_axis("pareto", "objective", np.arange(len(objs)), units="1")
+    res.put("pareto", "population_feasible_genes", extra_X, units="1", dims=("population_point", "gene"),
+            attrs={"meaning": "feasible final-population designs off the search front (verified too)"})
+    res.put("pareto", "genes", front.X, units="1", dims=("point", "gene"))
+    res.put("pareto", "F_search", front.F, units="1", dims=("point", "objective"),
+            attrs={"meaning": "minimised objectives on the search grids: sense x metric / |baseline metric|"})
+    res.put("pareto", "objective_names", np.asarray(objs, dtype=object), units="1", dims=("objective",))
+    res.put("pareto", "hypervolume_history", front.history_hv, units="1", dims=("generation",))
+    res.set_attrs("pareto", n_evals=front.n_evals, algorithm="pymoo NSGA-II",
+                  population_size=s.pareto["population_size"], generations=s.pareto["generations"])
+
+
+def store_refine(res, ro, refined, space, objs, s) -> None:
+    """Group ``refine``: each winner before and after the optax refinement, and which were accepted."""
+    res.put_axis("refine", "winner", np.arange(len(ro.accepted)), units="1")
+    res.put_axis("refine", "gene", np.arange(space.dim), units="1")
+    res.put_axis("refine", "objective", np.arange(len(objs)), units="1")
+    res.put_axis("refine", "accepted_design", np.arange(len(refined)), units="1")
+    for k in ("genes_before", "genes_after", "F_before", "F_after"):
+        res.put("refine", k, getattr(ro, k), units="1", dims=("winner", "gene" if "genes" in k else "objective"))
+    res.put("refine", "accepted", ro.accepted.astype(np.uint8), units="1", dims=("winner",))
+    res.put("refine", "accepted_genes", refined, units="1", dims=("accepted_design", "gene"))
+    res.set_attrs("refine", rule="accepted iff feasible on the search grids, no objective worse, primary better",
+                  steps=s.refine["steps"], learning_rate=s.refine["learning_rate"], penalty=s.refine["penalty"])
 
 
 def store_floor(res, fo, names, first: int, objs, s) -> None:

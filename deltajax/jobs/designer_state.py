@@ -1,5 +1,5 @@
 """The main job's state in ``results.h5``: the GA checkpoint (:func:`load_checkpoint`, :func:`put_checkpoint`), the
-finished stages (:func:`stages_done`), restaging an existing file before a resume (:func:`restage`), the job's
+finished stages (:func:`stages_done`; restaging, :func:`restage`, is the stage engine's), the job's
 fingerprint (:func:`job_fingerprint`) and continuing a finished run with more budget (:func:`earlier_run`,
 :func:`carry_earlier`: only :data:`BUDGET_SETTINGS` may differ; its verified front seeds the searches and joins
 the verified candidates with the metrics it verified).
@@ -20,6 +20,7 @@ from typing import Any, Mapping, Optional, Sequence
 import numpy as np
 
 from ..optimize.workflow import STORED_METRIC, SetupError
+from .stages import recorded, restage
 
 __all__ = ["load_checkpoint", "put_checkpoint", "restage", "stages_done", "job_fingerprint", "BUDGET_SETTINGS",
            "EarlierRun", "continued_file", "earlier_run", "carry_earlier"]
@@ -83,22 +84,6 @@ def put_checkpoint(res, ck: Mapping[str, Any]) -> None:
     res.set_attrs(g, fingerprint=ck["fingerprint"], generations_done=int(ck["generations_done"]))
 
 
-def restage(res, path: Path) -> None:
-    """Stage everything an existing results.h5 holds into ``res`` (so the next flush keeps it), verified first:
-    data that does not match its checksums or the file's integrity record is never re-staged (the next flush
-    would write fresh checksums over it). Raises :class:`deltajax.io.ChecksumError` (or OSError) then."""
-    from ..io import read
-
-    contents = read(path, verify=True)
-    for k, v in contents.attrs.items():
-        if k not in ("start_time",):
-            res.attrs.setdefault(k, v)
-    for group, variables in contents.variables.items():
-        if group:
-            res.set_attrs(group, **contents.group_attrs[group])
-            res.put_variables(group, variables)
-
-
 def job_fingerprint(cfg) -> str:
     """Hash of everything that determines a run's results (not resume/stop_after/progress/plots)."""
     from omegaconf import OmegaConf
@@ -113,17 +98,9 @@ def job_fingerprint(cfg) -> str:
 
 
 def stages_done(path: Path) -> tuple[Optional[str], list]:
-    """(fingerprint, finished stages) recorded in ``path``; (None, []) when there is no file. Its attributes are
-    verified against the file's integrity record first (raises :class:`deltajax.io.ChecksumError`); raises
-    OSError (with the path) when it exists but cannot be read."""
-    from ..io import read
-
-    if not path.exists():
-        return None, []
-    attrs = read(path, max_elements=0, verify=True).attrs
-    fp = attrs.get("ga_reconfig_fingerprint", "")
-    st = attrs.get("ga_reconfig_stages", "")
-    return (fp or None), [x for x in str(st).split(",") if x]
+    """(fingerprint, finished stages) of the ``ga_reconfig`` run recorded in ``path``
+    (:func:`deltajax.jobs.stages.recorded`)."""
+    return recorded(path, "ga_reconfig")
 
 
 # -- continuing a finished run with more budget (experiment.continue_from) --------------------------------------------
