@@ -719,7 +719,8 @@ RUN_ATTRS = ("start_time", "end_time", "git_commit", "wall_time_s", "host", "hos
 
 
 def differences(path_a: os.PathLike, path_b: os.PathLike, *, ignore: Sequence[str] = (),
-                rtol: float = 0.0) -> list[str]:
+                rtol: float = 0.0, exact: Sequence[str] = (), group: Optional[str] = None,
+                verify: bool = True) -> list[str]:
     """What differs between two results files: every group, dataset and attribute present in one only, every
     dataset whose dtype, shape or values differ (NaN equals NaN; ``rtol`` > 0 compares floats to that relative
     tolerance, 0: bit for bit), and every attribute whose value differs. One line per difference, ``[]`` when
@@ -727,21 +728,24 @@ def differences(path_a: os.PathLike, path_b: os.PathLike, *, ignore: Sequence[st
 
     Attributes named in :data:`RUN_ATTRS` (time, commit, wall time, the checksums that follow the values) and the
     datasets, groups or attributes matching a pattern of ``ignore`` (``fnmatch`` on ``group/name`` and on
-    ``group@attribute``; e.g. ``"*/timing*"``, ``"*@*_s"``) are not compared. Both files are read verified.
+    ``group@attribute``; e.g. ``"*/timing*"``, ``"*@*_s"``) are not compared. Datasets matching a pattern of
+    ``exact`` are compared bit for bit whatever ``rtol`` (a selection, a mask). ``group``: only that group and
+    its subgroups (the file's root attributes left out). Both files are read verified (``verify=False``: as they
+    are, e.g. to compare a file edited outside deltajax).
     """
     import fnmatch
 
-    a, b = read(path_a, verify=True), read(path_b, verify=True)
+    a, b = read(path_a, verify=verify), read(path_b, verify=verify)
 
     def skip(name: str) -> bool:
         return any(fnmatch.fnmatchcase(name, pat) for pat in ignore)
 
-    def same(x, y) -> bool:
+    def same(x, y, name: str = "") -> bool:
         x, y = np.asarray(x), np.asarray(y)
         if x.dtype != y.dtype or x.shape != y.shape:
             return False
         if x.dtype.kind in "fc":
-            if rtol > 0:
+            if rtol > 0 and not any(fnmatch.fnmatchcase(name, pat) for pat in exact):
                 return bool(np.allclose(x, y, rtol=rtol, atol=0.0, equal_nan=True))
             return bool(np.array_equal(x, y, equal_nan=True))
         return bool(np.array_equal(x, y))
@@ -757,9 +761,9 @@ def differences(path_a: os.PathLike, path_b: os.PathLike, *, ignore: Sequence[st
                 out.append(f"{where}@{k}: {ax[k]!r} != {bx[k]!r}"[:300])
         return out
 
-    out = attrs_diff("/", a.attrs, b.attrs)
+    out = attrs_diff("/", a.attrs, b.attrs) if group is None else []
     for g in sorted(set(a.group_attrs) | set(b.group_attrs)):
-        if g and skip(g):
+        if (g and skip(g)) or (group is not None and g != group and not g.startswith(group + "/")):
             continue
         if g not in a.group_attrs or g not in b.group_attrs:
             out.append(f"{g}/: group only in {'a' if g in a.group_attrs else 'b'}")
@@ -777,7 +781,7 @@ def differences(path_a: os.PathLike, path_b: os.PathLike, *, ignore: Sequence[st
             x, y = np.asarray(va[n].data), np.asarray(vb[n].data)
             if x.dtype != y.dtype or x.shape != y.shape:
                 out.append(f"{name}: {x.dtype}{list(x.shape)} != {y.dtype}{list(y.shape)}")
-            elif not same(x, y):
+            elif not same(x, y, name):
                 if x.dtype.kind in "fc":
                     d = np.abs(x.astype(complex) - y.astype(complex))
                     d = np.where(np.isnan(x) & np.isnan(y), 0.0, d)

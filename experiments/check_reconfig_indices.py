@@ -19,9 +19,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-import numpy as np
-
-from deltajax.io import read
+from deltajax.io import differences
 
 #: attributes that legitimately differ between two runs of the same job
 VOLATILE = {"time_odr_s", "time_rdr_s", "time_stats_s", "rdr_ik_tests", "rdr_full_kernels"}
@@ -31,42 +29,12 @@ EXACT = {"R_star", "reachable_fixed", "count_odr", "face_count_odr", "x", "y", "
 
 
 def compare(ref_path, new_path, rtol: float = 0.0, ignore_attrs=()) -> list[str]:
-    """Differences between two results files (empty: the same, in the sense of the module docstring);
-    ``ignore_attrs``: group attributes not compared besides :data:`VOLATILE` (e.g. ``mode``)."""
-    a, b = read(ref_path, "workspace"), read(new_path, "workspace")
-    out = []
-    for grp in sorted(set(a.variables) | set(b.variables)):
-        va, vb = a.variables.get(grp, {}), b.variables.get(grp, {})
-        for name in sorted(set(va) | set(vb)):
-            where = f"{grp}/{name}"
-            if name not in va or name not in vb:
-                out.append(f"{where}: only in {'the reference' if name in va else 'the new file'}")
-                continue
-            x, y = np.asarray(va[name].data), np.asarray(vb[name].data)
-            if x.shape != y.shape or x.dtype != y.dtype:
-                out.append(f"{where}: shape/dtype {x.shape} {x.dtype} vs {y.shape} {y.dtype}")
-                continue
-            if x.dtype.kind not in "fc":
-                if not np.array_equal(x, y):
-                    out.append(f"{where}: {int(np.sum(x != y))} entries differ")
-                continue
-            nan_x, nan_y = np.isnan(x), np.isnan(y)
-            if not np.array_equal(nan_x, nan_y):
-                out.append(f"{where}: NaN pattern differs at {int(np.sum(nan_x != nan_y))} entries")
-                continue
-            fx, fy = x[~nan_x].astype(np.float64), y[~nan_y].astype(np.float64)
-            tol = 0.0 if name in EXACT else rtol
-            bad = np.abs(fx - fy) > tol * np.abs(fx)
-            if np.any(bad):
-                rel = np.max(np.abs(fx - fy)[bad] / np.maximum(np.abs(fx[bad]), 1e-300))
-                out.append(f"{where}: {int(bad.sum())} of {fx.size} entries differ (largest relative {rel:.3g}, "
-                           f"allowed {tol:g})")
-    for grp in sorted(set(a.group_attrs) | set(b.group_attrs)):
-        ga, gb = a.group_attrs.get(grp, {}), b.group_attrs.get(grp, {})
-        for k in sorted((set(ga) | set(gb)) - VOLATILE - set(ignore_attrs)):
-            if k not in ga or k not in gb or not np.array_equal(np.asarray(ga[k]), np.asarray(gb[k])):
-                out.append(f"{grp} attribute {k}: {ga.get(k)!r} vs {gb.get(k)!r}")
-    return out
+    """Differences between two results files (empty: the same, in the sense of the module docstring), by
+    :func:`deltajax.io.differences` on group ``workspace``; ``ignore_attrs``: group attributes not compared
+    besides :data:`VOLATILE` (e.g. ``mode``). The files are read as they are (not verified)."""
+    return differences(ref_path, new_path, group="workspace", rtol=rtol, verify=False,
+                       exact=[f"workspace/{n}" for n in EXACT] + [f"workspace/*/{n}" for n in EXACT],
+                       ignore=[f"workspace@{k}" for k in (*VOLATILE, *ignore_attrs)])
 
 
 def main(argv=None) -> int:

@@ -98,5 +98,5 @@ def test_toy_job_fast_equals_exact_and_checker_detects_changes(toy_run, tmp_path
         v.ravel()[i] = np.nextafter(v.ravel()[i], np.float32(np.inf))
         d[...] = v
     diffs = compare(fast, changed)
-    assert len(diffs) == 1 and "k_tilde_odr: 1 of" in diffs[0]
+    assert len(diffs) == 1 and "k_tilde_odr: values differ at 1 of" in diffs[0]
     assert compare(fast, changed, rtol=1e-6) == []

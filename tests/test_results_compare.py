@@ -40,3 +40,15 @@ def test_every_kind_of_difference_is_named(tmp_path):
     assert any(line.startswith("g@kind: 'a' != 'b'") for line in d)
     # to a tolerance, the last-bit change is no difference
     assert not any(line.startswith("g/v") for line in dio.differences(a, b, ignore=["*/timing*"], rtol=1e-12))
+
+
+def test_exact_patterns_and_one_group(tmp_path):
+    a = _write(tmp_path / "a.h5")
+    b = _write(tmp_path / "b.h5", scale=1.0 + 1e-15, extra=True)
+    # bit for bit whatever the tolerance where a pattern says so
+    d = dio.differences(a, b, ignore=["*/timing*"], rtol=1e-12, exact=["g/v"])
+    assert any(line.startswith("g/v: values differ at") for line in d)
+    # one group: the other group and the root attributes are left out
+    d = dio.differences(a, b, ignore=["*/timing*"], group="h")
+    assert d == ["h/: group only in b"]
+    assert dio.differences(a, b, ignore=["*/timing*"], rtol=1e-12, group="g") == []
