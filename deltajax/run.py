@@ -69,6 +69,8 @@ class RunContext:
         results: the run's :class:`deltajax.io.ResultsFile` (flushed at the end; flush it yourself to checkpoint).
         robot: the fixed robot built from ``cfg.robot`` (validated).
         recon: the reconfigurable robot, or ``None`` if ``cfg.robot.R_range`` is null.
+        settings: the job's settings, built and checked once before the run (:func:`deltajax.config.validate_config`;
+            the job reads these, not ``cfg``).
         complete: set it to False when the run stops before its end (to be resumed): ``<run_dir>/checkpoint``
             is then kept; a complete run's checkpoint directory is removed after the final flush.
     """
@@ -78,8 +80,19 @@ class RunContext:
     results: Any
     robot: Any
     recon: Any
+    settings: Any = None
     complete: bool = True  # a job that stops early (resumable) sets False: the run dir then stays resumable
     figures: list = dataclasses.field(default_factory=list)  # (path, PNG bytes), written after results.h5
+
+    @property
+    def seed(self) -> int:
+        """The run's seed (``seed``)."""
+        return int(self.cfg.seed)
+
+    @property
+    def plots(self) -> bool:
+        """Whether the run draws its figures (``plots``)."""
+        return bool(self.cfg.get("plots", True))
 
     @property
     def dtype(self):
@@ -170,8 +183,8 @@ def _validated(cfg: DictConfig, run_dir: Optional[Path] = None):
     float32_requested(cfg.precision == "float32")  # asked for: no float32 warning
     check_keys(cfg)  # unknown keys (also +key=value ones), before anything else reads the config
     robot, recon = robot_from_config(cfg.robot)  # validated before anything compiles
-    validate_config(cfg, robot, recon, run_dir=run_dir)  # every experiment field
-    return name, module, robot, recon
+    settings = validate_config(cfg, robot, recon, run_dir=run_dir)  # every experiment field, the job's settings
+    return name, module, robot, recon, settings
 
 
 def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
@@ -192,7 +205,7 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
         jax.config.update("jax_compilation_cache_dir", os.path.expanduser(str(cache)))
         if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ:  # JAX's own setting wins if given
             jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
-    name, module, robot, recon = _validated(cfg, run_dir)  # every field, before the run dir is touched
+    name, module, robot, recon, settings = _validated(cfg, run_dir)  # every field, before the run dir is touched
     from . import __version__
     from .io import ResultsFile, git_commit
     from .rundir import claim
@@ -220,7 +233,7 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
             "jax_version": jax.__version__,
         }
         results = ResultsFile(run_dir / "results.h5", attrs=attrs)
-        ctx = RunContext(cfg=cfg, run_dir=run_dir, results=results, robot=robot, recon=recon)
+        ctx = RunContext(cfg=cfg, run_dir=run_dir, results=results, robot=robot, recon=recon, settings=settings)
         t0 = time.perf_counter()
         with _console_through_tqdm():
             module.run(ctx)

@@ -106,12 +106,12 @@ def test_ga_reconfig_exports_its_baseline_and_recommendation(toy_run):
     loops = json.loads((run_dir / "recommended.loops.json").read_text())
     assert loops["format"] == SIDECAR_FORMAT and loops["urdf"] == "recommended.urdf"
     assert len(loops["loop_closures"]) == 3
-    from types import SimpleNamespace
+    from deltajax.config import source_run
+    from deltajax.jobs.datasheet import run_designs
 
-    from deltajax.jobs.datasheet import _designs_from_run
-
-    designs = {n: r for n, r, *_ in _designs_from_run(str(run_dir), SimpleNamespace(log=lambda msg: None))}
     S = data["summary"]
+    space, motor = source_run(str(run_dir))
+    designs = {n: r for n, r, *_ in run_designs(space, S, motor)}
     R_op = list(S["metric_name"]).index("R_operating")
     for name in ("baseline", "recommended"):   # each datasheet at the R the run operates the design at
         assert float(data["datasheet"][name]["base_radius"]) == pytest.approx(float(S[name][R_op]))

@@ -230,10 +230,12 @@ def test_robust_mode_at_toy_size_picks_a_design_that_holds_in_fresh_samples(toy_
     from deltajax.config import ga_reconfig_build, robot_from_config
     from deltajax.io import ResultsFile, load
     from deltajax.jobs.ga_reconfig import _tolerance
+    from deltajax.jobs.stages import State
     from deltajax.optimize.designer import DESIGN_SENSE
     from deltajax.optimize.workflow import designer_problem
 
-    V = load(toy_run("ga_reconfig"))["verify"]
+    path = toy_run("ga_reconfig")
+    V = load(path)["verify"]
     cfg = compose("ga_reconfig", *TOY["ga_reconfig"], "experiment.robust.enabled=true",
                   "experiment.tolerance.length_mm=2.0", "experiment.tolerance.joint_offset_deg=1.0",
                   "experiment.tolerance.samples=200")
@@ -241,7 +243,8 @@ def test_robust_mode_at_toy_size_picks_a_design_that_holds_in_fresh_samples(toy_
     s, space, _, _ = ga_reconfig_build(cfg.experiment, robot, recon)
     objs = list(s.objectives)
     res, ctx = ResultsFile(tmp_path / "results.h5"), _Ctx()
-    _tolerance(ctx, res, V, s, space, objs, np.asarray([DESIGN_SENSE[o] for o in objs], float), objs.index(s.primary))
+    _tolerance(State(ctx=ctx, res=res, path=path, s=s, space=space, objs=objs, jp=objs.index(s.primary),
+                     sense=np.asarray([DESIGN_SENSE[o] for o in objs], float)))
     res.flush()
     out = load(tmp_path / "results.h5")
     T, a = out["tolerance"], out["tolerance"]["robust"]["attrs"]

@@ -7,6 +7,7 @@ Every error raised here names the config field and the value, before anything is
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any, Mapping, Optional, Tuple
 
@@ -15,12 +16,14 @@ from ..mass import FOREARM_MODELS, MASS_FIELDS, MassError, MassModel
 
 __all__ = ["ConfigError", "robot_from_config", "mass_from_config", "validate_config", "check_keys", "valid_keys",
            "register_schemas", "TOP_LEVEL_KEYS",
-           "EXPERIMENT_VALIDATORS", "EXPERIMENT_SCHEMAS"]
+           "EXPERIMENT_SETTINGS", "EXPERIMENT_SCHEMAS", "BenchKernelSettings",
+           "PaperGridSettings", "IndicesExamplesSettings", "DatasheetSettings", "GaReconfigSettings", "source_run",
+           "GaReconfigSetup"]
 
 
 from .readers import (ConfigError, check_fits, read_choice, read_field, read_names,  # noqa: E402,F401
                       read_vector)  # the one set of readers
-from .ga_reconfig import (GaReconfigSettings, validate_ga_reconfig, validate_ga_reconfig_run_dir,  # noqa: E402,F401
+from .ga_reconfig import (GaReconfigSettings, GaReconfigSetup, validate_ga_reconfig, validate_ga_reconfig_run_dir,  # noqa: E402,F401
                           ga_reconfig_build, ga_reconfig_settings)
 
 def robot_from_config(cfg: Mapping[str, Any], prefix: str = "robot") -> Tuple[Delta, Optional[ReconfigurableDelta]]:
@@ -188,13 +191,24 @@ def _v_workspace_grid(e, cfg, robot, recon) -> None:
     read_field("experiment.stop_after", e.get("stop_after"), kind="int", lo=1, none=True)
 
 
-def _v_paper_grid(e, cfg, robot, recon, bytes_per_point: float = 2.0) -> None:
+@dataclasses.dataclass(frozen=True)
+class PaperGridSettings:
+    """``experiment=reconfig_workspace``: the Franco-López 2026 grid, points per chunk, checkpoints on."""
+
+    grid: Any
+    chunk_points: int
+    checkpoint: bool
+
+
+def paper_grid_settings(e, cfg, robot, recon, bytes_per_point: float = 2.0) -> PaperGridSettings:
     # reconfig_workspace: two reachable masks (fixed R, some R) of 1 byte per point
-    paper_grid_from_config(e, bytes_per_point)
-    read_field("experiment.chunk_points", e.get("chunk_points"), kind="int", lo=1)
-    read_field("experiment.checkpoint", e.get("checkpoint", True), kind="bool")
+    grid = paper_grid_from_config(e, bytes_per_point)
+    out = PaperGridSettings(grid=grid,
+                            chunk_points=read_field("experiment.chunk_points", e.get("chunk_points"), kind="int", lo=1),
+                            checkpoint=read_field("experiment.checkpoint", e.get("checkpoint", True), kind="bool"))
     if recon is None:
         raise ConfigError(f"experiment={e.get('name')} needs a reconfigurable robot: robot.R_range is null")
+    return out
 
 
 def _v_reconfig_indices(e, cfg, robot, recon) -> None:
@@ -202,7 +216,7 @@ def _v_reconfig_indices(e, cfg, robot, recon) -> None:
 
     store = read_names("experiment.store_fields", e.get("store_fields"), INDEX_NAMES)
     # per point: two masks, R* and every stored field at R* and at fixed R (float32), the slice index field
-    _v_paper_grid(e, cfg, robot, recon, bytes_per_point=2 + 4 * (2 * len(store) + 2))
+    paper_grid_settings(e, cfg, robot, recon, bytes_per_point=2 + 4 * (2 * len(store) + 2))
     grid = paper_grid_from_config(e, 0.0)
     read_field("beta", cfg.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
     read_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
@@ -215,13 +229,30 @@ def _v_reconfig_indices(e, cfg, robot, recon) -> None:
         read_field(f"experiment.slices_z[{i}]", z, lo=max(z0, 0.0), hi=z1, lo_open=z0 <= 0.0, unit="m")
 
 
-def _v_bench_kernel(e, cfg, robot, recon) -> None:
-    for k in ("n_points", "n_baseline", "block", "repeats"):
-        read_field(f"experiment.{k}", e.get(k), kind="int", lo=1)
+@dataclasses.dataclass(frozen=True)
+class BenchKernelSettings:
+    """``experiment=bench_kernel``: points timed (JAX kernel, NumPy reference), points per block (0: one vmap),
+    best of ``repeats`` warm timings, the evaluated robot's base radius ``R`` (m), the dtypes timed."""
+
+    n_points: int
+    n_baseline: int
+    block: int
+    repeats: int
+    R: float
+    dtypes: tuple
+
+
+def bench_kernel_settings(e, cfg, robot, recon) -> BenchKernelSettings:
+    n = {k: read_field(f"experiment.{k}", e.get(k), kind="int", lo=1) for k in ("n_points", "n_baseline", "repeats")}
+    block = read_field("experiment.block", e.get("block"), kind="int", lo=0)   # 0: one plain vmap
     for k in ("n_points", "n_baseline"):  # the points (3 coordinates) and their index values, float64
         check_fits(f"experiment.{k}", e.get(k), float(e.get(k)) * 8 * 12, f"{e.get(k)} points")
-    read_field("experiment.R", e.get("R"), lo=0, lo_open=True, unit="m")
-    read_names("experiment.dtypes", e.get("dtypes"), ("float32", "float64"), min_len=1)
+    dtypes = read_names("experiment.dtypes", e.get("dtypes"), ("float32", "float64"), min_len=1)
+    if cfg.get("precision") != "float64" and "float64" in dtypes:
+        raise ConfigError("experiment.dtypes lists float64, which needs precision=float64 (got precision="
+                          f"{cfg.get('precision')})")
+    return BenchKernelSettings(block=block, R=read_field("experiment.R", e.get("R"), lo=0, lo_open=True, unit="m"),
+                               dtypes=tuple(dtypes), **n)
 
 
 def _point_below_base(path: str, v: Any) -> list:
@@ -233,8 +264,21 @@ def _point_below_base(path: str, v: Any) -> list:
     return p
 
 
-def indices_examples_spec(e, cfg=None, robot=None, recon=None) -> dict:
-    """``experiment.*`` of indices_examples as plain values (the paper's example points, the R curve step)."""
+@dataclasses.dataclass(frozen=True)
+class IndicesExamplesSettings:
+    """``experiment=indices_examples``: the R curves' step (m), the paper's example points (m, base frame, z down),
+    the k~ parameters and the Jacobian form."""
+
+    R_step: float
+    points: tuple
+    b_v: float
+    b_f: float
+    beta: float
+    matrix: str
+
+
+def indices_examples_settings(e, cfg=None, robot=None, recon=None) -> IndicesExamplesSettings:
+    """``experiment.*`` of indices_examples (the paper's example points, the R curve step)."""
     if recon is None:
         raise ConfigError("experiment=indices_examples needs a reconfigurable robot: robot.R_range is null")
     from ..indices import INDEX_NAMES
@@ -244,11 +288,12 @@ def indices_examples_spec(e, cfg=None, robot=None, recon=None) -> dict:
     n_R = _n_steps(float(recon.R_min), float(recon.R_max), R_step)  # every index at every R of each point's curve
     check_fits("experiment.R_step", R_step, 8.0 * n_R * max(1, len(points)) * len(INDEX_NAMES),
           f"{n_R:.3g} R samples of each point's index curves", unit="m")
-    return dict(R_step=R_step, points=points,
-                b_v=read_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True),
-                b_f=read_field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True),
-                beta=read_field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True),
-                matrix=read_choice("experiment.matrix", e.get("matrix"), ("theta3x3", "full3x4")))
+    return IndicesExamplesSettings(
+        R_step=R_step, points=tuple(tuple(p) for p in points),
+        b_v=read_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True),
+        b_f=read_field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True),
+        beta=read_field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True),
+        matrix=read_choice("experiment.matrix", e.get("matrix"), ("theta3x3", "full3x4")))
 
 
 def _cycle_setup(s, path: str) -> dict:
@@ -313,8 +358,46 @@ def _search_centre(path: str, v: Any, centre: list, robot) -> None:
                           f"inverse kinematics within the joint limits there); choose a reachable centre")
 
 
-def datasheet_spec(e, cfg=None, robot=None, recon=None) -> dict:
-    """``experiment.*`` and the top-level ``source`` of the datasheet job as plain values (kg, s, m, N m, rad/s).
+@dataclasses.dataclass(frozen=True)
+class DatasheetSettings:
+    """``experiment=datasheet`` and the top-level ``source`` (kg, s, m, N m, rad/s); ``kind``: "preset" or
+    "run_dir"."""
+
+    source: str
+    kind: str
+    payloads: tuple
+    vendor_dwell: float
+    hd_ratio: float
+    volume_h: float
+    n_samples: int
+    cylinder_grid: tuple
+    centre: Optional[tuple]
+    R: Optional[float]
+    motor: dict
+    gear_ratio: float
+    source_space: Any = None            # kind "run_dir": the source run's design space, rebuilt from its settings
+    source_motor: Optional[dict] = None  # kind "run_dir": the source run's motor settings
+
+
+def source_run(src: str) -> tuple:
+    """(design space, motor settings) of the ga_reconfig run in directory ``src`` (its stored config rebuilt)."""
+    import os
+
+    import yaml
+
+    from .. import io
+
+    attrs = io.read(os.path.join(src, "results.h5"), max_elements=0).attrs
+    cfg = yaml.safe_load(attrs["config"])
+    if (cfg.get("experiment") or {}).get("name") != "ga_reconfig":
+        raise ConfigError(f"source={src!r} is a {(cfg.get('experiment') or {}).get('name')!r} run, not ga_reconfig")
+    robot, recon = robot_from_config(cfg["robot"])
+    s, space = ga_reconfig_build(cfg["experiment"], robot, recon)[:2]
+    return space, s.motor
+
+
+def datasheet_settings(e, cfg=None, robot=None, recon=None) -> DatasheetSettings:
+    """``experiment.*`` and the top-level ``source`` of the datasheet job (kg, s, m, N m, rad/s).
 
     ``source``: a :data:`deltajax.presets.PRESETS` name (with ``experiment.motor`` and ``experiment.gear_ratio``) or
     a ga_reconfig run directory (its baseline and recommended designs with the run's own motor and gear ratios).
@@ -355,15 +438,17 @@ def datasheet_spec(e, cfg=None, robot=None, recon=None) -> dict:
         raise ConfigError(f"experiment.motor.efficiency must be in (0, 1], got {motor['efficiency']!r}")
     centre = e.get("centre")
     R = e.get("R")
-    return dict(source=src, kind=kind, payloads=payloads, vendor_dwell=read_field("experiment.vendor_dwell",
-                                                                              e.get("vendor_dwell"), lo=0, unit="s"),
-                hd_ratio=pos("hd_ratio", "1"), volume_h=pos("volume_h", "m"),
-                n_samples=read_field("experiment.n_samples", e.get("n_samples"), kind="int", lo=3),
-                cylinder_grid=tuple(read_field(f"experiment.cylinder_grid[{i}]", g, kind="int", lo=2)
-                                    for i, g in enumerate(grid)),
-                centre=None if centre is None else read_vector("experiment.centre", centre, 3),
-                R=None if R is None else read_field("experiment.R", R, lo=0, lo_open=True, unit="m"),
-                motor=motor, gear_ratio=pos("gear_ratio", "motor speed / arm speed"))
+    return DatasheetSettings(
+        source=src, kind=kind, payloads=tuple(payloads),
+        vendor_dwell=read_field("experiment.vendor_dwell", e.get("vendor_dwell"), lo=0, unit="s"),
+        hd_ratio=pos("hd_ratio", "1"), volume_h=pos("volume_h", "m"),
+        n_samples=read_field("experiment.n_samples", e.get("n_samples"), kind="int", lo=3),
+        cylinder_grid=tuple(read_field(f"experiment.cylinder_grid[{i}]", g, kind="int", lo=2)
+                            for i, g in enumerate(grid)),
+        centre=None if centre is None else tuple(read_vector("experiment.centre", centre, 3)),
+        R=None if R is None else read_field("experiment.R", R, lo=0, lo_open=True, unit="m"),
+        motor=motor, gear_ratio=pos("gear_ratio", "motor speed / arm speed"),
+        **(dict(zip(("source_space", "source_motor"), source_run(src))) if kind == "run_dir" else {}))
 
 
 def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
@@ -524,19 +609,19 @@ def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dic
 #: Experiments that use the robot's R range (the others only use the fixed robot, R = base_radius).
 R_RANGE_EXPERIMENTS = ("reconfig_workspace", "reconfig_indices", "indices_examples", "ga_reconfig", "dynamics_cycle")
 
-#: experiment name -> validator(experiment cfg, whole cfg, robot, recon); experiments not listed get the
-#: top-level checks only (their job validates its own fields).
-EXPERIMENT_VALIDATORS = {
+#: experiment name -> builder(experiment cfg, whole cfg, robot, recon) of the job's settings: every field checked
+#: (one ConfigError line naming it), returned as the object the run hands to the job (``RunContext.settings``).
+EXPERIMENT_SETTINGS = {
     "workspace_grid": _v_workspace_grid,
-    "reconfig_workspace": _v_paper_grid,
+    "reconfig_workspace": paper_grid_settings,
     "reconfig_indices": _v_reconfig_indices,
-    "indices_examples": indices_examples_spec,
-    "bench_kernel": _v_bench_kernel,
+    "indices_examples": indices_examples_settings,
+    "bench_kernel": bench_kernel_settings,
     "dynamics_cycle": dynamics_cycle_spec,
     "boundary_search": boundary_search_spec,
     "reconfig_motion": reconfig_motion_spec,
     "ga_reconfig": validate_ga_reconfig,
-    "datasheet": datasheet_spec,
+    "datasheet": datasheet_settings,
 }
 
 
@@ -544,11 +629,15 @@ EXPERIMENT_VALIDATORS = {
 RUN_DIR_CHECKS = {"ga_reconfig": validate_ga_reconfig_run_dir}
 
 
-def validate_config(cfg: Mapping[str, Any], robot=None, recon=None, *, run_dir=None) -> None:
-    """Check every field of the composed config before anything is computed.
+def validate_config(cfg: Mapping[str, Any], robot=None, recon=None, *, run_dir=None) -> Any:
+    """Check every field of the composed config before anything is computed, and build the job's settings.
 
-    Top-level keys (unknown ones rejected, types and ranges), then the experiment block with its validator
-    (types, ranges, NaN, cross-field rules). The robot block is checked by :func:`robot_from_config`.
+    Top-level keys (unknown ones rejected, types and ranges), then the experiment block with its builder in
+    :data:`EXPERIMENT_SETTINGS` (types, ranges, NaN, cross-field rules). The robot block is checked by
+    :func:`robot_from_config`.
+
+    Returns:
+        the job's settings (what the run hands to the job as ``RunContext.settings``; the job reads no config).
 
     Raises:
         ConfigError: one line naming the field (dotted path) and the value.
@@ -563,9 +652,8 @@ def validate_config(cfg: Mapping[str, Any], robot=None, recon=None, *, run_dir=N
         check_reach_over_range(cfg.get("robot"), recon)
     if run_dir is not None and e.get("name") in RUN_DIR_CHECKS:
         RUN_DIR_CHECKS[e.get("name")](e, run_dir)
-    check = EXPERIMENT_VALIDATORS.get(e.get("name"))
-    if check is not None:
-        check(e, cfg, robot, recon)
+    build = EXPERIMENT_SETTINGS.get(e.get("name"))
+    return None if build is None else build(e, cfg, robot, recon)
 
 
 from ..schemas import EXPERIMENT_SCHEMAS, RobotSchema, register_schemas, schema_keys, unknown_key  # noqa: E402

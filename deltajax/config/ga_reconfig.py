@@ -9,7 +9,7 @@ from typing import Any, Mapping, Optional
 
 from .readers import ConfigError, check_fits, read_choice, read_field
 
-__all__ = ["GaReconfigSettings", "ga_reconfig_settings", "ga_reconfig_build", "validate_ga_reconfig",
+__all__ = ["GaReconfigSettings", "GaReconfigSetup", "ga_reconfig_settings", "ga_reconfig_build", "validate_ga_reconfig",
            "validate_ga_reconfig_run_dir", "DESIGN_POINT_BYTES", "RECOMMEND_RULES"]
 
 # ---- ga_reconfig: the designer's problem (every field, unknown keys included); owner: designer ----
@@ -346,16 +346,34 @@ def _tolerance_settings(e: Mapping[str, Any]) -> dict:
     return out
 
 
-def validate_ga_reconfig(e, cfg, robot, recon) -> None:
-    s = ga_reconfig_build(e, robot, recon)[0]  # every field, the design space, the GA settings, the problem
-    if s.continue_from is not None:           # the earlier run: finished, of the same problem (its file only)
+@dataclasses.dataclass(frozen=True)
+class GaReconfigSetup:
+    """What the main job runs on, built once per run from its settings: the settings, the design space, the
+    coarse (search) problem, the GA's configuration and, for ``experiment.continue_from``, the earlier run
+    (:class:`deltajax.jobs.designer_state.EarlierRun`; None for a new search)."""
+
+    settings: GaReconfigSettings
+    space: Any
+    problem: Any
+    ga: Any
+    earlier: Any = None
+
+
+def validate_ga_reconfig(e, cfg, robot, recon) -> GaReconfigSetup:
+    """The main job's :class:`GaReconfigSetup`: every field, the design space, the GA settings, the problem and a
+    continued run's earlier run (finished, of the same problem; its file only)."""
+    s, space, pb, ga = ga_reconfig_build(e, robot, recon)
+    earlier = None
+    if s.continue_from is not None:
         from ..jobs.designer_state import earlier_run
         from ..optimize.workflow import SetupError
 
         try:
-            earlier_run(s.continue_from, cfg)
+            earlier = earlier_run(s.continue_from, cfg)
         except SetupError as err:
             raise ConfigError(str(err)) from None
+    return GaReconfigSetup(settings=s, space=space, problem=pb, ga=dataclasses.replace(ga, seed=int(cfg.get("seed"))),
+                           earlier=earlier)
 
 
 def validate_ga_reconfig_run_dir(e, run_dir) -> None:

@@ -20,8 +20,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .. import reference
-from ..config import ConfigError
-from ..indices import POINT_BLOCK, map_points, point_indices
+from ..indices import map_points, point_indices
 from ..benchmarks import frozen_kernel as _kernel_baseline
 
 __all__ = ["run", "fusion_count"]
@@ -58,21 +57,11 @@ def _numba_rates(points: np.ndarray, geo: list, repeats: int):
 
 
 def run(ctx) -> None:
-    e = ctx.cfg.experiment
-    for key in ("n_points", "n_baseline", "repeats"):
-        if int(e[key]) < 1:
-            raise ConfigError(f"experiment.{key} must be >= 1, got {e[key]!r}")
-    for dt in e.dtypes:
-        if dt not in ("float32", "float64"):
-            raise ConfigError(f"experiment.dtypes entries must be float32/float64, got {dt!r}")
-    block = int(e.get("block", POINT_BLOCK))
-    if block < 0:
-        raise ConfigError(f"experiment.block must be >= 0 (0: one plain vmap), got {e.block!r}")
-    if ctx.cfg.precision != "float64" and "float64" in e.dtypes:
-        raise ConfigError("bench_kernel with float64 in experiment.dtypes needs precision=float64")
-    robot64 = ctx.robot.with_base_radius(float(e.R))
-    n, nb, reps = int(e.n_points), int(e.n_baseline), int(e.repeats)
-    pts = _sample_points(n, int(ctx.cfg.seed))
+    e = ctx.settings                                   # checked before the run (config.bench_kernel_settings)
+    block = e.block
+    robot64 = ctx.robot.with_base_radius(e.R)
+    n, nb, reps = e.n_points, e.n_baseline, e.repeats
+    pts = _sample_points(n, ctx.seed)
     res = ctx.results
     lines = []
 
@@ -130,7 +119,7 @@ def run(ctx) -> None:
     res.set_attrs("bench", device=str(jax.devices()[0]), report="\n".join(lines))
     for line in lines:
         ctx.log(line)
-    if ctx.cfg.get("plots", True):
+    if ctx.plots:
         from ..plots import bench_rates_from_results
 
         ctx.savefig(bench_rates_from_results(res, f"kernel throughput (IK + Jacobian + indices), {n} points, "

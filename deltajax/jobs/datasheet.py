@@ -19,33 +19,24 @@ import os
 import numpy as np
 
 from .. import plots
-from ..config import ConfigError, datasheet_spec
+from ..config import ConfigError
 from ..constraints import Motor
 from ..datasheet import MOTOR_FIELDS, ROW_FIELDS, UNITS, datasheet
 
 __all__ = ["run", "run_designs", "write", "save"]
 
 
-def _designs_from_run(run_dir: str, ctx):
+def _designs_from_run(spec, ctx):
     """[(name, robot, motor, gear ratio, R)] of a ga_reconfig run's baseline and recommended designs."""
-    import yaml
-
     from .. import io
-    from ..config import ga_reconfig_build, robot_from_config
 
-    data = io.load(os.path.join(run_dir, "results.h5"))
-    cfg = yaml.safe_load(data["attrs"]["config"])
-    if (cfg.get("experiment") or {}).get("name") != "ga_reconfig":
-        raise ConfigError(f"source={run_dir!r} is a {(cfg.get('experiment') or {}).get('name')!r} run, not ga_reconfig")
-    S = data.get("summary") or {}
+    S = io.load(os.path.join(spec.source, "results.h5")).get("summary") or {}
     if "recommended_params" not in S:
-        raise ConfigError(f"source={run_dir!r}: the run has no recommendation (group summary; unfinished run or no "
-                          "feasible design)")
-    robot, recon = robot_from_config(cfg["robot"])
-    s, space = ga_reconfig_build(cfg["experiment"], robot, recon)[:2]
+        raise ConfigError(f"source={spec.source!r}: the run has no recommendation (group summary; unfinished run or "
+                          "no feasible design)")
     ctx.log("source is a ga_reconfig run: its motor and each design's gear ratio are used "
             "(experiment.motor / experiment.gear_ratio ignored)")
-    return run_designs(space, S, s.motor)
+    return run_designs(spec.source_space, S, spec.source_motor)
 
 
 def run_designs(space, summary, motor_settings) -> list:
@@ -90,7 +81,7 @@ def _designs_from_preset(name: str, spec):
     robot = preset_robot(name)
     if robot is None:
         raise ConfigError(f"source={name!r}: the preset has no mass model, a datasheet needs one")
-    return [(name, robot, Motor(**spec["motor"]), spec["gear_ratio"], spec["R"])]
+    return [(name, robot, Motor(**spec.motor), spec.gear_ratio, spec.R)]
 
 
 def save(res, group: str, ds) -> None:
@@ -114,13 +105,13 @@ def save(res, group: str, ds) -> None:
 
 
 def run(ctx) -> None:
-    spec = datasheet_spec(ctx.cfg.experiment, ctx.cfg, ctx.robot, ctx.recon)
-    if spec["kind"] == "preset":
-        designs = _designs_from_preset(spec["source"], spec)
+    spec = ctx.settings                                # checked before the run (config.datasheet_settings)
+    if spec.kind == "preset":
+        designs = _designs_from_preset(spec.source, spec)
     else:
-        designs = _designs_from_run(spec["source"], ctx)
-    write(ctx, designs, payloads=spec["payloads"], vendor_dwell=spec["vendor_dwell"], centre=spec["centre"],
-          hd_ratio=spec["hd_ratio"], volume_h=spec["volume_h"], n_samples=spec["n_samples"],
-          cylinder_grid=spec["cylinder_grid"])
-    ctx.results.set_attrs("datasheet", source=spec["source"], source_kind=spec["kind"],
+        designs = _designs_from_run(spec, ctx)
+    write(ctx, designs, payloads=spec.payloads, vendor_dwell=spec.vendor_dwell, centre=spec.centre,
+          hd_ratio=spec.hd_ratio, volume_h=spec.volume_h, n_samples=spec.n_samples,
+          cylinder_grid=spec.cylinder_grid)
+    ctx.results.set_attrs("datasheet", source=spec.source, source_kind=spec.kind,
                           designs=",".join(d[0] for d in designs))

@@ -46,14 +46,10 @@ build = ga_reconfig_build
 def run(ctx) -> None:
     """The main job: its settings and problem built once, then the two lists of stages (:data:`SEARCH`, whose
     stages hand on in memory, and :data:`ANSWER`, whose stages read the results file) on the stage engine."""
-    from ..optimize import workflow as W
     from ..optimize.designer import DESIGN_SENSE
 
-    s, space, pb, ga_cfg = build(ctx.cfg.experiment, ctx.robot, ctx.recon)    # validated before anything compiles
-    try:   # more budget for a finished run: its verified front seeds the searches and joins the candidates
-        earlier = None if s.continue_from is None else ST.earlier_run(s.continue_from, ctx.cfg)
-    except W.SetupError as err:
-        raise ConfigError(str(err)) from None
+    setup = ctx.settings                     # built and checked once, before anything compiled
+    s, space, earlier = setup.settings, setup.space, setup.earlier
     runner, path, fp = Runner(ctx, "ga_reconfig"), ctx.run_dir / "results.h5", ST.job_fingerprint(ctx.cfg)
     done = runner.open(fp, resume=s.resume, partial_what="GA checkpoint",
                        has_partial=lambda p: ST.load_checkpoint(p) is not None)
@@ -63,8 +59,8 @@ def run(ctx) -> None:
     objs = list(s.objectives)
     sense = np.asarray([DESIGN_SENSE[o] for o in objs], float)
     carried = earlier.genes if earlier is not None else np.zeros((0, space.dim))
-    st = State(ctx=ctx, res=ctx.results, path=path, fp=fp, s=s, space=space, pb=pb, seed=int(ctx.cfg.seed),
-               ga_cfg=dataclasses.replace(ga_cfg, seed=int(ctx.cfg.seed)), earlier=earlier, objs=objs,
+    st = State(ctx=ctx, res=ctx.results, path=path, fp=fp, s=s, space=space, pb=setup.problem, seed=ctx.seed,
+               ga_cfg=setup.ga, earlier=earlier, objs=objs,
                primary=s.primary, jp=objs.index(s.primary), sense=sense, carried=carried,
                base_genes=space.baseline_genes(), scr_front=np.zeros((0, space.dim)),
                front_X=np.zeros((0, space.dim)), extra_X=np.zeros((0, space.dim)),

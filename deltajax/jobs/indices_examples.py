@@ -11,7 +11,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..config import indices_examples_spec
 from ..indices import INDEX_NAMES, indices
 from ..kinematics import ik
 from ..papers import FRANCO2026_EXAMPLE_INDICES, FRANCO2026_EXAMPLES, FRANCO2026_MISPRINTS
@@ -23,10 +22,10 @@ UNITS = {"manipulability": "m^3/rad^3", "imi": "rad^3/m^3"}
 
 
 def run(ctx) -> None:
-    spec = indices_examples_spec(ctx.cfg.experiment, ctx.cfg, ctx.robot, ctx.recon)
+    spec = ctx.settings                                # checked before the run (config.indices_examples_settings)
     recon = ctx.recon
     dtype = ctx.dtype
-    kw = dict(b_v=spec["b_v"], b_f=spec["b_f"], beta=spec["beta"], matrix=spec["matrix"])
+    kw = dict(b_v=spec.b_v, b_f=spec.b_f, beta=spec.beta, matrix=spec.matrix)
 
     def at(R, p):
         rb = recon.at(R)
@@ -60,10 +59,10 @@ def run(ctx) -> None:
         ctx.log(f"{name:7s} {k:12s} paper {paper:.5g}  ours {ours:.6g}  rel {rel:.1e}  {flag}")
 
     # Index-vs-R curves at the example points: R = R_min + k * R_step (integer k)
-    step = spec["R_step"]
+    step = spec.R_step
     n = int(round((float(recon.R_max) - float(recon.R_min)) / step)) + 1
     R = float(recon.R_min) + step * np.arange(n)
-    pts = np.asarray(spec["points"])
+    pts = np.asarray(spec.points)
     curve = jax.jit(jax.vmap(jax.vmap(at, in_axes=(0, None)), in_axes=(None, 0)))
     bar.set_postfix_str(f"curves ({len(pts)} points x {n} R)")
     sol, ind = jax.block_until_ready(curve(jnp.asarray(R, dtype), jnp.asarray(pts, dtype)))
@@ -89,7 +88,7 @@ def run(ctx) -> None:
                                                                   "sigma_min_f", "inv_cond")))
     res.set_attrs("curves", note="argmax over finite values with ties to the smallest R; omega_v is "
                   "unbounded at Jx-singular R (e.g. R = 0.465 at z = 0.2, singularity type 1)")
-    if ctx.cfg.get("plots", True):
+    if ctx.plots:
         from ..plots import plot_index_curves
 
         bar.set_postfix_str("plot")

@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..config import ConfigError, paper_grid_from_config
 from ..papers import FRANCO2026_VOLUMES as PAPER
 
 __all__ = ["run"]
@@ -21,13 +20,9 @@ def run(ctx) -> None:
     from ..workspace import fixed_workspace, reconfigurable_workspace
     from ..workspace.driver import computed_points, face_count
 
-    cfg = ctx.cfg.experiment
-    if ctx.recon is None:
-        raise ConfigError("reconfig_workspace needs a reconfigurable robot: robot.R_range is null")
-    grid = paper_grid_from_config(cfg)
-    h = grid.h
-    chunk = int(cfg.get("chunk_points", 1 << 20))
-    ck = ctx.run_dir / "checkpoint" if cfg.get("checkpoint", True) else None
+    s = ctx.settings                                   # checked before the run (config.paper_grid_settings)
+    grid, h, chunk = s.grid, s.grid.h, s.chunk_points
+    ck = ctx.run_dir / "checkpoint" if s.checkpoint else None
     ctx.log(f"grid {grid.shape} = {grid.n_points} points, h = {h} m")
     with ctx.progress(total=computed_points(grid), desc="fixed") as bar:
         fixed = fixed_workspace(ctx.robot, grid, fields=False, chunk_size=chunk, progress=bar.update,
@@ -60,7 +55,7 @@ def run(ctx) -> None:
     ctx.log(f"fixed: {out['fixed'][0]} points, {out['fixed'][1]:.5f} m^3 (count h^3), {out['fixed'][2]:.5f} m^3 "
             f"(count/N V_box); reconfigurable: {out['reconfigurable'][0]} points, {out['reconfigurable'][1]:.5f} / "
             f"{out['reconfigurable'][2]:.5f} m^3; increase {inc:.1f} % (paper 0.075 / 0.137 m^3, +82 %)")
-    if ctx.cfg.get("plots", True):
+    if ctx.plots:
         fig = plots.workspace_3d(grid.x, grid.y, grid.z, {"(a) reconfigurable": recon.ok,
                                                           f"(b) fixed R = {float(ctx.robot.base_radius):.3f} m": fixed.ok})
         ctx.savefig(fig, "fig7_workspace")
