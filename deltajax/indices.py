@@ -24,9 +24,9 @@ from jaxtyping import Array, Bool, Float, Int
 from .eigen3 import sym3_top2
 from .fastmath import fuse_outputs, recip, sqrt0
 from .geometry import Delta
-from .jacobian import resolve_length, homogenise, jq_diagonal, jq_theta, jx_det, jx_row
-from .kinematics import (branch_sign, from_chain_frames, chain_local, design_ok, forearm_units,
-                         guarded_configuration, limit_terms, loop_closure, loop_vectors, passive_angles, safe_point)
+from .jacobian import chain, resolve_length, homogenise, jq_diagonal, jq_theta, jx_det, jx_row
+from .kinematics import (branch_sign, from_chain_frames, design_ok, forearm_units, guarded_configuration, limit_terms,
+                         passive_angles, safe_point)
 
 __all__ = [
     "Indices",
@@ -45,6 +45,11 @@ __all__ = [
     "sym3_top2",
     "indices_from_sv",
     "singular_values_closed_form",
+    "SvMatrix",
+    "sv_matrix",
+    "singular_values_from_eig",
+    "criterion_of",
+    "point_value",
     "SV_METHODS",
     "POINT_BLOCK",
     "map_points",
@@ -141,6 +146,41 @@ def singular_values(jx, d=None, *, method: str = "fast", with_inverses: bool = F
         return jnp.where(fin[..., None], s, jnp.nan)
     if method not in ("fast", "jacobi"):
         raise ValueError(f"method must be 'fast' or 'jacobi', got {method!r}")
+    m = sv_matrix(jx, d)
+    e1, e2 = sym3_top2(m.x00, m.x11, m.x22, m.x01, m.x02, m.x12, m.c2, m.det_x, method)
+    return singular_values_from_eig(e1, e2, m.jx_side, m.prod_d, m.det_jx, with_inverses=with_inverses)
+
+
+class SvMatrix(NamedTuple):
+    """The symmetric 3x3 X whose two largest eigenvalues give the singular values of M = Jx^-1 diag(d)
+    (:func:`sv_matrix`); scalars.
+
+    Attributes:
+        jx_side: X is the Jx side adj(D) G adj(D) (|det Jx| < |prod d|), else the Jq side D adj(G) D.
+        prod_d: |d0 d1 d2|.
+        det_jx: |det Jx|.
+        c2: sum of X's principal 2x2 minors (from the factors, no cancellation).
+        det_x: det X (from the factors).
+        x00, x11, x22, x01, x02, x12: the entries of X.
+    """
+
+    jx_side: Bool[Array, ""]
+    prod_d: Float[Array, ""]
+    det_jx: Float[Array, ""]
+    c2: Float[Array, ""]
+    det_x: Float[Array, ""]
+    x00: Float[Array, ""]
+    x11: Float[Array, ""]
+    x22: Float[Array, ""]
+    x01: Float[Array, ""]
+    x02: Float[Array, ""]
+    x12: Float[Array, ""]
+
+
+def sv_matrix(jx, d) -> SvMatrix:
+    """The first half of :func:`singular_values`: X and its invariants from ``jx`` (the 9 entries of Jx,
+    row-major) and ``d`` (the 3 homogenised Jq entries), scalars; which side is chosen per point by which factor
+    is closer to singular (G = Jx Jx^T, D = diag(d), see :func:`singular_values`)."""
     J = [[jx[3 * i + k] for k in range(3)] for i in range(3)]
     G = {(i, j): J[i][0] * J[j][0] + J[i][1] * J[j][1] + J[i][2] * J[j][2] for i in range(3) for j in range(i, 3)}
     det_jx = jnp.abs(jx_det(*jx))
@@ -161,7 +201,13 @@ def singular_values(jx, d=None, *, method: str = "fast", with_inverses: bool = F
                    p2d * (d[0] * d[0] * adj_g[(0, 0)] + d[1] * d[1] * adj_g[(1, 1)] + d[2] * d[2] * adj_g[(2, 2)]),
                    det_g * (g00 * adj_d[0] * adj_d[0] + g11 * adj_d[1] * adj_d[1] + g22 * adj_d[2] * adj_d[2]))
     det_x = jnp.where(jx_side, p2d * p2d * det_g, p2d * det_g * det_g)
-    e1, e2 = sym3_top2(*X, c2, det_x, method)
+    return SvMatrix(jx_side, prod_d, det_jx, c2, det_x, *X)
+
+
+def singular_values_from_eig(e1, e2, jx_side, prod_d, det_jx, *, with_inverses: bool = False):
+    """The second half of :func:`singular_values`: (s1, s2, s3) from the two largest eigenvalues e1 >= e2 of
+    :func:`sv_matrix`'s X (the third from the exact determinant s1 s2 s3 = |prod d| / |det Jx|); with
+    ``with_inverses`` also 1/s1, s1 s2 s3 and its inverse (:class:`_SvTail`)."""
     t = _sv_tail(_sqrt0(e1), _sqrt0(e2), prod_d, det_jx, jx_side)
     return (t.s1, t.s2, t.s3) if not with_inverses else t
 
@@ -331,14 +377,10 @@ def point_kernel(robot: Delta, p: Float[Array, "3"], *, sign: float = 1.0, sv_me
     lim = limit_terms(robot.theta_min, robot.theta_max)
     chains, rows, d = [], [], []
     for i in range(3):
-        x, y, z = chain_local(p[0], p[1], p[2], i)
-        dx = x + robot.platform_radius - robot.base_radius  # (x + r) - R, as every kernel evaluates it
-        lc = loop_closure(dx, y, z, L1, L2, lim, sign)
-        ux, uy, uz = loop_vectors(dx, y, z, lc.cos, lc.sin, L1, L2)
-        rows.extend(jx_row(ux, uy, uz, i))
-        di = jq_theta(ux, uz, lc.cos, lc.sin)
-        d.append(di if length is None else di * (L1 / L))
-        chains.append(lc)
+        ch = chain(p[0], p[1], p[2], robot.base_radius, robot.platform_radius, L1, L2, lim, i, sign)
+        rows.extend(ch.jx)
+        d.append(ch.d if length is None else ch.d * (L1 / L))
+        chains.append(ch.loop)
     ok = valid & usable & chains[0].ok & chains[1].ok & chains[2].ok
     # double where: a failed point's Jacobian is garbage (finite); the singular values run on a fixed regular
     # stand-in (Jx = I, d = (0.3, 0.5, 0.7): distinct, well separated) so that no inf/NaN meets a zero cotangent
@@ -356,6 +398,23 @@ def point_kernel(robot: Delta, p: Float[Array, "3"], *, sign: float = 1.0, sv_me
     sv = tuple(jnp.where(ok, v, nan) for v in (t.s1, t.s2, t.s3))
     ok, chains, det_jx, masked, sv = fuse_outputs((ok, tuple(chains), jx_det(*rows), masked, sv))
     return PointKernel(ok=ok, chains=chains, det_jx=det_jx, indices=Indices(**masked, singular_values=jnp.stack(sv)))
+
+
+def criterion_of(ind: Indices, criterion: str):
+    """The index named ``criterion`` (one of :data:`INDEX_NAMES`) of ``ind``: the criterion a redundancy
+    resolution maximises (the Numba mirror selects it by its column number)."""
+    if criterion not in INDEX_NAMES:
+        raise ValueError(f"criterion must be one of {INDEX_NAMES}, got {criterion!r}")
+    return getattr(ind, criterion)
+
+
+def point_value(robot: Delta, p: Float[Array, "3"], criterion: str, *, sv_method: str = "fast", b_v: float = 2.0,
+                b_f: float = 4.2, beta: float = 0.5):
+    """(feasible, criterion value) of :func:`point_kernel` at one point: feasible = every loop closes within the
+    joint limits and det Jx != 0 exactly (redundancy resolution's rule for skipping a sample); the value is NaN
+    where the loops do not close (:func:`criterion_of`)."""
+    k = point_kernel(robot, p, sv_method=sv_method, b_v=b_v, b_f=b_f, beta=beta)
+    return k.ok & (k.det_jx != 0.0), criterion_of(k.indices, criterion)
 
 
 def _resolve_sv_method(sv_method: str, default: str) -> str:

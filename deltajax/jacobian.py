@@ -16,12 +16,14 @@ from __future__ import annotations
 from typing import NamedTuple, Optional
 
 import jax.numpy as jnp
-from jaxtyping import Array, Float
+from jaxtyping import Array, Bool, Float
 
 from .geometry import Delta
-from .kinematics import COS_A, SIN_A, from_chain_frames, forearm_units, guarded_configuration
+from .kinematics import (COS_A, SIN_A, LimitTerms, LoopClosure, chain_local, from_chain_frames, forearm_units,
+                         guarded_configuration, loop_closure, loop_vectors)
 
-__all__ = ["Jacobians", "jacobians", "jacobian", "homogenise", "jq_diagonal", "jx_row", "jq_theta", "jx_det"]
+__all__ = ["Jacobians", "jacobians", "jacobian", "homogenise", "jq_diagonal", "jx_row", "jq_theta", "jx_det", "Chain",
+           "chain", "JacobianBlocks", "jacobian_blocks"]
 
 
 def jx_row(ux, uy, uz, i: int):
@@ -53,6 +55,64 @@ def jx_det(j00, j01, j02, j10, j11, j12, j20, j21, j22):
     return (j00 * (j11 * j22 - j12 * j21)
             - j01 * (j10 * j22 - j12 * j20)
             + j02 * (j10 * j21 - j11 * j20))
+
+
+class Chain(NamedTuple):
+    """One chain of the per-point kernel (scalars; see :func:`chain`).
+
+    Attributes:
+        loop: the chain's :class:`~deltajax.kinematics.LoopClosure` (``loop.ok``: closes within the joint limits).
+        jx: row i of Jx (3 scalars, base frame, dimensionless); meaningful where ``loop.reach``.
+        d: homogenised Jq entry sin th2 sin th3 (:func:`jq_theta`, dimensionless); meaningful where ``loop.reach``.
+    """
+
+    loop: LoopClosure
+    jx: tuple
+    d: Float[Array, ""]
+
+
+def chain(x, y, z, R, r, L1, L2, lim: LimitTerms, i: int, sign: float = 1.0) -> Chain:
+    """Chain ``i`` of the per-point kernel at the base-frame point (x, y, z) (m): chain_local -> loop_closure
+    (dx = (x_i + r) - R) -> loop_vectors -> jx_row, jq_theta.
+
+    The step :func:`deltajax.indices.point_kernel` runs per chain, named so that the Numba mirror's ``chain``
+    has a definition to agree with. Inputs finite and bounded (the caller guards the point with
+    :func:`deltajax.kinematics.safe_point`; a NaN point gives ``ok=False`` and NaN rows).
+    """
+    px, py, pz = chain_local(x, y, z, i)
+    dx = px + r - R  # (x + r) - R, as every kernel evaluates it
+    lc = loop_closure(dx, py, pz, L1, L2, lim, sign)
+    ux, uy, uz = loop_vectors(dx, py, pz, lc.cos, lc.sin, L1, L2)
+    return Chain(loop=lc, jx=jx_row(ux, uy, uz, i), d=jq_theta(ux, uz, lc.cos, lc.sin))
+
+
+class JacobianBlocks(NamedTuple):
+    """The kernel's Jacobian blocks at one point (scalars; see :func:`jacobian_blocks`).
+
+    Attributes:
+        ok: all three loops close within the joint limits.
+        det_jx: signed det Jx (:func:`jx_det`; 0 exactly: redundancy resolution skips the sample).
+        jx: the 9 entries of Jx, row-major (row i = unit forearm vector of chain i, base frame).
+        d: the 3 homogenised Jq entries (:func:`jq_theta`).
+        chains: the three :class:`~deltajax.kinematics.LoopClosure`.
+    """
+
+    ok: Bool[Array, ""]
+    det_jx: Float[Array, ""]
+    jx: tuple
+    d: tuple
+    chains: tuple
+
+
+def jacobian_blocks(x, y, z, R, r, L1, L2, lim: LimitTerms, sign: float = 1.0) -> JacobianBlocks:
+    """Jx, the homogenised Jq diagonal and det Jx at the base-frame point (x, y, z) (m) from the three
+    :func:`chain` s, unguarded (values meaningful where ``ok``): the point-to-blocks half of
+    :func:`deltajax.indices.point_kernel`, which guards the point first and masks the blocks before the
+    singular values."""
+    chains = [chain(x, y, z, R, r, L1, L2, lim, i, sign) for i in range(3)]
+    jx = chains[0].jx + chains[1].jx + chains[2].jx
+    return JacobianBlocks(ok=chains[0].loop.ok & chains[1].loop.ok & chains[2].loop.ok, det_jx=jx_det(*jx), jx=jx,
+                          d=tuple(c.d for c in chains), chains=tuple(c.loop for c in chains))
 
 
 class Jacobians(NamedTuple):

@@ -2,7 +2,8 @@
 
 Used by tests ("every backend agrees": JAX core, Numba mirror, this file) and by the benchmarks as the NumPy
 baseline. It mirrors the JAX decomposition name for name (:func:`loop_closure`, :func:`loop_vectors`,
-:func:`singular_values`, :func:`point_indices`) but is written independently: joint limits by comparing
+:func:`singular_values`, :func:`indices_from_sv`, :func:`point_indices`; the rows of
+:data:`deltajax.backends.KERNELS`) but is written independently: joint limits by comparing
 the angle itself (``arctan2``), Jx from the explicit rotation, singular values from ``numpy.linalg.svd`` of
 M = Jx^-1 diag(d) (no closed form), k~ from the paper's Eq. 15-17 written out.
 
@@ -15,8 +16,8 @@ import math
 
 import numpy as np
 
-__all__ = ["chain_local", "loop_closure", "loop_vectors", "jacobian_blocks", "singular_values", "k_tilde",
-           "point_indices", "INDEX_NAMES"]
+__all__ = ["chain_local", "loop_closure", "loop_vectors", "jacobian_blocks", "singular_values", "sigma_tilde",
+           "k_tilde", "indices_from_sv", "point_indices", "INDEX_NAMES"]
 
 INDEX_NAMES = ("inv_cond", "sigma_min_v", "sigma_min_f", "omega_v", "omega_f", "k_tilde", "manipulability",
                "imi")
@@ -84,14 +85,19 @@ def singular_values(Jx: np.ndarray, d: np.ndarray) -> np.ndarray:
     return out
 
 
-def _sigma_tilde(s, a, b):
-    return np.where(s <= a, 1.0 - ((s - a) / a) ** 2, np.where(s <= b, 1.0 - ((s - a) / (b - a)) ** 2, 0.0))
+def sigma_tilde(s, a, b):
+    """The paper's piecewise quadratic (Eq. 16-17): 1 - ((s - a) / a)^2 up to a, 1 - ((s - a) / (b - a))^2 up to
+    b, 0 above; NaN stays NaN."""
+    s = np.asarray(s, np.float64)
+    with np.errstate(over="ignore", invalid="ignore"):
+        v = np.where(s <= a, 1.0 - ((s - a) / a) ** 2, np.where(s <= b, 1.0 - ((s - a) / (b - a)) ** 2, 0.0))
+    return np.where(np.isnan(s), np.nan, v)  # NaN compares False: it would score 0 (a number) otherwise
 
 
 def k_tilde(sigma_min_v, sigma_min_f, b_v=2.0, b_f=4.2, beta=0.5):
     """k~ = s~_v(sigma_min_v) s~_f(sigma_min_f), a_v = beta b_v, a_f = (1 - beta) b_f (paper Eq. 15-17)."""
     with np.errstate(invalid="ignore"):
-        return _sigma_tilde(sigma_min_v, beta * b_v, b_v) * _sigma_tilde(sigma_min_f, (1 - beta) * b_f, b_f)
+        return sigma_tilde(sigma_min_v, beta * b_v, b_v) * sigma_tilde(sigma_min_f, (1 - beta) * b_f, b_f)
 
 
 def point_indices(R, r, L1, L2, theta_min, theta_max, p, *, b_v=2.0, b_f=4.2, beta=0.5, sign=1.0) -> dict:
@@ -105,11 +111,17 @@ def point_indices(R, r, L1, L2, theta_min, theta_max, p, *, b_v=2.0, b_f=4.2, be
     Jx, d = jacobian_blocks(ux, uy, uz, c, s)
     sv = singular_values(np.where(ok[:, None, None], Jx, np.eye(3)), np.where(ok[:, None], d, 1.0))
     sv[~ok] = np.nan
+    return {"ok": ok, "cos": c, "sin": s, "singular_values": sv,
+            **indices_from_sv(sv, L1 ** 3, b_v=b_v, b_f=b_f, beta=beta)}
+
+
+def indices_from_sv(sv, raw_scale, *, b_v=2.0, b_f=4.2, beta=0.5) -> dict:
+    """Every index of :data:`INDEX_NAMES` (dict of (n,) arrays) from singular values ``sv`` (n, 3), descending,
+    of the homogenised matrix; ``raw_scale`` = L1^3 (homogenised -> raw manipulability). NaN in, NaN out."""
+    sv = np.asarray(sv, np.float64).reshape(-1, 3)
     s1, s2, s3 = sv[:, 0], sv[:, 1], sv[:, 2]
     with np.errstate(divide="ignore", invalid="ignore"):
         ov = s1 * s2 * s3
-        out = {"ok": ok, "cos": c, "sin": s, "singular_values": sv, "inv_cond": s3 / s1, "sigma_min_v": s3,
-               "sigma_min_f": 1.0 / s1, "omega_v": ov, "omega_f": 1.0 / ov,
-               "k_tilde": k_tilde(s3, 1.0 / s1, b_v, b_f, beta), "manipulability": ov * L1 ** 3,
-               "imi": 1.0 / (ov * L1 ** 3)}
-    return out
+        return {"inv_cond": s3 / s1, "sigma_min_v": s3, "sigma_min_f": 1.0 / s1, "omega_v": ov, "omega_f": 1.0 / ov,
+                "k_tilde": k_tilde(s3, 1.0 / s1, b_v, b_f, beta), "manipulability": ov * raw_scale,
+                "imi": 1.0 / (ov * raw_scale)}

@@ -18,7 +18,7 @@ import numba as nb
 import numpy as np
 
 from .numba_kernel import (CA0, CA1, CA2, CRITERION, CUBIC, FAST, INLINE, JACOBI, N_IDX, OPTS, SA0, SA1, SA2,
-                         SV_METHODS, as_tuple4, ik_ok, ik_ok_all, kt_tuple, limits_tuple, point_indices, point_value)
+                         SV_METHODS, as_tuple4, ik_ok, ik_ok_all, kt_tuple, limits_tuple, point_kernel, point_value)
 from .numba_screen import resolve_screened, screen_audit, screen_window, tcubic, tcubic2
 
 __all__ = ["N_IDX", "CRITERION", "SV_METHODS", "JACOBI", "FAST", "limits_tuple", "kt_tuple", "fixed_fields",
@@ -111,7 +111,7 @@ def fixed_fields_dense(x, y, z, R, r, L1, L2, lim, kt, out, ok, method=JACOBI):
 @nb.njit(**INLINE)
 def _fields_loop(x, y, z, R, r, L1, L2, lim, kt, out, ok, method):
     for j in range(x.shape[0]):
-        f, i0, i1, i2, i3, i4, i5, i6, i7 = point_indices(x[j], abs(y[j]), z[j], R, r, L1, L2, lim, kt, method)
+        f, i0, i1, i2, i3, i4, i5, i6, i7 = point_kernel(x[j], abs(y[j]), z[j], R, r, L1, L2, lim, kt, method)
         store_masked(out, j, f, i0, i1, i2, i3, i4, i5, i6, i7)
         ok[j] = f
 
@@ -123,7 +123,7 @@ def fields_at(x, y, z, ks, R_min, R_step, r, L1, L2, lim, kt, out):
     lim, kt = as_tuple4(lim), as_tuple4(kt)
     for j in range(x.shape[0]):
         k = ks[j]
-        f, i0, i1, i2, i3, i4, i5, i6, i7 = point_indices(x[j], abs(y[j]), z[j], R_min + max(k, 0) * R_step, r, L1,
+        f, i0, i1, i2, i3, i4, i5, i6, i7 = point_kernel(x[j], abs(y[j]), z[j], R_min + max(k, 0) * R_step, r, L1,
                                                           L2, lim, kt, JACOBI)
         store_masked(out, j, f & (k >= 0), i0, i1, i2, i3, i4, i5, i6, i7)
 

@@ -1,11 +1,12 @@
 """Numba mirror of the JAX point kernel: loop closure -> loop vectors -> Jacobian blocks -> singular values -> indices.
 
 One small scalar function per step of the core's decomposition (:mod:`deltajax.kinematics`,
-:mod:`deltajax.jacobian`, :mod:`deltajax.indices`), name for name, each tested against its JAX twin on random
-inputs (``tests/test_backends.py``). Every function takes and returns plain floats (no arrays, no allocation),
-is inlined into its caller by LLVM (:data:`INLINE`) and branch-free (selects, no early exit), so that a loop over
-points or R samples that calls them compiles to one straight-line body LLVM can vectorise. The drivers
-(:mod:`.numba_fields`) and the screen (:mod:`.numba_screen`) are built from these functions only: the loop-closure algebra
+:mod:`deltajax.jacobian`, :mod:`deltajax.indices`), name for name, each registered with its JAX definition in
+:data:`deltajax.backends.KERNELS` and checked against it by ``tests/test_backend_conformance.py``. Every function
+takes and returns plain floats (no arrays, no allocation), is inlined into its caller by LLVM (:data:`INLINE`)
+and branch-free (selects, no early exit), so that a loop over points or R samples that calls them compiles to
+one straight-line body LLVM can vectorise. The drivers (:mod:`.numba_fields`) and the screen
+(:mod:`.numba_screen`) are built from these functions only: the loop-closure algebra
 exists once in Numba.
 
 Conventions (SPEC §1): point P = (x, y, z) in the base frame (z down); chain i lies at angle alpha_i about z
@@ -31,7 +32,7 @@ from ..indices import INDEX_NAMES
 __all__ = ["OPTS", "INLINE", "N_IDX", "CRITERION", "JACOBI", "FAST", "CUBIC", "SV_METHODS", "limits_tuple", "kt_tuple",
            "as_tuple4", "chain_local", "loop_closure", "loop_vectors", "jx_row", "jq_theta", "jx_det", "chain",
            "chain_ok", "ik_ok_all", "ik_ok", "jacobian_blocks", "sv_matrix", "sym3_top2",
-           "singular_values_from_eig", "singular_values", "sigma_tilde", "indices_from_sv", "point_kernel",
+           "singular_values_from_eig", "singular_values", "sigma_tilde", "k_tilde", "indices_from_sv", "point_kernel",
            "criterion_of", "point_value"]
 
 def _drop_stale_cache() -> None:
@@ -419,6 +420,12 @@ def sigma_tilde(sig, a, b):
 
 
 @nb.njit(**INLINE)
+def k_tilde(sigma_min_v, sigma_min_f, kt):
+    """k~ = s~_v(sigma_min_v) s~_f(sigma_min_f) with ``kt`` = (a_v, b_v, a_f, b_f) (:func:`kt_tuple`)."""
+    return sigma_tilde(sigma_min_v, kt[0], kt[1]) * sigma_tilde(sigma_min_f, kt[2], kt[3])
+
+
+@nb.njit(**INLINE)
 def indices_from_sv(s1, s2, s3, raw_scale, kt):
     """All indices from the singular values, in :data:`deltajax.INDEX_NAMES` order (8 floats); ``kt`` =
     (a_v, b_v, a_f, b_f); ``raw_scale`` = L1^3 (homogenised -> raw manipulability)."""
@@ -427,7 +434,7 @@ def indices_from_sv(s1, s2, s3, raw_scale, kt):
     sigma_min_f = 1.0 / s1
     omega_f = 1.0 / omega_v
     return (s3 * sigma_min_f, s3, sigma_min_f, omega_v, omega_f,
-            sigma_tilde(s3, kt[0], kt[1]) * sigma_tilde(sigma_min_f, kt[2], kt[3]), manip,
+            k_tilde(s3, sigma_min_f, kt), manip,
             omega_f * (1.0 / raw_scale))
 
 
@@ -440,9 +447,6 @@ def point_kernel(x, y, z, R, r, L1, L2, lim, kt, method):
     s1, s2, s3 = singular_values(j00, j01, j02, j10, j11, j12, j20, j21, j22, d0, d1, d2, method)
     i0, i1, i2, i3, i4, i5, i6, i7 = indices_from_sv(s1, s2, s3, L1 * L1 * L1, kt)
     return ok & (det_s != 0.0), i0, i1, i2, i3, i4, i5, i6, i7
-
-
-point_indices = point_kernel  # the drivers' name
 
 
 @nb.njit(**INLINE)
