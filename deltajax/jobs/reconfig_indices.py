@@ -19,6 +19,7 @@ import numpy as np
 
 from ..config import ConfigError, paper_grid_from_config
 from ..indices import INDEX_NAMES
+from .stages import Runner, Stage, State
 
 __all__ = ["run", "STATS"]
 
@@ -26,12 +27,14 @@ STATS = ("min", "max", "mean")
 
 
 def run(ctx) -> None:
-    from .. import plots
-    from ..papers import FRANCO2026_INDEX_STATS as PAPER_TABLES
-    from ..workspace import fixed_workspace, redundancy_grid
-    from ..workspace.driver import computed_points, face_count
-    from ..workspace.redundancy import resolve_redundancy_host
+    """The paper's tables and Fig 8: settings read once, then the fixed robot's workspace (``odr``), R* over it
+    (``rdr``), the statistics against the paper (``store``), the Fig 8 planes (``slices``) and their figure."""
+    st = State(ctx=ctx, res=ctx.results, **_settings(ctx))
+    Runner(ctx, "reconfig_indices", resumable=False).run(STAGES, st)
 
+
+def _settings(ctx) -> dict:
+    """The job's settings from the config, checked (ConfigError, one line)."""
     cfg = ctx.cfg.experiment
     if ctx.recon is None:
         raise ConfigError("reconfig_indices needs a reconfigurable robot: robot.R_range is null")
@@ -55,44 +58,67 @@ def run(ctx) -> None:
     for n in store:
         if n not in INDEX_NAMES:
             raise ConfigError(f"experiment.store_fields: {n!r} is not one of {INDEX_NAMES}")
-    grid = paper_grid_from_config(cfg)
-    h = grid.h
-    chunk = int(cfg.get("chunk_points", 1 << 18))
-    ck = ctx.run_dir / "checkpoint" if cfg.get("checkpoint", True) else None
-    kw = dict(b_v=b_v, b_f=b_f, beta=beta)
+    return dict(cfg=cfg, beta=beta, b_v=b_v, b_f=b_f, criterion=criterion, mode=mode, slice_index=slice_index,
+                store=store, grid=paper_grid_from_config(cfg), chunk=int(cfg.get("chunk_points", 1 << 18)),
+                ck=ctx.run_dir / "checkpoint" if cfg.get("checkpoint", True) else None,
+                kw=dict(b_v=b_v, b_f=b_f, beta=beta), plots=bool(ctx.cfg.get("plots", True)))
 
-    t0 = time.perf_counter()
-    with ctx.progress(total=computed_points(grid), desc="ODR fields") as bar:
+
+def _odr(st: State) -> None:
+    """The fixed robot's workspace and indices on the grid (only the stored and sliced fields kept; statistics
+    accumulated chunk by chunk; checkpointed under ``<run_dir>/checkpoint/odr``)."""
+    from ..workspace import fixed_workspace
+    from ..workspace.driver import computed_points
+
+    st.t0 = time.perf_counter()
+    with st.ctx.progress(total=computed_points(st.grid), desc="ODR fields") as bar:
         # only the fields written below are kept on the grid; the statistics accumulate chunk by chunk
-        odr = fixed_workspace(ctx.robot, grid, fields=True, field_dtype=np.float32, chunk_size=1 << 20,
-                              keep=sorted(set(store) | {slice_index}), stats=True, progress=bar.update, checkpoint_dir=None if ck is None else ck / "odr", **kw)
-    t1 = time.perf_counter()
-    work: dict = {}
-    with ctx.progress(total=computed_points(grid, mode == "fast"), desc=f"RDR R* ({mode})") as bar:
-        rdr = redundancy_grid(ctx.recon, grid, mask=odr.ok, criterion=criterion, mode=mode, field_dtype=np.float32,
-                              chunk_size=chunk, keep=["R_star", *store], stats=True, R_dtype=np.float32,
-                              progress=bar.update, work=work,
-                              checkpoint_dir=None if ck is None else ck / f"rdr_{mode}", **kw)
-    t2 = time.perf_counter()
-    s_odr = odr.stats
-    s_rdr = rdr.stats  # over the ODR workspace: the mask of the redundancy job
-    t3 = time.perf_counter()
+        st.odr = fixed_workspace(st.ctx.robot, st.grid, fields=True, field_dtype=np.float32, chunk_size=1 << 20,
+                                 keep=sorted(set(st.store) | {st.slice_index}), stats=True, progress=bar.update,
+                                 checkpoint_dir=None if st.ck is None else st.ck / "odr", **st.kw)
+    st.t1 = time.perf_counter()
 
-    res = ctx.results
+
+def _rdr(st: State) -> None:
+    """R* (the sample maximising ``experiment.criterion``) over the fixed robot's workspace, and the indices there;
+    the statistics of both robots over that workspace."""
+    from ..workspace import redundancy_grid
+    from ..workspace.driver import computed_points
+
+    st.work = {}
+    with st.ctx.progress(total=computed_points(st.grid, st.mode == "fast"), desc=f"RDR R* ({st.mode})") as bar:
+        st.rdr = redundancy_grid(st.ctx.recon, st.grid, mask=st.odr.ok, criterion=st.criterion, mode=st.mode,
+                                 field_dtype=np.float32, chunk_size=st.chunk, keep=["R_star", *st.store], stats=True,
+                                 R_dtype=np.float32, progress=bar.update, work=st.work,
+                                 checkpoint_dir=None if st.ck is None else st.ck / f"rdr_{st.mode}", **st.kw)
+    st.t2 = time.perf_counter()
+    st.s_odr = st.odr.stats
+    st.s_rdr = st.rdr.stats  # over the ODR workspace: the mask of the redundancy job
+    st.t3 = time.perf_counter()
+
+
+def _store(st: State) -> None:
+    """Group ``workspace``: the fields, the statistics table of both robots and the paper's (NaN where it has no
+    value), the workspace's count and its points on the box faces (warned: the statistics then miss part of
+    it); the table logged against the paper."""
+    from ..papers import FRANCO2026_INDEX_STATS as PAPER_TABLES
+    from ..workspace.driver import face_count
+
+    ctx, res, grid, odr, rdr, s_odr, s_rdr = st.ctx, st.res, st.grid, st.odr, st.rdr, st.s_odr, st.s_rdr
     g = "workspace"
     for name, ax in (("x", grid.x), ("y", grid.y), ("z", grid.z)):
         res.put_axis(g, name, ax, units="m")
     res.put(g, "reachable_fixed", odr.ok.astype(np.uint8), units="1", dims=("x", "y", "z"))
     res.put(g, "R_star", rdr.fields["R_star"].astype(np.float32, copy=False), units="m", dims=("x", "y", "z"))
-    for n in store:
+    for n in st.store:
         res.put(g, f"{n}_rdr", rdr.fields[n], units="1", dims=("x", "y", "z"))
         res.put(g, f"{n}_odr", odr.fields[n], units="1", dims=("x", "y", "z"))
     res.put_axis(g, "robot", np.array(["RDR", "ODR"], dtype=object), units="1")
     res.put_axis(g, "index", np.array(list(INDEX_NAMES), dtype=object), units="1")
     res.put_axis(g, "stat", np.array(list(STATS), dtype=object), units="1")
-    table = np.array([[[s[n][st] for st in STATS] for n in INDEX_NAMES] for s in (s_rdr, s_odr)])
+    table = np.array([[[s[n][st_] for st_ in STATS] for n in INDEX_NAMES] for s in (s_rdr, s_odr)])
     res.put(g, "stats", table, units="1", dims=("robot", "index", "stat"))
-    paper = PAPER_TABLES.get(beta)
+    paper = PAPER_TABLES.get(st.beta)
     ptab = np.full_like(table, np.nan)
     if paper is not None:
         for r, rob in enumerate(("RDR", "ODR")):
@@ -107,37 +133,60 @@ def run(ctx) -> None:
     if faces:
         ctx.log(f"WARNING: {faces} points of the fixed robot's workspace lie on the faces of the grid box: the "
                 f"statistics cover only the part inside the box")
-    res.set_attrs(g, beta=beta, b_v=b_v, b_f=b_f, criterion=criterion, mode=mode, h=h,
+    t0, t1, t2, t3 = st.t0, st.t1, st.t2, st.t3
+    res.set_attrs(g, beta=st.beta, b_v=st.b_v, b_f=st.b_f, criterion=st.criterion, mode=st.mode, h=grid.h,
                   time_odr_s=t1 - t0, time_rdr_s=t2 - t1, time_stats_s=t3 - t2,
-                  rdr_ik_tests=work.get("samples", 0), rdr_full_kernels=work.get("full", 0))
-    ctx.log(f"ODR {t1 - t0:.1f} s, RDR {t2 - t1:.1f} s ({work}), stats {t3 - t2:.1f} s")
+                  rdr_ik_tests=st.work.get("samples", 0), rdr_full_kernels=st.work.get("full", 0))
+    ctx.log(f"ODR {t1 - t0:.1f} s, RDR {t2 - t1:.1f} s ({st.work}), stats {t3 - t2:.1f} s")
     for n in ("inv_cond", "omega_v", "omega_f", "sigma_min_v", "sigma_min_f", "k_tilde"):
         for rob, s in (("RDR", s_rdr), ("ODR", s_odr)):
             p = "" if paper is None or n not in paper[rob] else f"   paper {paper[rob][n]}"
             ctx.log(f"{n:12s} {rob}: min {s[n]['min']:.6g} max {s[n]['max']:.6g} mean {s[n]['mean']:.6g}{p}")
 
-    # Fig 8: whole planes (the RDR reaches beyond the ODR workspace)
-    zs = [float(v) for v in cfg.get("slices_z", [0.3, 0.4, 0.5])]
-    kz = [int(np.argmin(np.abs(grid.z - v))) for v in zs]
+
+def _slices(st: State) -> None:
+    """Fig 8's data, group ``workspace/slices``: ``experiment.slice_index`` and R* on whole planes z (the RDR
+    solved on the whole plane: it reaches beyond the ODR workspace) beside the fixed robot's."""
+    from ..workspace.redundancy import resolve_redundancy_host
+
+    ctx, res, grid = st.ctx, st.res, st.grid
+    zs = [float(v) for v in st.cfg.get("slices_z", [0.3, 0.4, 0.5])]
+    st.kz = kz = [int(np.argmin(np.abs(grid.z - v))) for v in zs]
     nx, ny, _ = grid.shape
     X, Y = np.meshgrid(grid.x, grid.y, indexing="ij")
-    sl_rdr, sl_odr, sl_R = [], [], []
-    col = INDEX_NAMES.index(slice_index)
+    st.sl_rdr, st.sl_odr, sl_R = [], [], []
+    col = INDEX_NAMES.index(st.slice_index)
     for k in ctx.progress(kz, total=len(kz), desc="Fig 8 planes (RDR R*)"):
         pts = np.stack([X.ravel(), Y.ravel(), np.full(X.size, grid.z[k])], axis=-1)
-        red, _ = resolve_redundancy_host(ctx.recon, pts, criterion, mode="fast", **kw)
-        sl_rdr.append(red.indices[:, col].reshape(nx, ny))
+        red, _ = resolve_redundancy_host(ctx.recon, pts, st.criterion, mode="fast", **st.kw)
+        st.sl_rdr.append(red.indices[:, col].reshape(nx, ny))
         sl_R.append(red.R.reshape(nx, ny))
-        sl_odr.append(odr.fields[slice_index][:, :, k].astype(np.float64))
-    gs = f"{g}/slices"
+        st.sl_odr.append(st.odr.fields[st.slice_index][:, :, k].astype(np.float64))
+    gs = "workspace/slices"
     res.put_axis(gs, "x", grid.x, units="m")
     res.put_axis(gs, "y", grid.y, units="m")
     res.put_axis(gs, "z", grid.z[kz], units="m")
-    res.put(gs, f"{slice_index}_rdr", np.stack(sl_rdr, -1), units="1", dims=("x", "y", "z"))
-    res.put(gs, f"{slice_index}_odr", np.stack(sl_odr, -1), units="1", dims=("x", "y", "z"))
+    res.put(gs, f"{st.slice_index}_rdr", np.stack(st.sl_rdr, -1), units="1", dims=("x", "y", "z"))
+    res.put(gs, f"{st.slice_index}_odr", np.stack(st.sl_odr, -1), units="1", dims=("x", "y", "z"))
     res.put(gs, "R_star", np.stack(sl_R, -1), units="m", dims=("x", "y", "z"))
-    if ctx.cfg.get("plots", True):
-        fig = plots.index_slices(grid.x, grid.y, grid.z[kz], {"RDR (R* by " + criterion + ")": sl_rdr,
-                                                              f"ODR (R = {float(ctx.robot.base_radius):.3f} m)": sl_odr},
-                                 label=slice_index, units="1")
-        ctx.savefig(fig, f"fig8_{slice_index}_slices")
+
+
+def _plots(st: State) -> None:
+    """Figure ``fig8_<index>_slices``: the slices of both robots."""
+    from .. import plots
+
+    grid = st.grid
+    fig = plots.index_slices(grid.x, grid.y, grid.z[st.kz],
+                             {"RDR (R* by " + st.criterion + ")": st.sl_rdr,
+                              f"ODR (R = {float(st.ctx.robot.base_radius):.3f} m)": st.sl_odr},
+                             label=st.slice_index, units="1")
+    st.ctx.savefig(fig, f"fig8_{st.slice_index}_slices")
+
+
+STAGES = (
+    Stage("odr", _odr),
+    Stage("rdr", _rdr),
+    Stage("store", _store),
+    Stage("slices", _slices),
+    Stage("plots", _plots, when=lambda st: st.plots),
+)

@@ -27,6 +27,7 @@ finite value, and the scalars ``count``, ``volume`` (count h^3), ``volume_box`` 
 
 from __future__ import annotations
 
+import functools
 import importlib.util
 import json
 import os
@@ -37,6 +38,7 @@ import numpy as np
 
 from ..config import ConfigError, workspace_grid_from_config
 from ..rundir import CheckpointError, RunDirError
+from .stages import Runner, Stage, State
 
 from ..workspace.evaluators import (make_evaluator, make_grid_evaluator,  # (the job's kernels; also benchmarked)
                                 make_numba_evaluator)
@@ -74,6 +76,15 @@ def _int(cfg, key: str, field: str, lo: int = None) -> int:
 
 
 def run(ctx) -> None:
+    """The grid job: its settings read and checked once, then its stages: ``grid`` (this shard's chunks on the
+    chunk engine, checkpointed into and resumed from results.h5), ``store`` (results and summary) and ``plots``."""
+    st = State(ctx=ctx, **_settings(ctx))
+    Runner(ctx, "workspace_grid", resumable=False).run(STAGES, st)
+
+
+def _settings(ctx) -> dict:
+    """The job's settings, plan and resume key from the config (raises ConfigError / RunDirError, one line),
+    and the arrays the chunks fill (this shard's x-planes)."""
     import jax
 
     from ..workspace import FIELD_NAMES
@@ -99,7 +110,6 @@ def run(ctx) -> None:
     params = {k: float(ex.get(k)) for k in ("b_v", "b_f", "beta")}
     plan = GridPlan(grid.shape, chunk_points, n_dev, shard, n_shards)
     nx, ny, nz = grid.shape
-    xs = slice(plan.x_start, plan.x_stop)
     n_local = plan.x_stop - plan.x_start
     n_idx = len(FIELD_NAMES)
     dtype = np.dtype(ctx.dtype)
@@ -126,113 +136,153 @@ def run(ctx) -> None:
     if ctx.results.path.exists() and not ex.get("resume", True):
         raise RunDirError(f"{ctx.results.path} exists and experiment.resume=false: add fresh=true to start over, "
                           f"or choose another hydra.run.dir")
-    x_faces = (plan.x_start == 0, plan.x_stop == nx)
+    return dict(ex=ex, grid=grid, shard=shard, n_shards=n_shards, store=store, n_dev=n_dev, params=params, plan=plan,
+                n_local=n_local, n_idx=n_idx, dtype=dtype, backend=backend, key=key, reach=reach, fields=fields,
+                planes=planes, arrays={"reachable": reach, **fields, **planes},
+                x_faces=(plan.x_start == 0, plan.x_stop == nx), plots=bool(cfg.get("plots", True)))
 
-    def stage(planes_done: int) -> None:
-        r = ctx.results
-        r.put_axis(GROUP, "x", grid.x[xs], units="m")
-        r.put_axis(GROUP, "y", grid.y, units="m")
-        r.put_axis(GROUP, "z", grid.z, units="m")
-        r.put_axis(GROUP, "index", np.asarray(FIELD_NAMES, dtype=object), units="1")
-        r.put(GROUP, "reachable", reach, units="1", dims=("x", "y", "z"),
-              attrs={"description": "IK solvable for all chains with theta within limits"})
-        for name in store:
-            r.put(GROUP, name, fields[name], units="1", dims=("x", "y", "z"),
-                  attrs={"description": f"{name} (theta3x3, homogenised by L1); NaN outside the workspace"})
-        r.put(GROUP, "plane_count", planes["plane_count"], units="1", dims=("x",))
-        r.put(GROUP, "plane_face_count", planes["plane_face_count"], units="1", dims=("x",),
-              attrs={"description": "reachable points of the x-plane on the y and z faces of the grid box"})
-        for k in ("plane_n", "plane_sum", "plane_min", "plane_max"):
-            r.put(GROUP, k, planes[k], units="1", dims=("x", "index"))
-        for k, v in plane_summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume, x_faces).items():
-            r.put(GROUP, k, v, units={"count": "1", "volume": "m^3", "volume_box": "m^3"}.get(k, "1"), dims=())
-        r.set_attrs(GROUP, shard_axis="x", shard=shard, n_shards=n_shards, shard_start=plan.x_start,
-                    shard_stop=plan.x_stop, shard_axis_size=nx, shard_reduce=REDUCER, planes_done=planes_done,
-                    complete=int(planes_done == n_local), resume_key=key, h=grid.h, n_points=grid.n_points,
-                    box_volume=grid.box_volume, b_v=params["b_v"], b_f=params["b_f"], beta=params["beta"],
-                    chunk_planes=plan.planes_per_chunk,
-                    resume_seal=seal(key, planes_done, plan.x_start, plan.x_stop),
-                    description="fixed-R workspace grid: reachability, indices and their statistics")
 
-    def check(data, done: int) -> str:
-        counts = data["reachable"][:done].reshape(done, -1).sum(axis=1, dtype=np.int64)
-        return "" if np.array_equal(counts, data["plane_count"][:done]) else \
-            "plane_count does not match the reachable mask"
+def _store_grid(st: State, planes_done: int) -> None:
+    """Stage this shard's arrays, statistics and attributes into the results (the chunk engine's checkpoint
+    writer too): ``planes_done`` x-planes of ``st.n_local`` are finished."""
+    from ..workspace import FIELD_NAMES
 
-    arrays = {"reachable": reach, **fields, **planes}
-    checkpoint = ResultsCheckpoint(ctx.results, GROUP, arrays, key, (plan.x_start, plan.x_stop), stage, check,
-                                   done_attr="planes_done",
+    r, grid, plan, planes, params = st.ctx.results, st.grid, st.plan, st.planes, st.params
+    r.put_axis(GROUP, "x", grid.x[plan.x_start:plan.x_stop], units="m")
+    r.put_axis(GROUP, "y", grid.y, units="m")
+    r.put_axis(GROUP, "z", grid.z, units="m")
+    r.put_axis(GROUP, "index", np.asarray(FIELD_NAMES, dtype=object), units="1")
+    r.put(GROUP, "reachable", st.reach, units="1", dims=("x", "y", "z"),
+          attrs={"description": "IK solvable for all chains with theta within limits"})
+    for name in st.store:
+        r.put(GROUP, name, st.fields[name], units="1", dims=("x", "y", "z"),
+              attrs={"description": f"{name} (theta3x3, homogenised by L1); NaN outside the workspace"})
+    r.put(GROUP, "plane_count", planes["plane_count"], units="1", dims=("x",))
+    r.put(GROUP, "plane_face_count", planes["plane_face_count"], units="1", dims=("x",),
+          attrs={"description": "reachable points of the x-plane on the y and z faces of the grid box"})
+    for k in ("plane_n", "plane_sum", "plane_min", "plane_max"):
+        r.put(GROUP, k, planes[k], units="1", dims=("x", "index"))
+    for k, v in plane_summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume, st.x_faces).items():
+        r.put(GROUP, k, v, units={"count": "1", "volume": "m^3", "volume_box": "m^3"}.get(k, "1"), dims=())
+    r.set_attrs(GROUP, shard_axis="x", shard=st.shard, n_shards=st.n_shards, shard_start=plan.x_start,
+                shard_stop=plan.x_stop, shard_axis_size=grid.shape[0], shard_reduce=REDUCER,
+                planes_done=planes_done, complete=int(planes_done == st.n_local), resume_key=st.key, h=grid.h,
+                n_points=grid.n_points, box_volume=grid.box_volume, b_v=params["b_v"], b_f=params["b_f"],
+                beta=params["beta"], chunk_planes=plan.planes_per_chunk,
+                resume_seal=seal(st.key, planes_done, plan.x_start, plan.x_stop),
+                description="fixed-R workspace grid: reachability, indices and their statistics")
+
+
+def _check(data, done: int) -> str:
+    """Why a checkpoint's first ``done`` x-planes are inconsistent ("" when they are not)."""
+    counts = data["reachable"][:done].reshape(done, -1).sum(axis=1, dtype=np.int64)
+    return "" if np.array_equal(counts, data["plane_count"][:done]) else \
+        "plane_count does not match the reachable mask"
+
+
+def _chunk(st: State, la: int, lb: int) -> dict:
+    """One chunk: this shard's x-planes ``la:lb`` evaluated, as the arrays the chunk engine stores (and times the
+    first chunk, which includes compilation)."""
+    from ..workspace import FIELD_NAMES
+
+    plan, timing, (_, ny, nz) = st.plan, st.timing, st.grid.shape
+    a, b = plan.x_start + la, plan.x_start + lb  # global x-planes of this chunk
+    n = (b - a) * plan.plane
+    ok, vals = st.evaluate(st.ctx.robot, a, b)  # both backends: the planes' rows first (the JAX path pads after)
+    ok = np.asarray(ok)[:n].reshape(b - a, plan.plane)
+    vals = np.asarray(vals)[:n].reshape(b - a, plan.plane, st.n_idx).astype(st.dtype, copy=False)
+    timing["n_eval"] += n
+    if timing["first_s"] is None:
+        timing["first_s"], timing["n_first"] = time.perf_counter() - st.t0, n
+    okp = ok.reshape(b - a, ny, nz)
+    out = {"reachable": okp, **plane_statistics(ok, vals)}
+    out.update({name: vals[..., FIELD_NAMES.index(name)].reshape(b - a, ny, nz) for name in st.store})
+    out["plane_face_count"] = (okp.sum(axis=(1, 2)) - okp[:, 1:-1, 1:-1].sum(axis=(1, 2))
+                               if min(ny, nz) > 2 else okp.sum(axis=(1, 2)))
+    return out
+
+
+def _grid(st: State) -> None:
+    """Every chunk of this shard on the chunk engine (:func:`deltajax.workspace.chunks.run_chunks`), checkpointed
+    into results.h5 every ``experiment.checkpoint_s`` seconds and resumed from it; ``experiment.stop_after``
+    stops after that many chunks as if killed (the run is then incomplete). Hands on ``done`` (x-planes) and the
+    evaluation rate (points/s after the first chunk)."""
+    ctx, ex, plan, grid = st.ctx, st.ex, st.plan, st.grid
+    checkpoint = ResultsCheckpoint(ctx.results, GROUP, st.arrays, st.key, (plan.x_start, plan.x_stop),
+                                   functools.partial(_store_grid, st), _check, done_attr="planes_done",
                                    remedy="move it away to keep it, or add fresh=true to start over")
-    if backend == "jax":
-        evaluate = make_grid_evaluator(grid, n_dev, planes=plan.planes_per_chunk, dtype=dtype, **params)
+    if st.backend == "jax":
+        st.evaluate = make_grid_evaluator(grid, st.n_dev, planes=plan.planes_per_chunk, dtype=st.dtype, **st.params)
     else:
-        evaluate = make_numba_evaluator(grid, **params)
-    robot = ctx.robot
-    ctx.log(f"workspace_grid: grid {nx}x{ny}x{nz} = {grid.n_points} points, shard {shard}/{n_shards} "
+        st.evaluate = make_numba_evaluator(grid, **st.params)
+    nx, ny, nz = grid.shape
+    ctx.log(f"workspace_grid: grid {nx}x{ny}x{nz} = {grid.n_points} points, shard {st.shard}/{st.n_shards} "
             f"x[{plan.x_start}:{plan.x_stop}], {plan.chunk1 - plan.chunk0} chunks of {plan.planes_per_chunk} "
-            f"planes, " + (f"JAX on {n_dev} device(s)" if backend == "jax" else
+            f"planes, " + (f"JAX on {st.n_dev} device(s)" if st.backend == "jax" else
                            f"Numba on {os.environ.get('NUMBA_NUM_THREADS', 'all')} thread(s)"))
-    t0 = time.perf_counter()
-    timing = {"n_eval": 0, "first_s": None, "n_first": 0}  # the first chunk includes compilation: timed apart
-
-    def compute(la: int, lb: int) -> dict:
-        a, b = plan.x_start + la, plan.x_start + lb  # global x-planes of this chunk
-        n = (b - a) * plan.plane
-        ok, vals = evaluate(robot, a, b)  # both backends: the planes' rows first (the JAX path pads after them)
-        ok = np.asarray(ok)[:n].reshape(b - a, plan.plane)
-        vals = np.asarray(vals)[:n].reshape(b - a, plan.plane, n_idx).astype(dtype, copy=False)
-        timing["n_eval"] += n
-        if timing["first_s"] is None:
-            timing["first_s"], timing["n_first"] = time.perf_counter() - t0, n
-        okp = ok.reshape(b - a, ny, nz)
-        out = {"reachable": okp, **plane_statistics(ok, vals)}
-        out.update({name: vals[..., FIELD_NAMES.index(name)].reshape(b - a, ny, nz) for name in store})
-        out["plane_face_count"] = (okp.sum(axis=(1, 2)) - okp[:, 1:-1, 1:-1].sum(axis=(1, 2))
-                                   if min(ny, nz) > 2 else okp.sum(axis=(1, 2)))
-        return out
-
+    st.t0 = time.perf_counter()
+    st.timing = {"n_eval": 0, "first_s": None, "n_first": 0}  # the first chunk includes compilation: timed apart
     stop_after = ex.get("stop_after")  # stop as if killed after this many chunks (tests the resume path)
     progress = {"done": 0}
-    with ctx.progress(total=n_local, desc="workspace_grid x-planes") as bar:
+    with ctx.progress(total=st.n_local, desc="workspace_grid x-planes") as bar:
         def advance(n: int) -> None:
-            if progress["done"] == 0 and n and timing["first_s"] is None:
+            if progress["done"] == 0 and n and st.timing["first_s"] is None:
                 ctx.log(f"resuming: {n} x-planes already done")
             progress["done"] += n
             bar.update(n)
 
         try:
-            run_chunks(n_local, plan.planes_per_chunk, compute, {n: (a.dtype, None) for n, a in arrays.items()},
-                       checkpoint=checkpoint, checkpoint_every_s=float(ex.get("checkpoint_s", 60.0)),
-                       progress=advance, max_chunks=None if stop_after is None else int(stop_after))
+            run_chunks(st.n_local, plan.planes_per_chunk, functools.partial(_chunk, st),
+                       {n: (a.dtype, None) for n, a in st.arrays.items()}, checkpoint=checkpoint,
+                       checkpoint_every_s=float(ex.get("checkpoint_s", 60.0)), progress=advance,
+                       max_chunks=None if stop_after is None else int(stop_after))
         except CheckpointMismatch as e:
             raise CheckpointError(str(e)) from None
-    done = progress["done"]  # planes of this shard finished
-    n_eval, first_chunk_s, n_first = timing["n_eval"], timing["first_s"], timing["n_first"]
-    elapsed = time.perf_counter() - t0
-    stage(done)
+    st.done = progress["done"]  # planes of this shard finished
+    elapsed = time.perf_counter() - st.t0
+    n_eval, first_chunk_s, n_first = st.timing["n_eval"], st.timing["first_s"], st.timing["n_first"]
     warm_s, warm_n = elapsed - (first_chunk_s or 0.0), n_eval - n_first
     if warm_n == 0:  # a single chunk: its time includes compilation
         warm_s, warm_n = elapsed, n_eval
-    rate = warm_n / warm_s if warm_s > 0 else 0.0
+    st.rate = warm_n / warm_s if warm_s > 0 else 0.0
+
+
+def _store(st: State) -> None:
+    """The shard's results and the run's evaluation figures; a stopped run (``experiment.stop_after``) is marked
+    incomplete (resumable)."""
+    from ..workspace import FIELD_NAMES
+
+    ctx, grid, plan, done, first_chunk_s = st.ctx, st.grid, st.plan, st.done, st.timing["first_s"]
+    _store_grid(st, done)
     # points_evaluated: the work of the whole run (every finished x-plane, those of the processes before a resume
     # included: what an uninterrupted run reports); the rate is this process's
-    ctx.results.set_attrs(points_evaluated=done * plan.plane, points_evaluated_this_process=n_eval,
-                          points_per_s=rate, first_chunk_s=first_chunk_s or 0.0,
-                          devices_used=n_dev if backend == "jax" else 0, backend=backend,
+    ctx.results.set_attrs(points_evaluated=done * plan.plane, points_evaluated_this_process=st.timing["n_eval"],
+                          points_per_s=st.rate, first_chunk_s=first_chunk_s or 0.0,
+                          devices_used=st.n_dev if st.backend == "jax" else 0, backend=st.backend,
                           worker_env=os.environ.get("DELTAJAX_WORKER_ENV", ""))
-    s = plane_summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume, x_faces)
+    s = plane_summary(st.planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume, st.x_faces)
     if int(s["face_count"]):
         ctx.log(f"WARNING: {int(s['face_count'])} reachable points lie on the faces of the grid box: the workspace "
                 f"continues outside it, so the volume below is a lower bound (widen experiment.grid.x/y/z, or set "
                 f"them to null to size the box from the robot's reach bound)")
-    if done < n_local:
+    if done < st.n_local:
         ctx.complete = False
-        ctx.log(f"stopped after {done} of {n_local} x-planes (experiment.stop_after): rerun into {ctx.run_dir} "
+        ctx.log(f"stopped after {done} of {st.n_local} x-planes (experiment.stop_after): rerun into {ctx.run_dir} "
                 f"to resume")
-    ctx.log(f"shard {shard}/{n_shards}: {int(s['count'])} reachable points, volume {float(s['volume']):.6g} m^3 "
-            f"(count h^3), {float(s['volume_box']):.6g} m^3 (count/N V_box); "
-            f"{rate / 1e6:.2f} M points/s after the first chunk ({first_chunk_s or 0.0:.1f} s with compilation)")
-    if cfg.get("plots", True) and n_shards == 1:
-        from .. import plots
+    ctx.log(f"shard {st.shard}/{st.n_shards}: {int(s['count'])} reachable points, volume {float(s['volume']):.6g} "
+            f"m^3 (count h^3), {float(s['volume_box']):.6g} m^3 (count/N V_box); "
+            f"{st.rate / 1e6:.2f} M points/s after the first chunk ({first_chunk_s or 0.0:.1f} s with compilation)")
 
-        ctx.savefig(plots.workspace_grid(grid, reach), "workspace_grid")
+
+def _plots(st: State) -> None:
+    """The reachable set's figure (a single run only: a shard holds part of the grid)."""
+    from .. import plots
+
+    st.ctx.savefig(plots.workspace_grid(st.grid, st.reach), "workspace_grid")
+
+
+STAGES = (
+    Stage("grid", _grid),
+    Stage("store", _store),
+    Stage("plots", _plots, when=lambda st: st.plots and st.n_shards == 1),
+)
