@@ -34,10 +34,10 @@ import math
 import os
 import shutil
 from pathlib import Path
-from typing import Any, Mapping
+from typing import Any, Mapping, Optional
 
 __all__ = ["RunDirError", "CheckpointError", "RunDirectory", "claim", "config_differences", "describe_differences",
-           "MANIFEST", "LOCK", "NEUTRAL"]
+           "MANIFEST", "LOCK", "NEUTRAL", "recorded", "restage"]
 
 MANIFEST = "deltajax_run.json"
 LOCK = ".deltajax.lock"
@@ -269,3 +269,35 @@ def claim(path: os.PathLike, experiment: str, config: Mapping[str, Any], *, fres
         fcntl.flock(fd, fcntl.LOCK_UN)
         os.close(fd)
         raise
+
+
+# -- what a job recorded in its results file (the stage engine, deltajax.jobs.stages, writes it) ---------------
+
+def recorded(path: Path, job: str) -> tuple[Optional[str], list]:
+    """(fingerprint, finished stages) that job ``job`` recorded in the results file ``path``; (None, []) when
+    there is no file. Its attributes are verified against the file's integrity record first (raises
+    :class:`deltajax.io.ChecksumError`); raises OSError (with the path) when it exists but cannot be read."""
+    from .io import read
+
+    if not Path(path).exists():
+        return None, []
+    attrs = read(path, max_elements=0, verify=True).attrs
+    fp = str(attrs.get(f"{job}_fingerprint", "")) or None
+    return fp, [x for x in str(attrs.get(f"{job}_stages", "")).split(",") if x]
+
+
+def restage(res: Any, path: Path) -> None:
+    """Stage everything the results file ``path`` holds into ``res`` (a :class:`deltajax.io.ResultsFile`, so
+    that its next flush keeps it), verified first: data that does not match its checksums or the file's
+    integrity record is never re-staged (the next flush would write fresh checksums over it). Raises
+    :class:`deltajax.io.ChecksumError` (or OSError) then."""
+    from .io import read
+
+    contents = read(path, verify=True)
+    for k, v in contents.attrs.items():
+        if k not in ("start_time",):
+            res.attrs.setdefault(k, v)
+    for group, variables in contents.variables.items():
+        if group:
+            res.set_attrs(group, **contents.group_attrs[group])
+            res.put_variables(group, variables)

@@ -145,3 +145,19 @@ def test_imports_run_core_to_engines_to_application():
             if rank[_wing(target)] > rank[_wing(modname)]:
                 bad.append(f"{modname}:{line} ({_wing(modname)}) imports {target} ({_wing(target)})")
     assert not bad, "\n".join(bad)
+
+
+#: where the configuration is read: the settings builders (deltajax.config) and the run that hands their result to
+#: the job (deltajax.run); jobs and library read ``RunContext.settings``, never the config
+CONFIG_READERS = ("deltajax.config", "deltajax.run")
+
+
+def test_the_configuration_is_read_in_one_place():
+    bad = []
+    for f, modname in MODULES:
+        if modname.startswith(CONFIG_READERS):
+            continue
+        for n in ast.walk(ast.parse(f.read_text())):
+            if isinstance(n, ast.Attribute) and n.attr == "cfg":
+                bad.append(f"{modname}:{n.lineno} reads .cfg")
+    assert not bad, "\n".join(bad)

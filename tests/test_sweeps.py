@@ -19,7 +19,7 @@ from hypothesis import strategies as st
 
 from _sweep_helpers import assert_identical, cli, finish
 from deltajax.config import ConfigError
-from deltajax.jobs.workspace_grid import GridPlan
+from deltajax.config import grid_plan
 from deltajax.sweeps import ShardError, merge_shards, resolve_worker_cpus
 
 REPO = Path(__file__).resolve().parent.parent
@@ -179,9 +179,9 @@ def test_worker_cpus_sources():
 @given(nx=st.integers(1, 60), ny=st.integers(1, 9), nz=st.integers(1, 9), chunk=st.integers(1, 400),
        n_dev=st.integers(1, 4), data=st.data())
 def test_shards_partition_the_grid_on_chunk_boundaries(nx, ny, nz, chunk, n_dev, data):
-    n_chunks = GridPlan((nx, ny, nz), chunk, n_dev, 0, 1).n_chunks
+    n_chunks = grid_plan((nx, ny, nz), chunk, n_dev, 0, 1).n_chunks
     n_shards = data.draw(st.integers(1, n_chunks))
-    plans = [GridPlan((nx, ny, nz), chunk, n_dev, s, n_shards) for s in range(n_shards)]
+    plans = [grid_plan((nx, ny, nz), chunk, n_dev, s, n_shards) for s in range(n_shards)]
     assert plans[0].x_start == 0 and plans[-1].x_stop == nx
     for p, q in zip(plans, plans[1:]):
         assert p.x_stop == q.x_start and p.x_start < p.x_stop
@@ -192,9 +192,9 @@ def test_shards_partition_the_grid_on_chunk_boundaries(nx, ny, nz, chunk, n_dev,
 
 def test_bad_shard_settings_name_the_field():
     with pytest.raises(ConfigError, match="^shard must be in 0..1"):
-        GridPlan((9, 9, 7), 100, 1, 2, 2)
+        grid_plan((9, 9, 7), 100, 1, 2, 2)
     with pytest.raises(ConfigError, match="^n_shards must be in 1..9"):
-        GridPlan((9, 9, 7), 100, 1, 0, 10)
+        grid_plan((9, 9, 7), 100, 1, 0, 10)
 
 
 @pytest.mark.slow

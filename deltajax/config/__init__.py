@@ -18,6 +18,7 @@ __all__ = ["ConfigError", "robot_from_config", "mass_from_config", "validate_con
            "register_schemas", "TOP_LEVEL_KEYS",
            "EXPERIMENT_SETTINGS", "EXPERIMENT_SCHEMAS", "BenchKernelSettings",
            "PaperGridSettings", "IndicesExamplesSettings", "DatasheetSettings", "GaReconfigSettings", "source_run",
+           "WorkspaceGridSettings", "ReconfigIndicesSettings", "grid_plan",
            "GaReconfigSetup"]
 
 
@@ -170,25 +171,74 @@ def paper_grid_from_config(e: Mapping[str, Any], bytes_per_point: float = 1.0):
         raise ConfigError(f"experiment.h={h!r}: {err}") from None
 
 
-def _v_workspace_grid(e, cfg, robot, recon) -> None:
+@dataclasses.dataclass(frozen=True)
+class WorkspaceGridSettings:
+    """``experiment=workspace_grid``: the grid (m), this job's shard of ``n_shards``, points per chunk, the index
+    fields stored, the devices used (resolved), the k~ parameters, the backend (resolved: ``auto`` is Numba on a
+    CPU in float64, else JAX), resume/checkpoint/stop settings and what identifies the numbers for a resume
+    (``robot_key``, ``precision``)."""
+
+    grid: Any
+    shard: int
+    n_shards: int
+    chunk_points: int
+    store: tuple
+    n_dev: int
+    params: dict
+    backend: str
+    resume: bool
+    checkpoint_s: float
+    stop_after: Optional[int]
+    robot_key: dict
+    precision: str
+    plan: Any = None     # this shard's chunks of whole x-planes (:func:`grid_plan`)
+
+
+def grid_plan(shape, chunk_points: int, n_devices: int, shard: int, n_shards: int):
+    """The :class:`deltajax.workspace.chunks.ShardPlan` of a workspace grid job; its refusals are
+    :class:`ConfigError` (they name a setting)."""
+    from ..workspace.chunks import ShardPlan
+
+    try:
+        return ShardPlan(shape, chunk_points, n_devices, shard, n_shards)
+    except ValueError as e:
+        raise ConfigError(str(e)) from None
+
+
+def workspace_grid_settings(e, cfg, robot, recon) -> WorkspaceGridSettings:
+    import importlib.util
+
+    import jax
+
     from ..indices import INDEX_NAMES
 
     store = read_names("experiment.store", e.get("store"), INDEX_NAMES)
     itemsize = 8 if cfg.get("precision") == "float64" else 4
     # per point of this shard: the reachable mask (1 byte) and every stored index field
-    workspace_grid_from_config(e.get("grid") or {}, robot,
-                               bytes_per_point=(1 + itemsize * len(store)) / int(cfg.get("n_shards", 1) or 1))
-    read_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
-    read_field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True)
-    read_field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
-    read_field("experiment.chunk_points", e.get("chunk_points"), kind="int", lo=1)
-    read_choice("experiment.backend", e.get("backend", "auto"), ("auto", "jax", "numba"))
+    grid = workspace_grid_from_config(e.get("grid") or {}, robot,
+                                      bytes_per_point=(1 + itemsize * len(store)) / int(cfg.get("n_shards", 1) or 1))
+    params = dict(b_v=read_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True),
+                  b_f=read_field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True),
+                  beta=read_field("experiment.beta", e.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True))
+    chunk = read_field("experiment.chunk_points", e.get("chunk_points"), kind="int", lo=1)
+    backend = read_choice("experiment.backend", e.get("backend", "auto"), ("auto", "jax", "numba"))
     dev = e.get("devices", "all")
-    if dev not in ("all", None):
-        read_field("experiment.devices", dev, kind="int", lo=1)
-    read_field("experiment.checkpoint_s", e.get("checkpoint_s"), lo=0, unit="s")
-    read_field("experiment.resume", e.get("resume", True), kind="bool")
-    read_field("experiment.stop_after", e.get("stop_after"), kind="int", lo=1, none=True)
+    n_avail = jax.local_device_count()
+    n_dev = n_avail if dev in ("all", None) else read_field("experiment.devices", dev, kind="int", lo=1, hi=n_avail)
+    f64 = cfg.get("precision") == "float64"
+    if backend == "auto":  # what measures faster (experiments/bench_multidevice.py): Numba on CPU in float64
+        backend = "numba" if (jax.default_backend() == "cpu" and f64
+                              and importlib.util.find_spec("numba") is not None) else "jax"
+    elif backend == "numba" and not f64:
+        raise ConfigError("experiment.backend=numba computes in float64: use precision=float64 or backend=jax")
+    return WorkspaceGridSettings(
+        grid=grid, shard=int(cfg.get("shard", 0)), n_shards=int(cfg.get("n_shards", 1)), chunk_points=chunk,
+        store=tuple(store), n_dev=n_dev, params=params, backend=backend,
+        resume=read_field("experiment.resume", e.get("resume", True), kind="bool"),
+        checkpoint_s=read_field("experiment.checkpoint_s", e.get("checkpoint_s"), lo=0, unit="s"),
+        stop_after=read_field("experiment.stop_after", e.get("stop_after"), kind="int", lo=1, none=True),
+        robot_key={k: str(v) for k, v in cfg.get("robot").items()}, precision=str(cfg.get("precision")),
+        plan=grid_plan(grid.shape, chunk, n_dev, int(cfg.get("shard", 0)), int(cfg.get("n_shards", 1))))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -211,22 +261,45 @@ def paper_grid_settings(e, cfg, robot, recon, bytes_per_point: float = 2.0) -> P
     return out
 
 
-def _v_reconfig_indices(e, cfg, robot, recon) -> None:
+@dataclasses.dataclass(frozen=True)
+class ReconfigIndicesSettings:
+    """``experiment=reconfig_indices``: the paper's grid, points per chunk, checkpoints on, the selection criterion
+    and mode (``fast``: the reach interval prunes R samples; ``exact``: every R), the k~ parameters (``beta`` is the
+    top-level one), the index of the Fig 8 planes at heights ``slices_z`` (m), the index fields stored."""
+
+    grid: Any
+    chunk_points: int
+    checkpoint: bool
+    criterion: str
+    mode: str
+    b_v: float
+    b_f: float
+    beta: float
+    slice_index: str
+    slices_z: tuple
+    store_fields: tuple
+
+
+def reconfig_indices_settings(e, cfg, robot, recon) -> ReconfigIndicesSettings:
     from ..indices import INDEX_NAMES
 
     store = read_names("experiment.store_fields", e.get("store_fields"), INDEX_NAMES)
     # per point: two masks, R* and every stored field at R* and at fixed R (float32), the slice index field
-    paper_grid_settings(e, cfg, robot, recon, bytes_per_point=2 + 4 * (2 * len(store) + 2))
-    grid = paper_grid_from_config(e, 0.0)
-    read_field("beta", cfg.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True)
-    read_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True)
-    read_field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True)
-    read_choice("experiment.criterion", e.get("criterion"), INDEX_NAMES)
-    read_choice("experiment.mode", e.get("mode"), ("fast", "exact"))
-    read_choice("experiment.slice_index", e.get("slice_index"), INDEX_NAMES)
+    paper = paper_grid_settings(e, cfg, robot, recon, bytes_per_point=2 + 4 * (2 * len(store) + 2))
+    grid = paper.grid
     z0, z1 = float(grid.z[0]), float(grid.z[-1])
-    for i, z in enumerate(e.get("slices_z") or []):  # a plane of the grid below the base (the nearest is drawn)
-        read_field(f"experiment.slices_z[{i}]", z, lo=max(z0, 0.0), hi=z1, lo_open=z0 <= 0.0, unit="m")
+    # a plane of the grid below the base (the nearest is drawn)
+    zs = tuple(read_field(f"experiment.slices_z[{i}]", z, lo=max(z0, 0.0), hi=z1, lo_open=z0 <= 0.0, unit="m")
+               for i, z in enumerate(e.get("slices_z") or []))
+    return ReconfigIndicesSettings(
+        grid=grid, chunk_points=paper.chunk_points, checkpoint=paper.checkpoint,
+        beta=read_field("beta", cfg.get("beta"), lo=0, hi=1, lo_open=True, hi_open=True),
+        b_v=read_field("experiment.b_v", e.get("b_v"), lo=0, lo_open=True),
+        b_f=read_field("experiment.b_f", e.get("b_f"), lo=0, lo_open=True),
+        criterion=read_choice("experiment.criterion", e.get("criterion"), INDEX_NAMES),
+        mode=read_choice("experiment.mode", e.get("mode"), ("fast", "exact")),
+        slice_index=read_choice("experiment.slice_index", e.get("slice_index"), INDEX_NAMES),
+        slices_z=zs, store_fields=tuple(store))
 
 
 @dataclasses.dataclass(frozen=True)
@@ -612,9 +685,9 @@ R_RANGE_EXPERIMENTS = ("reconfig_workspace", "reconfig_indices", "indices_exampl
 #: experiment name -> builder(experiment cfg, whole cfg, robot, recon) of the job's settings: every field checked
 #: (one ConfigError line naming it), returned as the object the run hands to the job (``RunContext.settings``).
 EXPERIMENT_SETTINGS = {
-    "workspace_grid": _v_workspace_grid,
+    "workspace_grid": workspace_grid_settings,
     "reconfig_workspace": paper_grid_settings,
-    "reconfig_indices": _v_reconfig_indices,
+    "reconfig_indices": reconfig_indices_settings,
     "indices_examples": indices_examples_settings,
     "bench_kernel": bench_kernel_settings,
     "dynamics_cycle": dynamics_cycle_spec,

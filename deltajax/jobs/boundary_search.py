@@ -25,7 +25,6 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..config import boundary_search_spec
 from ..papers import BOUNDARY_SEARCH as PAPER
 from ..workspace import boundary as B
 from .stages import Runner, Stage, State
@@ -71,13 +70,13 @@ def run(ctx) -> None:
     """The boundary job: settings read once, then its stages on the stage engine: ``setup`` (the settings and the
     paper's numbers stored), ``grid_volume`` (the independent check), one ``step_<s>deg`` per angular step (both
     methods), ``centre_sweep`` and ``plots``."""
-    p = boundary_search_spec(ctx.cfg.experiment)
+    p = ctx.settings                                   # checked before the run (config.boundary_search_spec)
     st = State(ctx=ctx, res=ctx.results, p=p, robot=ctx.robot, keep={})
     steps = [Stage(f"step_{step:g}deg", functools.partial(_step, step=step)) for step in p["steps_deg"]]
     Runner(ctx, "boundary_search", resumable=False).run(
         (Stage("setup", _store_setup), Stage("grid_volume", _grid_volume), *steps,
          Stage("centre_sweep", _centre_sweep, when=lambda st: bool(st.p["centre_sweep_z"])),
-         Stage("plots", _plots, when=lambda st: st.ctx.cfg.get("plots", True))), st)
+         Stage("plots", _plots, when=lambda st: st.ctx.plots)), st)
 
 
 def _store_setup(st: State) -> None:

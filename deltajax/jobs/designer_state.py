@@ -1,17 +1,13 @@
 """The main job's state in ``results.h5``: the GA checkpoint (:func:`load_checkpoint`, :func:`put_checkpoint`), the
-finished stages (:func:`stages_done`; restaging, :func:`restage`, is the stage engine's), the job's
-fingerprint (:func:`job_fingerprint`) and continuing a finished run with more budget (:func:`earlier_run`,
-:func:`carry_earlier`: only :data:`BUDGET_SETTINGS` may differ; its verified front seeds the searches and joins
-the verified candidates with the metrics it verified).
+finished stages (:func:`stages_done`; restaging, :func:`restage`, is :mod:`deltajax.rundir`'s) and a continued
+run's earlier front joined to the verified candidates (:func:`carry_earlier`; the earlier run itself is read with
+the settings, :func:`deltajax.config.ga_reconfig.earlier_run`).
 
-Application wing: it reads the config and the results file; the engines (:mod:`deltajax.optimize`) never do.
+Application wing: it reads the results file; the engines (:mod:`deltajax.optimize`) never do.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import hashlib
-import json
 import math
 import re
 from pathlib import Path
@@ -20,10 +16,9 @@ from typing import Any, Mapping, Optional, Sequence
 import numpy as np
 
 from ..optimize.workflow import STORED_METRIC, SetupError
-from .stages import recorded, restage
+from ..rundir import recorded, restage
 
-__all__ = ["load_checkpoint", "put_checkpoint", "restage", "stages_done", "job_fingerprint", "BUDGET_SETTINGS",
-           "EarlierRun", "continued_file", "earlier_run", "carry_earlier"]
+__all__ = ["load_checkpoint", "put_checkpoint", "restage", "stages_done", "carry_earlier"]
 
 
 # -- results-file bookkeeping (checkpoint, restaging, stages) -------------------------------------------------------
@@ -84,100 +79,15 @@ def put_checkpoint(res, ck: Mapping[str, Any]) -> None:
     res.set_attrs(g, fingerprint=ck["fingerprint"], generations_done=int(ck["generations_done"]))
 
 
-def job_fingerprint(cfg) -> str:
-    """Hash of everything that determines a run's results (not resume/stop_after/progress/plots)."""
-    from omegaconf import OmegaConf
-
-    c = OmegaConf.to_container(cfg, resolve=True)
-    e = dict(c.get("experiment", {}))
-    e.pop("resume", None)
-    e.pop("stop_after", None)
-    blob = json.dumps({"experiment": e, "robot": c.get("robot"), "seed": c.get("seed"),
-                       "precision": c.get("precision")}, sort_keys=True, default=str)
-    return hashlib.sha256(blob.encode()).hexdigest()[:16]
-
-
 def stages_done(path: Path) -> tuple[Optional[str], list]:
     """(fingerprint, finished stages) of the ``ga_reconfig`` run recorded in ``path``
-    (:func:`deltajax.jobs.stages.recorded`)."""
+    (:func:`deltajax.rundir.recorded`)."""
     return recorded(path, "ga_reconfig")
 
 
 # -- continuing a finished run with more budget (experiment.continue_from) --------------------------------------------
 
-#: Settings a continued run may change: the search's budget (besides :data:`deltajax.rundir.NEUTRAL`, which never
-#: change the numbers). Everything else (robot, precision, the problem, the verification grids, the recommendation
-#: rule) must equal the earlier run's, so that its verified metrics hold here.
-BUDGET_SETTINGS = ("seed", "experiment.continue_from", "experiment.screen", "experiment.ga",
-                   "experiment.pareto.enabled", "experiment.pareto.population_size", "experiment.pareto.generations",
-                   "experiment.refine", "experiment.floor_solve",
-                   # the tolerance analysis reads the verified designs and changes none of their numbers
-                   "experiment.tolerance", "experiment.robust")
-
-
-@dataclasses.dataclass(frozen=True)
-class EarlierRun:
-    """The verified front of a finished ``ga_reconfig`` run that a run continues (:func:`earlier_run`)."""
-
-    path: Path                 # its results.h5
-    fingerprint: str           # its ga_reconfig_fingerprint
-    names: tuple               # its front points' names there, each prefixed "earlier_"
-    genes: np.ndarray          # (k, d) their genes
-    rows: np.ndarray           # (k,) their rows on its verify group's design axis
-    verify: Mapping[str, Any]  # its verify group as loaded (metrics on the fine grids)
-    recommended: int           # index into names/genes of its recommendation (-1: none)
-
-
-def continued_file(where: str) -> Path:
-    """The results file that ``experiment.continue_from`` names (a run directory or a results.h5)."""
-    p = Path(str(where)).expanduser()
-    return p / "results.h5" if p.is_dir() or not p.suffix else p
-
-
-def earlier_run(where: str, cfg) -> EarlierRun:
-    """The finished run ``where`` (its run directory or results.h5) that this run (config ``cfg``) continues with
-    more budget. Raises :class:`SetupError` (one line naming ``experiment.continue_from``) when it is missing,
-    unfinished, or a run of another problem: only :data:`BUDGET_SETTINGS` may differ. Reads the file only
-    (nothing compiles)."""
-    import yaml
-    from omegaconf import OmegaConf
-
-    from ..io import load
-    from ..rundir import config_differences, describe_differences
-
-    key = "experiment.continue_from"
-    p = continued_file(where)
-    if not p.is_file():
-        raise SetupError(f"{key}: {where} is neither a run directory holding a results.h5 nor a results file")
-    try:
-        fp, done = stages_done(p)
-        data = load(p)
-        old = yaml.safe_load(data["attrs"]["config"])
-    except (OSError, KeyError, ValueError, yaml.YAMLError) as err:
-        raise SetupError(f"{key}: {p} cannot be read as a ga_reconfig run ({type(err).__name__}: {err})") from None
-    if not fp or not isinstance(old, Mapping) or old.get("experiment", {}).get("name") != "ga_reconfig":
-        raise SetupError(f"{key}: {p} holds no ga_reconfig run")
-    if "verify" not in done:
-        raise SetupError(f"{key}: the run in {p} has not finished its verification (stages done: "
-                         f"{','.join(done) or 'none'}); resume it first (rerun with hydra.run.dir={p.parent})")
-    new = OmegaConf.to_container(cfg, resolve=True)
-    diffs = config_differences(old, new, ignore=BUDGET_SETTINGS)
-    if diffs:
-        raise SetupError(f"{key}: {p} is a run of another problem ({describe_differences(diffs)}); a continued run "
-                         "may change only the search budget (seed, experiment.screen, .ga, .pareto population_size "
-                         "and generations, .refine, .floor_solve, .tolerance, .robust)")
-    V = data["verify"]
-    rows = np.asarray(V["front"], int).reshape(-1)
-    genes = np.asarray(V["genes"], float)
-    names = [str(n) for n in np.asarray(V["design_name"]).reshape(-1)[rows]]
-    rec = int(V["attrs"]["recommended"])
-    # "earlier_" on every carried name (a chain of continuations gives earlier_earlier_..., names stay unique)
-    return EarlierRun(path=p.resolve(), fingerprint=fp, names=tuple(f"earlier_{n}" for n in names),
-                      genes=genes.reshape(-1, genes.shape[-1])[rows], rows=rows, verify=V,
-                      recommended=int(np.flatnonzero(rows == rec)[0]) if rec in rows else -1)
-
-
-def carry_earlier(mv: Mapping[str, np.ndarray], earlier: EarlierRun, objs: Sequence[str]) -> dict:
+def carry_earlier(mv: Mapping[str, np.ndarray], earlier, objs: Sequence[str]) -> dict:
     """This run's fine-grid metrics ``mv`` (row 0: the baseline) followed by the earlier run's front points with
     the metrics *it* verified (stored, not recomputed: its recommendation keeps its exact numbers). Raises
     :class:`SetupError` when the earlier run's verified baseline differs from this run's (another deltajax

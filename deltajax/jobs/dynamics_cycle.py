@@ -29,7 +29,7 @@ import numpy as np
 
 from .. import plots, presets
 from .. import trajectory as tr
-from ..config import ConfigError, dynamics_cycle_spec
+from ..config import ConfigError
 from ..cycle import Limits, cycle_metrics, cycle_profile, metrics_by_forearm_model
 from ..mass import FOREARM_MODELS
 from .stages import Runner, Stage, State
@@ -110,7 +110,7 @@ def run(ctx) -> None:
     """The dynamics job: settings and robots read once, then one stage per robot (both cases, stored and drawn),
     the GA motion with R moving (a reconfigurable robot with ``experiment.recon_R_amplitude`` != 0) and the
     summaries, on the stage engine."""
-    spec = dynamics_cycle_spec(ctx.cfg.experiment, ctx.cfg, ctx.robot, ctx.recon)
+    spec = ctx.settings                                # checked before the run (config.dynamics_cycle_spec)
     method, robots = spec["method"], _robots(ctx, spec)
     st = State(ctx=ctx, res=ctx.results, spec=spec, dtype=ctx.dtype, robots=robots, method=method,
                other="lagrange" if method == "virtual_work" else "virtual_work",

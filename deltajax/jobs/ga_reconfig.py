@@ -19,7 +19,7 @@ recommendation: worst cases searched at the verification's density and at twice 
 Carlo over manufacturing and model tolerances on the certified answer, :mod:`deltajax.optimize.robust`;
 ``experiment.robust``: the robust recommendation) -> results (summary) ->
 plots -> report (``report.html``, the self-contained run report of :mod:`deltajax.runreport`). ``experiment.continue_from`` (more budget for
-a finished run, :func:`deltajax.jobs.designer_state.earlier_run`): its verified front seeds the GA and NSGA-II and
+a finished run, :func:`deltajax.config.ga_reconfig.earlier_run`): its verified front seeds the GA and NSGA-II and
 joins the verified candidates with its stored metrics, so the recommendation cannot be one its recommendation
 dominates.
 The GA paper's claims are *not* compared here (different metrics); see docs/REPRODUCTION.md §5.
@@ -50,7 +50,7 @@ def run(ctx) -> None:
 
     setup = ctx.settings                     # built and checked once, before anything compiled
     s, space, earlier = setup.settings, setup.space, setup.earlier
-    runner, path, fp = Runner(ctx, "ga_reconfig"), ctx.run_dir / "results.h5", ST.job_fingerprint(ctx.cfg)
+    runner, path, fp = Runner(ctx, "ga_reconfig"), ctx.run_dir / "results.h5", setup.fingerprint
     done = runner.open(fp, resume=s.resume, partial_what="GA checkpoint",
                        has_partial=lambda p: ST.load_checkpoint(p) is not None)
     if "report" in done:
@@ -576,10 +576,10 @@ def _report(st: State) -> None:
 
 
 #: The answer: stages that read what the search stored (so a resumed run answers the same). A run that went past
-#: verify before the certify stage existed stays as it was (its tolerance stage read the verified answer).
+#: a stage's place before the stage existed stays as it was (its later stages read what it had).
 ANSWER = (
     Stage("certify", _certify, when=lambda st: not {"tolerance", "results"} & set(st.runner.done)),
-    Stage("tolerance", _tolerance, when=lambda st: st.s.tolerance["enabled"]),
+    Stage("tolerance", _tolerance, when=lambda st: st.s.tolerance["enabled"] and "results" not in st.runner.done),
     Stage("results", _results),
     Stage("plots", _plots),
     Stage("export", _export),   # done once the datasheets are in results.h5, their figures and the models on disk

@@ -17,7 +17,6 @@ import time
 
 import numpy as np
 
-from ..config import ConfigError, paper_grid_from_config
 from ..indices import INDEX_NAMES
 from .stages import Runner, Stage, State
 
@@ -34,34 +33,12 @@ def run(ctx) -> None:
 
 
 def _settings(ctx) -> dict:
-    """The job's settings from the config, checked (ConfigError, one line)."""
-    cfg = ctx.cfg.experiment
-    if ctx.recon is None:
-        raise ConfigError("reconfig_indices needs a reconfigurable robot: robot.R_range is null")
-    beta = float(ctx.cfg.get("beta", cfg.get("beta", 0.5)))
-    if not 0.0 < beta < 1.0:
-        raise ConfigError(f"beta must be in (0, 1), got {beta!r}")
-    b_v, b_f = float(cfg.get("b_v", 2.0)), float(cfg.get("b_f", 4.2))
-    for k, v in (("b_v", b_v), ("b_f", b_f)):
-        if not v > 0:
-            raise ConfigError(f"experiment.{k} must be > 0, got {v!r}")
-    criterion = str(cfg.get("criterion", "k_tilde"))
-    if criterion not in INDEX_NAMES:
-        raise ConfigError(f"experiment.criterion must be one of {INDEX_NAMES}, got {criterion!r}")
-    mode = str(cfg.get("mode", "fast"))
-    if mode not in ("fast", "exact"):
-        raise ConfigError(f"experiment.mode must be 'fast' or 'exact', got {mode!r}")
-    slice_index = str(cfg.get("slice_index", "omega_v"))
-    if slice_index not in INDEX_NAMES:
-        raise ConfigError(f"experiment.slice_index must be one of {INDEX_NAMES}, got {slice_index!r}")
-    store = list(cfg.get("store_fields", []) or [])
-    for n in store:
-        if n not in INDEX_NAMES:
-            raise ConfigError(f"experiment.store_fields: {n!r} is not one of {INDEX_NAMES}")
-    return dict(cfg=cfg, beta=beta, b_v=b_v, b_f=b_f, criterion=criterion, mode=mode, slice_index=slice_index,
-                store=store, grid=paper_grid_from_config(cfg), chunk=int(cfg.get("chunk_points", 1 << 18)),
-                ck=ctx.run_dir / "checkpoint" if cfg.get("checkpoint", True) else None,
-                kw=dict(b_v=b_v, b_f=b_f, beta=beta), plots=bool(ctx.cfg.get("plots", True)))
+    """What the stages read, from the job's settings (checked before the run: config.reconfig_indices_settings)."""
+    s = ctx.settings
+    return dict(beta=s.beta, b_v=s.b_v, b_f=s.b_f, criterion=s.criterion, mode=s.mode, slice_index=s.slice_index,
+                store=list(s.store_fields), slices_z=s.slices_z, grid=s.grid, chunk=s.chunk_points,
+                ck=ctx.run_dir / "checkpoint" if s.checkpoint else None,
+                kw=dict(b_v=s.b_v, b_f=s.b_f, beta=s.beta), plots=ctx.plots)
 
 
 def _odr(st: State) -> None:
@@ -150,7 +127,7 @@ def _slices(st: State) -> None:
     from ..workspace.redundancy import resolve_redundancy_host
 
     ctx, res, grid = st.ctx, st.res, st.grid
-    zs = [float(v) for v in st.cfg.get("slices_z", [0.3, 0.4, 0.5])]
+    zs = [float(v) for v in st.slices_z]
     st.kz = kz = [int(np.argmin(np.abs(grid.z - v))) for v in zs]
     nx, ny, _ = grid.shape
     X, Y = np.meshgrid(grid.x, grid.y, indexing="ij")

@@ -34,7 +34,6 @@ import numpy as np
 
 from .. import motion as mo
 from .. import plots
-from ..config import reconfig_motion_spec
 from ..cycle import Limits
 from ..motion_refine import path_report, refine_path
 from .stages import Runner, Stage, State
@@ -51,7 +50,7 @@ SUMMARY = (("mean_value", "1"), ("min_value", "1"), ("max_abs_R_dot", "m/s"), ("
 def run(ctx) -> None:
     """The motion job: its settings read once, then per case (:data:`CASE_STAGES`: R(t) by each method, their
     reports, the case's results, its figures) and the mechanism's attributes, on the stage engine."""
-    s = reconfig_motion_spec(ctx.cfg.experiment, ctx.cfg, ctx.robot, ctx.recon, dtype=ctx.dtype)
+    s = ctx.settings                                   # checked before the run (config.reconfig_motion_spec)
     # one bar over every step of every case (tables, DP, refinement if on, per-method reports, write and plots)
     st = State(ctx=ctx, res=ctx.results, s=s, kw=dict(b_v=s["b_v"], b_f=s["b_f"], beta=s["beta"]),
                tables_jit=jax.jit(mo.path_tables, static_argnames=("criterion",)),

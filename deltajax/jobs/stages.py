@@ -28,7 +28,7 @@ import types
 from pathlib import Path
 from typing import Any, Callable, Iterable, Optional
 
-__all__ = ["Stage", "State", "Stop", "Runner", "recorded", "restage"]
+__all__ = ["Stage", "State", "Stop", "Runner"]
 
 
 class Stop(Exception):
@@ -41,36 +41,6 @@ class State(types.SimpleNamespace):
 
 def _always(state: State) -> bool:
     return True
-
-
-def recorded(path: Path, job: str) -> tuple[Optional[str], list]:
-    """(fingerprint, finished stages) that job ``job`` recorded in the results file ``path``; (None, []) when
-    there is no file. Its attributes are verified against the file's integrity record first (raises
-    :class:`deltajax.io.ChecksumError`); raises OSError (with the path) when it exists but cannot be read."""
-    from ..io import read
-
-    if not Path(path).exists():
-        return None, []
-    attrs = read(path, max_elements=0, verify=True).attrs
-    fp = str(attrs.get(f"{job}_fingerprint", "")) or None
-    return fp, [x for x in str(attrs.get(f"{job}_stages", "")).split(",") if x]
-
-
-def restage(res: Any, path: Path) -> None:
-    """Stage everything the results file ``path`` holds into ``res`` (a :class:`deltajax.io.ResultsFile`, so
-    that its next flush keeps it), verified first: data that does not match its checksums or the file's
-    integrity record is never re-staged (the next flush would write fresh checksums over it). Raises
-    :class:`deltajax.io.ChecksumError` (or OSError) then."""
-    from ..io import read
-
-    contents = read(path, verify=True)
-    for k, v in contents.attrs.items():
-        if k not in ("start_time",):
-            res.attrs.setdefault(k, v)
-    for group, variables in contents.variables.items():
-        if group:
-            res.set_attrs(group, **contents.group_attrs[group])
-            res.put_variables(group, variables)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -132,13 +102,12 @@ class Runner:
             partial_what: what that checkpoint is called in the refusal of ``resume="must"``.
 
         Raises:
-            deltajax.config.ConfigError: the file holds another job or other settings, cannot be read, or
+            deltajax.rundir.RunDirError: the file holds another job or other settings, cannot be read, or
                 ``resume="must"`` finds nothing to resume (one line, nothing changed).
             deltajax.rundir.CheckpointError: the file fails its checksums (``fresh=true`` starts over).
         """
-        from ..config import ConfigError
         from ..io import ChecksumError
-        from ..rundir import CheckpointError
+        from ..rundir import CheckpointError, RunDirError, recorded, restage
 
         path = Path(self.ctx.results.path)
         try:
@@ -146,13 +115,13 @@ class Runner:
         except ChecksumError as err:
             raise CheckpointError(f"cannot resume: {err}; add fresh=true to start over") from None
         except OSError as err:
-            raise ConfigError(f"{path} exists but cannot be read ({err}); move it away or choose another "
+            raise RunDirError(f"{path} exists but cannot be read ({err}); move it away or choose another "
                               "hydra.run.dir") from None
         if old_fp is not None and old_fp != fingerprint:
-            raise ConfigError(f"{path} holds a {self.job} run with different settings (fingerprint {old_fp} vs "
+            raise RunDirError(f"{path} holds a {self.job} run with different settings (fingerprint {old_fp} vs "
                               f"{fingerprint}); choose another hydra.run.dir (nothing was changed)")
         if path.exists() and old_fp is None and resume != "never" and not has_partial(path):
-            raise ConfigError(f"{path} exists but holds no {self.job} run; choose another hydra.run.dir "
+            raise RunDirError(f"{path} exists but holds no {self.job} run; choose another hydra.run.dir "
                               "(nothing was changed)")
         self.ctx.results.set_attrs(**{self.attr_fingerprint: fingerprint})
         if resume == "never":
@@ -163,7 +132,7 @@ class Runner:
             except ChecksumError as err:
                 raise CheckpointError(f"cannot resume: {err}; add fresh=true to start over") from None
         if resume == "must" and not done and not has_partial(path):
-            raise ConfigError(f"experiment.resume=must but {path} holds no {partial_what}")
+            raise RunDirError(f"experiment.resume=must but {path} holds no {partial_what}")
         self.done = done
         return self.done
 

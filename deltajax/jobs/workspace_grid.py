@@ -28,53 +28,30 @@ finite value, and the scalars ``count``, ``volume`` (count h^3), ``volume_box`` 
 from __future__ import annotations
 
 import functools
-import importlib.util
 import json
 import os
 import time
-from typing import Sequence
 
 import numpy as np
 
-from ..config import ConfigError, workspace_grid_from_config
 from ..rundir import CheckpointError, RunDirError
 from .stages import Runner, Stage, State
 
 from ..workspace.evaluators import (make_evaluator, make_grid_evaluator,  # (the job's kernels; also benchmarked)
                                 make_numba_evaluator)
-from ..workspace.chunks import (CheckpointMismatch, ResultsCheckpoint, ShardPlan, plane_statistics, plane_summary,
+from ..workspace.chunks import (CheckpointMismatch, ResultsCheckpoint, plane_statistics, plane_summary,
                                run_chunks, seal)
 
 GROUP = "workspace"
 #: the registered shard reducer (deltajax.sweeps.reducers) of group ``workspace``
 REDUCER = "workspace_planes"
 
-__all__ = ["run", "GridPlan", "make_evaluator", "make_grid_evaluator", "make_numba_evaluator"]
-
-
-# ---------------------------------------------------------------------------------------------------------
-# configuration (the grid reader is config.workspace_grid_from_config)
-# ---------------------------------------------------------------------------------------------------------
-class GridPlan(ShardPlan):
-    """:class:`deltajax.workspace.chunks.ShardPlan` whose refusals are :class:`ConfigError` (they name a setting)."""
-
-    def __init__(self, shape: Sequence[int], chunk_points: int, n_devices: int, shard: int, n_shards: int):
-        try:
-            super().__init__(shape, chunk_points, n_devices, shard, n_shards)
-        except ValueError as e:
-            raise ConfigError(str(e)) from None
+__all__ = ["run", "make_evaluator", "make_grid_evaluator", "make_numba_evaluator"]
 
 
 # ---------------------------------------------------------------------------------------------------------
 # the experiment
 # ---------------------------------------------------------------------------------------------------------
-def _int(cfg, key: str, field: str, lo: int = None) -> int:
-    v = cfg.get(key)
-    if not isinstance(v, int) or isinstance(v, bool) or (lo is not None and v < lo):
-        raise ConfigError(f"{field} must be an integer{'' if lo is None else f' >= {lo}'}, got {v!r}")
-    return v
-
-
 def run(ctx) -> None:
     """The grid job: its settings read and checked once, then its stages: ``grid`` (this shard's chunks on the
     chunk engine, checkpointed into and resumed from results.h5), ``store`` (results and summary) and ``plots``."""
@@ -83,63 +60,37 @@ def run(ctx) -> None:
 
 
 def _settings(ctx) -> dict:
-    """The job's settings, plan and resume key from the config (raises ConfigError / RunDirError, one line),
-    and the arrays the chunks fill (this shard's x-planes)."""
-    import jax
-
+    """What the stages read: the job's settings (checked before the run: config.workspace_grid_settings), the
+    resume key, and the arrays the chunks fill (this shard's x-planes). RunDirError when a results file exists
+    and experiment.resume=false."""
     from ..workspace import FIELD_NAMES
 
-    cfg = ctx.cfg
-    ex = cfg.experiment
-    grid = workspace_grid_from_config(ex.grid, ctx.robot)
-    shard = _int(cfg, "shard", "shard", 0)
-    n_shards = _int(cfg, "n_shards", "n_shards", 1)
-    chunk_points = _int(ex, "chunk_points", "experiment.chunk_points", 1)
-    store = list(ex.get("store") or [])
-    for name in store:
-        if name not in FIELD_NAMES:
-            raise ConfigError(f"experiment.store: {name!r} is not an index; choose from {list(FIELD_NAMES)}")
-    dev_cfg = ex.get("devices", "all")
-    n_avail = jax.local_device_count()
-    if dev_cfg in ("all", None):
-        n_dev = n_avail
-    elif isinstance(dev_cfg, int) and not isinstance(dev_cfg, bool) and 1 <= dev_cfg <= n_avail:
-        n_dev = dev_cfg
-    else:
-        raise ConfigError(f"experiment.devices must be 'all' or an integer in 1..{n_avail}, got {dev_cfg!r}")
-    params = {k: float(ex.get(k)) for k in ("b_v", "b_f", "beta")}
-    plan = GridPlan(grid.shape, chunk_points, n_dev, shard, n_shards)
+    s = ctx.settings                 # checked before the run (config.workspace_grid_settings)
+    grid, shard, n_shards, store, n_dev, params, backend = (s.grid, s.shard, s.n_shards, list(s.store), s.n_dev,
+                                                            s.params, s.backend)
+    plan = s.plan
     nx, ny, nz = grid.shape
     n_local = plan.x_stop - plan.x_start
     n_idx = len(FIELD_NAMES)
     dtype = np.dtype(ctx.dtype)
-
-    backend = ex.get("backend", "auto")
-    if backend not in ("auto", "jax", "numba"):
-        raise ConfigError(f"experiment.backend must be 'auto', 'jax' or 'numba', got {backend!r}")
-    if backend == "auto":  # what measures faster (experiments/bench_multidevice.py): Numba on CPU in float64
-        backend = "numba" if (jax.default_backend() == "cpu" and dtype == np.float64
-                              and importlib.util.find_spec("numba") is not None) else "jax"
-    elif backend == "numba" and dtype != np.float64:
-        raise ConfigError("experiment.backend=numba computes in float64: use precision=float64 or backend=jax")
     # a key for resuming: everything that determines the numbers (the shard is checked separately)
     key = json.dumps({"grid": [grid.x[0], grid.x[-1], grid.y[0], grid.y[-1], grid.z[0], grid.z[-1], grid.h],
-                      "robot": {k: str(v) for k, v in ctx.cfg.robot.items()}, "params": params,
+                      "robot": s.robot_key, "params": params,
                       "chunk": plan.planes_per_chunk, "store": store,
-                      "precision": str(cfg.precision), "backend": backend}, sort_keys=True)
+                      "precision": s.precision, "backend": backend}, sort_keys=True)
     reach = np.zeros((n_local, ny, nz), np.uint8)
     fields = {name: np.full((n_local, ny, nz), np.nan, dtype) for name in store}
     planes = {"plane_count": np.zeros(n_local, np.int64), "plane_face_count": np.zeros(n_local, np.int64),
               "plane_n": np.zeros((n_local, n_idx), np.int64),
               "plane_sum": np.zeros((n_local, n_idx), dtype), "plane_min": np.full((n_local, n_idx), np.inf, dtype),
               "plane_max": np.full((n_local, n_idx), -np.inf, dtype)}
-    if ctx.results.path.exists() and not ex.get("resume", True):
+    if ctx.results.path.exists() and not s.resume:
         raise RunDirError(f"{ctx.results.path} exists and experiment.resume=false: add fresh=true to start over, "
                           f"or choose another hydra.run.dir")
-    return dict(ex=ex, grid=grid, shard=shard, n_shards=n_shards, store=store, n_dev=n_dev, params=params, plan=plan,
+    return dict(s=s, grid=grid, shard=shard, n_shards=n_shards, store=store, n_dev=n_dev, params=params, plan=plan,
                 n_local=n_local, n_idx=n_idx, dtype=dtype, backend=backend, key=key, reach=reach, fields=fields,
                 planes=planes, arrays={"reachable": reach, **fields, **planes},
-                x_faces=(plan.x_start == 0, plan.x_stop == nx), plots=bool(cfg.get("plots", True)))
+                x_faces=(plan.x_start == 0, plan.x_stop == nx), plots=ctx.plots)
 
 
 def _store_grid(st: State, planes_done: int) -> None:
@@ -207,7 +158,7 @@ def _grid(st: State) -> None:
     into results.h5 every ``experiment.checkpoint_s`` seconds and resumed from it; ``experiment.stop_after``
     stops after that many chunks as if killed (the run is then incomplete). Hands on ``done`` (x-planes) and the
     evaluation rate (points/s after the first chunk)."""
-    ctx, ex, plan, grid = st.ctx, st.ex, st.plan, st.grid
+    ctx, plan, grid = st.ctx, st.plan, st.grid
     checkpoint = ResultsCheckpoint(ctx.results, GROUP, st.arrays, st.key, (plan.x_start, plan.x_stop),
                                    functools.partial(_store_grid, st), _check, done_attr="planes_done",
                                    remedy="move it away to keep it, or add fresh=true to start over")
@@ -222,7 +173,7 @@ def _grid(st: State) -> None:
                            f"Numba on {os.environ.get('NUMBA_NUM_THREADS', 'all')} thread(s)"))
     st.t0 = time.perf_counter()
     st.timing = {"n_eval": 0, "first_s": None, "n_first": 0}  # the first chunk includes compilation: timed apart
-    stop_after = ex.get("stop_after")  # stop as if killed after this many chunks (tests the resume path)
+    stop_after = st.s.stop_after  # stop as if killed after this many chunks (tests the resume path)
     progress = {"done": 0}
     with ctx.progress(total=st.n_local, desc="workspace_grid x-planes") as bar:
         def advance(n: int) -> None:
@@ -234,7 +185,7 @@ def _grid(st: State) -> None:
         try:
             run_chunks(st.n_local, plan.planes_per_chunk, functools.partial(_chunk, st),
                        {n: (a.dtype, None) for n, a in st.arrays.items()}, checkpoint=checkpoint,
-                       checkpoint_every_s=float(ex.get("checkpoint_s", 60.0)), progress=advance,
+                       checkpoint_every_s=st.s.checkpoint_s, progress=advance,
                        max_chunks=None if stop_after is None else int(stop_after))
         except CheckpointMismatch as e:
             raise CheckpointError(str(e)) from None
