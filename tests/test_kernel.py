@@ -120,7 +120,7 @@ def _with(rb, field, v):
 
 
 @pytest.mark.slow
-def test_issue_point_gradient_matches_svd_and_central_difference():
+def test_forearm_gradient_of_k_tilde_matches_svd_and_central_difference():
     rb = dj.presets.franco2026(fixed_R=0.2)
     p = jnp.array([0.02744933, 0.04406817, 0.25658779])
 
