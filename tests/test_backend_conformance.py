@@ -453,9 +453,19 @@ def _cases():
     for row in backends.KERNELS:
         if row.name in PER_METHOD:
             for method, code in METHODS:
-                yield pytest.param(row, PER_METHOD[row.name](method, code), id=f"{row.name}-{method}")
+                name = f"{row.name}-{method}"
+                yield pytest.param(row, PER_METHOD[row.name](method, code), id=name, marks=_tier(name))
         else:
-            yield pytest.param(row, CASES.get(row.name), id=row.name)
+            yield pytest.param(row, CASES.get(row.name), id=row.name, marks=_tier(row.name))
+
+
+#: rows whose compilation takes over ~1 s on 2 cores: the full suite's tier (the fast tier keeps every other row)
+SLOW_ROWS = ("singular_values_from_eig", "point_value-fast", "point_value-jacobi", "point_kernel-jacobi",
+             "singular_values-jacobi", "chain", "sym3_top2-jacobi")
+
+
+def _tier(name: str):
+    return (pytest.mark.slow,) if name in SLOW_ROWS else ()
 
 
 def _compare(want, got, mask, exact, rtol, what):
@@ -498,6 +508,7 @@ def test_points_cover_every_input_class():
     assert (reason == IK_JOINT_LIMIT).any(axis=1).sum() > 10
 
 
+@pytest.mark.slow
 def test_oracles_agree_where_a_backend_has_no_twin():
     """The rows without a reference twin meet NumPy's own answer: det Jx (numpy.linalg.det) and the two largest
     eigenvalues of X (numpy.linalg.eigvalsh; the fast cubic to its ~sqrt(eps) split of a repeated pair)."""
