@@ -47,7 +47,7 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
-__all__ = ["Tolerances", "ToleranceError", "analyse", "perturb", "deviations", "tolerances_from_mapping",
+__all__ = ["Tolerances", "ToleranceError", "analyse", "perturb", "deviations",
            "describe", "design_summary", "select", "PER_DESIGN", "PARAMETERS", "PERCENTILES", "CONSTRAINT_METRICS", "DISTRIBUTIONS",
            "DEFAULT_SAMPLES"]
 
@@ -340,17 +340,6 @@ def select(results: Sequence[Mapping[str, Any]], picks: Sequence[tuple]) -> dict
     for k in PER_DESIGN:
         out[k] = np.stack([np.asarray(results[j][k])[i] for j, i in picks])
     return out
-
-
-def tolerances_from_mapping(block: Mapping[str, Any], prefix: str = "tolerances") -> Tolerances:
-    """:class:`Tolerances` from plain values (``length_mm``, ``joint_offset_deg``, ``mass_percent``,
-    ``motor_percent``, ``distribution``); raises :class:`ToleranceError` naming ``prefix.<field>``."""
-    try:
-        return Tolerances(length=float(block["length_mm"]) * 1e-3, joint_offset_deg=float(block["joint_offset_deg"]),
-                          mass=float(block["mass_percent"]) / 100.0, motor=float(block["motor_percent"]) / 100.0,
-                          distribution=str(block["distribution"]))
-    except ToleranceError as err:
-        raise ToleranceError(f"{prefix}: {err}") from None
 
 
 def describe(tol: Tolerances) -> str:

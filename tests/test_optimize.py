@@ -126,8 +126,13 @@ def test_second_ga_selectable():
     r = run_ga(sphere, 4, cfg)
     assert r.best_fitness < 0.2
     np.testing.assert_array_equal(r.history["gen_feasible_fraction"], np.ones(8))
-    with pytest.raises(GAError, match="experiment.ga.algorithm"):
+    with pytest.raises(GAError, match=r"^GAConfig\.algorithm must be one of"):   # the library names its own field
         GAConfig(algorithm="cmaes").validate()
+    from deltajax.config import ConfigError
+    from deltajax.config.ga_reconfig import ga_config
+
+    with pytest.raises(ConfigError, match=r"^experiment\.ga\.algorithm must be one of"):  # the config its path
+        ga_config({"algorithm": "cmaes"})
 
 
 def test_ga_seeded_with_several_designs_keeps_the_best_seed():

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import math
 import json
 from pathlib import Path
 from typing import Any, Mapping, Optional
@@ -19,7 +20,8 @@ from .readers import ConfigError, check_fits, read_choice, read_field
 
 __all__ = ["GaReconfigSettings", "GaReconfigSetup", "ga_reconfig_settings", "ga_reconfig_build", "validate_ga_reconfig",
            "validate_ga_reconfig_run_dir", "DESIGN_POINT_BYTES", "RECOMMEND_RULES", "job_fingerprint",
-           "BUDGET_SETTINGS", "EarlierRun", "continued_file", "earlier_run"]
+           "BUDGET_SETTINGS", "EarlierRun", "continued_file", "earlier_run", "reconfig_settings",
+           "RECONFIG_KEYS", "DRIVE_UNITS", "tolerances_of", "ga_config"]
 
 # ---- ga_reconfig: the designer's problem (every field, unknown keys included); owner: designer ----
 # The one reader of experiment.* for experiment=ga_reconfig (the job and the validator call it); the design space,
@@ -136,7 +138,7 @@ class GaReconfigSettings:
     # continuous regular workspace in the search: () off, else ((bisection, golden-section steps), (rings, angles,
     # levels) of the unit cylinder) for deltajax.constraints.refine_cylinder (the verification keeps its defaults)
     search_refine: tuple = ()
-    reconfig: dict = dataclasses.field(default_factory=dict)  # rtmode: operating.settings_from_block
+    reconfig: dict = dataclasses.field(default_factory=dict)  # rtmode: reconfig_settings
     # the tolerance stage (deltajax.tolerance: Monte Carlo over manufacturing and model tolerances); absent: off
     tolerance: dict = dataclasses.field(default_factory=lambda: {"enabled": False})
     # the robust recommendation (holds every constraint in >= probability of the Monte Carlo samples); absent: off
@@ -145,13 +147,75 @@ class GaReconfigSettings:
     continue_from: Optional[str] = None
 
 
-def _operating_settings(e: Mapping[str, Any]) -> dict:  # rtmode
-    from ..optimize.operating import OperatingError, settings_from_block
+#: the keys of ``experiment.reconfig`` and the units of its drive limits
+RECONFIG_KEYS = {"mode", "aggregate", "n_R", "segments", "drive", "mechanism", "motor_torque"}
+DRIVE_UNITS = {"speed": "m/s", "acceleration": "m/s^2", "force": "N"}
+
+
+def _num(b: Mapping[str, Any], key: str, where: str, unit: str) -> float:
+    v = b.get(key)
+    if v is None:
+        return math.inf
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v) or not v > 0:
+        raise ConfigError(f"{where}.{key} must be a number > 0 {unit} or null (no limit), got {v!r}")
+    return float(v)
+
+
+def reconfig_settings(block: Optional[Mapping[str, Any]], where: str = "experiment.reconfig") -> dict:
+    """Validate the ``experiment.reconfig`` block (plain values; ``None``: all defaults) into a plain dict.
+
+    Raises:
+        ConfigError: one line naming the field and the value in its unit.
+    """
+    from ..motion import AGGREGATES
+    from ..optimize.operating import MECHANISM_NAMES, MODES
+
+    b = {} if block is None else block
+    if not isinstance(b, Mapping):
+        raise ConfigError(f"{where} must be a mapping, got {b!r}")
+    for k in b:
+        if k not in RECONFIG_KEYS:
+            raise ConfigError(f"{where}.{k}: unknown key; valid keys: {sorted(RECONFIG_KEYS)}")
+    out = {}
+    for name, options, default in (("mode", MODES, "per_task"), ("aggregate", AGGREGATES, "integral"),
+                                   ("mechanism", MECHANISM_NAMES, "none")):
+        v = b.get(name, default)
+        if v not in options:
+            raise ConfigError(f"{where}.{name} must be one of {list(options)}, got {v!r}")
+        out[name] = v
+    for name, default, lo in (("n_R", 17, 3), ("segments", 8, 3)):
+        v = b.get(name, default)
+        if isinstance(v, bool) or not isinstance(v, int) or v < lo:
+            raise ConfigError(f"{where}.{name} must be an integer >= {lo}, got {v!r}")
+        out[name] = v
+    d = b.get("drive") or {}
+    if not isinstance(d, Mapping):
+        raise ConfigError(f"{where}.drive must be a mapping with keys {list(DRIVE_UNITS)}, got {d!r}")
+    for k in d:
+        if k not in DRIVE_UNITS:
+            raise ConfigError(f"{where}.drive.{k}: unknown key; valid keys: {list(DRIVE_UNITS)}")
+    out["drive"] = {k: _num(d, k, f"{where}.drive", u) for k, u in DRIVE_UNITS.items()}
+    out["motor_torque"] = _num(b, "motor_torque", where, "N m")
+    if out["mechanism"] == "none" and math.isfinite(out["motor_torque"]):
+        raise ConfigError(f"{where}.motor_torque={out['motor_torque']!r} N m needs {where}.mechanism="
+                             f"screw_linkage (got mechanism=none)")
+    return out
+
+
+def tolerances_of(block: Mapping[str, Any]):
+    """The :class:`deltajax.tolerance.Tolerances` of a checked ``experiment.tolerance`` block (mm, deg, %)."""
+    from ..tolerance import ToleranceError, Tolerances
 
     try:
-        return settings_from_block(e.get("reconfig"))
-    except OperatingError as err:
-        raise ConfigError(str(err)) from None
+        return Tolerances(length=float(block["length_mm"]) * 1e-3, joint_offset_deg=float(block["joint_offset_deg"]),
+                          mass=float(block["mass_percent"]) / 100.0, motor=float(block["motor_percent"]) / 100.0,
+                          distribution=str(block["distribution"]))
+    except ToleranceError as err:
+        raise ConfigError(f"experiment.tolerance: {err}") from None
+
+
+def _operating_settings(e: Mapping[str, Any]) -> dict:  # rtmode
+    return reconfig_settings(e.get("reconfig"))
 
 
 def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
@@ -352,7 +416,27 @@ def _tolerance_settings(e: Mapping[str, Any]) -> dict:
            "joint_offset_deg": _ga_num(t, "joint_offset_deg", "tolerance", lo=0, hi=5, unit="deg"),
            "mass_percent": _ga_num(t, "mass_percent", "tolerance", lo=0, hi=50, unit="%"),
            "motor_percent": _ga_num(t, "motor_percent", "tolerance", lo=0, hi=50, unit="%")}
+    tolerances_of(out)          # the Monte Carlo's own invariants, before anything compiles
     return out
+
+
+def ga_config(block: Mapping[str, Any], seed: int = 0):
+    """The :class:`deltajax.optimize.GAConfig` of ``experiment.ga`` (unknown keys refused; its invariants checked
+    by :meth:`GAConfig.validate`, named here by their config path)."""
+    from ..optimize.ga import GAConfig, GAError
+
+    known = {f.name for f in dataclasses.fields(GAConfig)} - {"seed"}
+    extra = set(block) - known
+    if extra:
+        raise ConfigError(f"experiment.ga: unknown keys {sorted(extra)}; known: {sorted(known)}")
+    kw = {k: block[k] for k in block}
+    for k in ("population_size", "generations", "checkpoint_every"):
+        if k in kw and isinstance(kw[k], float) and float(kw[k]).is_integer():
+            kw[k] = int(kw[k])
+    try:
+        return GAConfig(seed=int(seed), **kw).validate()
+    except (GAError, TypeError) as err:
+        raise ConfigError(str(err).replace("GAConfig.", "experiment.ga.", 1)) from None
 
 
 # ---- the run's identity and continuing a finished run (experiment.continue_from) ----
@@ -481,14 +565,15 @@ def validate_ga_reconfig_run_dir(e, run_dir) -> None:
 
 
 def ga_reconfig_build(ectx: Mapping[str, Any], robot, recon, *, n_R: Optional[int] = None):
-    """(settings, design space, coarse problem, GA config, baseline design) of experiment=ga_reconfig, validated
-    (one ConfigError line naming the field and the value)."""
+    """(settings, design space, coarse problem, GA config) of experiment=ga_reconfig, validated (one ConfigError
+    line naming the field and the value)."""
     from ..optimize.workflow import SetupError, setup
 
     s = ga_reconfig_settings(ectx)
     try:
-        return (s,) + tuple(setup(s, robot, recon, n_R=n_R))
+        space, pb = setup(s, robot, recon, n_R=n_R)
     except SetupError as err:
         raise ConfigError(str(err)) from None
+    return s, space, pb, ga_config(s.ga)
 # ---- end of ga_reconfig block ----
 

@@ -451,9 +451,9 @@ def certify_lines(Cg) -> list:
 
 def tolerances_of(s):
     """The :class:`deltajax.tolerance.Tolerances` of the validated settings' ``tolerance`` block."""
-    from ..tolerance import tolerances_from_mapping
+    from ..config.ga_reconfig import tolerances_of as of
 
-    return tolerances_from_mapping(s.tolerance, prefix="experiment.tolerance")
+    return of(s.tolerance)
 
 
 def _put_design_block(res, group: str, names, rows, a: dict, tol_text: str, roles=None) -> None:

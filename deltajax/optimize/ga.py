@@ -71,7 +71,8 @@ class GAConfig:
     seed: int = 0
     init: str = "uniform"
 
-    def validate(self, prefix: str = "experiment.ga") -> "GAConfig":
+    def validate(self, prefix: str = "GAConfig") -> "GAConfig":
+        """Check the invariants (raises :class:`GAError` naming ``<prefix>.<field>`` and the value); returns self."""
         if self.algorithm not in ALGORITHMS:
             raise GAError(f"{prefix}.algorithm must be one of {sorted(ALGORITHMS)}, got {self.algorithm!r}")
         for name in ("population_size", "generations", "checkpoint_every"):
@@ -92,18 +93,6 @@ class GAConfig:
             raise GAError(f"{prefix}.population_size - 1 must be divisible by 4 for gesmr_ga (4 std groups), "
                           f"got {self.population_size}")
         return self
-
-    @staticmethod
-    def from_mapping(m: Mapping[str, Any], seed: int, prefix: str = "experiment.ga") -> "GAConfig":
-        known = {f.name for f in dataclasses.fields(GAConfig)} - {"seed"}
-        extra = set(m) - known
-        if extra:
-            raise GAError(f"{prefix}: unknown keys {sorted(extra)}; known: {sorted(known)}")
-        kw = {k: m[k] for k in m}
-        for k in ("population_size", "generations", "checkpoint_every"):
-            if k in kw and isinstance(kw[k], float) and float(kw[k]).is_integer():
-                kw[k] = int(kw[k])
-        return GAConfig(seed=int(seed), **kw).validate(prefix)
 
 
 def make_strategy(cfg: GAConfig, num_dims: int):

@@ -65,7 +65,7 @@ from ..motion_refine import spline_basis
 from ..trajectory import Cycle
 
 __all__ = ["MODES", "MECHANISM_NAMES", "OperatingError", "OperatingSpec", "OPERATING_UNITS", "OPERATING_SENSE",
-           "FIXED_VARIANT_METRICS", "settings_from_block", "spec_from_settings", "path_operating", "not_evaluated",
+           "FIXED_VARIANT_METRICS", "spec_from_settings", "path_operating", "not_evaluated",
            "u_rates"]
 
 MODES = ("per_task", "path")
@@ -81,8 +81,6 @@ OPERATING_SENSE = {"R_speed_margin": -1, "R_accel_margin": -1, "R_force_margin":
 #: cycle metrics whose per-task (fixed-R) value is also reported as ``<name>_fixed``
 FIXED_VARIANT_METRICS = ("picks_per_min", "cycle_time", "peak_utilisation", "rms_utilisation", "speed_utilisation",
                          "joint_margin_deg", "interference_margin")
-_KEYS = {"mode", "aggregate", "n_R", "segments", "drive", "mechanism", "motor_torque"}
-_DRIVE = {"speed": "m/s", "acceleration": "m/s^2", "force": "N"}
 
 
 class OperatingError(ValueError):
@@ -130,55 +128,8 @@ class OperatingSpec:
             raise OperatingError(f"OperatingSpec.motor_torque={self.motor_torque!r} N m needs a mechanism")
 
 
-def _num(b: Mapping[str, Any], key: str, where: str, unit: str) -> float:
-    v = b.get(key)
-    if v is None:
-        return math.inf
-    if isinstance(v, bool) or not isinstance(v, (int, float)) or math.isnan(v) or not v > 0:
-        raise OperatingError(f"{where}.{key} must be a number > 0 {unit} or null (no limit), got {v!r}")
-    return float(v)
-
-
-def settings_from_block(block: Optional[Mapping[str, Any]], where: str = "experiment.reconfig") -> dict:
-    """Validate the ``experiment.reconfig`` block (plain values; ``None``: all defaults) into a plain dict.
-
-    Raises:
-        OperatingError: one line naming the field and the value in its unit.
-    """
-    b = {} if block is None else block
-    if not isinstance(b, Mapping):
-        raise OperatingError(f"{where} must be a mapping, got {b!r}")
-    for k in b:
-        if k not in _KEYS:
-            raise OperatingError(f"{where}.{k}: unknown key; valid keys: {sorted(_KEYS)}")
-    out = {}
-    for name, options, default in (("mode", MODES, "per_task"), ("aggregate", AGGREGATES, "integral"),
-                                   ("mechanism", MECHANISM_NAMES, "none")):
-        v = b.get(name, default)
-        if v not in options:
-            raise OperatingError(f"{where}.{name} must be one of {list(options)}, got {v!r}")
-        out[name] = v
-    for name, default, lo in (("n_R", 17, 3), ("segments", 8, 3)):
-        v = b.get(name, default)
-        if isinstance(v, bool) or not isinstance(v, int) or v < lo:
-            raise OperatingError(f"{where}.{name} must be an integer >= {lo}, got {v!r}")
-        out[name] = v
-    d = b.get("drive") or {}
-    if not isinstance(d, Mapping):
-        raise OperatingError(f"{where}.drive must be a mapping with keys {list(_DRIVE)}, got {d!r}")
-    for k in d:
-        if k not in _DRIVE:
-            raise OperatingError(f"{where}.drive.{k}: unknown key; valid keys: {list(_DRIVE)}")
-    out["drive"] = {k: _num(d, k, f"{where}.drive", u) for k, u in _DRIVE.items()}
-    out["motor_torque"] = _num(b, "motor_torque", where, "N m")
-    if out["mechanism"] == "none" and math.isfinite(out["motor_torque"]):
-        raise OperatingError(f"{where}.motor_torque={out['motor_torque']!r} N m needs {where}.mechanism="
-                             f"screw_linkage (got mechanism=none)")
-    return out
-
-
 def spec_from_settings(s: Mapping[str, Any], R_range: Optional[tuple] = None) -> OperatingSpec:
-    """:class:`OperatingSpec` from :func:`settings_from_block`'s dict. ``R_range`` (m): the R range the screw
+    """:class:`OperatingSpec` from the settings' ``reconfig`` dict (:mod:`deltajax.config.ga_reconfig`). ``R_range`` (m): the R range the screw
     linkage must cover (the design space's smallest R_min .. largest R_max), required with
     ``mechanism=screw_linkage`` (:func:`deltajax.mechanism.example_screw_linkage` sized for it)."""
     mech = None

@@ -111,14 +111,14 @@ def operating_spec(s):  # rtmode: the screw linkage is sized for the design spac
 
 
 def setup(s, robot, recon, *, n_R: Optional[int] = None):
-    """(design space, coarse problem, GA config) for settings ``s``. The baseline is the configured robot
+    """(design space, coarse problem) for settings ``s``. The baseline is the configured robot
     (reconfigurable if it has an R range) with the motor's rotor inertia and the gear ratio
     ``motor.gear_ratio`` in its mass model. Raises :class:`SetupError` (one line naming the field)."""
     import equinox as eqx
     import jax.numpy as jnp
 
     from ..constraints import ConstraintError
-    from . import DesignSpace, DesignSpaceError, GAConfig, GAError
+    from . import DesignSpace, DesignSpaceError
 
     base = recon if recon is not None else robot
     rob = base.robot if recon is not None else base
@@ -131,11 +131,10 @@ def setup(s, robot, recon, *, n_R: Optional[int] = None):
     try:
         space = DesignSpace.from_bounds(base, s.bounds, n_R=s.n_R if n_R is None else n_R,
                                         prefix="experiment.design.bounds")
-        ga = GAConfig.from_mapping(s.ga, seed=0)
         pb = designer_problem(s)
-    except (DesignSpaceError, GAError, ConstraintError, ValueError) as err:
+    except (DesignSpaceError, ConstraintError, ValueError) as err:
         raise SetupError(str(err)) from None
-    return space, pb, ga
+    return space, pb
 
 
 # -- screen ----------------------------------------------------------------------------------------------------
