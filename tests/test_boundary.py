@@ -216,7 +216,7 @@ def test_experiment_config_errors():
 
     base = OmegaConf.load("configs/experiment/boundary_search.yaml").experiment
     ok = _check(base)
-    assert ok["rho_max"] == 5.12 and ok["steps_deg"] == [2.0, 1.0]
+    assert ok.rho_max == 5.12 and ok.steps_deg == [2.0, 1.0]
     for key, value, match in (("eps", -0.01, "experiment.eps"), ("steps_deg", [7.0], "experiment.steps_deg"),
                               ("centre", [0.0, 1.0], "experiment.centre"),
                               ("predictor", "magic", "experiment.predictor"),

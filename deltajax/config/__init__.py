@@ -18,7 +18,8 @@ __all__ = ["ConfigError", "robot_from_config", "mass_from_config", "validate_con
            "register_schemas", "TOP_LEVEL_KEYS",
            "EXPERIMENT_SETTINGS", "EXPERIMENT_SCHEMAS", "BenchKernelSettings",
            "PaperGridSettings", "IndicesExamplesSettings", "DatasheetSettings", "GaReconfigSettings", "source_run",
-           "WorkspaceGridSettings", "ReconfigIndicesSettings", "grid_plan",
+           "WorkspaceGridSettings", "ReconfigIndicesSettings", "grid_plan", "DynamicsCycleSettings",
+           "BoundarySearchSettings", "ReconfigMotionSettings",
            "GaReconfigSetup"]
 
 
@@ -377,9 +378,27 @@ def _cycle_setup(s, path: str) -> dict:
     return out
 
 
-def dynamics_cycle_spec(e, cfg=None, robot=None, recon=None) -> dict:
-    """``experiment.*`` of dynamics_cycle as plain values; ``setups`` holds one entry per analysed robot name
-    (its own block or ``default``), the config robot's under ``cfg_name``."""
+@dataclasses.dataclass(frozen=True)
+class DynamicsCycleSettings:
+    """``experiment=dynamics_cycle``: the inverse-dynamics formulation, cycle samples, motion law and blend, the
+    presets analysed besides the config robot (named ``cfg_name``), each robot's cycle setup (centre m, heading
+    deg, duration s, torque N m and speed rad/s limits), the GA paper's motion (rad, s), the moving-R amplitude (m)."""
+
+    method: str
+    n_samples: int
+    law: str
+    blend: float
+    robots: tuple
+    cfg_name: str
+    setups: dict
+    ga_amplitude: float
+    ga_duration: float
+    recon_R_amplitude: float
+
+
+def dynamics_cycle_spec(e, cfg=None, robot=None, recon=None) -> DynamicsCycleSettings:
+    """``experiment.*`` of dynamics_cycle; ``setups`` holds one entry per analysed robot name (its own block or
+    ``default``), the config robot's under ``cfg_name``."""
     from .. import presets
     from ..trajectory import MOTION_LAWS
 
@@ -408,11 +427,12 @@ def dynamics_cycle_spec(e, cfg=None, robot=None, recon=None) -> dict:
     # positions, velocities and accelerations of every analysed robot's cycle (float64), at least
     check_fits("experiment.n_samples", n_samples, 72.0 * n_samples * len(setups), f"{len(setups)} cycles of "
           f"{n_samples} samples")
-    return dict(method=read_choice("experiment.method", e.get("method"), ("virtual_work", "lagrange")),
+    return DynamicsCycleSettings(
+                method=read_choice("experiment.method", e.get("method"), ("virtual_work", "lagrange")),
                 n_samples=n_samples,
                 law=read_choice("experiment.law", e.get("law"), MOTION_LAWS),
                 blend=read_field("experiment.blend", e.get("blend"), lo=0, hi=1, hi_open=True),
-                robots=robots, cfg_name=cfg_name, setups=setups,
+                robots=tuple(robots), cfg_name=cfg_name, setups=setups,
                 ga_amplitude=read_field("experiment.ga_motion.amplitude", gm.get("amplitude"), lo=0, lo_open=True,
                                     unit="rad"),
                 ga_duration=read_field("experiment.ga_motion.duration", gm.get("duration"), lo=0, lo_open=True, unit="s"),
@@ -524,8 +544,29 @@ def datasheet_settings(e, cfg=None, robot=None, recon=None) -> DatasheetSettings
         **(dict(zip(("source_space", "source_motor"), source_run(src))) if kind == "run_dir" else {}))
 
 
-def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
-    """``experiment.*`` of boundary_search as plain values (m, deg)."""
+@dataclasses.dataclass(frozen=True)
+class BoundarySearchSettings:
+    """``experiment=boundary_search`` (m, deg): the search centre, bisection tolerance and ray length, angular
+    steps, predictor, half space, volume rule, profile samples, the reference grid (spacing, box), the centre sweep
+    and the timing repeats."""
+
+    eps: float
+    rho_max: float
+    grid_h: float
+    sweep_step_deg: float
+    centre: list
+    steps_deg: list
+    predictor: str
+    volume_rule: str
+    profile_samples: int
+    grid_box: list
+    centre_sweep_z: list
+    half_space: bool
+    timing_repeats: int
+
+
+def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> BoundarySearchSettings:
+    """``experiment.*`` of boundary_search (m, deg)."""
     from ..workspace import boundary as B
 
     pos = lambda k, unit: read_field(f"experiment.{k}", e.get(k), lo=0, lo_open=True, unit=unit)  # noqa: E731
@@ -566,7 +607,7 @@ def boundary_search_spec(e, cfg=None, robot=None, recon=None) -> dict:
         _search_centre(f"experiment.centre_sweep_z[{i}]", z, [out["centre"][0], out["centre"][1], z], robot)
     out["half_space"] = read_field("experiment.half_space", e.get("half_space", True), kind="bool")
     out["timing_repeats"] = read_field("experiment.timing_repeats", e.get("timing_repeats", 3), kind="int", lo=1)
-    return out
+    return BoundarySearchSettings(**out)
 
 
 #: the numeric settings of experiment.mechanism (deltajax.mechanism.example_screw_linkage / DirectRadial), with the
@@ -580,7 +621,30 @@ MECHANISM_FIELDS = {
 }
 
 
-def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dict:
+@dataclasses.dataclass(frozen=True)
+class ReconfigMotionSettings:
+    """``experiment=reconfig_motion``: the selection criterion and aggregate, the k~ parameters, the R step (m) and
+    the robot's R samples at it (``recon``), the arms' torque (N m) and speed (rad/s) limits, the R drive limits
+    (:class:`deltajax.RDriveLimits`), the reconfiguration mechanism (and its range check), the spline
+    refinement, and each case's (Cartesian cycle, boundary condition)."""
+
+    criterion: str
+    aggregate: str
+    b_v: float
+    b_f: float
+    R_step: float
+    torque_limit: float
+    speed_limit: float
+    beta: float
+    drive: Any
+    recon: Any
+    mech: Any
+    refine: dict
+    cases: dict
+    mech_info: Optional[dict] = None
+
+
+def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> ReconfigMotionSettings:
     """``experiment.*`` of reconfig_motion as plain values and library objects: the R drive limits
     (:class:`deltajax.RDriveLimits`), the reconfiguration mechanism, and each case's Cartesian cycle."""
     import jax.numpy as jnp
@@ -675,7 +739,7 @@ def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> dic
                 raise
             raise ConfigError(f"{p}: {err}") from None
         out["cases"][name] = (cyc, boundary)
-    return out
+    return ReconfigMotionSettings(**out)
 
 
 

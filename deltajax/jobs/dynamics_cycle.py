@@ -111,27 +111,27 @@ def run(ctx) -> None:
     the GA motion with R moving (a reconfigurable robot with ``experiment.recon_R_amplitude`` != 0) and the
     summaries, on the stage engine."""
     spec = ctx.settings                                # checked before the run (config.dynamics_cycle_spec)
-    method, robots = spec["method"], _robots(ctx, spec)
+    method, robots = spec.method, _robots(ctx, spec)
     st = State(ctx=ctx, res=ctx.results, spec=spec, dtype=ctx.dtype, robots=robots, method=method,
                other="lagrange" if method == "virtual_work" else "virtual_work",
                profile_jit=jax.jit(cycle_profile, static_argnames=("method",)),
                metrics_jit=jax.jit(cycle_metrics, static_argnames=("method",)),
-               ga=tr.ga_paper_motion(amplitude=spec["ga_amplitude"], duration=spec["ga_duration"],
-                                     n_samples=spec["n_samples"], dtype=ctx.dtype),
+               ga=tr.ga_paper_motion(amplitude=spec.ga_amplitude, duration=spec.ga_duration,
+                                     n_samples=spec.n_samples, dtype=ctx.dtype),
                summary=[], comparison=[], max_formulation_gap=0.0,  # comparison: (robot/case, {model: metrics})
                bar=ctx.progress(total=len(robots), desc="robots"))
     stages = [Stage(name, functools.partial(_robot, name=name, last=i == len(robots) - 1))
               for i, name in enumerate(robots)]
     Runner(ctx, "dynamics_cycle", resumable=False).run(
         (*stages, Stage("moving_R", _moving_R, when=lambda st: st.ctx.recon is not None
-                        and st.spec["recon_R_amplitude"] != 0.0), Stage("summary", _store_summary)), st)
+                        and st.spec.recon_R_amplitude != 0.0), Stage("summary", _store_summary)), st)
 
 
 def _robots(ctx, spec) -> dict:
-    """The robots evaluated: the config robot (under ``spec["cfg_name"]``), then the presets of
+    """The robots evaluated: the config robot (under ``spec.cfg_name``), then the presets of
     ``experiment.robots`` (ConfigError for one without a mass model)."""
-    robots = {spec["cfg_name"]: ctx.robot}
-    for name in spec["robots"]:
+    robots = {spec.cfg_name: ctx.robot}
+    for name in spec.robots:
         if name not in robots:
             rob = preset_robot(name)
             if rob is None:
@@ -148,11 +148,11 @@ def _in_dtype(robot, dtype):
 def _robot(st: State, name: str, last: bool) -> None:
     """One robot along the standard cycle (its own centre, heading, duration and limits) and the GA paper's motion:
     each case computed, stored (flushed once both are) and drawn (:func:`_case`)."""
-    spec, s = st.spec, st.spec["setups"][name]
+    spec, s = st.spec, st.spec.setups[name]
     robot = _in_dtype(st.robots[name], st.dtype)
     limits = Limits(torque=s["torque_limit"], speed=s["speed_limit"])
     cycle = tr.adept_cycle(s["centre"], heading=math.radians(s["heading_deg"]), duration=s["duration"],
-                           law=spec["law"], blend=spec["blend"], n_samples=spec["n_samples"], dtype=st.dtype)
+                           law=spec.law, blend=spec.blend, n_samples=spec.n_samples, dtype=st.dtype)
     for case, cyc in {"adept": cycle, "ga_motion": st.ga}.items():
         _case(st, name, robot, s, limits, case, cyc)
     st.res.flush()
@@ -211,12 +211,12 @@ def _case(st: State, name: str, robot, s: dict, limits, case: str, cyc) -> None:
 def _moving_R(st: State) -> None:
     """The config robot along the GA motion with R = R0 + A sin(2 pi t/T): group
     ``dynamics/<robot>/ga_motion_moving_R`` with the R actuator's force (its gap to the other method)."""
-    ctx, res, spec, method, cfg_name = st.ctx, st.res, st.spec, st.method, st.spec["cfg_name"]
+    ctx, res, spec, method, cfg_name = st.ctx, st.res, st.spec, st.method, st.spec.cfg_name
     recon = ctx.recon
     robot = _in_dtype(recon.robot, st.dtype)
-    R0, A = float(recon.robot.base_radius), spec["recon_R_amplitude"]
+    R0, A = float(recon.robot.base_radius), spec.recon_R_amplitude
     cyc = tr.with_R_profile(st.ga, R0, amplitude=A)
-    s = spec["setups"][cfg_name]
+    s = spec.setups[cfg_name]
     limits = Limits(torque=s["torque_limit"], speed=s["speed_limit"])
     m = st.metrics_jit(robot, cyc, limits, method=method)
     prof = st.profile_jit(robot, cyc, method=method)
@@ -247,6 +247,6 @@ def _store_summary(st: State) -> None:
         res.put("dynamics/summary", stored, np.asarray([as_is(getattr(m, key)) for _, _, m, _ in summary]),
                 units=unit, dims=dims)
     _save_forearm_summary(res, st.comparison)
-    res.set_attrs("dynamics", method=st.method, law=spec["law"], blend=spec["blend"], n_samples=spec["n_samples"],
+    res.set_attrs("dynamics", method=st.method, law=spec.law, blend=spec.blend, n_samples=spec.n_samples,
                   max_formulation_gap=st.max_formulation_gap)
     st.ctx.log(f"largest |virtual work - Lagrange| over all profiles: {st.max_formulation_gap:.2e}")
