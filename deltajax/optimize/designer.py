@@ -219,6 +219,41 @@ def _nanmin(a, axis=-1):
     return jnp.where(jnp.any(jnp.isnan(a), axis=axis), jnp.nan, jnp.min(a, axis=axis))
 
 
+#: Pairs per full good test call of :func:`_good_where_possible`, as a fraction of all pairs (1/GRID_CHUNKS each).
+GRID_CHUNKS = 16
+
+
+def _good_where_possible(good, possible, Rs, pts):
+    """``good(R, p)`` at every (R in ``Rs``, p in ``pts``), (nR, nP) bools, with the full test run only where the
+    cheap necessary condition ``possible(R, p)`` holds (False elsewhere, which is the full test's answer there).
+
+    The pairs that may be good are packed to the front (in their order) and tested in chunks of 1/GRID_CHUNKS of
+    all pairs by a while loop that stops after the last one: the same test at the same (R, point) pairs, so the
+    same answers, at the cost of the possible pairs (on the default problem's grid 6-56 % of them, 28 % on
+    average over Sobol designs: reach and the index exclude the rest) instead of all. Vmapped over designs the
+    loop runs until the batch's design with the most possible pairs is done."""
+    nR, nP = Rs.shape[0], pts.shape[0]
+    M = nR * nP
+    iR = jnp.repeat(jnp.arange(nR), nP)
+    iP = jnp.tile(jnp.arange(nP), nR)
+    maybe = jax.vmap(lambda i, j: possible(Rs[i], pts[j]))(iR, iP)
+    count = jnp.sum(maybe.astype(jnp.int32))
+    pos = jnp.cumsum(maybe.astype(jnp.int32)) - 1
+    order = jnp.zeros((M,), jnp.int32).at[jnp.where(maybe, pos, M)].set(jnp.arange(M, dtype=jnp.int32), mode="drop")
+    K = -(-M // GRID_CHUNKS)
+    order = jnp.concatenate([order, jnp.zeros((K * GRID_CHUNKS - M,), jnp.int32)])
+
+    def body(st):
+        c, out = st
+        idx = jax.lax.dynamic_slice(order, (c * K,), (K,))
+        g = jax.vmap(lambda m: good(Rs[iR[m]], pts[iP[m]]))(idx)
+        live = c * K + jnp.arange(K) < count
+        return c + 1, out.at[jnp.where(live, idx, M)].set(g, mode="drop")
+
+    _, out = jax.lax.while_loop(lambda st: st[0] * K < count, body, (jnp.int32(0), jnp.zeros((M,), bool)))
+    return out.reshape(nR, nP)
+
+
 def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> dict[str, jax.Array]:
     """Every metric of one design plus ``g`` (constraint values, (5,)), ``violation`` (sum of positive parts)
     and ``feasible``; pure and vmappable. ``regular=False`` skips the regular workspace (NaN).
@@ -306,7 +341,12 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
             return jax.vmap(lambda p: C.good_point(at(R), p, pb.good, plate_radius=plate).good)(rw).reshape(grid)
 
         g_k = good_grid(Rc[k])                                                  # the operating R
-        g_any = jnp.any(jax.vmap(good_grid)(Rs), axis=0) if recon else g_k
+        if recon:   # full good tests only where the cheap necessary condition holds (reach and index)
+            g_s = _good_where_possible(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good,
+                                       lambda R, p: C.good_point_possible(at(R), p, pb.good), Rs, rw)
+            g_any = jnp.any(g_s, axis=0).reshape(grid)
+        else:
+            g_any = g_k
         reg = C.largest_cylinder(jnp.all(g_any, axis=2), r, z, pb.hd_ratio)
         regf = C.largest_cylinder(jnp.all(g_k, axis=2), r, z, pb.hd_ratio)
         if pb.rw_refine:   # continuous measure, bracketed by the grid's answer (same good test, same R samples)
