@@ -11,7 +11,7 @@ Pure geometry over a good-point predicate: what "good" means (reachable, index, 
 from __future__ import annotations
 
 import math
-from typing import Callable, NamedTuple
+from typing import Callable, NamedTuple, Optional
 
 import jax
 import jax.numpy as jnp
@@ -129,7 +129,8 @@ def _distinct_offsets(unit, dt):
 
 
 def refine_cylinder(good_fn: Callable[[Array], Array], start: RegularWorkspace, r, z, hd_ratio: float, *,
-                    unit=None, n_bisect: int = REFINE_BISECT, n_golden: int = REFINE_GOLDEN) -> RegularWorkspace:
+                    unit=None, n_bisect: int = REFINE_BISECT, n_golden: int = REFINE_GOLDEN,
+                    all_good: Optional[Callable[[Array], Array]] = None) -> RegularWorkspace:
     """Continuous regular-workspace measure, started from the grid's answer ``start`` (:func:`largest_cylinder`
     on the grid ``r``, ``z``).
 
@@ -146,6 +147,8 @@ def refine_cylinder(good_fn: Callable[[Array], Array], start: RegularWorkspace, 
     the height binds: in all, <= ~0.1 % in D, <= ~0.3 % in volume. The samples (4 rings x 3 angles 0/30/60 deg x
     5 levels by default) are
     what is checked: like any sampled test, a bad region thinner than the sample spacing can slip between them.
+    ``all_good(points (n, 3)) -> bool``: the same answer as ``all(good_fn(p) for p in points)``, computed
+    another way (e.g. stopping at the first bad point: :func:`deltajax.optimize.designer.evaluate_designer`).
     Every step is a continuous function of the good set's boundary, so the measure moves continuously with
     the design (the grid's answer only places the brackets). Pure, vmappable; returns a
     :class:`RegularWorkspace`.
@@ -159,6 +162,8 @@ def refine_cylinder(good_fn: Callable[[Array], Array], start: RegularWorkspace, 
     d_hi = start.diameter + 2.0 * (2.0 * dr + dz / hd_ratio)
     c0 = start.z_top + start.height / 2.0
 
+    test_all = all_good if all_good is not None else (lambda P: jnp.all(jax.vmap(good_fn)(P)))
+
     def d_at(c):
         centre = jnp.stack([jnp.zeros((), dt), jnp.zeros((), dt), c])
         # the centre itself (offset 0, the same point at every D) tested once per centre, not at every step:
@@ -168,7 +173,7 @@ def refine_cylinder(good_fn: Callable[[Array], Array], start: RegularWorkspace, 
         def body(_, lh):
             lo, hi = lh
             mid = 0.5 * (lo + hi)
-            ok = centre_ok & jnp.all(jax.vmap(good_fn)(centre[None, :] + mid * unit))
+            ok = centre_ok & test_all(centre[None, :] + mid * unit)
             return jnp.where(ok, mid, lo), jnp.where(ok, hi, mid)
 
         lo, _ = jax.lax.fori_loop(0, n_bisect, body, (0.0 * d_hi, d_hi))

@@ -254,6 +254,50 @@ def _good_where_possible(good, possible, Rs, pts):
     return out.reshape(nR, nP)
 
 
+def _all_any_good(good, possible, Rs, pts):
+    """``all(any(good(R, p) for R in Rs) for p in pts)``, the test of a cylinder's samples with R chosen per point
+    (:func:`deltajax.constraints.refine_cylinder` in :func:`evaluate_designer`), with fewer full good tests: only
+    pairs that pass the cheap necessary condition ``possible``; first one pair per point (its first possible R in
+    the order of ``Rs``), then rounds of len(pts) pairs taken point by point from the points not yet good (all
+    their remaining possible R, so a point with no good R is found bad within a round or two); it stops as soon
+    as every point has a good R (True) or a point has none left (False). The answer does not depend on which
+    pairs are tested or in what order (the good test is pure), so it is the full any/all's."""
+    nS, nR = pts.shape[0], Rs.shape[0]
+    M = nS * nR
+    maybe = jax.vmap(lambda p: jax.vmap(lambda R: possible(R, p))(Rs))(pts)       # (nS, nR): point-major order
+    K = nS
+    # round 1: each point's first possible R
+    has = jnp.any(maybe, axis=1)
+    first = jnp.argmax(maybe, axis=1)
+    g1 = jax.vmap(lambda i, j: good(Rs[i], pts[j]))(first, jnp.arange(nS)) & has
+    tested0 = (jnp.arange(nR)[None, :] == first[:, None]) & has[:, None]
+
+    def remaining(st):
+        tested, sat = st
+        return maybe & ~tested & ~sat[:, None]
+
+    def cond(st):
+        sat = st[1]
+        stuck = jnp.any(~sat & ~jnp.any(remaining(st), axis=1))
+        return ~jnp.all(sat) & ~stuck
+
+    def body(st):
+        tested, sat = st
+        rem = remaining(st).reshape(-1)
+        pos = jnp.cumsum(rem.astype(jnp.int32)) - 1
+        pick = jnp.zeros((K,), jnp.int32).at[jnp.where(rem & (pos < K), pos, K)].set(
+            jnp.arange(M, dtype=jnp.int32), mode="drop")
+        live = jnp.arange(K) < jnp.sum(rem.astype(jnp.int32))
+        iS, iR = pick // nR, pick % nR
+        g = jax.vmap(lambda i, j: good(Rs[i], pts[j]))(iR, iS) & live
+        tested = tested.reshape(-1).at[jnp.where(live, pick, M)].set(True, mode="drop").reshape(nS, nR)
+        sat = sat.at[jnp.where(g, iS, nS)].set(True, mode="drop")
+        return tested, sat
+
+    _, sat = jax.lax.while_loop(cond, body, (tested0, g1))
+    return jnp.all(sat)
+
+
 def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> dict[str, jax.Array]:
     """Every metric of one design plus ``g`` (constraint values, (5,)), ``violation`` (sum of positive parts)
     and ``feasible``; pure and vmappable. ``regular=False`` skips the regular workspace (NaN).
@@ -337,13 +381,14 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         grid = pb.rw_points.shape[:3]
         rw = jnp.asarray(pb.rw_points, dt).reshape(-1, 3)
 
-        def good_grid(R):
-            return jax.vmap(lambda p: C.good_point(at(R), p, pb.good, plate_radius=plate).good)(rw).reshape(grid)
+        # full good tests only where the cheap necessary condition holds (reach and index)
+        def good_grid(R_set):
+            return _good_where_possible(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good,
+                                        lambda R, p: C.good_point_possible(at(R), p, pb.good), R_set, rw)
 
-        g_k = good_grid(Rc[k])                                                  # the operating R
-        if recon:   # full good tests only where the cheap necessary condition holds (reach and index)
-            g_s = _good_where_possible(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good,
-                                       lambda R, p: C.good_point_possible(at(R), p, pb.good), Rs, rw)
+        g_k = good_grid(Rc[k][None])[0].reshape(grid)                           # the operating R
+        if recon:
+            g_s = good_grid(Rs)                                                 # (ns, grid points)
             g_any = jnp.any(g_s, axis=0).reshape(grid)
         else:
             g_any = g_k
@@ -355,9 +400,15 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
 
             good_any = ((lambda p: jnp.any(jax.vmap(lambda R: good_at(R, p))(Rs))) if recon
                         else (lambda p: good_at(Rc[k], p)))
+            all_any = None
+            if recon:   # R samples tried in the order of their good grid points, most first
+                rank = jnp.argsort(-jnp.sum(g_s, axis=1), stable=True)
+                all_any = lambda P: _all_any_good(  # noqa: E731
+                    good_at, lambda R, p: C.good_point_possible(at(R), p, pb.good), Rs[rank], P)
             nb, ng = pb.rw_refine_steps
             unit = C.cylinder_samples(pb.hd_ratio, *pb.rw_refine_samples)
-            reg = C.refine_cylinder(good_any, reg, r, z, pb.hd_ratio, unit=unit, n_bisect=nb, n_golden=ng)
+            reg = C.refine_cylinder(good_any, reg, r, z, pb.hd_ratio, unit=unit, n_bisect=nb, n_golden=ng,
+                                    all_good=all_any)
             regf = C.refine_cylinder(lambda p: good_at(Rc[k], p), regf, r, z, pb.hd_ratio, unit=unit, n_bisect=nb,
                                      n_golden=ng)
         out.update(regular_volume=reg.volume, regular_diameter=reg.diameter, regular_height=reg.height,
