@@ -266,35 +266,34 @@ def _all_any_good(good, possible, Rs, pts):
     M = nS * nR
     maybe = jax.vmap(lambda p: jax.vmap(lambda R: possible(R, p))(Rs))(pts)       # (nS, nR): point-major order
     K = nS
-    # round 1: each point's first possible R
     has = jnp.any(maybe, axis=1)
-    first = jnp.argmax(maybe, axis=1)
-    g1 = jax.vmap(lambda i, j: good(Rs[i], pts[j]))(first, jnp.arange(nS)) & has
-    tested0 = (jnp.arange(nR)[None, :] == first[:, None]) & has[:, None]
+    first = jnp.argmax(maybe, axis=1)                 # each point's first possible R (round 0)
 
-    def remaining(st):
-        tested, sat = st
+    def remaining(tested, sat):
         return maybe & ~tested & ~sat[:, None]
 
     def cond(st):
-        sat = st[1]
-        stuck = jnp.any(~sat & ~jnp.any(remaining(st), axis=1))
-        return ~jnp.all(sat) & ~stuck
+        c, tested, sat = st
+        stuck = jnp.any(~sat & ~jnp.any(remaining(tested, sat), axis=1))
+        return (c == 0) | (~jnp.all(sat) & ~stuck)
 
-    def body(st):
-        tested, sat = st
-        rem = remaining(st).reshape(-1)
+    def body(st):                                     # one compiled copy of the good test for every round
+        c, tested, sat = st
+        rem = remaining(tested, sat).reshape(-1)
         pos = jnp.cumsum(rem.astype(jnp.int32)) - 1
         pick = jnp.zeros((K,), jnp.int32).at[jnp.where(rem & (pos < K), pos, K)].set(
             jnp.arange(M, dtype=jnp.int32), mode="drop")
         live = jnp.arange(K) < jnp.sum(rem.astype(jnp.int32))
-        iS, iR = pick // nR, pick % nR
+        r0 = c == 0
+        iS = jnp.where(r0, jnp.arange(nS), pick // nR)
+        iR = jnp.where(r0, first, pick % nR)
+        live = jnp.where(r0, has, live)
         g = jax.vmap(lambda i, j: good(Rs[i], pts[j]))(iR, iS) & live
-        tested = tested.reshape(-1).at[jnp.where(live, pick, M)].set(True, mode="drop").reshape(nS, nR)
+        tested = tested.reshape(-1).at[jnp.where(live, iS * nR + iR, M)].set(True, mode="drop").reshape(nS, nR)
         sat = sat.at[jnp.where(g, iS, nS)].set(True, mode="drop")
-        return tested, sat
+        return c + 1, tested, sat
 
-    _, sat = jax.lax.while_loop(cond, body, (tested0, g1))
+    _, _, sat = jax.lax.while_loop(cond, body, (jnp.int32(0), jnp.zeros((nS, nR), bool), jnp.zeros((nS,), bool)))
     return jnp.all(sat)
 
 
@@ -386,11 +385,12 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
             return _good_where_possible(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good,
                                         lambda R, p: C.good_point_possible(at(R), p, pb.good), R_set, rw)
 
-        g_k = good_grid(Rc[k][None])[0].reshape(grid)                           # the operating R
-        if recon:
-            g_s = good_grid(Rs)                                                 # (ns, grid points)
+        if recon:   # the R samples and the operating R in one call (one compiled copy of the test)
+            g_all = good_grid(jnp.concatenate([Rs, Rc[k][None]]))
+            g_s, g_k = g_all[:ns], g_all[ns].reshape(grid)                      # (ns, grid points); the operating R
             g_any = jnp.any(g_s, axis=0).reshape(grid)
         else:
+            g_k = good_grid(Rc[k][None])[0].reshape(grid)
             g_any = g_k
         reg = C.largest_cylinder(jnp.all(g_any, axis=2), r, z, pb.hd_ratio)
         regf = C.largest_cylinder(jnp.all(g_k, axis=2), r, z, pb.hd_ratio)
