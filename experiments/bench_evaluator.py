@@ -1,6 +1,6 @@
 """The designer's search evaluator (regular workspace on) against an earlier version of it, in one process.
 
-    python experiments/bench_evaluator.py                       # vs main, 16 Sobol designs, median of 5
+    python experiments/bench_evaluator.py                       # vs f021be3, 16 Sobol designs, median of 5
     python experiments/bench_evaluator.py --old-ref f021be3 --designs 32 --reps 7
 
 The earlier version is ``deltajax/optimize/designer.py`` and ``deltajax/regular.py`` as ``git show <old-ref>``
@@ -75,7 +75,9 @@ def load_old(ref: str):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--old-ref", default="main", help="git ref of the earlier evaluator (default: main)")
+    ap.add_argument("--old-ref", default="f021be3",
+                    help="git ref of the earlier evaluator (default: f021be3, main before this work; main's "
+                         "designer.py, regular.py and constraints.py were the same at ff00431)")
     ap.add_argument("--designs", type=int, default=16, help="Sobol designs per call (the vmapped batch)")
     ap.add_argument("--reps", type=int, default=5, help="interleaved rounds (median reported)")
     ap.add_argument("--seed", type=int, default=7, help="Sobol scramble seed")
