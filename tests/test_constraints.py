@@ -322,3 +322,37 @@ def test_search_settings_of_the_refined_cylinder_against_closed_forms():
     assert np.max(err) < 2e-3                                        # measured: well inside the bound (~1 mm)
     np.testing.assert_allclose(np.diff(D), np.diff(d_exact), atol=2e-3)
     assert np.max(np.abs(Dg - d_exact)) > 5 * np.max(err)           # the grid's answer alone is much coarser
+
+
+def test_refine_cylinder_each_distinct_sample_once_and_all_good_give_the_same_answer():
+    # refine_cylinder tests the centre once per centre and drops repeated samples (the axis ring repeats one point
+    # per angle): the answer must be that of the samples as given, repeats and all; an ``all_good`` computing the
+    # same all() another way (here: the samples in reverse order) must not change it either
+    lam = 0.5
+    pts, r, z = C.polar_grid(0.40, 0.15, 0.78, 16, 3, 22)
+    unit = C.cylinder_samples(lam, 3, 2, 3)
+    def run(u, **kw):
+        good = _ball(0.45, 0.18)
+        g = jax.vmap(good)(jnp.asarray(pts).reshape(-1, 3)).reshape(pts.shape[:3])
+        start = C.largest_cylinder(jnp.all(g, axis=2), r, z, lam)
+        return C.refine_cylinder(good, start, r, z, lam, unit=u, n_bisect=10, n_golden=8, **kw)
+
+    base = run(unit)
+    doubled = run(np.concatenate([unit, unit, np.zeros((2, 3))]))       # repeats and extra centres
+    rev = run(unit, all_good=lambda P: jnp.all(jax.vmap(_ball(0.45, 0.18))(P[::-1])))
+    for o in (doubled, rev):
+        for a, b in zip(base, o):
+            assert float(a) == float(b)
+
+
+@pytest.mark.slow
+def test_good_point_possible_is_necessary():
+    # a point where good_point_possible is False is never good (the search evaluator skips the full test there)
+    spec = C.GoodSpec(joints=C.JointModel(limit=math.radians(50), platform_neutral=math.radians(40)),
+                      links=C.LinkModel(), threshold=0.3)
+    pts, _, _ = C.polar_grid(0.45, 0.1, 0.9, 12, 3, 12)
+    P = jnp.asarray(pts).reshape(-1, 3)
+    good = jax.jit(jax.vmap(lambda p: C.good_point(ROBOT, p, spec).good))(P)
+    maybe = jax.jit(jax.vmap(lambda p: C.good_point_possible(ROBOT, p, spec)))(P)
+    assert np.all(np.asarray(maybe) | ~np.asarray(good))
+    assert 0 < int(np.sum(good)) and int(np.sum(maybe)) < P.shape[0]   # neither test trivial on this grid
