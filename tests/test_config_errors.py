@@ -39,3 +39,10 @@ def test_unknown_keys_are_listed_plainly_not_as_a_python_list():
     assert "[" not in msg and "'" not in msg and "\n" not in msg
     with pytest.raises(ConfigError, match=r"^unknown top-level key\(s\) foo; valid keys: robot, experiment, seed"):
         C.check_keys({"foo": 1})
+
+
+def test_a_datasheet_source_that_is_not_a_readable_run_is_one_line(tmp_path):
+    (tmp_path / "results.h5").write_bytes(b"not an HDF5 file")
+    with pytest.raises(ConfigError, match=r"^source=.*: its results.h5 cannot be read as a run") as err:
+        C.source_run(str(tmp_path))
+    assert "\n" not in str(err.value)

@@ -480,10 +480,15 @@ def source_run(src: str) -> tuple:
 
     from .. import io
 
-    attrs = io.read(os.path.join(src, "results.h5"), max_elements=0).attrs
-    cfg = yaml.safe_load(attrs["config"])
-    if (cfg.get("experiment") or {}).get("name") != "ga_reconfig":
-        raise ConfigError(f"source={src!r} is a {(cfg.get('experiment') or {}).get('name')!r} run, not ga_reconfig")
+    try:
+        attrs = io.read(os.path.join(src, "results.h5"), max_elements=0).attrs
+        cfg = yaml.safe_load(attrs["config"])
+    except (OSError, KeyError, ValueError, yaml.YAMLError) as err:
+        raise ConfigError(f"source={src!r}: its results.h5 cannot be read as a run ({type(err).__name__}: "
+                          f"{err})") from None
+    if not isinstance(cfg, Mapping) or (cfg.get("experiment") or {}).get("name") != "ga_reconfig":
+        name = (cfg.get("experiment") or {}).get("name") if isinstance(cfg, Mapping) else None
+        raise ConfigError(f"source={src!r} is a {name!r} run, not ga_reconfig")
     robot, recon = robot_from_config(cfg["robot"])
     s, space = ga_reconfig_build(cfg["experiment"], robot, recon)[:2]
     return space, s.motor
