@@ -86,15 +86,14 @@ def main(argv=None):
     import jax
 
     jax.config.update("jax_enable_x64", True)
-    from hydra import compose, initialize_config_dir
     from scipy.stats import qmc
 
     from deltajax.config import ga_reconfig_build, robot_from_config
     from deltajax.optimize.designer import evaluate_designer
+    from deltajax.overrides import compose_config
     from deltajax.run import CONFIG_DIR
 
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        cfg = compose(config_name="config", overrides=["experiment=ga_reconfig"])
+    cfg = compose_config(["experiment=ga_reconfig"], CONFIG_DIR)
     robot, recon = robot_from_config(cfg.robot)
     _, space, pb, _ = ga_reconfig_build(cfg.experiment, robot, recon)
     X = np.asarray(qmc.Sobol(d=space.dim, scramble=True, seed=args.seed).random(args.designs))

@@ -41,16 +41,14 @@ def main(argv=None):
     import jax
     jax.config.update("jax_enable_x64", True)
     import jax.numpy as jnp
-    from hydra import compose, initialize_config_dir
-
     from deltajax import constraints as C
     from deltajax.config import ga_reconfig_build, robot_from_config
     from deltajax.optimize import certify as CE
     from deltajax.optimize import workflow as W
+    from deltajax.overrides import compose_config
     from deltajax.run import CONFIG_DIR
 
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        cfg = compose(config_name="config", overrides=["experiment=ga_reconfig"])
+    cfg = compose_config(["experiment=ga_reconfig"], CONFIG_DIR)
     robot, recon = robot_from_config(cfg.robot)
     s, space, _, _ = ga_reconfig_build(cfg.experiment, robot, recon)
     space_v = dataclasses.replace(space, n_R=s.verify["n_R"])

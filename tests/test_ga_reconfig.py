@@ -10,7 +10,7 @@ import pytest
 
 from deltajax.config import ConfigError
 from deltajax.io import ResultsFile, load
-from deltajax.jobs.designer_state import restage
+from deltajax.rundir import restage
 from deltajax.run import run_experiment
 from deltajax.rundir import RunDirError
 

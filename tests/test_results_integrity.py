@@ -167,18 +167,19 @@ def test_library_reads_of_a_tampered_checkpoint_refuse_it(stopped_run, tmp_path)
     """The job's own reads (not only the run directory's claim) verify: the checkpoint loader and the re-staging
     of a resume never use or re-checksum edited data."""
     from deltajax.jobs import designer_state as W
+    from deltajax.rundir import recorded, restage
 
     path = _copy(stopped_run, tmp_path) / "results.h5"
     assert W.load_checkpoint(path)["generations_done"] == 2
-    assert W.stages_done(path)[1] == ["screen"]
+    assert recorded(path, "ga_reconfig")[1] == ["screen"]
     with h5py.File(path, "r+") as f:
         f["ga/checkpoint"].attrs["generations_done"] = 3
     with pytest.raises(CheckpointError, match="'generations_done' does not match its checksum.*fresh=true"):
         W.load_checkpoint(path)
     with pytest.raises(dio.ChecksumError, match="generations_done"):
-        W.stages_done(path)
+        recorded(path, "ga_reconfig")
     with pytest.raises(dio.ChecksumError, match="generations_done"):
-        W.restage(dio.ResultsFile(tmp_path / "other.h5"), path)
+        restage(dio.ResultsFile(tmp_path / "other.h5"), path)
 
 
 # -- a finished run is re-verified before "nothing to do" -------------------------------------------------------
@@ -230,7 +231,7 @@ def test_plots_stage_is_marked_only_after_its_figures_are_on_disk(toy_run, tmp_p
     d.mkdir()
     # the finished run up to its results stage, written legitimately (as a run killed before its plots)
     res = dio.ResultsFile(d / "results.h5")
-    from deltajax.jobs.designer_state import restage
+    from deltajax.rundir import restage
 
     restage(res, full)
     res.set_attrs(ga_reconfig_stages="screen,ga,pareto,refine,verify,tolerance,results")

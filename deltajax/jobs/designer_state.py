@@ -1,7 +1,7 @@
-"""The main job's state in ``results.h5``: the GA checkpoint (:func:`load_checkpoint`, :func:`put_checkpoint`), the
-finished stages (:func:`stages_done`; restaging, :func:`restage`, is :mod:`deltajax.rundir`'s) and a continued
-run's earlier front joined to the verified candidates (:func:`carry_earlier`; the earlier run itself is read with
-the settings, :func:`deltajax.config.ga_reconfig.earlier_run`).
+"""The main job's state in ``results.h5``: the GA checkpoint (:func:`load_checkpoint`, :func:`put_checkpoint`) and a
+continued run's earlier front joined to the verified candidates (:func:`carry_earlier`; the earlier run itself is read with
+the settings, :func:`deltajax.config.ga_reconfig.earlier_run`). The finished stages and restaging before a resume
+are :mod:`deltajax.rundir`'s (``recorded``, ``restage``).
 
 Application wing: it reads the results file; the engines (:mod:`deltajax.optimize`) never do.
 """
@@ -11,14 +11,13 @@ from __future__ import annotations
 import math
 import re
 from pathlib import Path
-from typing import Any, Mapping, Optional, Sequence
+from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 from ..optimize.workflow import STORED_METRIC, SetupError
-from ..rundir import recorded, restage
 
-__all__ = ["load_checkpoint", "put_checkpoint", "restage", "stages_done", "carry_earlier"]
+__all__ = ["load_checkpoint", "put_checkpoint", "carry_earlier"]
 
 
 # -- results-file bookkeeping (checkpoint, restaging, stages) -------------------------------------------------------
@@ -77,12 +76,6 @@ def put_checkpoint(res, ck: Mapping[str, Any]) -> None:
     res.put(g, "population", ck["population"], units="1", dims=("member", "gene"))
     res.put(g, "fitness", ck["fitness"], units="1", dims=("member",))
     res.set_attrs(g, fingerprint=ck["fingerprint"], generations_done=int(ck["generations_done"]))
-
-
-def stages_done(path: Path) -> tuple[Optional[str], list]:
-    """(fingerprint, finished stages) of the ``ga_reconfig`` run recorded in ``path``
-    (:func:`deltajax.rundir.recorded`)."""
-    return recorded(path, "ga_reconfig")
 
 
 # -- continuing a finished run with more budget (experiment.continue_from) --------------------------------------------
