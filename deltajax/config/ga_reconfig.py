@@ -51,13 +51,22 @@ _GA_KEYS = {
     "pareto": {"enabled", "population_size", "generations", "ref_min_factor"},
     "tolerance": {"enabled", "samples", "seed", "distribution", "length_mm", "joint_offset_deg", "mass_percent",
                   "motor_percent"},
-    "robust": {"enabled", "probability", "confirm_seed", "max_candidates"},
+    "robust": {"enabled", "probability", "confirm_seed", "max_candidates", "margins"},
     "verify": {"n_R", "n_R_operating", "task_n_r", "task_n_phi", "task_n_z", "cycle_samples", "rw_n_r", "rw_n_phi",
                "rw_n_z"},
 }
 
 # keys a config may omit (their defaults are applied where they are read)
-_GA_OPTIONAL = {"regular_workspace": {"search_refine", "search_refine_steps", "search_refine_samples"}}
+_GA_OPTIONAL = {"regular_workspace": {"search_refine", "search_refine_steps", "search_refine_samples"},
+                "robust": {"margins"}}
+
+#: ``experiment.robust.margins``: the margin every constraint must hold by in a robust run's search, verification
+#: and certification (name -> unit, upper bound): the good-workspace index threshold raised by ``index``, the
+#: passive joints' limit lowered by ``joint_deg``, the links' required clearance raised by ``clearance_mm``, the
+#: motor's peak and rated torque derated by ``motor_percent`` (the cycle is planned with that torque headroom).
+#: 0 (the default): the constraint as stated.
+ROBUST_MARGINS = {"index": ("", None), "joint_deg": ("deg", 180.0), "clearance_mm": ("mm", 1000.0),
+                  "motor_percent": ("%", 100.0)}
 
 #: a lower bound of the memory of one evaluated point of a design (one 3x3 Jacobian in float32), for the refusal
 #: of populations that cannot be evaluated at once
@@ -377,7 +386,8 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
                               "probability": _ga_num(rb, "probability", "robust", lo=0, lo_open=True, hi=1),
                               "confirm_seed": _ga_num(rb, "confirm_seed", "robust", lo=0, hi=2 ** 32 - 1,
                                                       integer=True),
-                              "max_candidates": _ga_num(rb, "max_candidates", "robust", lo=1, integer=True)}
+                              "max_candidates": _ga_num(rb, "max_candidates", "robust", lo=1, integer=True),
+                              "margins": _robust_margins(rb.get("margins"), joints, good)}
         tl = optional.get("tolerance", {"enabled": False})
         if optional["robust"]["enabled"] and not tl["enabled"]:
             raise ConfigError("experiment.robust.enabled=true needs the tolerance stage: set "
@@ -402,6 +412,36 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
                     pareto=pareto, recommend=recommend, verify=verify, screen=screen, refine=refine,
                     recommend_band=band, recommend_floor=floor, search_refine=search_refine,
                     reconfig=_operating_settings(e), continue_from=cont, **optional)
+
+
+def _robust_margins(m: Any, joints: Mapping[str, Any], good: Mapping[str, Any]) -> dict:
+    """``experiment.robust.margins`` (:data:`ROBUST_MARGINS`; absent or a missing key: 0). A margin must leave the
+    tightened constraint satisfiable: the joint limit stays > 0, the index threshold < 1, the motor torque > 0."""
+    from ..indices import INDEX_RANGES
+
+    out = dict.fromkeys(ROBUST_MARGINS, 0.0)
+    if m is None:
+        return out
+    m = _ga_plain(m)
+    if not isinstance(m, Mapping):
+        raise ConfigError(f"experiment.robust.margins must be a mapping of {', '.join(ROBUST_MARGINS)}, got {m!r}")
+    extra = set(m) - set(ROBUST_MARGINS)
+    if extra:
+        raise ConfigError(f"experiment.robust.margins: unknown keys {', '.join(sorted(extra))}; valid keys: "
+                          f"{', '.join(ROBUST_MARGINS)}")
+    for k, (unit, hi) in ROBUST_MARGINS.items():
+        if k in m:
+            out[k] = read_field(f"experiment.robust.margins.{k}", m[k], lo=0, hi=hi, hi_open=hi is not None,
+                                unit=unit)
+    if out["joint_deg"] >= joints["limit_deg"]:
+        raise ConfigError(f"experiment.robust.margins.joint_deg must be < experiment.joints.limit_deg "
+                          f"({joints['limit_deg']:g} deg), got {out['joint_deg']!r} deg")
+    top = INDEX_RANGES[good["index"]][1]
+    if top is not None and math.isfinite(top) and good["threshold"] + out["index"] >= top:
+        raise ConfigError(f"experiment.robust.margins.index must be < {top:g} - experiment.good_workspace.threshold "
+                          f"({top - good['threshold']:g}; the index {good['index']} is at most {top:g}), "
+                          f"got {out['index']!r}")
+    return out
 
 
 def _tolerance_settings(e: Mapping[str, Any]) -> dict:
@@ -462,7 +502,9 @@ BUDGET_SETTINGS = ("seed", "experiment.continue_from", "experiment.screen", "exp
                    "experiment.pareto.enabled", "experiment.pareto.population_size", "experiment.pareto.generations",
                    "experiment.refine", "experiment.floor_solve",
                    # the tolerance analysis reads the verified designs and changes none of their numbers
-                   "experiment.tolerance", "experiment.robust")
+                   "experiment.tolerance", "experiment.robust.enabled", "experiment.robust.probability",
+                   "experiment.robust.confirm_seed", "experiment.robust.max_candidates")
+# (experiment.robust.margins is not a budget setting: it tightens the problem the earlier run verified)
 
 
 @dataclasses.dataclass(frozen=True)
@@ -511,11 +553,12 @@ def earlier_run(where: str, cfg) -> EarlierRun:
         raise ConfigError(f"{key}: the run in {p} has not finished its verification (stages done: "
                          f"{','.join(done) or 'none'}); resume it first (rerun with hydra.run.dir={p.parent})")
     new = OmegaConf.to_container(cfg, resolve=True)
-    diffs = config_differences(old, new, ignore=BUDGET_SETTINGS)
-    if diffs:
+    diffs = [d for d in config_differences(old, new, ignore=BUDGET_SETTINGS)
+             if not (d[0].startswith("experiment.robust.margins.") and {d[1], d[2]} <= {"<unset>", 0, 0.0})]
+    if diffs:   # (a zero margin is the constraint as stated: the same problem as a run before margins existed)
         raise ConfigError(f"{key}: {p} is a run of another problem ({describe_differences(diffs)}); a continued run "
                          "may change only the search budget (seed, experiment.screen, .ga, .pareto population_size "
-                         "and generations, .refine, .floor_solve, .tolerance, .robust)")
+                         "and generations, .refine, .floor_solve, .tolerance, .robust but its margins)")
     V = data["verify"]
     rows = np.asarray(V["front"], int).reshape(-1)
     genes = np.asarray(V["genes"], float)

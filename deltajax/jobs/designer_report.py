@@ -13,7 +13,7 @@ if TYPE_CHECKING:
 __all__ = ["SUMMARY_METRICS", "FIXED_R_METRIC", "summary", "change_text", "print_summary", "plots", "tolerances_of",
            "store_tolerance", "store_robust", "store_frozen", "headline_lines", "cost_lines", "summary_attrs",
            "store_certify", "certify_lines", "store_ga", "store_pareto", "store_refine", "store_floor", "store_verify",
-           "rule_text", "robust_text", "floor_line"]
+           "rule_text", "robust_text", "floor_line", "margins_text"]
 
 SUMMARY_METRICS = ("picks_per_min", "regular_volume", "regular_diameter", "peak_utilisation", "rms_utilisation",
                    "speed_utilisation", "task_good_fraction", "task_index_min", "joint_margin_deg",
@@ -98,8 +98,22 @@ def summary(ctx, res, data, space, objs, s) -> None:
                   evaluation=("certified: worst cases searched, the density doubled to check them (group certify); "
                               "the other designs on the fine verification grids (group verify)") if mn else
                   "fine verification grids (group verify)")
+    res.set_attrs("summary", required_margins=margins_text(s))
     if "tolerance" in data:   # the tolerance stage's headline figures (group tolerance holds the rest)
         res.set_attrs("summary", **summary_attrs(data["tolerance"]))
+
+
+def margins_text(s) -> str:
+    """``experiment.robust.margins`` in words ("none": the constraints as stated)."""
+    from ..optimize.workflow import required_margins
+
+    m = required_margins(s)
+    parts = [f"index threshold +{m['index']:g}" if m["index"] else "",
+             f"passive joints' limit -{m['joint_deg']:g} deg" if m["joint_deg"] else "",
+             f"links' clearance +{m['clearance_mm']:g} mm" if m["clearance_mm"] else "",
+             f"motor peak and rated torque -{m['motor_percent']:g} %" if m["motor_percent"] else ""]
+    parts = [p for p in parts if p]
+    return ", ".join(parts) if parts else "none"
 
 
 def change_text(baseline: float, recommended: float, sense: int) -> str:
@@ -153,6 +167,11 @@ def print_summary(ctx, data) -> None:
             ctx.log(f"  {who} {on}: " + ("feasible (every constraint met)" if bool(V["feasible"][i])
                                          else "infeasible" + (f", violates {', '.join(bad)} on the fine grids"
                                                               if bad else "")))
+    req = S["attrs"].get("required_margins", "none")
+    if req != "none":
+        ctx.log(f"  every constraint required with a margin (experiment.robust.margins): {req}; the feasibility and "
+                "the margins below are against the tightened constraints, the tolerance analysis against the "
+                "stated ones")
     if "margin_name" in S:
         ctx.log("  margins (>= 0: the constraint holds by that much; certified):")
         ctx.log(f"  {'margin':26s} {'units':7s} {'baseline':>10s} {'recommended':>11s}")

@@ -475,7 +475,7 @@ def _tolerance(st: State) -> None:
     ctx, res, s, space, sense, jp = st.ctx, st.res, st.s, st.space, st.sense, st.jp
     V = overlay(load(st.path))                          # what verify and certify stored
     space_v = dataclasses.replace(space, n_R=s.verify["n_R"]) if space.reconfigurable else space
-    pb_fine = W.designer_problem(s, fine=True)
+    pb_fine = W.designer_problem(s, fine=True, nominal=True)   # a built robot is judged by the stated constraints
     tol = R.tolerances_of(s)
     text = TL.describe(tol)
     names = [str(n) for n in V["design_name"]]
@@ -525,7 +525,9 @@ def _tolerance(st: State) -> None:
             ctx.log(f"WARNING robust: no verified candidate holds every constraint in >= "
                     f"{100 * s.robust['probability']:g} % of the samples ({len(rc.checked)} checked"
                     + (", every feasible one" if rc.exhausted else "") + "); the recommendation stays the nominal "
-                    f"one ({names[rec] if rec >= 0 else 'none'}), which does not meet experiment.robust.probability")
+                    f"one ({names[rec] if rec >= 0 else 'none'}), which does not meet experiment.robust.probability; "
+                    "to search for designs that hold with a margin, set experiment.robust.margins (group "
+                    "tolerance's metric_percentiles show how far each constraint moves under the tolerances)")
     sel = TL.select(results, [(e[1] if isinstance(e[1], tuple) else (0, e[1])) for e in entries])
     roles = [e[0] for e in entries]
     R.store_tolerance(res, roles, [names[e[2]] for e in entries], [e[2] for e in entries], sel, text)
@@ -550,7 +552,12 @@ def _export(st: State) -> None:
     from .datasheet import run_designs, write
 
     ctx = st.ctx
-    designs = run_designs(st.space, load(st.path)["summary"], st.s.motor)
+    summary = load(st.path).get("summary") or {}
+    if "metric_name" not in summary:     # the results stage found no feasible design: nothing to take out
+        ctx.log("export: no recommended design (no feasible candidate on the fine grids), so no datasheets and no "
+                "model files")
+        return
+    designs = run_designs(st.space, summary, st.s.motor)
     write(ctx, designs)
     ctx.write_figures()
     recommended = [d for d in designs if d[0] == "recommended"]

@@ -37,7 +37,7 @@ from .programs import (batch_evaluator, content_key, design_metrics, objective_m
                        stable_key)
 
 
-__all__ = ["SetupError", "setup", "designer_problem", "screen", "screen_front", "ga_fitness", "ga_fitness_key",
+__all__ = ["SetupError", "setup", "designer_problem", "required_margins", "screen", "screen_front", "ga_fitness", "ga_fitness_key",
            "pareto_eval",
            "refine_designs", "RefineOutcome", "descent_paths", "verify", "floor_limits", "recommend",
            "RECOMMEND_RULES", "DESCENT_ROWS", "design_metrics", "batch_evaluator", "objective_matrix",
@@ -56,18 +56,39 @@ class SetupError(ValueError):
 
 # -- setup ---------------------------------------------------------------------------------------------------
 
-def designer_problem(s, *, fine: bool = False):
-    """The designer's problem (coarse search grids, or the fine verification grids with ``fine=True``)."""
+def required_margins(s) -> dict:
+    """``experiment.robust.margins`` of settings ``s`` (:data:`deltajax.config.ga_reconfig.ROBUST_MARGINS`;
+    every margin 0 where the run states none)."""
+    m = dict.fromkeys(("index", "joint_deg", "clearance_mm", "motor_percent"), 0.0)
+    m.update(s.robust.get("margins") or {})
+    return m
+
+
+def designer_problem(s, *, fine: bool = False, nominal: bool = False):
+    """The designer's problem (coarse search grids, or the fine verification grids with ``fine=True``).
+
+    Every constraint tightened by the run's required margins (:func:`required_margins`: the index threshold
+    raised, the passive joints' limit lowered, the links' clearance raised, the motor's peak and rated torque
+    derated), unless ``nominal``: the constraints as stated (what the tolerance stage's Monte Carlo judges a built
+    robot by). With no margin set both are the same problem."""
     from .. import constraints as C
     from .designer import DesignerProblem
 
-    joints = C.JointModel(limit=math.radians(s.joints["limit_deg"]),
+    mg = {k: 0.0 for k in required_margins(s)} if nominal else required_margins(s)
+    links_kw = dict(s.links)
+    if mg["clearance_mm"]:
+        links_kw["clearance"] = links_kw["clearance"] + 1e-3 * mg["clearance_mm"]
+    motor_kw = {k: v for k, v in s.motor.items() if k != "gear_ratio"}
+    if mg["motor_percent"]:
+        for k in ("peak_torque", "rated_torque"):
+            motor_kw[k] = motor_kw[k] * (1.0 - mg["motor_percent"] / 100.0)
+    joints = C.JointModel(limit=math.radians(s.joints["limit_deg"] - mg["joint_deg"]),
                           elbow_neutral=math.radians(s.joints["elbow_neutral_deg"]),
                           platform_neutral=math.radians(s.joints["platform_neutral_deg"]), kind=s.joints["kind"])
-    links = C.LinkModel(**s.links)
-    good = C.GoodSpec(joints=joints, links=links, threshold=s.good["threshold"], index=s.good["index"],
+    links = C.LinkModel(**links_kw)
+    good = C.GoodSpec(joints=joints, links=links, threshold=s.good["threshold"] + mg["index"], index=s.good["index"],
                       beta=s.good["beta"])
-    motor = C.Motor(**{k: v for k, v in s.motor.items() if k != "gear_ratio"})
+    motor = C.Motor(**motor_kw)
     task, cycle, regular = dict(s.task), dict(s.cycle), dict(s.regular)
     n_op = s.cycle["n_R_operating"]
     # the continuous regular-workspace measure: full settings on the fine grids, the lighter search settings
