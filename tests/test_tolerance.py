@@ -139,6 +139,14 @@ def test_samples_are_seeded_and_do_not_depend_on_the_chunking(toy):
     ("experiment.tolerance.mass_percent=nan", r"^experiment\.tolerance\.mass_percent must be a finite number"),
     ("experiment.robust.probability=1.5", r"^experiment\.robust\.probability must be in \(0, 1\], got 1\.5$"),
     ("experiment.robust.confirm_seed=0", r"^experiment\.robust\.confirm_seed=0 must differ from experiment\.tolerance"),
+    ("experiment.robust.margins.joint_deg=-1", r"^experiment\.robust\.margins\.joint_deg must be in \[0, 180\) deg, "
+                                               r"got -1\.0 deg$"),
+    ("experiment.robust.margins.joint_deg=55", r"^experiment\.robust\.margins\.joint_deg must be < "
+                                               r"experiment\.joints\.limit_deg \(55 deg\), got 55\.0 deg$"),
+    ("experiment.robust.margins.index=0.7", r"^experiment\.robust\.margins\.index must be < 1 - "
+                                            r"experiment\.good_workspace\.threshold \(0\.7; "),
+    ("experiment.robust.margins.motor_percent=100", r"^experiment\.robust\.margins\.motor_percent must be in "
+                                                    r"\[0, 100\) %, got 100\.0 %$"),
 ])
 def test_bad_tolerance_settings_are_one_line_naming_the_field(override, match):
     from deltajax.config import ga_reconfig_settings
@@ -261,3 +269,71 @@ def test_robust_mode_at_toy_size_picks_a_design_that_holds_in_fresh_samples(toy_
     check = dj.tolerance.analyse(designer_problem(s, fine=True), space_v, V["genes"][rec], tol, samples=500, seed=77)
     assert check["p_all"][0] >= 0.97
     assert any("robustness costs" in line or "robust recommendation" in line for line in ctx.lines)
+
+
+@pytest.mark.slow
+def test_margins_tighten_every_constraint_by_the_stated_amount_and_the_nominal_problem_keeps_them(toy):
+    # experiment.robust.margins: the search's problem with each constraint tightened by exactly its margin; the
+    # nominal problem (the tolerance stage's) and a run with zero margins are the problem as stated
+    import math
+
+    from deltajax.config import ga_reconfig_build, robot_from_config
+    from deltajax.optimize.workflow import batch_evaluator, designer_problem, required_margins
+    from deltajax.tracing import content_key
+
+    pb, space, genes = toy
+    cfg = compose("ga_reconfig", *TOY_PROBLEM, "experiment.robust.margins.joint_deg=1.5",
+                  "experiment.robust.margins.clearance_mm=2.0", "experiment.robust.margins.index=0.02",
+                  "experiment.robust.margins.motor_percent=10")
+    robot, recon = robot_from_config(cfg.robot)
+    s, _, pb_t, _ = ga_reconfig_build(cfg.experiment, robot, recon)
+    assert required_margins(s) == {"index": 0.02, "joint_deg": 1.5, "clearance_mm": 2.0, "motor_percent": 10.0}
+    nom = designer_problem(s, nominal=True)
+    assert content_key(nom) == content_key(pb)                      # zero margins: the stated problem
+    assert float(pb_t.joints.limit) == pytest.approx(math.radians(s.joints["limit_deg"] - 1.5), rel=1e-15)
+    assert float(pb_t.good.joints.limit) == float(pb_t.joints.limit)
+    assert float(pb_t.good.threshold) == pytest.approx(float(pb.good.threshold) + 0.02, rel=1e-15)
+    assert float(pb_t.good.links.clearance) == pytest.approx(float(pb.links.clearance) + 2e-3, rel=1e-15)
+    for k in ("peak_torque", "rated_torque"):
+        assert float(getattr(pb_t.motor, k)) == pytest.approx(0.9 * float(getattr(pb.motor, k)), rel=1e-15)
+    assert float(pb_t.motor.max_speed) == float(pb.motor.max_speed)
+    # evaluated: the margins move by exactly the stated amounts where both choose the same operating R, the
+    # derated motor runs the cycle slower, and a design feasible with margins is feasible as stated
+    mt, mn = batch_evaluator(pb_t, space, 4, regular=False)(genes), _nominal(pb, space, genes)
+    same = np.asarray(mt["R_operating"]) == np.asarray(mn["R_operating"])
+    assert same.any()
+    np.testing.assert_allclose(np.asarray(mt["joint_margin_deg"])[same],
+                               np.asarray(mn["joint_margin_deg"])[same] - 1.5, atol=1e-9)
+    np.testing.assert_allclose(np.asarray(mt["interference_margin"])[same],
+                               np.asarray(mn["interference_margin"])[same] - 2e-3, atol=1e-12)
+    np.testing.assert_array_equal(np.asarray(mt["task_index_min"])[same], np.asarray(mn["task_index_min"])[same])
+    assert np.all(np.asarray(mt["picks_per_min"])[same] < np.asarray(mn["picks_per_min"])[same])
+    assert np.all(~np.asarray(mt["feasible"], bool) | np.asarray(mn["feasible"], bool))
+
+
+def test_a_continued_run_may_change_the_budget_but_not_the_margins():
+    from deltajax.config.ga_reconfig import problem_differences
+
+    old = {"experiment": {"ga": {"generations": 10}, "robust": {"enabled": False}}, "seed": 0}
+    zero = {"experiment": {"ga": {"generations": 40}, "robust": {"enabled": True, "margins": {
+        "index": 0.0, "joint_deg": 0.0, "clearance_mm": 0.0, "motor_percent": 0.0}}}, "seed": 3}
+    assert problem_differences(old, zero) == []        # a run made before margins existed: the same problem
+    one = {"experiment": {"robust": {"margins": {"joint_deg": 1.0}}}}
+    assert problem_differences(zero, one) == [("experiment.robust.margins.joint_deg", 0.0, 1.0)]
+    assert problem_differences(old, one) == [("experiment.robust.margins.joint_deg", "<unset>", 1.0)]
+
+
+def test_export_of_a_run_without_a_feasible_design_says_so_and_writes_no_files(tmp_path):
+    from deltajax.io import ResultsFile
+    from deltajax.jobs.ga_reconfig import _export
+    from deltajax.jobs.stages import State
+
+    res = ResultsFile(tmp_path / "results.h5")
+    res.set_attrs("summary", recommended="none")        # what the results stage stores when nothing is feasible
+    res.flush()
+    ctx = _Ctx()
+    ctx.run_dir = tmp_path
+    _export(State(ctx=ctx, path=tmp_path / "results.h5", space=None, s=None))
+    assert ctx.lines == ["export: no recommended design (no feasible candidate on the fine grids), so no "
+                         "datasheets and no model files"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["results.h5"]

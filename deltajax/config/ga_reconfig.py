@@ -15,12 +15,12 @@ from typing import Any, Mapping, Optional
 
 import numpy as np
 
-from ..rundir import recorded
+from ..rundir import config_differences, recorded
 from .readers import ConfigError, check_fits, read_choice, read_field
 
 __all__ = ["GaReconfigSettings", "GaReconfigSetup", "ga_reconfig_settings", "ga_reconfig_build", "validate_ga_reconfig",
            "validate_ga_reconfig_run_dir", "DESIGN_POINT_BYTES", "RECOMMEND_RULES", "job_fingerprint",
-           "BUDGET_SETTINGS", "EarlierRun", "continued_file", "earlier_run", "reconfig_settings",
+           "BUDGET_SETTINGS", "problem_differences", "EarlierRun", "continued_file", "earlier_run", "reconfig_settings",
            "RECONFIG_KEYS", "DRIVE_UNITS", "tolerances_of", "ga_config"]
 
 # ---- ga_reconfig: the designer's problem (every field, unknown keys included); owner: designer ----
@@ -507,6 +507,14 @@ BUDGET_SETTINGS = ("seed", "experiment.continue_from", "experiment.screen", "exp
 # (experiment.robust.margins is not a budget setting: it tightens the problem the earlier run verified)
 
 
+def problem_differences(old: Mapping[str, Any], new: Mapping[str, Any]) -> list:
+    """The settings (dotted key, there, here) in which two runs' configurations pose different problems: every
+    difference but :data:`BUDGET_SETTINGS`; an unset margin and a zero one (``experiment.robust.margins``) are the
+    same constraint (a run made before margins existed poses the problem a run with zero margins does)."""
+    return [d for d in config_differences(old, new, ignore=BUDGET_SETTINGS)
+            if not (d[0].startswith("experiment.robust.margins.") and {d[1], d[2]} <= {"<unset>", 0, 0.0})]
+
+
 @dataclasses.dataclass(frozen=True)
 class EarlierRun:
     """The verified front of a finished ``ga_reconfig`` run that a run continues (:func:`earlier_run`)."""
@@ -535,7 +543,7 @@ def earlier_run(where: str, cfg) -> EarlierRun:
     from omegaconf import OmegaConf
 
     from ..io import load
-    from ..rundir import config_differences, describe_differences
+    from ..rundir import describe_differences
 
     key = "experiment.continue_from"
     p = continued_file(where)
@@ -553,9 +561,8 @@ def earlier_run(where: str, cfg) -> EarlierRun:
         raise ConfigError(f"{key}: the run in {p} has not finished its verification (stages done: "
                          f"{','.join(done) or 'none'}); resume it first (rerun with hydra.run.dir={p.parent})")
     new = OmegaConf.to_container(cfg, resolve=True)
-    diffs = [d for d in config_differences(old, new, ignore=BUDGET_SETTINGS)
-             if not (d[0].startswith("experiment.robust.margins.") and {d[1], d[2]} <= {"<unset>", 0, 0.0})]
-    if diffs:   # (a zero margin is the constraint as stated: the same problem as a run before margins existed)
+    diffs = problem_differences(old, new)
+    if diffs:
         raise ConfigError(f"{key}: {p} is a run of another problem ({describe_differences(diffs)}); a continued run "
                          "may change only the search budget (seed, experiment.screen, .ga, .pareto population_size "
                          "and generations, .refine, .floor_solve, .tolerance, .robust but its margins)")
