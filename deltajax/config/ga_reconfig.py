@@ -433,11 +433,11 @@ def _robust_margins(m: Any, joints: Mapping[str, Any], good: Mapping[str, Any]) 
         if k in m:
             out[k] = read_field(f"experiment.robust.margins.{k}", m[k], lo=0, hi=hi, hi_open=hi is not None,
                                 unit=unit)
-    if out["joint_deg"] >= joints["limit_deg"]:
+    if out["joint_deg"] > 0 and out["joint_deg"] >= joints["limit_deg"]:
         raise ConfigError(f"experiment.robust.margins.joint_deg must be < experiment.joints.limit_deg "
                           f"({joints['limit_deg']:g} deg), got {out['joint_deg']!r} deg")
     top = INDEX_RANGES[good["index"]][1]
-    if top is not None and math.isfinite(top) and good["threshold"] + out["index"] >= top:
+    if out["index"] > 0 and top is not None and good["threshold"] + out["index"] >= top:
         raise ConfigError(f"experiment.robust.margins.index must be < {top:g} - experiment.good_workspace.threshold "
                           f"({top - good['threshold']:g}; the index {good['index']} is at most {top:g}), "
                           f"got {out['index']!r}")
