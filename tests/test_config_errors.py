@@ -5,6 +5,7 @@ import pytest
 
 from deltajax import config as C
 from deltajax.config import ConfigError
+from deltajax.config import dynamics as config_dynamics
 
 
 def test_one_grid_reader_in_config():
@@ -21,7 +22,8 @@ def test_config_errors_give_the_value_in_the_users_unit_on_one_line():
              (lambda: C.robot_from_config({"base_radius": 0.2, "platform_radius": 0.05, "upper_arm": 0.3,
                                            "forearm": 0.8, "theta_min_deg": "low", "theta_max_deg": None}),
               "robot.theta_min_deg must be a number (deg), got 'low'"),
-             (lambda: C._cycle_setup({"centre": [0, 0, 0.4], "heading_deg": 0, "duration": 0}, "experiment.setups.x"),
+             (lambda: config_dynamics._cycle_setup({"centre": [0, 0, 0.4], "heading_deg": 0, "duration": 0},
+                                                   "experiment.setups.x"),
               "experiment.setups.x.duration must be > 0 s, got 0.0 s"),
              (lambda: C.read_choice("experiment.mode", "slow", ("fast", "exact")),
               "experiment.mode must be one of exact, fast, got 'slow'")]

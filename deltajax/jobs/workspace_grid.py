@@ -60,15 +60,13 @@ def run(ctx) -> None:
 
 
 def _settings(ctx) -> dict:
-    """What the stages read: the job's settings (checked before the run: config.workspace_grid_settings), the
-    resume key, and the arrays the chunks fill (this shard's x-planes). RunDirError when a results file exists
-    and experiment.resume=false."""
+    """What the stages read besides the job's settings ``s`` (checked before the run:
+    config.workspace_grid_settings; the stages read them as ``st.s``): the resume key and the arrays the chunks
+    fill (this shard's x-planes). RunDirError when a results file exists and experiment.resume=false."""
     from ..workspace import FIELD_NAMES
 
     s = ctx.settings                 # checked before the run (config.workspace_grid_settings)
-    grid, shard, n_shards, store, n_dev, params, backend = (s.grid, s.shard, s.n_shards, list(s.store), s.n_dev,
-                                                            s.params, s.backend)
-    plan = s.plan
+    grid, store, params, backend, plan = s.grid, list(s.store), s.params, s.backend, s.plan
     nx, ny, nz = grid.shape
     n_local = plan.x_stop - plan.x_start
     n_idx = len(FIELD_NAMES)
@@ -87,8 +85,7 @@ def _settings(ctx) -> dict:
     if ctx.results.path.exists() and not s.resume:
         raise RunDirError(f"{ctx.results.path} exists and experiment.resume=false: add fresh=true to start over, "
                           f"or choose another hydra.run.dir")
-    return dict(s=s, grid=grid, shard=shard, n_shards=n_shards, store=store, n_dev=n_dev, params=params, plan=plan,
-                n_local=n_local, n_idx=n_idx, dtype=dtype, backend=backend, key=key, reach=reach, fields=fields,
+    return dict(s=s, n_local=n_local, n_idx=n_idx, dtype=dtype, key=key, reach=reach, fields=fields,
                 planes=planes, arrays={"reachable": reach, **fields, **planes},
                 x_faces=(plan.x_start == 0, plan.x_stop == nx), plots=ctx.plots)
 
@@ -98,14 +95,14 @@ def _store_grid(st: State, planes_done: int) -> None:
     writer too): ``planes_done`` x-planes of ``st.n_local`` are finished."""
     from ..workspace import FIELD_NAMES
 
-    r, grid, plan, planes, params = st.ctx.results, st.grid, st.plan, st.planes, st.params
+    r, grid, plan, planes, params = st.ctx.results, st.s.grid, st.s.plan, st.planes, st.s.params
     r.put_axis(GROUP, "x", grid.x[plan.x_start:plan.x_stop], units="m")
     r.put_axis(GROUP, "y", grid.y, units="m")
     r.put_axis(GROUP, "z", grid.z, units="m")
     r.put_axis(GROUP, "index", np.asarray(FIELD_NAMES, dtype=object), units="1")
     r.put(GROUP, "reachable", st.reach, units="1", dims=("x", "y", "z"),
           attrs={"description": "IK solvable for all chains with theta within limits"})
-    for name in st.store:
+    for name in st.s.store:
         r.put(GROUP, name, st.fields[name], units="1", dims=("x", "y", "z"),
               attrs={"description": f"{name} (theta3x3, homogenised by L1); NaN outside the workspace"})
     r.put(GROUP, "plane_count", planes["plane_count"], units="1", dims=("x",))
@@ -115,7 +112,7 @@ def _store_grid(st: State, planes_done: int) -> None:
         r.put(GROUP, k, planes[k], units="1", dims=("x", "index"))
     for k, v in plane_summary(planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume, st.x_faces).items():
         r.put(GROUP, k, v, units={"count": "1", "volume": "m^3", "volume_box": "m^3"}.get(k, "1"), dims=())
-    r.set_attrs(GROUP, shard_axis="x", shard=st.shard, n_shards=st.n_shards, shard_start=plan.x_start,
+    r.set_attrs(GROUP, shard_axis="x", shard=st.s.shard, n_shards=st.s.n_shards, shard_start=plan.x_start,
                 shard_stop=plan.x_stop, shard_axis_size=grid.shape[0], shard_reduce=REDUCER,
                 planes_done=planes_done, complete=int(planes_done == st.n_local), resume_key=st.key, h=grid.h,
                 n_points=grid.n_points, box_volume=grid.box_volume, b_v=params["b_v"], b_f=params["b_f"],
@@ -136,7 +133,7 @@ def _chunk(st: State, la: int, lb: int) -> dict:
     first chunk, which includes compilation)."""
     from ..workspace import FIELD_NAMES
 
-    plan, timing, (_, ny, nz) = st.plan, st.timing, st.grid.shape
+    plan, timing, (_, ny, nz) = st.s.plan, st.timing, st.s.grid.shape
     a, b = plan.x_start + la, plan.x_start + lb  # global x-planes of this chunk
     n = (b - a) * plan.plane
     ok, vals = st.evaluate(st.ctx.robot, a, b)  # both backends: the planes' rows first (the JAX path pads after)
@@ -147,7 +144,7 @@ def _chunk(st: State, la: int, lb: int) -> dict:
         timing["first_s"], timing["n_first"] = time.perf_counter() - st.t0, n
     okp = ok.reshape(b - a, ny, nz)
     out = {"reachable": okp, **plane_statistics(ok, vals)}
-    out.update({name: vals[..., FIELD_NAMES.index(name)].reshape(b - a, ny, nz) for name in st.store})
+    out.update({name: vals[..., FIELD_NAMES.index(name)].reshape(b - a, ny, nz) for name in st.s.store})
     out["plane_face_count"] = (okp.sum(axis=(1, 2)) - okp[:, 1:-1, 1:-1].sum(axis=(1, 2))
                                if min(ny, nz) > 2 else okp.sum(axis=(1, 2)))
     return out
@@ -158,18 +155,19 @@ def _grid(st: State) -> None:
     into results.h5 every ``experiment.checkpoint_s`` seconds and resumed from it; ``experiment.stop_after``
     stops after that many chunks as if killed (the run is then incomplete). Hands on ``done`` (x-planes) and the
     evaluation rate (points/s after the first chunk)."""
-    ctx, plan, grid = st.ctx, st.plan, st.grid
+    ctx, plan, grid = st.ctx, st.s.plan, st.s.grid
     checkpoint = ResultsCheckpoint(ctx.results, GROUP, st.arrays, st.key, (plan.x_start, plan.x_stop),
                                    functools.partial(_store_grid, st), _check, done_attr="planes_done",
                                    remedy="move it away to keep it, or add fresh=true to start over")
-    if st.backend == "jax":
-        st.evaluate = make_grid_evaluator(grid, st.n_dev, planes=plan.planes_per_chunk, dtype=st.dtype, **st.params)
+    if st.s.backend == "jax":
+        st.evaluate = make_grid_evaluator(grid, st.s.n_dev, planes=plan.planes_per_chunk, dtype=st.dtype,
+                                          **st.s.params)
     else:
-        st.evaluate = make_numba_evaluator(grid, **st.params)
+        st.evaluate = make_numba_evaluator(grid, **st.s.params)
     nx, ny, nz = grid.shape
-    ctx.log(f"workspace_grid: grid {nx}x{ny}x{nz} = {grid.n_points} points, shard {st.shard}/{st.n_shards} "
+    ctx.log(f"workspace_grid: grid {nx}x{ny}x{nz} = {grid.n_points} points, shard {st.s.shard}/{st.s.n_shards} "
             f"x[{plan.x_start}:{plan.x_stop}], {plan.chunk1 - plan.chunk0} chunks of {plan.planes_per_chunk} "
-            f"planes, " + (f"JAX on {st.n_dev} device(s)" if st.backend == "jax" else
+            f"planes, " + (f"JAX on {st.s.n_dev} device(s)" if st.s.backend == "jax" else
                            f"Numba on {os.environ.get('NUMBA_NUM_THREADS', 'all')} thread(s)"))
     st.t0 = time.perf_counter()
     st.timing = {"n_eval": 0, "first_s": None, "n_first": 0}  # the first chunk includes compilation: timed apart
@@ -203,13 +201,13 @@ def _store(st: State) -> None:
     incomplete (resumable)."""
     from ..workspace import FIELD_NAMES
 
-    ctx, grid, plan, done, first_chunk_s = st.ctx, st.grid, st.plan, st.done, st.timing["first_s"]
+    ctx, grid, plan, done, first_chunk_s = st.ctx, st.s.grid, st.s.plan, st.done, st.timing["first_s"]
     _store_grid(st, done)
     # points_evaluated: the work of the whole run (every finished x-plane, those of the processes before a resume
     # included: what an uninterrupted run reports); the rate is this process's
     ctx.results.set_attrs(points_evaluated=done * plan.plane, points_evaluated_this_process=st.timing["n_eval"],
                           points_per_s=st.rate, first_chunk_s=first_chunk_s or 0.0,
-                          devices_used=st.n_dev if st.backend == "jax" else 0, backend=st.backend,
+                          devices_used=st.s.n_dev if st.s.backend == "jax" else 0, backend=st.s.backend,
                           worker_env=os.environ.get("DELTAJAX_WORKER_ENV", ""))
     s = plane_summary(st.planes, FIELD_NAMES, grid.h, grid.n_points, grid.box_volume, st.x_faces)
     if int(s["face_count"]):
@@ -220,7 +218,7 @@ def _store(st: State) -> None:
         ctx.complete = False
         ctx.log(f"stopped after {done} of {st.n_local} x-planes (experiment.stop_after): rerun into {ctx.run_dir} "
                 f"to resume")
-    ctx.log(f"shard {st.shard}/{st.n_shards}: {int(s['count'])} reachable points, volume {float(s['volume']):.6g} "
+    ctx.log(f"shard {st.s.shard}/{st.s.n_shards}: {int(s['count'])} reachable points, volume {float(s['volume']):.6g} "
             f"m^3 (count h^3), {float(s['volume_box']):.6g} m^3 (count/N V_box); "
             f"{st.rate / 1e6:.2f} M points/s after the first chunk ({first_chunk_s or 0.0:.1f} s with compilation)")
 
@@ -229,11 +227,11 @@ def _plots(st: State) -> None:
     """The reachable set's figure (a single run only: a shard holds part of the grid)."""
     from .. import plots
 
-    st.ctx.savefig(plots.workspace_grid(st.grid, st.reach), "workspace_grid")
+    st.ctx.savefig(plots.workspace_grid(st.s.grid, st.reach), "workspace_grid")
 
 
 STAGES = (
     Stage("grid", _grid),
     Stage("store", _store),
-    Stage("plots", _plots, when=lambda st: st.plots and st.n_shards == 1),
+    Stage("plots", _plots, when=lambda st: st.plots and st.s.n_shards == 1),
 )
