@@ -142,10 +142,10 @@ LONG_FIRST = ("tests/test_slurm.py", "tests/test_ga_reconfig.py", "tests/test_op
 #: compiled functions): one worker each, so that each is traced and compiled once per session, not once per
 #: worker. test_backends' two point-kernel cases each compiled the same Numba functions (~320 s wall each, cold,
 #: on both workers at once, 2026-12-01); test_ga_fitness's exact and screened population covers (per k_min)
-#: serve three tests
+#: serve three tests; test_kernel_blocks' two scales share one compiled singular-value tail
 SAME_WORKER = ("tests/test_backends.py", "tests/test_ga_fitness.py", "tests/test_workspace_grid_jax.py",
                "tests/test_dynamics.py", "tests/test_kernel.py", "tests/test_kinematics.py",
-               "tests/test_trajectory.py", "tests/test_indices.py")
+               "tests/test_trajectory.py", "tests/test_indices.py", "tests/test_kernel_blocks.py")
 
 
 #: tests that run the main job in-process on the toy size's search and verification grids (tests/toy_jobs.py), or
