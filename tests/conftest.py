@@ -142,19 +142,22 @@ LONG_FIRST = ("tests/test_slurm.py", "tests/test_ga_reconfig.py", "tests/test_op
 #: compiled functions): one worker each, so that each is traced and compiled once per session, not once per
 #: worker. test_backends' two point-kernel cases each compiled the same Numba functions (~320 s wall each, cold,
 #: on both workers at once, 2026-12-01); test_ga_fitness's exact and screened population covers (per k_min)
-#: serve three tests
+#: serve three tests; test_kernel_blocks' two scales share one compiled singular-value tail
 SAME_WORKER = ("tests/test_backends.py", "tests/test_ga_fitness.py", "tests/test_workspace_grid_jax.py",
                "tests/test_dynamics.py", "tests/test_kernel.py", "tests/test_kinematics.py",
-               "tests/test_trajectory.py", "tests/test_indices.py")
+               "tests/test_trajectory.py", "tests/test_indices.py", "tests/test_kernel_blocks.py")
 
 
 #: tests that run the main job in-process on the toy size's search and verification grids (tests/toy_jobs.py), or
 #: its refine descent: one worker, so that the job's compiled programs, which deltajax.optimize.workflow keeps by
-#: the content of the problem, are traced and compiled once per session rather than once per worker
+#: the content of the problem, are traced and compiled once per session rather than once per worker.
+#: experiments/gpu_check.py --scale 1 runs the main job at the same toy size (and its search evaluator): after the
+#: toy run in the same process 27.8 CPU-s, alone 50 (2026-12-04, load 4)
 GA_TOY = ("tests/test_ga_reconfig.py", "tests/test_resume_older_runs.py", "tests/test_jobs.py::test_ga_reconfig_",
           "tests/test_jobs.py::test_every_job_end_to_end_at_toy_size[ga_reconfig]",
           "tests/test_optimize.py::test_refine_designs_",
-          "tests/test_results_files.py::test_xarray_opens_every_group_with_units[ga_reconfig]")
+          "tests/test_results_files.py::test_xarray_opens_every_group_with_units[ga_reconfig]",
+          "tests/test_gpu_check.py")
 
 
 #: where the workers tell the scheduler their groups ({nodeid: group} per worker, JSON): set by the controller

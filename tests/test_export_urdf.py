@@ -5,7 +5,6 @@ import json
 
 import numpy as np
 import pytest
-import yourdfpy
 
 import deltajax as dj
 
@@ -14,6 +13,8 @@ import deltajax as dj
                                       (dj.presets.franco2026(with_mass=True), (0.05, 0.08, 0.4))],
                          ids=["industrial", "franco2026"])
 def test_urdf_loads_and_loops_close(tmp_path, robot, p):
+    import yourdfpy  # here, not at collection: ~1 s of imports (trimesh, scipy.spatial) in every xdist worker
+
     path = tmp_path / "design.urdf"
     motor = dj.presets.servo_750w()
     text, side = dj.export.urdf(robot, motor=motor, gear_ratio=20.0, path=path)

@@ -75,11 +75,19 @@ def reference_grid(toy_run):
     return toy_run("workspace_grid")
 
 
-def _partial(tmp_path, chunks=3):
-    """A workspace_grid run stopped after ``chunks`` x-planes (as if killed): a checkpoint to tamper with."""
-    d = tmp_path / "run"
-    run_experiment("workspace_grid", [*WG, f"experiment.stop_after={chunks}"], run_dir=d)
+@pytest.fixture(scope="module")
+def partial_grid(tmp_path_factory):
+    """A workspace_grid run stopped after 3 x-planes (as if killed), once per module: read-only, see _partial."""
+    d = tmp_path_factory.mktemp("partial_grid") / "run"
+    run_experiment("workspace_grid", [*WG, "experiment.stop_after=3"], run_dir=d)
     return d
+
+
+def _partial(tmp_path, partial_grid):
+    """A copy of ``partial_grid`` in ``tmp_path``: a checkpoint to tamper with (one run serves the five tests)."""
+    import shutil
+
+    return Path(shutil.copytree(partial_grid, tmp_path / "run"))
 
 
 # -- 1. run directories are owned ---------------------------------------------------------------------------
@@ -143,8 +151,8 @@ def test_refused_cli_rerun_keeps_hydra_files(tmp_path):
 
 
 # -- 2. checkpoints: damaged or tampered files are refused -------------------------------------------------------
-def test_unreadable_results_file_is_refused_on_resume(tmp_path):
-    d = _partial(tmp_path)
+def test_unreadable_results_file_is_refused_on_resume(tmp_path, partial_grid):
+    d = _partial(tmp_path, partial_grid)
     (d / "results.h5").write_bytes(b"garbage" * 100)
     with pytest.raises(RunDirError, match=r"cannot resume: .*results\.h5 is not a readable HDF5 file.*fresh=true"):
         run_experiment("workspace_grid", WG, run_dir=d)
@@ -157,8 +165,8 @@ def test_unreadable_results_file_is_refused_on_resume(tmp_path):
     ("flip_value", "workspace/k_tilde does not match its checksum"),
     ("count", "workspace/plane_count does not match its checksum"),
 ])
-def test_tampered_checkpoint_is_refused(tmp_path, tamper, message):
-    d = _partial(tmp_path)
+def test_tampered_checkpoint_is_refused(tmp_path, partial_grid, tamper, message):
+    d = _partial(tmp_path, partial_grid)
     with h5py.File(d / "results.h5", "r+") as f:
         g = f["workspace"]
         if tamper == "planes_done":

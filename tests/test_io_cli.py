@@ -7,7 +7,6 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-import xarray as xr
 import yaml
 
 import deltajax
@@ -17,6 +16,8 @@ REPO = Path(__file__).resolve().parent.parent
 
 
 def test_results_file_layout_and_xarray(tmp_path):
+    import xarray as xr  # here, not at collection (~0.5 s of imports in every xdist worker)
+
     path = tmp_path / "results.h5"
     res = ResultsFile(path, attrs={"experiment": "demo", "seed": 3})
     x, z = np.linspace(-1, 1, 5), np.linspace(0, 1, 4)
@@ -83,6 +84,8 @@ def test_indices_examples_through_the_cli(toy_run):
     k_peaks = [R for _, index, R in deltajax.papers.FRANCO2026_ARGMAX_R if index == "k_tilde"]
     np.testing.assert_allclose(res["curves"]["argmax_R_k_tilde"], k_peaks, atol=1e-4)
     assert (tmp_path / "index_curves.png").stat().st_size > 10_000
+    import xarray as xr
+
     ds = xr.open_dataset(tmp_path / "results.h5", group="curves", engine="h5netcdf")
     assert ds["k_tilde"].dims == ("point", "R")
     ds.close()

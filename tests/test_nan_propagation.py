@@ -154,6 +154,8 @@ def test_invalid_input_is_nan_at_every_batch_size(dtype):
         pad = lambda a: jnp.concatenate([a[:n], jnp.repeat(a[:1], BIG - n, axis=0)])  # noqa: E731
         out = _compiled(dtype)(pad(x), pad(p), pad(t))
         _check_all(jax.tree_util.tree_map(lambda v: v[:n], out), valid, n)
+    if dtype == jnp.float64:  # un-jitted float64: every function (EAGER_FAST included), the test below
+        return
     eager = _per_row(EAGER_FAST, dtype)
     for n in (1, 8, BIG):                                                      # no jit
         _check_all(eager(x[:n], p[:n], t[:n]), valid, n)
