@@ -533,13 +533,19 @@ def motor_side(tau_arm, theta_dot, motor: Motor, gear_ratio):
     return tau_arm * (1.0 / (gear_ratio * motor.efficiency)), theta_dot * gear_ratio
 
 
-def _loads_from_unit(a, g, thd_unit, T, dwell, motor: Motor, n, ok):
-    """Motor loads at duration T from the T = 1 profile split (a / T^2 + g arm torque, thd_unit / T speed)."""
-    scale = 1.0 / (n * motor.efficiency)
+def _peak_ratio(a, g, thd_unit, T, motor: Motor, n):
+    """(motor torque, motor speed, |torque| / envelope(speed)) per sample and actuator at duration T from the
+    T = 1 profile split (inf past the envelope's speed); the peak utilisation is its maximum."""
     tau_m, om = motor_side(a / (T * T) + g, thd_unit / T, motor, n)   # (K, 3)
     env = motor.envelope(om)
     ratio = jnp.abs(tau_m) / jnp.where(env > 0, env, 1.0)
-    ratio = jnp.where(env > 0, ratio, jnp.where(jnp.abs(tau_m) > 0, jnp.inf, 0.0))
+    return tau_m, om, jnp.where(env > 0, ratio, jnp.where(jnp.abs(tau_m) > 0, jnp.inf, 0.0))
+
+
+def _loads_from_unit(a, g, thd_unit, T, dwell, motor: Motor, n, ok):
+    """Motor loads at duration T from the T = 1 profile split (a / T^2 + g arm torque, thd_unit / T speed)."""
+    scale = 1.0 / (n * motor.efficiency)
+    tau_m, om, ratio = _peak_ratio(a, g, thd_unit, T, motor, n)
     K = a.shape[0]
     move = jnp.tensordot(_trap_weights(K, a.dtype), tau_m * tau_m, axes=1) * T   # int tau^2 dt over the motion
     hold = (g[0] * scale) ** 2 + (g[K // 2] * scale) ** 2                       # pick and place dwells

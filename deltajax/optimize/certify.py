@@ -43,13 +43,15 @@ import numpy as np
 
 __all__ = ["TOLERANCES", "RAY_DENSITY", "RAY_PASSES", "RayDensity", "ray_cylinders", "ray_cylinder",
            "worst_in_cylinder", "certify_design", "certified_program", "design_margins", "MARGIN_UNITS", "cycle_at",
-           "grid_cylinder_bounds", "CERTIFIED_METRICS", "CYCLE_METRICS", "feasible_certified", "overlay"]
+           "grid_cylinder_bounds", "CERTIFIED_METRICS", "CYCLE_METRICS", "feasible_certified", "overlay",
+           "cycle_path"]
 
 #: Stated accuracy of a certified figure: doubling the density moves it by no more than this.
 #: regular_volume: relative; joint margin: deg; clearance: m; utilisations: ratio (relative to 1).
 TOLERANCES = {"regular_volume": 0.005, "joint_margin_deg": 0.05, "interference_margin": 1e-4,
               "rms_utilisation": 1e-4, "peak_utilisation": 1e-4, "task_index_min": 1e-3}
 
+from .cycle_worst import cycle_worst  # noqa: E402
 from .rays import (RAY_DENSITY, RAY_PASSES, RayDensity, ray_cylinder, ray_cylinders,  # noqa: F401
                    worst_in_cylinder)
 
@@ -61,6 +63,15 @@ def cycle_at(pb, n_samples: int):
     cyc = pb.settings["cycle"]
     return adept_cycle(pb.settings["cycle_centre"], duration=float(cyc["duration"]), n_samples=int(n_samples),
                        law=str(cyc["law"]))
+
+
+def cycle_path(pb) -> Callable:
+    """The problem's cycle path at any normalised times: ``u (k,) -> (x, x', x'')`` (the path :func:`cycle_at`
+    samples, :func:`deltajax.trajectory.adept_path`)."""
+    from ..trajectory import adept_path
+
+    centre, law = pb.settings["cycle_centre"], str(pb.settings["cycle"]["law"])
+    return lambda u: adept_path(u, centre, law=law)
 
 
 def _certified_once(pb, design, R_op, density: RayDensity, task_n, cycle_n: int):
@@ -91,18 +102,15 @@ def _certified_once(pb, design, R_op, density: RayDensity, task_n, cycle_n: int)
     worst, _ = worst_in_cylinder(lambda p: jnp.stack([(c := chk(R_op, p)).index, c.joint_margin,
                                                       c.interference_margin]), *task)
     idx, jm_t, im_t = worst[0], worst[1], worst[2]
-    cyc = cycle_at(pb, cycle_n)
-    cc = jax.vmap(lambda p: chk(R_op, p))(cyc.x.astype(dt))
-
-    def nanmin(a):
-        return jnp.where(jnp.any(jnp.isnan(a)), jnp.nan, jnp.min(a))
-
-    rate = C.cycle_rate(at(R_op), cyc, pb.motor, robot0.mass.gear_ratio, dwell=pb.dwell, payload_mass=pb.payload)
+    cw = cycle_worst(at(R_op), cycle_path(pb), int(cycle_n), float(pb.settings["cycle"]["duration"]),
+                     lambda p: ((c := chk(R_op, p.astype(dt))).joint_margin, c.interference_margin), pb.motor,
+                     robot0.mass.gear_ratio, dwell=pb.dwell, payload_mass=pb.payload)
+    rate = cw.rate
     return {"regular_volume": reg.volume, "regular_diameter": reg.diameter, "regular_height": reg.height,
             "regular_z_top": reg.z_top, "regular_volume_fixed": regf.volume, "regular_diameter_fixed": regf.diameter,
             "task_index_min": idx,
-            "joint_margin_deg": jnp.rad2deg(jnp.minimum(jm_t, nanmin(cc.joint_margin))),
-            "interference_margin": jnp.minimum(im_t, nanmin(cc.interference_margin)),
+            "joint_margin_deg": jnp.rad2deg(jnp.minimum(jm_t, cw.joint_margin)),
+            "interference_margin": jnp.minimum(im_t, cw.interference_margin),
             "picks_per_min": rate.picks_per_min, "cycle_time": rate.cycle_time,
             "peak_utilisation": rate.loads.peak_utilisation, "rms_utilisation": rate.loads.rms_utilisation,
             "speed_utilisation": rate.loads.speed_utilisation}
