@@ -328,3 +328,45 @@ def test_cycle_worst_agrees_with_a_64x_denser_scan_and_is_never_better_than_its_
     assert float(cw.rate.cycle_time) <= T64 * (1.0 + CE.TOLERANCES["peak_utilisation"])
     # the samples alone are faster than the 64x scan allows; the refined time is not
     assert float(s["cycle_time"]) < T64
+
+
+def _fake_programs(monkeypatch, volume_at):
+    """certify_design with its jitted program replaced by figures that depend on the cycle samples only."""
+    calls = []
+
+    def program(pb, density, task_samples, cycle_samples):
+        def run(design, R):
+            calls.append(cycle_samples)
+            out = {k: 0.5 for k in CE.CERTIFIED_METRICS}
+            out["regular_volume"] = volume_at(cycle_samples)
+            return out
+        return run
+
+    monkeypatch.setattr(CE, "certified_program", program)
+    return calls
+
+
+class _Design:
+    upper_arm = jnp.zeros(3)
+
+
+@pytest.mark.parametrize("volumes, doublings, converged", [
+    ((1.0, 1.001), 1, True),                                 # settled at the first doubling: two evaluations
+    ((1.0, 1.02, 1.03, 1.032), 3, True),                     # settled at the third
+    ((1.0, 1.02, 1.04, 1.06), 3, False),                     # never: capped at 1 + 2 doublings
+    ((float("nan"),) * 4, 1, False),                         # NaN at both densities: doubling again cannot help
+])
+def test_certify_design_doubles_the_density_again_until_every_figure_settles(monkeypatch, volumes, doublings,
+                                                                            converged):
+    dens, task = CE.RAY_DENSITY, (3, 5, 7)
+    seq = {c: v for c, v in zip((9, 17, 33, 65), volumes)}
+    calls = _fake_programs(monkeypatch, lambda c: seq[c])
+    out = CE.certify_design(None, _Design(), 0.2, density=dens, task_samples=task, cycle_samples=9)
+    assert out["doublings"] == doublings and out["converged"] is converged
+    assert calls == [9, 17, 33, 65][:doublings + 1]
+    assert out["cycle_samples"] == calls[-1]
+    np.testing.assert_equal(out["regular_volume"], volumes[doublings])
+    np.testing.assert_equal(out["regular_volume_first"], volumes[0])
+    with pytest.raises(ValueError, match="max_extra_doublings"):
+        CE.certify_design(None, _Design(), 0.2, density=dens, task_samples=task, cycle_samples=9,
+                          max_extra_doublings=-1)
