@@ -21,9 +21,8 @@ import jax
 import jax.numpy as jnp
 
 from .. import constraints as C
-from ..cycle import log_bisect
 from ..trajectory import Cycle
-from .rays import _golden_min
+from .rays import golden_min
 
 __all__ = ["worst_along", "CycleWorst", "cycle_worst"]
 
@@ -43,7 +42,7 @@ def worst_along(f: Callable, u, V, *, n_start: int = 3, n_golden: int = 14):
         _, idx = jax.lax.top_k(-v, ns)
 
         def search(t0):
-            return _golden_min(lambda t: f(t)[c], jnp.clip(t0 - h, 0.0, 1.0), jnp.clip(t0 + h, 0.0, 1.0), n_golden)
+            return golden_min(lambda t: f(t)[c], jnp.clip(t0 - h, 0.0, 1.0), jnp.clip(t0 + h, 0.0, 1.0), n_golden)
 
         ts, fs = jax.vmap(search)(u[idx])
         j = jnp.argmin(fs)
@@ -65,7 +64,7 @@ class CycleWorst(NamedTuple):
             (peak torque and utilisation over both; RMS and speed from the dense samples).
         sampled: the same figures on the dense samples alone (a dict: ``joint_margin``, ``interference_margin``,
             ``cycle_time``, ``peak_utilisation``).
-        t_worst: (3,) the normalised times of the joint margin's, the clearance's and the peak's worst points.
+        t_worst: (2,) the normalised times of the joint margin's and the clearance's worst points.
     """
 
     joint_margin: jax.Array
@@ -89,12 +88,12 @@ def cycle_worst(robot, path: Callable, n_samples: int, duration, point_fields: C
         point_fields: ``p (3,) -> (joint margin, interference margin)`` at a point of the path (NaN: unreachable).
         motor, gear_ratio, dwell, payload_mass, T_low, T_high, n_iter: as :func:`deltajax.constraints.cycle_rate`.
 
-    The peak: at the dense samples' fastest time T0 (exactly :func:`deltajax.constraints.cycle_rate` on the
-    samples) the peak utilisation max over actuators of |tau_m| / envelope(omega_m) is maximised in u from the
-    worst samples; the cycle time is then the smallest T at which the dense samples (peak and RMS) and the refined
-    points (peak) all hold, never below T0. The refined points are found at T0; the time they move T by is far
-    below the doubling check's tolerance, so they are not searched again at the new T. NaN everywhere (as
-    ``cycle_rate``) where a sample or a refined point is unreachable.
+    The peak (:func:`deltajax.constraints.cycle_rate_refined`): at the dense samples' fastest time T0 (exactly
+    :func:`deltajax.constraints.cycle_rate` on the samples) the peak utilisation max over actuators of |tau_m| /
+    envelope(omega_m) is maximised in u from the worst samples; the cycle time is then the smallest T at which the
+    dense samples (peak and RMS) and the refined point (peak) all hold, never below T0. The point is found at T0;
+    the time it moves T by is far below the doubling check's tolerance, so it is not searched again at the new T.
+    NaN everywhere (as ``cycle_rate``) where a sample or the refined point is unreachable.
     """
     u = jnp.arange(n_samples, dtype=jnp.result_type(float)) / (n_samples - 1)
     x, dx, ddx = path(u)
@@ -113,47 +112,10 @@ def cycle_worst(robot, path: Callable, n_samples: int, duration, point_fields: C
     any_nan = jnp.any(jnp.isnan(Vm), axis=0)
     margins = jnp.where(any_nan, jnp.nan, margins)
 
-    # the cycle rate on the dense samples (cycle_rate's algebra), then the peak refined at its time
-    m, n, drive = C._guarded_drive(motor, gear_ratio)
-    r = C.with_drive(robot, m, n, payload_mass)
-    a, g, thd, ok = C._unit_profile(r, cyc)
-    ok = ok & drive
-    dw = jnp.asarray(dwell, dt)
-    T0 = jnp.where(ok, C._bisect_time(a, g, thd, m, n, dw, T_low, T_high, n_iter), jnp.nan)
-    T0l = jnp.where(jnp.isfinite(T0), T0, cyc.duration)
-
-    def unit_at(t):
-        tt = jnp.reshape(t, (1,))
-        xt, dxt, ddxt = path(tt)
-        a1, g1, thd1, ok1 = C._unit_profile(r, Cycle(u=tt, x=xt, dx=dxt, ddx=ddxt, duration=duration,
-                                                     space="cartesian"))
-        return a1[0], g1[0], thd1[0], ok1
-
-    def neg_peak(t, T):
-        a1, g1, thd1, ok1 = unit_at(t)
-        return jnp.where(ok1, -jnp.max(C._peak_ratio(a1, g1, thd1, T, m, n)[2]), jnp.nan)
-
-    Vp = -jnp.max(C._peak_ratio(a, g, thd, T0l, m, n)[2], axis=1)                       # (K,)
-    _, t_p = worst_along(lambda t: neg_peak(t, T0l)[None], u, Vp[:, None], n_start=n_start, n_golden=n_golden)
-    a1, g1, thd1, ok1 = unit_at(t_p[0])
-    ok = ok & ok1
-
-    def feasible(T):
-        L = C._loads_from_unit(a, g, thd, T, dw, m, n, jnp.asarray(True))
-        pk = jnp.max(C._peak_ratio(a1[None], g1[None], thd1[None], T, m, n)[2])
-        return (L.peak_utilisation <= 1.0) & (L.rms_utilisation <= 1.0) & (pk <= 1.0)
-
-    T = jnp.where(ok, jnp.maximum(T0, log_bisect(feasible, T_low, T_high, dt, n_iter)), jnp.nan)
-    ppm = jnp.where(jnp.isfinite(T), 60.0 / (T + 2.0 * dw), jnp.where(jnp.isnan(T), jnp.nan, 0.0))
-    Tl = jnp.where(jnp.isfinite(T), T, cyc.duration)
-    L = C._loads_from_unit(a, g, thd, Tl, dw, m, n, ok)
-    tau1, _, ratio1 = C._peak_ratio(a1[None], g1[None], thd1[None], Tl, m, n)
-    nan = jnp.asarray(jnp.nan, dt)
-    L = L._replace(peak_torque=jnp.where(ok, jnp.maximum(L.peak_torque, jnp.abs(tau1[0])), nan),
-                   peak_utilisation=jnp.where(ok, jnp.maximum(L.peak_utilisation, jnp.max(ratio1)), nan))
-    L0 = C._loads_from_unit(a, g, thd, T0l, dw, m, n, ok)
+    rate, T0, peak0 = C.cycle_rate_refined(
+        robot, cyc, path, lambda f, uu, V: worst_along(f, uu, V, n_start=n_start, n_golden=n_golden)[1][0], motor,
+        gear_ratio, dwell=dwell, payload_mass=payload_mass, T_low=T_low, T_high=T_high, n_iter=n_iter)
     sampled = {"joint_margin": nanmin(Vm[:, 0]), "interference_margin": nanmin(Vm[:, 1]),
-               "cycle_time": T0, "peak_utilisation": L0.peak_utilisation}
-    return CycleWorst(joint_margin=margins[0], interference_margin=margins[1],
-                      rate=C.CycleRate(cycle_time=T, picks_per_min=ppm, loads=L), sampled=sampled,
-                      t_worst=jnp.concatenate([t_m, t_p]))
+               "cycle_time": T0, "peak_utilisation": peak0}
+    return CycleWorst(joint_margin=margins[0], interference_margin=margins[1], rate=rate, sampled=sampled,
+                      t_worst=t_m)
