@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import NamedTuple, Optional
+from typing import Callable, NamedTuple, Optional
 
 import equinox as eqx
 import jax
@@ -69,7 +69,7 @@ from .regular import (REFINE_BISECT, REFINE_GOLDEN, REFINE_SAMPLES, RegularWorks
 
 __all__ = ["JointModel", "LinkModel", "Motor", "GoodSpec", "JointAngles", "Interference", "DriveLoads",
            "joint_angles", "joint_margin", "segment_distance", "segment_disc_distance", "interference", "with_drive",
-           "motor_side", "drive_ok", "drive_loads",
+           "motor_side", "drive_ok", "drive_loads", "cycle_rate_refined",
            "min_cycle_time", "picks_per_minute", "cycle_rate", "CycleRate", "PointCheck", "good_point", "good_point_possible", "largest_cylinder", "regular_workspace",
            "RegularWorkspace", "polar_grid", "cylinder_samples", "refine_cylinder", "ConstraintError"]
 
@@ -533,13 +533,19 @@ def motor_side(tau_arm, theta_dot, motor: Motor, gear_ratio):
     return tau_arm * (1.0 / (gear_ratio * motor.efficiency)), theta_dot * gear_ratio
 
 
-def _loads_from_unit(a, g, thd_unit, T, dwell, motor: Motor, n, ok):
-    """Motor loads at duration T from the T = 1 profile split (a / T^2 + g arm torque, thd_unit / T speed)."""
-    scale = 1.0 / (n * motor.efficiency)
+def _peak_ratio(a, g, thd_unit, T, motor: Motor, n):
+    """(motor torque, motor speed, |torque| / envelope(speed)) per sample and actuator at duration T from the
+    T = 1 profile split (inf past the envelope's speed); the peak utilisation is its maximum."""
     tau_m, om = motor_side(a / (T * T) + g, thd_unit / T, motor, n)   # (K, 3)
     env = motor.envelope(om)
     ratio = jnp.abs(tau_m) / jnp.where(env > 0, env, 1.0)
-    ratio = jnp.where(env > 0, ratio, jnp.where(jnp.abs(tau_m) > 0, jnp.inf, 0.0))
+    return tau_m, om, jnp.where(env > 0, ratio, jnp.where(jnp.abs(tau_m) > 0, jnp.inf, 0.0))
+
+
+def _loads_from_unit(a, g, thd_unit, T, dwell, motor: Motor, n, ok):
+    """Motor loads at duration T from the T = 1 profile split (a / T^2 + g arm torque, thd_unit / T speed)."""
+    scale = 1.0 / (n * motor.efficiency)
+    tau_m, om, ratio = _peak_ratio(a, g, thd_unit, T, motor, n)
     K = a.shape[0]
     move = jnp.tensordot(_trap_weights(K, a.dtype), tau_m * tau_m, axes=1) * T   # int tau^2 dt over the motion
     hold = (g[0] * scale) ** 2 + (g[K // 2] * scale) ** 2                       # pick and place dwells
@@ -665,6 +671,62 @@ def picks_per_minute(robot: Delta, cycle, motor: Motor, gear_ratio, *, dwell=0.0
     """Cycle rate (picks/min) of :func:`cycle_rate`: 0 when no motion time meets the limits, NaN when the
     cycle is unreachable."""
     return cycle_rate(robot, cycle, motor, gear_ratio, dwell=dwell, payload_mass=payload_mass, **kw).picks_per_min
+
+
+def cycle_rate_refined(robot: Delta, cycle, path: Callable, refine: Callable, motor: Motor, gear_ratio, *,
+                       dwell=0.0, payload_mass=None, T_low: float = 1e-3, T_high: float = 60.0,
+                       n_iter: int = 60) -> tuple:
+    """:func:`cycle_rate` with the peak utilisation searched between the samples of ``cycle``.
+
+    At the samples' fastest time T0 (exactly :func:`cycle_rate`'s) ``refine(f, u, V) -> t`` finds the worst point
+    of f(t) = -(max over actuators of |tau_m| / envelope(omega_m)) from its values ``V`` (K, 1) at the samples
+    ``cycle.u`` (e.g. :func:`deltajax.optimize.cycle_worst.worst_along`), on the path ``path(u (k,)) -> (x, x',
+    x'')`` (the one ``cycle`` samples). The cycle time is then the smallest T at which the samples (peak and RMS)
+    and that point (peak) all hold, never below T0; the loads there carry the peak over both (RMS and speed: the
+    samples'; the RMS is an integral, the samples' trapezoidal rule). NaN everywhere where a sample or the point
+    is unreachable. Returns (the refined :class:`CycleRate`, the samples' T0, the samples' peak utilisation at T0).
+    """
+    from .trajectory import Cycle
+
+    motor, gear_ratio, drive = _guarded_drive(motor, gear_ratio)
+    r = with_drive(robot, motor, gear_ratio, payload_mass)
+    a, g, thd, ok = _unit_profile(r, cycle)
+    ok = ok & drive
+    n = jnp.asarray(gear_ratio, a.dtype)
+    dw = jnp.asarray(dwell, a.dtype)
+    T0 = jnp.where(ok, _bisect_time(a, g, thd, motor, n, dw, T_low, T_high, n_iter), jnp.nan)
+    T0l = jnp.where(jnp.isfinite(T0), T0, cycle.duration)
+
+    def unit_at(t):
+        tt = jnp.reshape(t, (1,))
+        xt, dxt, ddxt = path(tt)
+        a1, g1, thd1, ok1 = _unit_profile(r, Cycle(u=tt, x=xt, dx=dxt, ddx=ddxt, duration=cycle.duration,
+                                                   space="cartesian"))
+        return a1, g1, thd1, ok1
+
+    def neg_peak(t):
+        a1, g1, thd1, ok1 = unit_at(t)
+        return jnp.where(ok1, -jnp.max(_peak_ratio(a1, g1, thd1, T0l, motor, n)[2]), jnp.nan)[None]
+
+    t_p = refine(neg_peak, cycle.u, -jnp.max(_peak_ratio(a, g, thd, T0l, motor, n)[2], axis=1)[:, None])
+    a1, g1, thd1, ok1 = unit_at(t_p)
+    ok = ok & ok1
+
+    def feasible(T):
+        L = _loads_from_unit(a, g, thd, T, dw, motor, n, jnp.asarray(True))
+        pk = jnp.max(_peak_ratio(a1, g1, thd1, T, motor, n)[2])
+        return (L.peak_utilisation <= 1.0) & (L.rms_utilisation <= 1.0) & (pk <= 1.0)
+
+    T = jnp.where(ok, jnp.maximum(T0, log_bisect(feasible, T_low, T_high, a.dtype, n_iter)), jnp.nan)
+    ppm = jnp.where(jnp.isfinite(T), 60.0 / (T + 2.0 * dw), jnp.where(jnp.isnan(T), jnp.nan, 0.0))
+    Tl = jnp.where(jnp.isfinite(T), T, cycle.duration)
+    L = _loads_from_unit(a, g, thd, Tl, dw, motor, n, ok)
+    tau1, _, ratio1 = _peak_ratio(a1, g1, thd1, Tl, motor, n)
+    nan = jnp.asarray(jnp.nan, a.dtype)
+    L = L._replace(peak_torque=jnp.where(ok, jnp.maximum(L.peak_torque, jnp.abs(tau1[0])), nan),
+                   peak_utilisation=jnp.where(ok, jnp.maximum(L.peak_utilisation, jnp.max(ratio1)), nan))
+    peak0 = _loads_from_unit(a, g, thd, T0l, dw, motor, n, ok).peak_utilisation
+    return CycleRate(cycle_time=T, picks_per_min=ppm, loads=L), T0, peak0
 
 
 # -- good and regular workspace --------------------------------------------------------------------------------

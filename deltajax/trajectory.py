@@ -30,6 +30,7 @@ __all__ = [
     "modified_trapezoid",
     "Cycle",
     "adept_cycle",
+    "adept_path",
     "point_to_point",
     "ga_paper_motion",
     "with_R_profile",
@@ -191,51 +192,37 @@ def _segment(law, tau, t0, t1):
     return s, ds / span, dds / (span * span)
 
 
-def adept_cycle(centre: Any = (0.0, 0.0, 0.4), *, heading: float = 0.0, duration: float = 0.5,
-                height: float = ADEPT_HEIGHT, width: float = ADEPT_WIDTH, law: str = "poly5",
-                blend: float = 0.5, vertical_fraction: Optional[float] = None, n_samples: int = 201,
-                dtype=None) -> Cycle:
-    """The standard pick-and-place ("Adept") cycle: ``height`` up, ``width`` across, ``height`` down, and back.
+def _adept_fraction(width: float, height: float, blend: float, vertical_fraction: Optional[float]) -> float:
+    """f_v of :func:`adept_path` (validated): the default gives the vertical and horizontal moves the same peak
+    acceleration."""
+    if vertical_fraction is None:
+        return 1.0 / (math.sqrt(width / height) + 2.0 * (1.0 - blend))
+    f_v = float(vertical_fraction)
+    if not 0.0 < f_v < 0.5:
+        raise ValueError(f"vertical_fraction must be in (0, 0.5), got {vertical_fraction!r}")
+    return f_v
 
-    The go half (u in [0, 1/2]) lifts from the pick point, crosses, and lowers onto the place point; the return
-    half retraces it backwards in time. Within a half (normalised tau in [0, 1]) the lift runs over
-    [0, f_v], the descent over [1 - f_v, 1] and the horizontal move over [f_v (1 - blend), 1 - f_v (1 - blend)],
-    each with the rest-to-rest ``law``. ``blend = 0`` stops at the corners; ``blend > 0`` overlaps the moves
-    (rounded corners, as controllers do). By default f_v = 1 / (sqrt(width / height) + 2 (1 - blend)), which
-    gives the vertical and horizontal moves the same peak acceleration.
 
-    Args:
-        centre: midpoint of the pick-place line (m, base frame, z down: the pick/place height).
-        heading: direction of the horizontal move in the xy plane (rad from +x).
-        duration: nominal cycle time T for the full go-and-back cycle (s).
-        height, width: strokes (m); the standard cycle is 0.025 / 0.305.
-        law: ``"poly5"``, ``"cycloidal"`` or ``"modified_trapezoid"``.
-        blend: overlap in [0, 1).
-        vertical_fraction: f_v, override of the default.
-        n_samples: K samples over the whole cycle (>= 3).
-        dtype: float dtype (default: JAX's default float).
-
-    Returns:
-        A Cartesian :class:`Cycle`.
-    """
+def adept_path(u: Any, centre: Any = (0.0, 0.0, 0.4), *, heading: float = 0.0, height: float = ADEPT_HEIGHT,
+               width: float = ADEPT_WIDTH, law: str = "poly5", blend: float = 0.5,
+               vertical_fraction: Optional[float] = None, dtype=None) -> tuple[Array, Array, Array]:
+    """The standard pick-and-place path of :func:`adept_cycle` at any normalised times ``u`` (any values in
+    [0, 1], shape (k,)): (x, x', x'') each (k, 3), the platform centre (m, base frame) and its u-derivatives.
+    Pure and elementwise in ``u`` (jit / vmap / differentiate freely): :func:`adept_cycle` is this at uniform
+    samples, and a search between the samples (:mod:`deltajax.optimize.cycle_worst`) evaluates the same path.
+    Arguments as :func:`adept_cycle`."""
     fn = motion_law(law)
     height = _check_positive("height", height)
     width = _check_positive("width", width)
-    duration = _check_positive("duration", duration)
     blend = float(blend)
     if not 0.0 <= blend < 1.0:
         raise ValueError(f"blend must be in [0, 1), got {blend!r}")
-    if vertical_fraction is None:
-        f_v = 1.0 / (math.sqrt(width / height) + 2.0 * (1.0 - blend))
-    else:
-        f_v = float(vertical_fraction)
-        if not 0.0 < f_v < 0.5:
-            raise ValueError(f"vertical_fraction must be in (0, 0.5), got {vertical_fraction!r}")
+    f_v = _adept_fraction(width, height, blend, vertical_fraction)
     dtype = jnp.result_type(float) if dtype is None else dtype
     centre = jnp.asarray(centre, dtype)
     if centre.shape != (3,):
         raise ValueError(f"centre must be a 3-vector (m), got shape {centre.shape}")
-    u = _uniform(n_samples, dtype)
+    u = jnp.asarray(u, dtype)
     go = u <= 0.5
     tau = jnp.where(go, 2.0 * u, 2.0 - 2.0 * u)        # the return half retraces the go half
     dtau = jnp.where(go, 2.0, -2.0)
@@ -253,6 +240,42 @@ def adept_cycle(centre: Any = (0.0, 0.0, 0.4), *, heading: float = 0.0, duration
     x = centre + along[:, None] * e + z[:, None] * ez
     dx = (dtau * width * dsx)[:, None] * e + (dtau * dz)[:, None] * ez
     ddx = (4.0 * width * ddsx)[:, None] * e + (4.0 * ddz)[:, None] * ez
+    return x, dx, ddx
+
+
+def adept_cycle(centre: Any = (0.0, 0.0, 0.4), *, heading: float = 0.0, duration: float = 0.5,
+                height: float = ADEPT_HEIGHT, width: float = ADEPT_WIDTH, law: str = "poly5",
+                blend: float = 0.5, vertical_fraction: Optional[float] = None, n_samples: int = 201,
+                dtype=None) -> Cycle:
+    """The standard pick-and-place ("Adept") cycle: ``height`` up, ``width`` across, ``height`` down, and back.
+
+    The go half (u in [0, 1/2]) lifts from the pick point, crosses, and lowers onto the place point; the return
+    half retraces it backwards in time. Within a half (normalised tau in [0, 1]) the lift runs over
+    [0, f_v], the descent over [1 - f_v, 1] and the horizontal move over [f_v (1 - blend), 1 - f_v (1 - blend)],
+    each with the rest-to-rest ``law``. ``blend = 0`` stops at the corners; ``blend > 0`` overlaps the moves
+    (rounded corners, as controllers do). By default f_v = 1 / (sqrt(width / height) + 2 (1 - blend)), which
+    gives the vertical and horizontal moves the same peak acceleration. The path at ``n_samples`` uniform
+    samples of :func:`adept_path` (which evaluates it at any u).
+
+    Args:
+        centre: midpoint of the pick-place line (m, base frame, z down: the pick/place height).
+        heading: direction of the horizontal move in the xy plane (rad from +x).
+        duration: nominal cycle time T for the full go-and-back cycle (s).
+        height, width: strokes (m); the standard cycle is 0.025 / 0.305.
+        law: ``"poly5"``, ``"cycloidal"`` or ``"modified_trapezoid"``.
+        blend: overlap in [0, 1).
+        vertical_fraction: f_v, override of the default.
+        n_samples: K samples over the whole cycle (>= 3).
+        dtype: float dtype (default: JAX's default float).
+
+    Returns:
+        A Cartesian :class:`Cycle`.
+    """
+    duration = _check_positive("duration", duration)
+    dtype = jnp.result_type(float) if dtype is None else dtype
+    u = _uniform(n_samples, dtype)
+    x, dx, ddx = adept_path(u, centre, heading=heading, height=height, width=width, law=law, blend=blend,
+                            vertical_fraction=vertical_fraction, dtype=dtype)
     return Cycle(u=u, x=x, dx=dx, ddx=ddx, duration=duration, space="cartesian")
 
 

@@ -233,3 +233,140 @@ def test_cycle_peak_and_rms_converge_at_the_certification_density(default_proble
     for peak, peak_dense, rms_dense in out:
         assert abs(peak - peak_dense) <= CE.TOLERANCES["peak_utilisation"]
         assert rms_dense <= 1.0 + CE.TOLERANCES["rms_utilisation"]      # the rating holds on the dense cycle
+
+
+# -- worst cases along the cycle: a golden section in t from the worst samples --------------------------------------
+
+def test_worst_along_finds_a_minimum_between_the_samples_and_is_never_above_the_samples():
+    from deltajax.optimize.cycle_worst import worst_along
+
+    t0, t1 = 0.3137, 0.8261                            # neither on the 11-sample grid
+
+    def f(t):
+        return jnp.stack([(t - t0) ** 2 - 1.0, jnp.cos(40.0 * (t - t1))])
+
+    u = jnp.linspace(0.0, 1.0, 11)
+    V = jax.vmap(f)(u)
+    best, at = jax.jit(lambda: worst_along(f, u, V))()
+    np.testing.assert_allclose(best, [-1.0, -1.0], atol=1e-6)             # the analytic minima
+    np.testing.assert_allclose(at[0], t0, atol=1e-3)
+    assert np.all(np.asarray(best) <= np.min(np.asarray(V), axis=0))
+    assert float(np.min(np.asarray(V)[:, 1])) > -1.0 + 1e-2               # the samples alone miss it
+
+
+def test_worst_along_reports_nan_where_a_point_between_the_samples_is_unreachable():
+    from deltajax.optimize.cycle_worst import worst_along
+
+    def f(t):   # the margin falls toward 0.43, unreachable on (0.42, 0.44): between the worst samples 0.4, 0.5
+        return jnp.where((t > 0.42) & (t < 0.44), jnp.nan, jnp.abs(t - 0.43))[None]
+
+    u = jnp.linspace(0.0, 1.0, 11)
+    V = jax.vmap(f)(u)
+    assert np.all(np.isfinite(np.asarray(V)))
+    best, _ = jax.jit(lambda: worst_along(f, u, V, n_golden=20))()
+    assert np.isnan(float(best[0]))
+
+
+def test_adept_path_is_the_cycle_at_its_samples_and_its_derivatives_are_the_paths():
+    from deltajax.trajectory import adept_cycle, adept_path
+
+    c = (0.01, -0.02, 0.45)
+    cyc = adept_cycle(c, law="cycloidal", n_samples=41)
+    x, dx, ddx = adept_path(cyc.u, c, law="cycloidal")
+    for a, b in ((x, cyc.x), (dx, cyc.dx), (ddx, cyc.ddx)):
+        np.testing.assert_array_equal(np.asarray(a), np.asarray(b))
+    t = jnp.asarray([0.1234, 0.3711, 0.6172, 0.9001])   # between the samples: central differences of the path
+    eps = 1e-6
+    xp, dxp, _ = adept_path(t + eps, c, law="cycloidal")
+    xm, dxm, _ = adept_path(t - eps, c, law="cycloidal")
+    _, dx0, ddx0 = adept_path(t, c, law="cycloidal")
+    np.testing.assert_allclose((xp - xm) / (2 * eps), dx0, atol=1e-6)
+    np.testing.assert_allclose((dxp - dxm) / (2 * eps), ddx0, atol=1e-4)
+
+
+@pytest.mark.slow
+def test_cycle_worst_agrees_with_a_64x_denser_scan_and_is_never_better_than_its_samples(default_problem):
+    """The refined worst joint margin, clearance and peak utilisation of the baseline's cycle at the problem's own
+    samples against a brute-force scan at 64x the density (cycle_rate on 64x the samples: a different method), with
+    rated = peak torque so that the peak, not the RMS, sets the cycle time."""
+    import equinox as eqx
+
+    from deltajax.optimize.cycle_worst import cycle_worst
+
+    _, space, pb = default_problem
+    d = space.decode(jnp.asarray(space.baseline_genes()))
+    plate = d.R_max + pb.links.plate_overhang
+    rob = d.at(jnp.asarray(0.16))
+    motor = eqx.tree_at(lambda m: m.rated_torque, pb.motor, pb.motor.peak_torque)
+    n = rob.mass.gear_ratio
+    kw = dict(dwell=pb.dwell, payload_mass=pb.payload)
+
+    def fields(p):
+        c = C.good_point(rob, p, pb.good, plate_radius=plate)
+        return c.joint_margin, c.interference_margin
+
+    K = pb.cycle.n_samples
+    dur = float(pb.settings["cycle"]["duration"])
+    cw = jax.jit(lambda: cycle_worst(rob, CE.cycle_path(pb), K, dur, fields, motor, n, **kw))()
+    dense = CE.cycle_at(pb, 64 * (K - 1) + 1)
+    r64 = jax.jit(lambda: C.cycle_rate(rob, dense, motor, n, **kw))()
+    f64 = jax.jit(jax.vmap(fields))(dense.x)
+    jm64, im64 = float(jnp.min(f64[0])), float(jnp.min(f64[1]))
+    s = cw.sampled
+    # never better than the samples
+    assert float(cw.joint_margin) <= float(s["joint_margin"])
+    assert float(cw.interference_margin) <= float(s["interference_margin"])
+    assert float(cw.rate.cycle_time) >= float(s["cycle_time"])
+    assert float(cw.rate.loads.peak_utilisation) >= float(s["peak_utilisation"]) - 1e-12
+    # the refined figures at 1x agree with the 64x scan within the stated tolerances (and are at least as bad)
+    assert abs(np.rad2deg(float(cw.joint_margin)) - np.rad2deg(jm64)) <= CE.TOLERANCES["joint_margin_deg"]
+    assert float(cw.joint_margin) <= jm64 + 1e-12
+    assert abs(float(cw.interference_margin) - im64) <= CE.TOLERANCES["interference_margin"]
+    assert float(cw.interference_margin) <= im64 + 1e-12
+    T64 = float(r64.cycle_time)
+    assert float(cw.rate.cycle_time) >= T64 * (1.0 - 1e-9)
+    assert float(cw.rate.cycle_time) <= T64 * (1.0 + CE.TOLERANCES["peak_utilisation"])
+    # the samples alone are faster than the 64x scan allows; the refined time is not
+    assert float(s["cycle_time"]) < T64
+
+
+def _fake_programs(monkeypatch, volume_at):
+    """certify_design with its jitted program replaced by figures that depend on the cycle samples only."""
+    calls = []
+
+    def program(pb, density, task_samples, cycle_samples):
+        def run(design, R):
+            calls.append(cycle_samples)
+            out = {k: 0.5 for k in CE.CERTIFIED_METRICS}
+            out["regular_volume"] = volume_at(cycle_samples)
+            return out
+        return run
+
+    monkeypatch.setattr(CE, "certified_program", program)
+    return calls
+
+
+class _Design:
+    upper_arm = jnp.zeros(3)
+
+
+@pytest.mark.parametrize("volumes, doublings, converged", [
+    ((1.0, 1.001), 1, True),                                 # settled at the first doubling: two evaluations
+    ((1.0, 1.02, 1.03, 1.032), 3, True),                     # settled at the third
+    ((1.0, 1.02, 1.04, 1.06), 3, False),                     # never: capped at 1 + 2 doublings
+    ((float("nan"),) * 4, 1, False),                         # NaN at both densities: doubling again cannot help
+])
+def test_certify_design_doubles_the_density_again_until_every_figure_settles(monkeypatch, volumes, doublings,
+                                                                            converged):
+    dens, task = CE.RAY_DENSITY, (3, 5, 7)
+    seq = {c: v for c, v in zip((9, 17, 33, 65), volumes)}
+    calls = _fake_programs(monkeypatch, lambda c: seq[c])
+    out = CE.certify_design(None, _Design(), 0.2, density=dens, task_samples=task, cycle_samples=9)
+    assert out["doublings"] == doublings and out["converged"] is converged
+    assert calls == [9, 17, 33, 65][:doublings + 1]
+    assert out["cycle_samples"] == calls[-1]
+    np.testing.assert_equal(out["regular_volume"], volumes[doublings])
+    np.testing.assert_equal(out["regular_volume_first"], volumes[0])
+    with pytest.raises(ValueError, match="max_extra_doublings"):
+        CE.certify_design(None, _Design(), 0.2, density=dens, task_samples=task, cycle_samples=9,
+                          max_extra_doublings=-1)

@@ -77,6 +77,11 @@ def test_toy_run_front_feasible_summary_and_units(full_run):
     # certified at twice the density: the change is stated, with the tolerances as attributes
     assert Cg["attrs"]["tolerance_regular_volume"] == 0.005 and Cg["attrs"]["tolerance_joint_margin_deg"] == 0.05
     assert np.all(np.isfinite(Cg["regular_volume_change"])) and np.all(Cg["peak_utilisation_change"] >= 0)
+    # doubled again while a figure moved more than its tolerance: the density reached is stored, within the cap
+    nd, cap = np.asarray(Cg["doublings"]), int(Cg["attrs"]["max_extra_doublings"])
+    assert np.all((nd >= 1) & (nd <= 1 + cap)) and np.all(Cg["converged"][nd < 1 + cap] == 1)
+    first = (np.asarray(Cg["cycle_samples"]) - 1) / 2.0 ** nd + 1          # the first density's cycle samples
+    assert np.all(first == first[0]) and first[0] > 1
     # the verification found the regular workspace by the same rays: the first density is the verified figure
     np.testing.assert_allclose(Cg["regular_volume_first"], np.asarray(V["regular_volume"])[rows], rtol=1e-9)
     # every verified design carries its margins in units; the summary holds both designs' and the log prints them

@@ -395,7 +395,7 @@ def store_certify(res, names, cert: dict, feas, marg: dict, front, Fv, rec: int,
     first density's figure, the change doubling made and whether every change is within its tolerance; the front
     and the normalised objectives with the certified figures in place; attributes: the tolerances, the method, the
     certified recommendation."""
-    from ..optimize.certify import CERTIFIED_METRICS, MARGIN_UNITS, RAY_PASSES, TOLERANCES
+    from ..optimize.certify import CERTIFIED_METRICS, MARGIN_UNITS, MAX_EXTRA_DOUBLINGS, RAY_PASSES, TOLERANCES
     from ..optimize.designer import DESIGN_UNITS
 
     g = "certify"
@@ -425,7 +425,13 @@ def store_certify(res, names, cert: dict, feas, marg: dict, front, Fv, rec: int,
                 attrs={"meaning": "change of the figure when the density is doubled"
                                   + (" (relative)" if k == "regular_volume" else "")})
     res.put(g, "converged", np.asarray([cert[i]["converged"] for i in rows], np.uint8), units="1",
-            dims=("certified_design",), attrs={"meaning": "1: every change within its tolerance"})
+            dims=("certified_design",), attrs={"meaning": "1: every change of the last doubling within its tolerance"})
+    res.put(g, "doublings", np.asarray([cert[i]["doublings"] for i in rows], int), units="1",
+            dims=("certified_design",),
+            attrs={"meaning": "times the first density was doubled (1: the first doubling settled every figure; "
+                              "more while a figure moved more than its tolerance, at most 1 + max_extra_doublings)"})
+    res.put(g, "cycle_samples", np.asarray([cert[i]["cycle_samples"] for i in rows], int), units="1",
+            dims=("certified_design",), attrs={"meaning": "cycle samples of the density reached (the figures')"})
     res.put(g, "feasible", np.asarray(feas, np.uint8)[rows], units="1", dims=("certified_design",))
     res.put(g, "front", np.asarray(front, int), units="1", dims=("front_point",),
             attrs={"meaning": "the verified front with the certified figures in place (rows of verify's design axis)"})
@@ -441,11 +447,14 @@ def store_certify(res, names, cert: dict, feas, marg: dict, front, Fv, rec: int,
                   tolerance_units="regular_volume relative; joint_margin_deg deg; interference_margin m; "
                                   "utilisations and index 1",
                   volume_floor=float("nan") if floor is None else float(floor),
+                  max_extra_doublings=int(MAX_EXTRA_DOUBLINGS),
                   method=f"regular workspace by rays ({v['rw_n_z']} levels x {v['rw_n_phi']} rays per pass, "
                          f"{v['rw_n_r']} samples along a ray, passes {','.join(RAY_PASSES)}); task cylinder "
                          f"{int(t['n_r']) + 1} x {2 * int(t['n_phi']) - 1} x {int(t['n_z']) + 2} samples + golden-"
-                         f"section search from the worst; cycle {2 * int(v['cycle_samples']) - 1} samples (the "
-                         "verification's task grid for the first); then every density doubled")
+                         f"section search from the worst; cycle {8 * (int(v['cycle_samples']) - 1) + 1} samples + "
+                         "golden-section search in t from the worst joint margin, clearance and peak torque utilisation (the RMS "
+                         "from the samples); then every density doubled, and doubled again (at most "
+                         f"{MAX_EXTRA_DOUBLINGS} more times) while a figure moved more than its tolerance")
 
 
 def certify_lines(Cg) -> list:
@@ -460,9 +469,11 @@ def certify_lines(Cg) -> list:
         worst = [k for k, x in ch.items() if not x <= float(Cg["attrs"].get(f"tolerance_{k}", np.inf))]
         vol = 1e3 * float(np.asarray(Cg["regular_volume"]).reshape(-1)[j])
         moved = 100 * ch.get("regular_volume", float("nan"))
-        out.append(f"  certified {name}: regular volume {vol:.4g} L (doubling the density moved it {moved:.2f} %, "
-                   f"tolerance {100 * tol:g} %)" + ("; every figure within its tolerance" if not worst else
-                                                    f"; NOT within tolerance: {', '.join(worst)}"))
+        nd = int(np.asarray(Cg["doublings"]).reshape(-1)[j]) if "doublings" in Cg else 1
+        again = f", after {nd} doublings" if nd > 1 else ""
+        out.append(f"  certified {name}: regular volume {vol:.4g} L (doubling the density moved it {moved:.2f} %"
+                   f"{again}, tolerance {100 * tol:g} %)" + ("; every figure within its tolerance" if not worst else
+                                                             f"; NOT within tolerance: {', '.join(worst)}"))
     return out
 
 

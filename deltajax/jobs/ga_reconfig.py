@@ -431,7 +431,8 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
         feas[i] = bool(CE.feasible_certified({k: np.asarray(v[i]) for k, v in mv.items()}, pb))
         ctx.log(f"certified {names[i]}: " + ", ".join(
             f"{k} {c[k]:.5g} (doubling moved it {c[k + '_change']:.2g}, tolerance {c[k + '_tolerance']:g})"
-            for k in CE.TOLERANCES) + ("" if c["converged"] else "; NOT within every tolerance")
+            for k in CE.TOLERANCES) + f"; density doubled {c['doublings']}x (cycle {c['cycle_samples']} samples)"
+            + ("" if c["converged"] else "; NOT within every tolerance")
             + ("" if feas[i] else "; infeasible once certified"))
 
     run(0)

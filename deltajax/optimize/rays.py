@@ -26,7 +26,8 @@ import jax.numpy as jnp
 
 from ..regular import RegularWorkspace
 
-__all__ = ["RAY_DENSITY", "RAY_PASSES", "RayDensity", "ray_cylinders", "ray_cylinder", "worst_in_cylinder"]
+__all__ = ["RAY_DENSITY", "RAY_PASSES", "RayDensity", "ray_cylinders", "ray_cylinder", "worst_in_cylinder",
+           "golden_min"]
 
 _GOLD = (math.sqrt(5.0) - 1.0) / 2.0
 
@@ -53,7 +54,7 @@ class RayDensity(NamedTuple):
 RAY_DENSITY = RayDensity()
 
 
-def _golden_min(f, a, b, n):
+def golden_min(f, a, b, n):
     """Golden-section search for a minimum of f on [a, b] (n steps); returns (x, f(x)) of the best point seen
     (the two interior points; the ends are not evaluated). One f per step (single traced copy)."""
     dt = jnp.result_type(a)
@@ -169,7 +170,7 @@ def _profile_cylinder(pz, pr, z_min, z_max, hd_ratio, d_max, n_c: int, n_golden:
     Ds = jax.vmap(lambda c: _diameter_at(pz, pr, c, hd_ratio, d_max))(cs)
     j = jnp.argmax(Ds)
     dcs = cs[1] - cs[0]
-    c_g, negD = _golden_min(lambda c: -_diameter_at(pz, pr, c, hd_ratio, d_max), cs[j] - dcs, cs[j] + dcs, n_golden)
+    c_g, negD = golden_min(lambda c: -_diameter_at(pz, pr, c, hd_ratio, d_max), cs[j] - dcs, cs[j] + dcs, n_golden)
     better = -negD > Ds[j]
     return jnp.where(better, c_g, cs[j]), jnp.where(better, -negD, Ds[j])
 
@@ -317,7 +318,7 @@ def worst_in_cylinder(f: Callable, diameter: float, height: float, z_top: float,
                 d = i % 3
                 a = jnp.clip(x[d] - step[d], lo[d], hi[d])
                 b = jnp.clip(x[d] + step[d], lo[d], hi[d])
-                t, ft = _golden_min(lambda t: fv(at(x.at[d].set(t)))[c], a, b, n_golden)
+                t, ft = golden_min(lambda t: fv(at(x.at[d].set(t)))[c], a, b, n_golden)
                 better = ft < fx
                 return jnp.where(better, x.at[d].set(t), x), jnp.where(better, ft, fx)
 
