@@ -139,6 +139,8 @@ def test_samples_are_seeded_and_do_not_depend_on_the_chunking(toy):
     ("experiment.tolerance.mass_percent=nan", r"^experiment\.tolerance\.mass_percent must be a finite number"),
     ("experiment.robust.probability=1.5", r"^experiment\.robust\.probability must be in \(0, 1\], got 1\.5$"),
     ("experiment.robust.confirm_seed=0", r"^experiment\.robust\.confirm_seed=0 must differ from experiment\.tolerance"),
+    ("experiment.verify.certify_doublings=-1", r"^experiment\.verify\.certify_doublings must be in \[0, 4\], "
+                                               r"got -1$"),
     ("experiment.robust.margins.joint_deg=-1", r"^experiment\.robust\.margins\.joint_deg must be in \[0, 180\) deg, "
                                                r"got -1\.0 deg$"),
     ("experiment.robust.margins.joint_deg=55", r"^experiment\.robust\.margins\.joint_deg must be < "

@@ -46,7 +46,9 @@ TOY = {
         "experiment.verify.n_R_operating=2", "experiment.verify.task_n_r=1", "experiment.verify.task_n_phi=3",
         "experiment.verify.task_n_z=2", "experiment.verify.cycle_samples=13", "experiment.verify.rw_n_r=7",
         "experiment.verify.rw_n_phi=3", "experiment.verify.rw_n_z=7", "experiment.screen.log2_size=6",
-        "experiment.refine.steps=3", "experiment.tolerance.samples=200"],
+        "experiment.refine.steps=3", "experiment.tolerance.samples=200",
+        # certify: the first doubling only (a toy grid does not settle; each further doubling is ~8x the rays)
+        "experiment.verify.certify_doublings=0"],
 }
 
 

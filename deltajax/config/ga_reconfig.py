@@ -53,12 +53,12 @@ _GA_KEYS = {
                   "motor_percent"},
     "robust": {"enabled", "probability", "confirm_seed", "max_candidates", "margins"},
     "verify": {"n_R", "n_R_operating", "task_n_r", "task_n_phi", "task_n_z", "cycle_samples", "rw_n_r", "rw_n_phi",
-               "rw_n_z"},
+               "rw_n_z", "certify_doublings"},
 }
 
 # keys a config may omit (their defaults are applied where they are read)
 _GA_OPTIONAL = {"regular_workspace": {"search_refine", "search_refine_steps", "search_refine_samples"},
-                "robust": {"margins"}}
+                "robust": {"margins"}, "verify": {"certify_doublings"}}
 
 #: ``experiment.robust.margins``: the margin every constraint must hold by in a robust run's search, verification
 #: and certification (name -> unit, upper bound): the good-workspace index threshold raised by ``index``, the
@@ -72,6 +72,7 @@ ROBUST_MARGINS = {"index": ("", None), "joint_deg": ("deg", 180.0), "clearance_m
 #: of populations that cannot be evaluated at once
 DESIGN_POINT_BYTES = 9 * 4
 
+from ..optimize.certify import MAX_EXTRA_DOUBLINGS  # noqa: E402  the certify stage's default
 from ..optimize.workflow import RECOMMEND_RULES  # noqa: E402  the one list (the rules of workflow.recommend)
 
 
@@ -396,7 +397,10 @@ def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
             raise ConfigError(f"experiment.robust.confirm_seed={optional['robust']['confirm_seed']!r} must differ "
                               f"from experiment.tolerance.seed (the confirmation is a fresh Monte Carlo)")
     v = _ga_block(e, "verify")
-    verify = {k: _ga_num(v, k, "verify", lo=1, integer=True) for k in v}
+    verify = {k: _ga_num(v, k, "verify", lo=1, integer=True) for k in v if k != "certify_doublings"}
+    # the certify stage's further doublings while a figure moves more than its tolerance (absent: the default)
+    verify["certify_doublings"] = (MAX_EXTRA_DOUBLINGS if v.get("certify_doublings") is None else
+                                   _ga_num(v, "certify_doublings", "verify", lo=0, hi=4, integer=True))
     for k in ("n_R", "task_n_phi", "task_n_z", "rw_n_r", "rw_n_phi", "rw_n_z"):
         if verify[k] < 2:
             raise ConfigError(f"experiment.verify.{k} must be >= 2, got {verify[k]!r}")

@@ -395,7 +395,7 @@ def store_certify(res, names, cert: dict, feas, marg: dict, front, Fv, rec: int,
     first density's figure, the change doubling made and whether every change is within its tolerance; the front
     and the normalised objectives with the certified figures in place; attributes: the tolerances, the method, the
     certified recommendation."""
-    from ..optimize.certify import CERTIFIED_METRICS, MARGIN_UNITS, MAX_EXTRA_DOUBLINGS, RAY_PASSES, TOLERANCES
+    from ..optimize.certify import CERTIFIED_METRICS, MARGIN_UNITS, RAY_PASSES, TOLERANCES
     from ..optimize.designer import DESIGN_UNITS
 
     g = "certify"
@@ -447,14 +447,14 @@ def store_certify(res, names, cert: dict, feas, marg: dict, front, Fv, rec: int,
                   tolerance_units="regular_volume relative; joint_margin_deg deg; interference_margin m; "
                                   "utilisations and index 1",
                   volume_floor=float("nan") if floor is None else float(floor),
-                  max_extra_doublings=int(MAX_EXTRA_DOUBLINGS),
+                  max_extra_doublings=int(v["certify_doublings"]),
                   method=f"regular workspace by rays ({v['rw_n_z']} levels x {v['rw_n_phi']} rays per pass, "
                          f"{v['rw_n_r']} samples along a ray, passes {','.join(RAY_PASSES)}); task cylinder "
                          f"{int(t['n_r']) + 1} x {2 * int(t['n_phi']) - 1} x {int(t['n_z']) + 2} samples + golden-"
                          f"section search from the worst; cycle {8 * (int(v['cycle_samples']) - 1) + 1} samples + "
                          "golden-section search in t from the worst joint margin, clearance and peak torque utilisation (the RMS "
                          "from the samples); then every density doubled, and doubled again (at most "
-                         f"{MAX_EXTRA_DOUBLINGS} more times) while a figure moved more than its tolerance")
+                         f"{int(v['certify_doublings'])} more times) while a figure moved more than its tolerance")
 
 
 def certify_lines(Cg) -> list:

@@ -422,7 +422,8 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
     def run(i):
         if i in cert or i < 0:
             return
-        c = CE.certify_design(pb, space_v.decode(jnp.asarray(genes[i])), R_op[i])
+        c = CE.certify_design(pb, space_v.decode(jnp.asarray(genes[i])), R_op[i],
+                              max_extra_doublings=int(s.verify["certify_doublings"]))
         cert[i] = c
         bar.update(1)
         for k in CE.CERTIFIED_METRICS:
