@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 
 from _sweep_helpers import assert_identical, cli, finish, job, rows
+from toy_jobs import GA_STAGES_OFF, TOY
 from deltajax.io import read
 
 REPO = Path(__file__).resolve().parent.parent
@@ -232,36 +233,14 @@ def _ga_overrides():
     under load; one every 100 made the GA so quick on an idle machine with a warm cache that it finished before
     scancel landed, CI 2026-12-01); the screen, Pareto, refine and floor stages off (what is checked is the GA's
     cancel, resubmit and bit-identical finish; with the screen and refine on, each of the three SLURM processes
-    compiled them: ~33 s of each job on its one CPU), the search and verification grids at the suite's toy sizes
-    (tests/toy_jobs.py), for whichever of those keys the ga_reconfig config has."""
-    from hydra import compose, initialize_config_dir
-
-    from deltajax.run import CONFIG_DIR
-
-    with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-        cfg = compose(config_name="config", overrides=["experiment=ga_reconfig"])
-    over = ["experiment=ga_reconfig", "plots=false", "progress=false", "seed=0",
-            "experiment.ga.population_size=8", "experiment.ga.generations=3000"]  # ~5 ms each: time to cancel
-    optional = {"experiment.ga.checkpoint_every": 10, "experiment.pareto.enabled": "false",
-                # the screen and refine stages are not what this test checks (tests/test_ga_reconfig.py and
-                # tests/test_jobs.py run them, resumed and not): off, so the SLURM job compiles the GA and verify only
-                "experiment.screen.enabled": "false", "experiment.refine.enabled": "false",
-                "experiment.floor_solve.enabled": "false",   # it would compile the refine descent in the job
-                # the main job's toy sizes (tests/test_ga_reconfig.py): search and verification grids
-                "experiment.design.n_R": 3, "experiment.task.n_r": 1, "experiment.task.n_phi": 3,
-                "experiment.task.n_z": 2, "experiment.cycle.n_samples": 11, "experiment.cycle.n_R_operating": 2,
-                "experiment.regular_workspace.n_r": 6, "experiment.regular_workspace.n_phi": 2,
-                "experiment.regular_workspace.n_z": 6, "experiment.verify.n_R": 3,
-                "experiment.verify.n_R_operating": 2, "experiment.verify.task_n_r": 1,
-                "experiment.verify.task_n_phi": 3, "experiment.verify.task_n_z": 2,
-                "experiment.verify.cycle_samples": 13, "experiment.verify.rw_n_r": 7, "experiment.verify.rw_n_phi": 2,
-                "experiment.verify.rw_n_z": 7}
-    from omegaconf import OmegaConf
-
-    for key, value in optional.items():
-        if OmegaConf.select(cfg, key, default=None) is not None:
-            over.append(f"{key}={value}")
-    return over
+    compiled them: ~33 s of each job on its one CPU); every other size is the suite's toy main job
+    (tests/toy_jobs.py: one source, so this job costs what the toy run costs -- its own copy of the sizes missed
+    ``certify_doublings=0`` and the job outgrew its 3 GB, CI 2026-12-04)."""
+    ga = ("experiment.ga.population_size=", "experiment.ga.generations=", "experiment.ga.checkpoint_every=")
+    toy = [o for o in TOY["ga_reconfig"] if not o.startswith(ga) and not o.endswith(".enabled=true")]
+    return ["experiment=ga_reconfig", "plots=false", "progress=false", "seed=0", *toy,
+            "experiment.ga.population_size=8", "experiment.ga.generations=3000",  # ~5 ms each: time to cancel
+            "experiment.ga.checkpoint_every=10", "experiment.screen.enabled=false", *GA_STAGES_OFF]
 
 
 def _generations_done(path):
