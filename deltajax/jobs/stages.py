@@ -12,8 +12,10 @@ everything around that, identically for every job:
   in-memory stage never rebuilds the state it would not use.
 * **stops**: a stage that raises :class:`Stop` (``experiment.stop_after``) ends the run resumable, with the
   message logged.
-* **timing and log lines**: each computed stage logs ``[name: wall s, CPU-s]`` (CPU-seconds of the process: on a
-  shared machine the figure to compare) and its wall time is kept in :attr:`Runner.timings`.
+* **timing and log lines**: each computed stage logs ``[name: wall s, CPU-s, peak GiB]`` (CPU-seconds of the
+  process: on a shared machine the figure to compare; the process's peak resident memory so far, so the stage that
+  raises it shows -- what a scheduler's memory request must cover) and its wall time is kept in
+  :attr:`Runner.timings`.
 
 Stages share one mutable :class:`State` (the job's settings, problem and what earlier stages handed on), so a
 job's ``run()`` is the list of its stages. Application wing: it reads and writes the results file through the
@@ -23,6 +25,7 @@ run context only.
 from __future__ import annotations
 
 import dataclasses
+import resource
 import time
 import types
 from pathlib import Path
@@ -145,7 +148,8 @@ class Runner:
             self.done.append(name)
             self.ctx.results.set_attrs(**{self.attr_stages: ",".join(self.done)})
             self.ctx.results.flush()
-        self.ctx.log(f"[{name}: {self.timings[name]:.1f} s, {cpu:.1f} CPU-s]")
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20  # kB on Linux
+        self.ctx.log(f"[{name}: {self.timings[name]:.1f} s, {cpu:.1f} CPU-s, peak {peak:.2f} GiB]")
         self._t = (time.perf_counter(), time.process_time())
 
     def run(self, stages: Iterable[Stage], state: State) -> bool:

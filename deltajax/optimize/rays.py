@@ -26,7 +26,7 @@ import jax.numpy as jnp
 
 from ..regular import RegularWorkspace
 
-__all__ = ["RAY_DENSITY", "RAY_PASSES", "RayDensity", "ray_cylinders", "ray_cylinder", "worst_in_cylinder",
+__all__ = ["RAY_DENSITY", "RAY_PASSES", "RAY_BATCH", "RayDensity", "ray_cylinders", "ray_cylinder", "worst_in_cylinder",
            "golden_min"]
 
 _GOLD = (math.sqrt(5.0) - 1.0) / 2.0
@@ -83,13 +83,21 @@ def golden_min(f, a, b, n):
 
 # -- the regular workspace by rays ------------------------------------------------------------------------------
 
+#: (R, point) pairs per evaluation of the good test in a ray pass: a pass with more evaluates them in batches of
+#: this many (``jax.lax.map``), so its memory is bounded. The certify stage's second further doubling reaches
+#: ~8e5 pairs per pass (the design's 16 R samples x 25 x 61 rays x 33 samples along each), whose unbatched
+#: intermediates (~3.5 kB a pair) took the main job from 1.9 to 4.45 GiB.
+RAY_BATCH = 1 << 16
+
+
 def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: int):
     """First bad radius along each ray, for each good set j (a point is good for set j when ``good_R(R, p)`` holds
     at any R of ``R_sets[j]``): ``phi[j]``, ``z[j]``, ``r_hi[j]`` (N,) per set; returns a list of (N,). ``n_along``
     samples in [0, r_hi], then the first bad interval searched again with ``n_along`` samples, ``n_levels`` times
     in all (every level a dense search, so an island inside the interval is found too). The value is the last good
     sample before the first bad one (never over-stated by the search), ``r_hi`` when every sample is good and 0
-    when the axis point is bad. Every (R, point) pair of every set goes through one vmapped call of ``good_R``."""
+    when the axis point is bad. Every (R, point) pair of every set goes through one vmapped call of ``good_R``
+    (in batches of :data:`RAY_BATCH` pairs)."""
     dt = jnp.result_type(z[0])
     u = jnp.linspace(0.0, 1.0, n_along, dtype=dt)
     cs = [(jnp.cos(ph), jnp.sin(ph)) for ph in phi]
@@ -106,7 +114,8 @@ def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: i
                          jnp.broadcast_to(p[:, :, None, :], s.shape + (nR, 3)).reshape(-1, 3)))
         Rf = jnp.concatenate([r for r, _ in rows])
         Pf = jnp.concatenate([p for _, p in rows])
-        gf = jax.vmap(good_R)(Rf, Pf)                                                   # the one call
+        gf = (jax.vmap(good_R)(Rf, Pf) if Rf.shape[0] <= RAY_BATCH else                 # the one call,
+              jax.lax.map(lambda a: good_R(*a), (Rf, Pf), batch_size=RAY_BATCH))        # in batches
         out, k = [], 0
         for j, (lo, hi, done, axis_bad) in enumerate(st):
             g = jnp.any(gf[k:k + sizes[j]].reshape(lo.shape[0], n_along, -1), axis=2)   # (N, n_along)
