@@ -70,7 +70,7 @@ def _run_problem(data: Mapping[str, Any], path: Path):
         pb = designer_problem(s, fine=True)
     except (ConfigError, SetupError) as err:
         raise ReportError(f"{path}: its stored configuration does not build here ({err})") from None
-    space_v = dataclasses.replace(space, n_R=s.verify["n_R"]) if space.reconfigurable else space
+    space_v = dataclasses.replace(space, n_R=s.verify.n_R) if space.reconfigurable else space
     return s, space_v, pb
 
 
@@ -185,7 +185,7 @@ def write_report(results_path, out_path=None, *, workspace_points: int = WORKSPA
     names = [str(n) for n in np.asarray(V["design_name"]).reshape(-1)]
     rec = int(V["attrs"]["recommended"])
     sections = [("front", "Designs verified on the fine grids",
-                 P.report.front_figure(V, list(s.objectives), units, space.names,
+                 P.report.front_figure(V, list(s.objectives.names), units, space.names,
                                        [space.units(n) for n in space.names],
                                        margins={k: v for k, v in (data.get("certify") or {}).items()
                                                 if k.startswith("margin_")}))]
@@ -197,7 +197,7 @@ def write_report(results_path, out_path=None, *, workspace_points: int = WORKSPA
         recon = space.reconfigurable
         good, h, n_pts = _good_workspace(design, recon, pb, workspace_points)
         t = s.task
-        cyl = [("task cylinder", t["diameter"], t["height"], t["z_top"], "#d62728")]
+        cyl = [("task cylinder", t.diameter, t.height, t.z_top, "#d62728")]
         d, hh, zt = (float(np.asarray(V[k], float)[rec]) for k in ("regular_diameter", "regular_height",
                                                                      "regular_z_top"))
         if np.isfinite([d, hh, zt]).all() and d > 0:

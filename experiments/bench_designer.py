@@ -146,7 +146,7 @@ def main(argv=None):
     s, space, pb, _ = ga_reconfig_build(cfg.experiment, robot, recon)
     from deltajax.optimize.designer import DESIGN_SENSE
 
-    objs = list(s.objectives)
+    objs = list(s.objectives.names)
     sense = np.asarray([DESIGN_SENSE[o] for o in objs], float)
     report = {"objectives": objs, "seeds": args.seeds, "large": args.large, "load_before": load0}
     if not args.no_scan:   # the scan (c); --no-scan: only (a), (b) and the runs' own fine-grid figures
@@ -168,7 +168,7 @@ def main(argv=None):
             # feasible design and the cache rewritten
             idx = np.linspace(0, len(X) - 1, 64).astype(int)
             chk0 = ev_cheap(X[idx])
-            dev0 = float(np.nanmax(np.abs(chk0[s.primary] - prim[idx]) / np.maximum(np.abs(prim[idx]), 1e-300)))
+            dev0 = float(np.nanmax(np.abs(chk0[s.objectives.primary] - prim[idx]) / np.maximum(np.abs(prim[idx]), 1e-300)))
             if not (np.array_equal(chk0["feasible"].astype(bool), feas[idx]) and dev0 <= 1e-9):
                 raise SystemExit(f"{cached}: its cheap pass does not match today's evaluator (max rel. deviation "
                                  f"{dev0:.3g}); delete it")
@@ -203,7 +203,7 @@ def main(argv=None):
         if feas is None:
             parts = [ev_cheap(X[i:i + 8192]) for i in range(0, len(X), 8192)]
             feas = np.concatenate([p["feasible"] for p in parts]).astype(bool)
-            prim = np.concatenate([p[s.primary] for p in parts])
+            prim = np.concatenate([p[s.objectives.primary] for p in parts])
             t_cheap, c_cheap = time.perf_counter() - t1, _cpu() - c1
             Xf = X[feas]
             Mf = ev(Xf) if len(Xf) else None
@@ -250,7 +250,7 @@ def main(argv=None):
         fr = [int(i) for i in np.asarray(V["front"]).reshape(-1)]
         pooled += [[float(V[o][i]) for o in objs] for i in fr]
     P = np.asarray(pooled) * sense                                  # minimised
-    j = objs.index(s.primary)
+    j = objs.index(s.objectives.primary)
     others = [k for k in range(len(objs)) if k != j]
     shortfall = {}
     for (budget, sd), (_, f, _, _) in sorted(rec.items()):
@@ -258,7 +258,7 @@ def main(argv=None):
         ok = np.all(P[:, others] <= fs[others] + 1e-12 * np.abs(fs[others]), axis=1)
         best = float(np.min(P[ok, j])) * sense[j]
         shortfall[f"{budget}_{sd}"] = float(abs(best - f[j]) / abs(best))
-        print(f"(a) {budget} seed {sd}: {s.primary} {f[j]:.5g}; best any run verified at >= its other objectives "
+        print(f"(a) {budget} seed {sd}: {s.objectives.primary} {f[j]:.5g}; best any run verified at >= its other objectives "
               f"{best:.5g} (shortfall {100 * shortfall[f'{budget}_{sd}']:.2f} %)")
     report["shortfall_vs_pooled_front"] = shortfall
     for budget, key in (("large", "larger_budget"), ("continued", "continued")):
@@ -283,16 +283,16 @@ def main(argv=None):
         print(f"(b) {budget}, seeds {both}: those where the larger budget's recommendation is dominated by the "
               f"smaller run's: {lost or 'none'}")
     if args.no_scan:
-        j = objs.index(s.primary)
+        j = objs.index(s.objectives.primary)
         per_seed = []
         for (budget, seed), p_ in sorted(runs.items()):
             V = load(p_)["verify"]
             okj = np.asarray(V["feasible"]).astype(bool)
-            fine_best = float(np.max(-sense[j] * np.asarray(V[s.primary])[okj])) * -sense[j]
+            fine_best = float(np.max(-sense[j] * np.asarray(V[s.objectives.primary])[okj])) * -sense[j]
             per_seed.append({"budget": budget, "seed": seed, "job_fine_best_primary": fine_best,
                              "hv_job_fine": float(V["attrs"]["hypervolume"]),
                              "front_size": int(np.asarray(V["front"]).size)})
-            print(f"(c, fine grids, no scan) {budget} seed {seed}: best {s.primary} {fine_best:.4g}, hypervolume "
+            print(f"(c, fine grids, no scan) {budget} seed {seed}: best {s.objectives.primary} {fine_best:.4g}, hypervolume "
                   f"{per_seed[-1]['hv_job_fine']:.4g}, verified front {per_seed[-1]['front_size']} points", flush=True)
         report.update(per_seed=per_seed, runs_wall_s=t_runs, runs_cpu_s=c_runs, load_after=os.getloadavg())
         (out / "bench_designer.json").write_text(json.dumps(report, indent=1, default=float))
@@ -304,7 +304,7 @@ def main(argv=None):
     Ff = Ff[fin]
     X_scan_nd = Xf[fin][non_dominated(Ff)] if len(Ff) else np.zeros((0, space.dim))
     hv_scan = hypervolume(Ff[non_dominated(Ff)], np.zeros(len(objs))) if len(Ff) else 0.0
-    j = objs.index(s.primary)
+    j = objs.index(s.objectives.primary)
     best_scan = float(np.max(-sense[j] * prim[feas])) * -sense[j] if feas.any() else float("nan")
     # like with like: the scan's coarse non-dominated set and its best designs on the primary, verified on the
     # job's fine grids (continuous regular workspace), normalised by the fine-grid baseline as the job's front is
@@ -319,7 +319,7 @@ def main(argv=None):
         jf = np.flatnonzero(feas)
         top = jf[np.argsort(sense[j] * prim[jf], kind="stable")[:args.fine_top]]
         Xv = np.concatenate([space.baseline_genes()[None], X_scan_nd, X[top]])
-        space_v = dataclasses.replace(space, n_R=s.verify["n_R"]) if space.reconfigurable else space
+        space_v = dataclasses.replace(space, n_R=s.verify.n_R) if space.reconfigurable else space
         c2 = _cpu()
         mvs = W.verify(W.designer_problem(s, fine=True), space_v, Xv)
         c_fine = _cpu() - c2
@@ -328,9 +328,9 @@ def main(argv=None):
     Fsv = objective_matrix(mvs, objs, sense / np.abs(bvf))
     okv = mvs["feasible"].astype(bool) & np.all(np.isfinite(Fsv), axis=1)
     hv_scan_fine = hypervolume(Fsv[okv][non_dominated(Fsv[okv])], np.zeros(len(objs))) if okv.any() else 0.0
-    best_scan_fine = float(np.max(-sense[j] * mvs[s.primary][okv])) * -sense[j] if okv.any() else float("nan")
+    best_scan_fine = float(np.max(-sense[j] * mvs[s.objectives.primary][okv])) * -sense[j] if okv.any() else float("nan")
     print(f"scan verified on the fine grids: {len(Fsv)} designs ({int(okv.sum())} feasible), {c_fine:.0f} CPU-s; "
-          f"best {s.primary} {best_scan_fine:.4g}, hypervolume {hv_scan_fine:.4g}", flush=True)
+          f"best {s.objectives.primary} {best_scan_fine:.4g}, hypervolume {hv_scan_fine:.4g}", flush=True)
     report.update(scan_fine_designs=int(len(Fsv)), scan_fine_feasible=int(okv.sum()), scan_fine_cpu_s=c_fine,
                   scan_fine_best_primary=best_scan_fine, scan_fine_hypervolume=hv_scan_fine)
     # the rule's own question on the fine grids (recommend: floor): the scan's best primary objective among its
@@ -339,10 +339,10 @@ def main(argv=None):
 
     lim = floor_limits(len(objs), j, s.recommend_floor, sense)
     at_floor = okv & np.all(Fsv <= lim[None, :], axis=1)
-    best_scan_floor = (float(np.max(-sense[j] * mvs[s.primary][at_floor])) * -sense[j] if at_floor.any()
+    best_scan_floor = (float(np.max(-sense[j] * mvs[s.objectives.primary][at_floor])) * -sense[j] if at_floor.any()
                        else float("nan"))
     if s.recommend == "floor":
-        print(f"scan, fine grids, the floor rule's question: best {s.primary} among its {int(at_floor.sum())} verified "
+        print(f"scan, fine grids, the floor rule's question: best {s.objectives.primary} among its {int(at_floor.sum())} verified "
               f"designs at the floor ({s.recommend_floor} x the baseline): {best_scan_floor:.5g}", flush=True)
     report.update(scan_fine_best_primary_at_floor=best_scan_floor)
     per_seed = []
@@ -357,7 +357,7 @@ def main(argv=None):
             dom_fine = int(sum(dominates(np.asarray([float(mvs[o][i]) for o in objs]), rec_fine, sense)
                                for i in np.flatnonzero(okv)))
             if s.recommend == "floor":
-                print(f"(c, fine grids, the rule's question) {budget} seed {seed}: recommended {s.primary} "
+                print(f"(c, fine grids, the rule's question) {budget} seed {seed}: recommended {s.objectives.primary} "
                       f"{rec_fine[j]:.5g} vs the scan's best at the floor {best_scan_floor:.5g} "
                       f"({'>=' if -sense[j] * rec_fine[j] >= -sense[j] * best_scan_floor else '<'}); verified scan "
                       f"designs dominating the recommendation: {dom_fine}", flush=True)
@@ -367,15 +367,15 @@ def main(argv=None):
             Fj = objective_matrix(mj, objs, scale)
             ok = mj["feasible"].astype(bool) & np.all(np.isfinite(Fj), axis=1)
             hv_job = hypervolume(Fj[ok][non_dominated(Fj[ok])], np.zeros(len(objs))) if ok.any() else 0.0
-            best_job = float(np.max(-sense[j] * mj[s.primary][ok])) * -sense[j] if ok.any() else float("nan")
-            ga_best = float(mg[s.primary][0]) if bool(mg["feasible"][0]) else float("nan")
+            best_job = float(np.max(-sense[j] * mj[s.objectives.primary][ok])) * -sense[j] if ok.any() else float("nan")
+            ga_best = float(mg[s.objectives.primary][0]) if bool(mg["feasible"][0]) else float("nan")
             fr = Fj[int(d["verify"]["attrs"]["recommended"])]
             dom = int(np.sum([dominates(f, fr, np.ones(len(objs))) for f in Ff]))
             V = d["verify"]
             okj = np.asarray(V["feasible"]).astype(bool)
-            fine_best = float(np.max(-sense[j] * np.asarray(V[s.primary])[okj])) * -sense[j]
+            fine_best = float(np.max(-sense[j] * np.asarray(V[s.objectives.primary])[okj])) * -sense[j]
             hv_fine = float(V["attrs"]["hypervolume"])
-            print(f"(c, fine grids) {budget} seed {seed}: best {s.primary} {fine_best:.4g} vs scan {best_scan_fine:.4g}"
+            print(f"(c, fine grids) {budget} seed {seed}: best {s.objectives.primary} {fine_best:.4g} vs scan {best_scan_fine:.4g}"
                   f" ({'>=' if fine_best >= best_scan_fine else '<'}); hypervolume {hv_fine:.4g} vs scan "
                   f"{hv_scan_fine:.4g} ({'>=' if hv_fine >= hv_scan_fine else '<'})", flush=True)
             per_seed.append({"budget": budget, "seed": seed, "ga_best_primary": ga_best, "job_best_primary": best_job,
@@ -383,7 +383,7 @@ def main(argv=None):
                              "hv_job": hv_job, "scan_designs_dominating_recommended": dom,
                              "recommended_fine": rec_fine.tolist(), "scan_fine_designs_dominating_recommended": dom_fine,
                              "refined_accepted": int(np.sum(d.get("refine", {}).get("accepted", [])))})
-            print(f"(c) {budget} seed {seed}: {s.primary} GA best {ga_best:.4g}, best of the job's designs "
+            print(f"(c) {budget} seed {seed}: {s.objectives.primary} GA best {ga_best:.4g}, best of the job's designs "
                   f"{best_job:.4g} vs best of the scan {best_scan:.4g} ({'>=' if best_job >= best_scan else '<'}); "
                   f"hypervolume job {hv_job:.4g} vs scan {hv_scan:.4g}; scan designs dominating the "
                   f"recommendation (coarse grids): {dom}", flush=True)

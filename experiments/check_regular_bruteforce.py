@@ -51,7 +51,7 @@ def main(argv=None):
     cfg = compose_config(["experiment=ga_reconfig"], CONFIG_DIR)
     robot, recon = robot_from_config(cfg.robot)
     s, space, _, _ = ga_reconfig_build(cfg.experiment, robot, recon)
-    space_v = dataclasses.replace(space, n_R=s.verify["n_R"])
+    space_v = dataclasses.replace(space, n_R=s.verify.n_R)
     pbf = W.designer_problem(s, fine=True)
     designs = [("baseline", space_v.baseline_genes())]
     if a.params:
@@ -63,7 +63,7 @@ def main(argv=None):
         V = load(a.results)["verify"]
         rec = int(V["attrs"]["recommended"])
         designs.append((str(V["design_name"][rec]), np.asarray(V["genes"][rec], float)))
-    rg = s.regular
+    rg = s.regular_workspace
     n_r, n_phi, n_z = (int(x) for x in a.grid.split(","))
     d1 = CE.RayDensity(*pbf.rw_rays)
     n_ray = len(CE.RAY_PASSES) * d1.n_phi * d1.n_z * d1.n_along * d1.n_levels
@@ -71,9 +71,9 @@ def main(argv=None):
     print(f"verification ray density {tuple(d1)} ({', '.join(d1._fields)}), {len(CE.RAY_PASSES)} passes: {n_ray} "
           f"samples on rays; brute-force grid {n_r} x {n_phi} x {n_z} = {n_bf} points, rings 0..{a.r_max} m "
           f"({n_bf / n_ray:.0f}x)", flush=True)
-    pts_old, r_old, z_old = C.polar_grid(rg["r_max"], rg["z_min"], rg["z_max"], 32, 5, 43)
+    pts_old, r_old, z_old = C.polar_grid(rg.r_max, rg.z_min, rg.z_max, 32, 5, 43)
     pb_old = dataclasses.replace(pbf, rw_rays=None, rw_points=pts_old, rw_r=r_old, rw_z=z_old)
-    pts, r, z = C.polar_grid(a.r_max, rg["z_min"], rg["z_max"], n_r, n_phi, n_z)
+    pts, r, z = C.polar_grid(a.r_max, rg.z_min, rg.z_max, n_r, n_phi, n_z)
     flat = pts.reshape(-1, 3)
     chunk = 32768
     for name, g in designs:
@@ -86,7 +86,7 @@ def main(argv=None):
 
         t = _cpu()
         ray = [jax.jit(lambda dd=dd, Rs=Rs, good_R=good_R: CE.ray_cylinders(
-            good_R, [Rs], rg["r_max"], rg["z_min"], rg["z_max"], rg["hd_ratio"], dd)[0])() for dd in (d1, d1.doubled())]
+            good_R, [Rs], rg.r_max, rg.z_min, rg.z_max, rg.hd_ratio, dd)[0])() for dd in (d1, d1.doubled())]
         v1, v2 = float(ray[0].volume), float(ray[1].volume)
         t_ray = _cpu() - t
         t = _cpu()
@@ -101,7 +101,7 @@ def main(argv=None):
             out = np.asarray(f(jnp.asarray(np.concatenate([blk, np.repeat(blk[:1], pad, axis=0)]))))
             parts.append(out[:len(blk)])
         good = np.concatenate(parts).reshape(pts.shape[:3])
-        bf = CE.grid_cylinder_bounds(good, r, z, rg["hd_ratio"])
+        bf = CE.grid_cylinder_bounds(good, r, z, rg.hd_ratio)
         t_bf = _cpu() - t
         print(f"{name}: rays {1e3 * v1:.3f} L (D {1e3 * float(ray[0].diameter):.2f} mm; doubled density "
               f"{1e3 * v2:.3f} L, change {100 * abs(v2 / v1 - 1):.2f} %), old refine_cylinder {1e3 * old:.3f} L; "

@@ -91,7 +91,7 @@ def checks(scale: int):
     s, space, pb = bench_ga.designer_problem(8)
     P = 64 * scale
     genes = jax.random.uniform(jax.random.PRNGKey(1), (P, space.dim), dtype=jnp.float64)
-    fit = ga_fitness(pb, space, [s.primary], [-1.0 / 195.0])   # picks/min, feasibility first
+    fit = ga_fitness(pb, space, [s.objectives.primary], [-1.0 / 195.0])   # picks/min, feasibility first
     yield "GA fitness", P, "designs", lambda g: fit(g)[0], (genes,)
     rm = dj.presets.franco2026(fixed_R=0.3, with_mass=True)
     n_d = 64 * scale

@@ -204,10 +204,10 @@ def test_task_worst_joint_margin_within_tolerance_of_a_dense_scan(default_proble
     def im(p):
         return C.good_point(d.at(R), p, pb.good, plate_radius=plate).interference_margin
 
-    args = (t["diameter"], t["height"], t["z_top"], 4, 9, 7)
+    args = (t.diameter, t.height, t.z_top, 4, 9, 7)
     found_j, _ = jax.jit(lambda: CE.worst_in_cylinder(jm, *args))()
     found_i, _ = jax.jit(lambda: CE.worst_in_cylinder(im, *args))()
-    pts = C.polar_grid(t["diameter"] / 2, t["z_top"], t["z_top"] + t["height"], 31, 121, 41)[0].reshape(-1, 3)
+    pts = C.polar_grid(t.diameter / 2, t.z_top, t.z_top + t.height, 31, 121, 41)[0].reshape(-1, 3)
     dense_j = float(jnp.min(jax.jit(jax.vmap(jm))(jnp.asarray(pts))))
     dense_i = float(jnp.min(jax.jit(jax.vmap(im))(jnp.asarray(pts))))
     assert float(found_j) <= dense_j + CE.TOLERANCES["joint_margin_deg"]

@@ -83,3 +83,73 @@ def test_reachable_centre_and_points_below_the_base_are_accepted():
 def test_ga_reconfig_messages_carry_the_units_written(override, message):
     with pytest.raises(ConfigError, match=message):
         validate(compose("ga_reconfig", override))
+
+
+# -- settings declared once: the generic reader of a settings dataclass (deltajax.config.readers) ---------------
+def test_settings_are_read_from_their_declared_metadata():
+    import dataclasses
+    from typing import Optional
+
+    from deltajax.config.readers import read_settings, setting
+
+    @dataclasses.dataclass(frozen=True, kw_only=True)
+    class Inner:
+        speed: float = setting(lo=0, lo_open=True, unit="m/s")
+        law: str = setting("poly5", choices=("poly5", "cycloidal"))
+
+    @dataclasses.dataclass(frozen=True, kw_only=True)
+    class Outer:
+        n: int = setting(lo=2)
+        limit: Optional[float] = setting(None, lo=0, hi=180, hi_open=True, unit="deg")
+        inner: Inner = setting(Inner(speed=1.0))
+        flag: bool = setting()
+
+        def _check(self, path):
+            if self.limit is not None and self.limit > 10 * self.n:
+                raise ConfigError(f"{path}.limit={self.limit!r} deg must be <= 10 x {path}.n")
+
+    ok = read_settings(Outer, {"n": 3, "flag": True, "inner": {"speed": 2}}, "experiment")
+    assert ok == Outer(n=3, flag=True, inner=Inner(speed=2.0, law="poly5"), limit=None)
+    assert isinstance(ok.inner.speed, float)
+    assert read_settings(Outer, {"n": 3, "flag": False}, "e").inner == Inner(speed=1.0)   # a default block
+    bad = [({"n": 1, "flag": True}, r"^e\.n must be >= 2, got 1$"),
+           ({"n": 2.5, "flag": True}, r"^e\.n must be an integer, got 2\.5$"),
+           ({"n": 3, "flag": "yes"}, r"^e\.flag must be true or false, got 'yes'$"),
+           ({"n": 3, "flag": True, "limit": 180}, r"^e\.limit must be in \[0, 180\) deg, got 180\.0 deg$"),
+           ({"n": 3, "flag": True, "limit": 31}, r"^e\.limit=31\.0 deg must be <= 10 x e\.n$"),      # its _check
+           ({"n": 3, "flag": True, "inner": {"speed": 0}}, r"^e\.inner\.speed must be > 0 m/s, got 0\.0 m/s$"),
+           ({"n": 3, "flag": True, "inner": {"speed": 1, "law": "x"}},
+            r"^e\.inner\.law must be one of cycloidal, poly5, got 'x'$"),
+           ({"n": 3, "flag": True, "inner": {}}, r"^e\.inner: missing keys speed$"),
+           ({"n": 3}, r"^e: missing keys flag$"),
+           ({"n": 3, "flag": True, "speed": 1}, r"^e: unknown keys speed; valid keys: flag, inner, limit, n$"),
+           ([1, 2], r"^e must be a mapping, got \[1, 2\]$")]
+    for block, match in bad:
+        with pytest.raises(ConfigError, match=match):
+            read_settings(Outer, block, "e")
+
+
+def test_every_main_job_setting_declares_how_it_is_checked():
+    """Every field of the main job's settings tree carries metadata (deltajax.config.readers.setting); every
+    number either a range or its own reader; the default YAML reads without a refusal."""
+    import dataclasses
+    import typing
+
+    from deltajax.config import ga_reconfig as G
+
+    def walk(cls, path):
+        for f in dataclasses.fields(cls):
+            spec = f.metadata.get("deltajax")
+            assert spec is not None, f"{path}.{f.name} has no setting() metadata"
+            tp = typing.get_type_hints(cls)[f.name]
+            tp = next((a for a in typing.get_args(tp) if a is not type(None)), tp)   # Optional[X] -> X
+            if dataclasses.is_dataclass(tp):
+                yield from walk(tp, f"{path}.{f.name}")
+            elif tp in (int, float) and spec.read is None and f.name != "threshold":   # threshold: by the index
+                assert spec.lo is not None or spec.hi is not None, f"{path}.{f.name}: no range"
+            yield f"{path}.{f.name}"
+
+    names = list(walk(G.GaReconfigSettings, "experiment"))
+    assert len(names) > 80 and "experiment.robust.margins.joint_deg" in names
+    s = G.ga_reconfig_settings(compose("ga_reconfig").experiment)
+    assert s.robust.margins.clearance_mm == 0.0 and s.verify.certify_doublings == 2 and s.ga.population_size > 0

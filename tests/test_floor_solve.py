@@ -105,7 +105,7 @@ def test_floor_solve_config_is_checked_before_anything_runs():
     with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
         cfg = compose(config_name="config", overrides=["experiment=ga_reconfig"])
         s = ga_reconfig_settings(cfg.experiment)
-        assert s.floor_solve == {"enabled": True, "rounds": 4, "candidates": 8}
+        assert (s.floor_solve.enabled, s.floor_solve.rounds, s.floor_solve.candidates) == (True, 4, 8)
         # another rule with the step on is valid (the job skips the step and says so): a rule override alone works
         assert ga_reconfig_settings(compose(config_name="config", overrides=[
             "experiment=ga_reconfig", "experiment.recommend=knee"]).experiment).recommend == "knee"

@@ -226,7 +226,7 @@ def test_a_different_config_into_a_finished_dir_is_refused(full_run):
     ("experiment.objectives.names=[picks_per_min,volume]", "unknown objective 'volume'"),
     ("+experiment.task.radius=0.1", "experiment.task: unknown keys"),
     ("experiment.cycle.n_samples=48", "must be odd"),
-    ("experiment.verify.rw_n_r=0", "experiment.verify.rw_n_r must be >= 1"),
+    ("experiment.verify.rw_n_r=0", "experiment.verify.rw_n_r must be >= 2, got 0"),
     ("experiment.regular_workspace.z_min=0.9", "z_min=0.9 m must be < z_max"),
     ("experiment.task.z_top=0.9", "experiment.task"),
     ("experiment.design.bounds.gear_ratio=[0,10]", "gear_ratio: must be > 0"),

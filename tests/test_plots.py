@@ -180,7 +180,7 @@ def test_ga_pareto_draws_the_floor_and_the_floor_step_designs():
     V = {"picks_per_min": pk, "regular_volume": vol, "regular_volume_fixed": vol / 4,
          "feasible": np.ones(len(names), np.int8), "front": np.array([2, 5, 4]), "design_name": names,
          "F": np.stack([-pk / pk[0], -vol / vol[0]], axis=1), "attrs": {"recommended": 5, "hypervolume": 1.6}}
-    s = SimpleNamespace(primary="picks_per_min", recommend="floor", recommend_floor=1.2, recommend_band=0.02)
+    s = SimpleNamespace(objectives=SimpleNamespace(primary="picks_per_min", names=("picks_per_min", "regular_volume")), recommend="floor", recommend_floor=1.2, recommend_band=0.02)
     objs, units = ["picks_per_min", "regular_volume"], {"picks_per_min": "1/min", "regular_volume": "m^3"}
     fig = ga_pareto(V, objs, s, units, floor=floor_line(V, objs, s))
     ax = fig.axes[0]
@@ -208,7 +208,7 @@ def test_ga_pareto_of_a_continued_run_marks_the_earlier_front_and_finds_the_ga_b
     V = {"picks_per_min": pk, "regular_volume": vol, "regular_volume_fixed": vol / 4,
          "feasible": np.ones(len(names), np.int8), "front": np.array([2, 1]), "design_name": names,
          "attrs": {"recommended": 2, "hypervolume": 1.6, "ga_best_design": "earlier_floor_0"}}
-    s = SimpleNamespace(primary="picks_per_min", recommend="floor", recommend_floor=1.2, recommend_band=0.02)
+    s = SimpleNamespace(objectives=SimpleNamespace(primary="picks_per_min", names=("picks_per_min", "regular_volume")), recommend="floor", recommend_floor=1.2, recommend_band=0.02)
     fig = ga_pareto(V, ["picks_per_min", "regular_volume"], s, {"picks_per_min": "1/min", "regular_volume": "m^3"})
     labels = {ln.get_label(): ln for ln in fig.axes[0].get_lines()}
     np.testing.assert_allclose(labels["GA best on picks_per_min"].get_xdata(), [216.4])

@@ -58,7 +58,7 @@ def test_front_hover_lists_each_designs_parameters_and_constraints(run):
     path, data = run
     V = data["verify"]
     s, space, _ = _problem(path, data)
-    fig = front_figure(V, list(s.objectives), DESIGN_UNITS, space.names, [space.units(n) for n in space.names])
+    fig = front_figure(V, list(s.objectives.names), DESIGN_UNITS, space.names, [space.units(n) for n in space.names])
     names = [str(n) for n in V["design_name"]]
     texts = {}
     for tr in fig.data:
@@ -77,9 +77,9 @@ def test_front_hover_lists_each_designs_parameters_and_constraints(run):
             assert f"{c}: {g:.3g}" in t
     traces = {tr.name: tr for tr in fig.data}
     base = traces[next(n for n in traces if n.startswith("baseline"))]
-    assert base.x[0] == pytest.approx(V[s.objectives[0]][0])
+    assert base.x[0] == pytest.approx(V[s.objectives.names[0]][0])
     rtr = traces[f"recommended ({names[rec]})"]
-    assert rtr.y[0] == pytest.approx(V[s.objectives[1]][rec] * (1e3 if DESIGN_UNITS[s.objectives[1]] == "m^3" else 1))
+    assert rtr.y[0] == pytest.approx(V[s.objectives.names[1]][rec] * (1e3 if DESIGN_UNITS[s.objectives.names[1]] == "m^3" else 1))
     assert len(traces["verified Pareto front"].x) == len(front)
 
 

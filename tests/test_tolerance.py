@@ -251,9 +251,9 @@ def test_robust_mode_at_toy_size_picks_a_design_that_holds_in_fresh_samples(toy_
                   "experiment.tolerance.samples=200")
     robot, recon = robot_from_config(cfg.robot)
     s, space, _, _ = ga_reconfig_build(cfg.experiment, robot, recon)
-    objs = list(s.objectives)
+    objs = list(s.objectives.names)
     res, ctx = ResultsFile(tmp_path / "results.h5"), _Ctx()
-    _tolerance(State(ctx=ctx, res=res, path=path, s=s, space=space, objs=objs, jp=objs.index(s.primary),
+    _tolerance(State(ctx=ctx, res=res, path=path, s=s, space=space, objs=objs, jp=objs.index(s.objectives.primary),
                      sense=np.asarray([DESIGN_SENSE[o] for o in objs], float)))
     res.flush()
     out = load(tmp_path / "results.h5")
@@ -266,7 +266,7 @@ def test_robust_mode_at_toy_size_picks_a_design_that_holds_in_fresh_samples(toy_
     assert out["verify"]["attrs"]["recommended_nominal"] == nominal
     assert V["feasible"][rec] == 1
     # an independent check of the choice: another seed, more samples
-    space_v = dataclasses.replace(space, n_R=s.verify["n_R"])
+    space_v = dataclasses.replace(space, n_R=s.verify.n_R)
     tol = Tolerances(length=2e-3, joint_offset_deg=1.0)
     check = dj.tolerance.analyse(designer_problem(s, fine=True), space_v, V["genes"][rec], tol, samples=500, seed=77)
     assert check["p_all"][0] >= 0.97
@@ -292,7 +292,7 @@ def test_margins_tighten_every_constraint_by_the_stated_amount_and_the_nominal_p
     assert required_margins(s) == {"index": 0.02, "joint_deg": 1.5, "clearance_mm": 2.0, "motor_percent": 10.0}
     nom = designer_problem(s, nominal=True)
     assert content_key(nom) == content_key(pb)                      # zero margins: the stated problem
-    assert float(pb_t.joints.limit) == pytest.approx(math.radians(s.joints["limit_deg"] - 1.5), rel=1e-15)
+    assert float(pb_t.joints.limit) == pytest.approx(math.radians(s.joints.limit_deg - 1.5), rel=1e-15)
     assert float(pb_t.good.joints.limit) == float(pb_t.joints.limit)
     assert float(pb_t.good.threshold) == pytest.approx(float(pb.good.threshold) + 0.02, rel=1e-15)
     assert float(pb_t.good.links.clearance) == pytest.approx(float(pb.links.clearance) + 2e-3, rel=1e-15)

@@ -126,7 +126,7 @@ def source_run(src: str) -> tuple:
         raise ConfigError(f"source={src!r} is a {name!r} run, not ga_reconfig")
     robot, recon = robot_from_config(cfg["robot"])
     s, space = ga_reconfig_build(cfg["experiment"], robot, recon)[:2]
-    return space, s.motor
+    return space, dataclasses.asdict(s.motor)
 
 
 def datasheet_settings(e, cfg=None, robot=None, recon=None) -> DatasheetSettings:

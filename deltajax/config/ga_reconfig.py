@@ -1,5 +1,6 @@
-"""The reader of ``experiment.*`` for ``experiment=ga_reconfig`` (the designer's problem): every field, unknown
-keys included. The design space, GA settings and problem are then built by :mod:`deltajax.optimize.workflow`
+"""The main job's settings: ``experiment.*`` of ``experiment=ga_reconfig`` (the designer's problem) as one tree of
+frozen dataclasses (:class:`GaReconfigSettings`, a block per config block), each field's range, unit and choices
+declared once and checked by the one generic reader (:func:`deltajax.config.readers.read_settings`). The design space, GA settings and problem are then built by :mod:`deltajax.optimize.workflow`
 (errors there become :class:`ConfigError` here), once per run, into the job's :class:`GaReconfigSetup`, with the
 run's identity (:func:`job_fingerprint`) and, for ``experiment.continue_from``, the finished run it continues
 (:func:`earlier_run`: only :data:`BUDGET_SETTINGS` may differ)."""
@@ -16,146 +17,15 @@ from typing import Any, Mapping, Optional
 import numpy as np
 
 from ..rundir import config_differences, recorded
-from .readers import ConfigError, check_fits, read_choice, read_field
+from .readers import ConfigError, check_fits, plain, read_field, read_settings, setting
 
 __all__ = ["GaReconfigSettings", "GaReconfigSetup", "ga_reconfig_settings", "ga_reconfig_build", "validate_ga_reconfig",
            "validate_ga_reconfig_run_dir", "DESIGN_POINT_BYTES", "RECOMMEND_RULES", "job_fingerprint",
            "BUDGET_SETTINGS", "problem_differences", "EarlierRun", "continued_file", "earlier_run", "reconfig_settings",
-           "RECONFIG_KEYS", "DRIVE_UNITS", "tolerances_of", "ga_config"]
-
-# ---- ga_reconfig: the designer's problem (every field, unknown keys included); owner: designer ----
-# The one reader of experiment.* for experiment=ga_reconfig (the job and the validator call it); the design space,
-# GA settings and problem are then built by deltajax.optimize.workflow.setup (errors there become ConfigError here).
-
-_GA_KEYS = {
-    "": {"name", "resume", "stop_after", "continue_from", "design", "task", "good_workspace", "joints", "links",
-         "motor", "cycle", "regular_workspace", "objectives", "constraints", "screen", "ga", "pareto", "refine",
-         "recommend", "recommend_band", "recommend_floor", "floor_solve", "verify", "tolerance", "robust",
-         "reconfig"},  # rtmode: experiment.reconfig is checked by deltajax.optimize.operating
-    "screen": {"enabled", "log2_size", "seed_fraction"},
-    "refine": {"enabled", "steps", "learning_rate", "penalty"},
-    "floor_solve": {"enabled", "rounds", "candidates"},
-    "design": {"n_R", "bounds"},
-    "task": {"diameter", "height", "z_top", "n_r", "n_phi", "n_z"},
-    "good_workspace": {"index", "threshold", "beta"},
-    "joints": {"kind", "limit_deg", "elbow_neutral_deg", "platform_neutral_deg"},
-    "links": {"forearm_radius", "upper_arm_radius", "clearance", "plate_overhang"},
-    "motor": {"peak_torque", "rated_torque", "max_speed", "corner_speed", "rotor_inertia", "efficiency",
-              "gear_ratio"},
-    "cycle": {"payload", "dwell", "duration", "n_samples", "law", "n_R_operating"},
-    "regular_workspace": {"hd_ratio", "r_max", "z_min", "z_max", "n_r", "n_phi", "n_z", "search_refine",
-                          "search_refine_steps", "search_refine_samples"},
-    "objectives": {"mode", "names", "primary", "weights"},
-    "constraints": {"task_in_good_workspace", "passive_joints", "interference", "min_picks_per_min",
-                    "max_arm_sum"},
-    "pareto": {"enabled", "population_size", "generations", "ref_min_factor"},
-    "tolerance": {"enabled", "samples", "seed", "distribution", "length_mm", "joint_offset_deg", "mass_percent",
-                  "motor_percent"},
-    "robust": {"enabled", "probability", "confirm_seed", "max_candidates", "margins"},
-    "verify": {"n_R", "n_R_operating", "task_n_r", "task_n_phi", "task_n_z", "cycle_samples", "rw_n_r", "rw_n_phi",
-               "rw_n_z", "certify_doublings"},
-}
-
-# keys a config may omit (their defaults are applied where they are read)
-_GA_OPTIONAL = {"regular_workspace": {"search_refine", "search_refine_steps", "search_refine_samples"},
-                "robust": {"margins"}, "verify": {"certify_doublings"}}
-
-#: ``experiment.robust.margins``: the margin every constraint must hold by in a robust run's search, verification
-#: and certification (name -> unit, upper bound): the good-workspace index threshold raised by ``index``, the
-#: passive joints' limit lowered by ``joint_deg``, the links' required clearance raised by ``clearance_mm``, the
-#: motor's peak and rated torque derated by ``motor_percent`` (the cycle is planned with that torque headroom).
-#: 0 (the default): the constraint as stated.
-ROBUST_MARGINS = {"index": ("", None), "joint_deg": ("deg", 180.0), "clearance_mm": ("mm", 1000.0),
-                  "motor_percent": ("%", 100.0)}
-
-#: a lower bound of the memory of one evaluated point of a design (one 3x3 Jacobian in float32), for the refusal
-#: of populations that cannot be evaluated at once
-DESIGN_POINT_BYTES = 9 * 4
-
-from ..optimize.certify import MAX_EXTRA_DOUBLINGS  # noqa: E402  the certify stage's default
-from ..optimize.workflow import RECOMMEND_RULES  # noqa: E402  the one list (the rules of workflow.recommend)
-
-
-def _ga_plain(x: Any) -> Any:
-    from omegaconf import DictConfig, ListConfig, OmegaConf
-
-    if isinstance(x, (DictConfig, ListConfig)):
-        return OmegaConf.to_container(x, resolve=True)
-    return x
-
-
-def _ga_block(e: Mapping[str, Any], name: str) -> dict:
-    v = e.get(name) if name else e
-    where = f"experiment.{name}" if name else "experiment"
-    if not isinstance(v, Mapping):
-        raise ConfigError(f"{where} must be a mapping, got {v!r}")
-    extra = set(v) - _GA_KEYS[name]
-    if extra:
-        raise ConfigError(f"{where}: unknown keys {', '.join(sorted(extra))}; valid keys: "
-                          f"{', '.join(sorted(_GA_KEYS[name]))}")
-    missing = _GA_KEYS[name] - set(v) - _GA_OPTIONAL.get(name, set())
-    if missing and name not in ("",):
-        raise ConfigError(f"{where}: missing keys {', '.join(sorted(missing))}")
-    return dict(v)
-
-
-def _ga_num(b: Mapping[str, Any], key: str, where: str, *, lo: Optional[float] = None, hi: Optional[float] = None,
-            lo_open: bool = False, integer: bool = False, allow_none: bool = False, unit: str = "") -> Any:
-    path = f"experiment.{where}.{key}" if where else f"experiment.{key}"
-    return read_field(path, b.get(key), kind="int" if integer else "float", lo=lo, hi=hi, lo_open=lo_open,
-                  none=allow_none, unit=unit)
-
-
-def _ga_flag(b, key, where):
-    return read_field(f"experiment.{where}.{key}", b.get(key), kind="bool")
-
-
-def _ga_choice(b, key, where, options):
-    return read_choice(f"experiment.{where}.{key}", b.get(key), options)
-
-
-@dataclasses.dataclass(frozen=True)
-class GaReconfigSettings:
-    """Validated plain settings of the job (SI units; angles in degrees where the name says so)."""
-
-    resume: str
-    stop_after: Optional[int]
-    n_R: int
-    bounds: dict
-    task: dict
-    good: dict
-    joints: dict
-    links: dict
-    motor: dict
-    cycle: dict
-    regular: dict
-    mode: str
-    objectives: tuple
-    primary: str
-    weights: dict
-    constraints: dict
-    ga: dict
-    pareto: dict
-    recommend: str
-    verify: dict
-    screen: dict = dataclasses.field(default_factory=lambda: {"enabled": False, "log2_size": 0, "seed_fraction": 0.0})
-    refine: dict = dataclasses.field(default_factory=lambda: {"enabled": False, "steps": 0, "learning_rate": 0.0,
-                                                               "penalty": 0.0})
-    recommend_band: float = 0.02
-    recommend_floor: float = 1.2
-    # recommend=floor: the epsilon-constraint step (deltajax.optimize.floor.solve_floor); absent: off
-    floor_solve: dict = dataclasses.field(default_factory=lambda: {"enabled": False, "rounds": 0, "candidates": 0})
-    # continuous regular workspace in the search: () off, else ((bisection, golden-section steps), (rings, angles,
-    # levels) of the unit cylinder) for deltajax.constraints.refine_cylinder (the verification keeps its defaults)
-    search_refine: tuple = ()
-    reconfig: dict = dataclasses.field(default_factory=dict)  # rtmode: reconfig_settings
-    # the tolerance stage (deltajax.tolerance: Monte Carlo over manufacturing and model tolerances); absent: off
-    tolerance: dict = dataclasses.field(default_factory=lambda: {"enabled": False})
-    # the robust recommendation (holds every constraint in >= probability of the Monte Carlo samples); absent: off
-    robust: dict = dataclasses.field(default_factory=lambda: {"enabled": False})
-    # a finished run (its directory or results.h5) this run continues with more budget; None: a new search
-    continue_from: Optional[str] = None
-
+           "RECONFIG_KEYS", "DRIVE_UNITS", "tolerances_of", "ga_config", "DesignBlock", "TaskBlock",
+           "GoodWorkspaceBlock", "JointsBlock", "LinksBlock", "MotorBlock", "CycleBlock", "RegularWorkspaceBlock",
+           "ObjectivesBlock", "ConstraintsBlock", "ScreenBlock", "ParetoBlock", "RefineBlock", "FloorSolveBlock",
+           "VerifyBlock", "ToleranceBlock", "MarginsBlock", "RobustBlock"]
 
 #: the keys of ``experiment.reconfig`` and the units of its drive limits
 RECONFIG_KEYS = {"mode", "aggregate", "n_R", "segments", "drive", "mechanism", "motor_torque"}
@@ -212,256 +82,16 @@ def reconfig_settings(block: Optional[Mapping[str, Any]], where: str = "experime
     return out
 
 
-def tolerances_of(block: Mapping[str, Any]):
+def tolerances_of(block: "ToleranceBlock"):
     """The :class:`deltajax.tolerance.Tolerances` of a checked ``experiment.tolerance`` block (mm, deg, %)."""
     from ..tolerance import ToleranceError, Tolerances
 
     try:
-        return Tolerances(length=float(block["length_mm"]) * 1e-3, joint_offset_deg=float(block["joint_offset_deg"]),
-                          mass=float(block["mass_percent"]) / 100.0, motor=float(block["motor_percent"]) / 100.0,
-                          distribution=str(block["distribution"]))
+        return Tolerances(length=float(block.length_mm) * 1e-3, joint_offset_deg=float(block.joint_offset_deg),
+                          mass=float(block.mass_percent) / 100.0, motor=float(block.motor_percent) / 100.0,
+                          distribution=str(block.distribution))
     except ToleranceError as err:
         raise ConfigError(f"experiment.tolerance: {err}") from None
-
-
-def _operating_settings(e: Mapping[str, Any]) -> dict:  # rtmode
-    return reconfig_settings(e.get("reconfig"))
-
-
-def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
-    """Validate every field of ``experiment`` (one ``ConfigError`` line naming field and value)."""
-    from ..indices import INDEX_NAMES, INDEX_RANGES
-    from ..optimize.designer import CONSTRAINT_NAMES, OBJECTIVES
-
-    e = _ga_block(_ga_plain(ectx), "")
-    resume = e.get("resume", "auto")
-    if resume not in ("auto", "never", "must"):
-        raise ConfigError(f"experiment.resume must be auto, never or must, got {resume!r}")
-    sa = e.get("stop_after")
-    if sa is not None and (isinstance(sa, bool) or not isinstance(sa, int) or sa < 1):
-        raise ConfigError(f"experiment.stop_after must be null or an integer >= 1, got {sa!r}")
-    cont = e.get("continue_from")
-    if cont is not None and (not isinstance(cont, str) or not cont.strip()):
-        raise ConfigError(f"experiment.continue_from must be null or the path of a finished ga_reconfig run "
-                          f"(its directory or results.h5), got {cont!r}")
-    d = _ga_block(e, "design")
-    n_R = _ga_num(d, "n_R", "design", lo=2, integer=True)
-    if not isinstance(d.get("bounds"), Mapping) or not d["bounds"]:
-        raise ConfigError(f"experiment.design.bounds must be a non-empty mapping, got {d.get('bounds')!r}")
-    t = _ga_block(e, "task")
-    task = {k: _ga_num(t, k, "task", lo=0, lo_open=True, unit="m") for k in ("diameter", "height", "z_top")}
-    task["n_r"] = _ga_num(t, "n_r", "task", lo=1, integer=True)
-    task["n_phi"] = _ga_num(t, "n_phi", "task", lo=2, integer=True)   # both ends of the 60 deg wedge
-    task["n_z"] = _ga_num(t, "n_z", "task", lo=2, integer=True)
-    gw = _ga_block(e, "good_workspace")
-    index = _ga_choice(gw, "index", "good_workspace", INDEX_NAMES)
-    lo, hi = INDEX_RANGES[index]  # a threshold outside the index's range selects every point or none
-    good = {"index": index, "threshold": _ga_num(gw, "threshold", "good_workspace", lo=lo, hi=hi),
-            "beta": _ga_num(gw, "beta", "good_workspace", lo=0, hi=1)}
-    j = _ga_block(e, "joints")
-    joints = {"kind": _ga_choice(j, "kind", "joints", ("ball", "universal")),
-              "limit_deg": _ga_num(j, "limit_deg", "joints", lo=0, lo_open=True, hi=180, unit="deg"),
-              "elbow_neutral_deg": _ga_num(j, "elbow_neutral_deg", "joints", lo=-180, hi=180, unit="deg"),
-              "platform_neutral_deg": _ga_num(j, "platform_neutral_deg", "joints", lo=-180, hi=180, unit="deg")}
-    lk = _ga_block(e, "links")
-    links = {k: _ga_num(lk, k, "links", lo=0, hi=1) for k in ("forearm_radius", "upper_arm_radius", "clearance")}
-    links["plate_overhang"] = _ga_num(lk, "plate_overhang", "links", lo=-1, hi=1)
-    mo = _ga_block(e, "motor")
-    motor_units = {"peak_torque": "N m", "rated_torque": "N m", "max_speed": "rad/s", "corner_speed": "rad/s",
-                   "gear_ratio": ""}
-    motor = {k: _ga_num(mo, k, "motor", lo=0, lo_open=True, unit=u) for k, u in motor_units.items()}
-    motor["rotor_inertia"] = _ga_num(mo, "rotor_inertia", "motor", lo=0, unit="kg m^2")
-    motor["efficiency"] = _ga_num(mo, "efficiency", "motor", lo=0, lo_open=True, hi=1)
-    if motor["rated_torque"] > motor["peak_torque"]:
-        raise ConfigError(f"experiment.motor.rated_torque={motor['rated_torque']!r} N m must be <= "
-                          f"experiment.motor.peak_torque={motor['peak_torque']!r} N m")
-    if motor["corner_speed"] > motor["max_speed"]:
-        raise ConfigError(f"experiment.motor.corner_speed={motor['corner_speed']!r} rad/s must be <= "
-                          f"experiment.motor.max_speed={motor['max_speed']!r} rad/s")
-    c = _ga_block(e, "cycle")
-    cycle = {"payload": _ga_num(c, "payload", "cycle", lo=0, unit="kg"),
-             "dwell": _ga_num(c, "dwell", "cycle", lo=0, unit="s"),
-             "duration": _ga_num(c, "duration", "cycle", lo=0, lo_open=True, unit="s"),
-             "n_samples": _ga_num(c, "n_samples", "cycle", lo=5, integer=True),
-             "law": _ga_choice(c, "law", "cycle", ("poly5", "cycloidal", "modified_trapezoid")),
-             "n_R_operating": _ga_num(c, "n_R_operating", "cycle", lo=1, integer=True)}
-    if cycle["n_samples"] % 2 == 0:
-        raise ConfigError(f"experiment.cycle.n_samples must be odd (a sample at the place point), "
-                          f"got {cycle['n_samples']}")
-    rw = _ga_block(e, "regular_workspace")
-    regular = {"hd_ratio": _ga_num(rw, "hd_ratio", "regular_workspace", lo=0, lo_open=True),
-               "r_max": _ga_num(rw, "r_max", "regular_workspace", lo=0, lo_open=True, unit="m"),
-               "z_min": _ga_num(rw, "z_min", "regular_workspace", lo=0, unit="m"),
-               "z_max": _ga_num(rw, "z_max", "regular_workspace", lo=0, lo_open=True, unit="m"),
-               "n_r": _ga_num(rw, "n_r", "regular_workspace", lo=2, integer=True),
-               "n_phi": _ga_num(rw, "n_phi", "regular_workspace", lo=2, integer=True),
-               "n_z": _ga_num(rw, "n_z", "regular_workspace", lo=2, integer=True)}
-    search_refine = ()
-    if read_field("experiment.regular_workspace.search_refine", rw.get("search_refine", False), kind="bool"):
-        steps, samples = rw.get("search_refine_steps", [10, 8]), rw.get("search_refine_samples", [3, 2, 3])
-        for key, v, n, lo in (("search_refine_steps", steps, 2, 1), ("search_refine_samples", samples, 3, 2)):
-            if not (isinstance(v, (list, tuple)) and len(v) == n and all(isinstance(x, int) and not
-                                                                         isinstance(x, bool) and x >= lo for x in v)):
-                raise ConfigError(f"experiment.regular_workspace.{key} must be a list of {n} integers >= {lo}, "
-                                  f"got {v!r}")
-        search_refine = (tuple(steps), tuple(samples))
-    if not regular["z_min"] < regular["z_max"]:
-        raise ConfigError(f"experiment.regular_workspace.z_min={regular['z_min']!r} m must be < "
-                          f"z_max={regular['z_max']!r} m")
-    if task["z_top"] + task["height"] > regular["z_max"] or task["z_top"] < regular["z_min"] or \
-            task["diameter"] / 2 > regular["r_max"]:
-        raise ConfigError(f"experiment.task (z {task['z_top']!r}..{task['z_top'] + task['height']!r} m, radius "
-                          f"{task['diameter'] / 2!r} m) must lie inside experiment.regular_workspace's grid "
-                          f"(z {regular['z_min']!r}..{regular['z_max']!r} m, r <= {regular['r_max']!r} m)")
-    o = _ga_block(e, "objectives")
-    mode = _ga_choice(o, "mode", "objectives", ("pareto", "weighted"))
-    names = o.get("names")
-    if not isinstance(names, (list, tuple)) or not names:
-        raise ConfigError(f"experiment.objectives.names must be a non-empty list from {list(OBJECTIVES)}, got "
-                          f"{names!r}")
-    for nm in names:
-        if nm not in OBJECTIVES:
-            raise ConfigError(f"experiment.objectives.names: unknown objective {nm!r}; known: {list(OBJECTIVES)}")
-    if len(set(names)) != len(names):
-        raise ConfigError(f"experiment.objectives.names has duplicates: {names!r}")
-    primary = o.get("primary")
-    if primary not in names:
-        raise ConfigError(f"experiment.objectives.primary must be one of experiment.objectives.names {names!r}, "
-                          f"got {primary!r}")
-    wts = o.get("weights")
-    if not isinstance(wts, Mapping):
-        raise ConfigError(f"experiment.objectives.weights must be a mapping, got {wts!r}")
-    weights = {}
-    for k in wts:
-        if k not in names:
-            raise ConfigError(f"experiment.objectives.weights.{k}: not in experiment.objectives.names {names!r}")
-        weights[k] = _ga_num(wts, k, "objectives.weights", lo=0)
-    if mode == "weighted" and not any(w > 0 for w in weights.values()):
-        raise ConfigError("experiment.objectives.weights: all weights are zero (objectives.mode=weighted)")
-    if mode == "pareto" and len(names) < 2:
-        raise ConfigError(f"experiment.objectives.names needs >= 2 objectives for mode=pareto, got {names!r}")
-    cs = _ga_block(e, "constraints")
-    cons = {k: _ga_flag(cs, k, "constraints") for k in ("task_in_good_workspace", "passive_joints", "interference")}
-    cons["min_picks_per_min"] = _ga_num(cs, "min_picks_per_min", "constraints", lo=0)
-    cons["max_arm_sum"] = _ga_num(cs, "max_arm_sum", "constraints", lo=0, lo_open=True, allow_none=True, unit="m")
-    assert set(CONSTRAINT_NAMES) >= {"task_in_good_workspace", "passive_joints", "interference"}
-    ga = dict(e.get("ga") or {})
-    p = _ga_block(e, "pareto")
-    pareto = {"enabled": _ga_flag(p, "enabled", "pareto"),
-              "population_size": _ga_num(p, "population_size", "pareto", lo=4, integer=True),
-              "generations": _ga_num(p, "generations", "pareto", lo=1, integer=True),
-              "ref_min_factor": _ga_num(p, "ref_min_factor", "pareto", lo=1, lo_open=True)}
-    # every member of a generation is evaluated at once on the search grids: refuse a population that cannot fit
-    per_design = n_R * (task["n_r"] * task["n_phi"] * task["n_z"] + regular["n_r"] * regular["n_phi"] *
-                        regular["n_z"]) + cycle["n_R_operating"] * cycle["n_samples"]
-    for path, size in (("experiment.ga.population_size", ga.get("population_size")),
-                       ("experiment.pareto.population_size", pareto["population_size"])):
-        if isinstance(size, (int, float)) and not isinstance(size, bool) and size > 0:
-            check_fits(path, size, float(size) * per_design * DESIGN_POINT_BYTES,
-                  f"{size:.3g} designs x {per_design} evaluated points each at once (a 3x3 Jacobian per point)")
-    recommend = e.get("recommend")
-    if recommend not in RECOMMEND_RULES:
-        raise ConfigError(f"experiment.recommend must be one of {', '.join(RECOMMEND_RULES)}, got {recommend!r}")
-    band = _ga_num(e, "recommend_band", "", lo=0, hi=1) if "recommend_band" in e else 0.02
-    floor = _ga_num(e, "recommend_floor", "", lo=0, lo_open=True) if "recommend_floor" in e else 1.2
-    sc = _ga_block(e, "screen")
-    screen = {"enabled": _ga_flag(sc, "enabled", "screen"),
-              "log2_size": _ga_num(sc, "log2_size", "screen", lo=0, hi=24, integer=True),
-              "seed_fraction": _ga_num(sc, "seed_fraction", "screen", lo=0, hi=1)}
-    rf = _ga_block(e, "refine")
-    refine = {"enabled": _ga_flag(rf, "enabled", "refine"),
-              "steps": _ga_num(rf, "steps", "refine", lo=1, integer=True),
-              "learning_rate": _ga_num(rf, "learning_rate", "refine", lo=0, lo_open=True, hi=1),
-              "penalty": _ga_num(rf, "penalty", "refine", lo=0)}
-    optional = {}                       # absent blocks keep GaReconfigSettings' defaults (the step off)
-    if "floor_solve" in e:
-        fs = _ga_block(e, "floor_solve")
-        optional["floor_solve"] = {"enabled": _ga_flag(fs, "enabled", "floor_solve"),
-                                   "rounds": _ga_num(fs, "rounds", "floor_solve", lo=1, integer=True),
-                                   "candidates": _ga_num(fs, "candidates", "floor_solve", lo=1, integer=True)}
-    if "tolerance" in e:
-        optional["tolerance"] = _tolerance_settings(e)
-    if "robust" in e:
-        rb = _ga_block(e, "robust")
-        optional["robust"] = {"enabled": _ga_flag(rb, "enabled", "robust"),
-                              "probability": _ga_num(rb, "probability", "robust", lo=0, lo_open=True, hi=1),
-                              "confirm_seed": _ga_num(rb, "confirm_seed", "robust", lo=0, hi=2 ** 32 - 1,
-                                                      integer=True),
-                              "max_candidates": _ga_num(rb, "max_candidates", "robust", lo=1, integer=True),
-                              "margins": _robust_margins(rb.get("margins"), joints, good)}
-        tl = optional.get("tolerance", {"enabled": False})
-        if optional["robust"]["enabled"] and not tl["enabled"]:
-            raise ConfigError("experiment.robust.enabled=true needs the tolerance stage: set "
-                              "experiment.tolerance.enabled=true")
-        if optional["robust"]["enabled"] and optional["robust"]["confirm_seed"] == tl["seed"]:
-            raise ConfigError(f"experiment.robust.confirm_seed={optional['robust']['confirm_seed']!r} must differ "
-                              f"from experiment.tolerance.seed (the confirmation is a fresh Monte Carlo)")
-    v = _ga_block(e, "verify")
-    verify = {k: _ga_num(v, k, "verify", lo=1, integer=True) for k in v if k != "certify_doublings"}
-    # the certify stage's further doublings while a figure moves more than its tolerance (absent: the default)
-    verify["certify_doublings"] = (MAX_EXTRA_DOUBLINGS if v.get("certify_doublings") is None else
-                                   _ga_num(v, "certify_doublings", "verify", lo=0, hi=4, integer=True))
-    for k in ("n_R", "task_n_phi", "task_n_z", "rw_n_r", "rw_n_phi", "rw_n_z"):
-        if verify[k] < 2:
-            raise ConfigError(f"experiment.verify.{k} must be >= 2, got {verify[k]!r}")
-    if verify["cycle_samples"] < 5 or verify["cycle_samples"] % 2 == 0:
-        raise ConfigError(f"experiment.verify.cycle_samples must be odd and >= 5, got {verify['cycle_samples']!r}")
-    # the verification's fine grids, one design at least evaluated at once
-    fine = verify["n_R"] * (verify["task_n_r"] * verify["task_n_phi"] * verify["task_n_z"] + verify["rw_n_r"] *
-                            verify["rw_n_phi"] * verify["rw_n_z"]) + verify["n_R_operating"] * verify["cycle_samples"]
-    check_fits("experiment.verify", verify, float(fine) * DESIGN_POINT_BYTES, f"{fine:.3g} evaluated points of a design")
-    return GaReconfigSettings(resume=resume, stop_after=sa, n_R=n_R, bounds=dict(d["bounds"]), task=task, good=good,
-                    joints=joints, links=links, motor=motor, cycle=cycle, regular=regular, mode=mode,
-                    objectives=tuple(names), primary=primary, weights=weights, constraints=cons, ga=ga,
-                    pareto=pareto, recommend=recommend, verify=verify, screen=screen, refine=refine,
-                    recommend_band=band, recommend_floor=floor, search_refine=search_refine,
-                    reconfig=_operating_settings(e), continue_from=cont, **optional)
-
-
-def _robust_margins(m: Any, joints: Mapping[str, Any], good: Mapping[str, Any]) -> dict:
-    """``experiment.robust.margins`` (:data:`ROBUST_MARGINS`; absent or a missing key: 0). A margin must leave the
-    tightened constraint satisfiable: the joint limit stays > 0, the index threshold < 1, the motor torque > 0."""
-    from ..indices import INDEX_RANGES
-
-    out = dict.fromkeys(ROBUST_MARGINS, 0.0)
-    if m is None:
-        return out
-    m = _ga_plain(m)
-    if not isinstance(m, Mapping):
-        raise ConfigError(f"experiment.robust.margins must be a mapping of {', '.join(ROBUST_MARGINS)}, got {m!r}")
-    extra = set(m) - set(ROBUST_MARGINS)
-    if extra:
-        raise ConfigError(f"experiment.robust.margins: unknown keys {', '.join(sorted(extra))}; valid keys: "
-                          f"{', '.join(ROBUST_MARGINS)}")
-    for k, (unit, hi) in ROBUST_MARGINS.items():
-        if k in m:
-            out[k] = read_field(f"experiment.robust.margins.{k}", m[k], lo=0, hi=hi, hi_open=hi is not None,
-                                unit=unit)
-    if out["joint_deg"] > 0 and out["joint_deg"] >= joints["limit_deg"]:
-        raise ConfigError(f"experiment.robust.margins.joint_deg must be < experiment.joints.limit_deg "
-                          f"({joints['limit_deg']:g} deg), got {out['joint_deg']!r} deg")
-    top = INDEX_RANGES[good["index"]][1]
-    if out["index"] > 0 and top is not None and good["threshold"] + out["index"] >= top:
-        raise ConfigError(f"experiment.robust.margins.index must be < {top:g} - experiment.good_workspace.threshold "
-                          f"({top - good['threshold']:g}; the index {good['index']} is at most {top:g}), "
-                          f"got {out['index']!r}")
-    return out
-
-
-def _tolerance_settings(e: Mapping[str, Any]) -> dict:
-    """``experiment.tolerance``: the Monte Carlo of :mod:`deltajax.tolerance` (lengths in mm, masses and motor
-    constants in percent)."""
-    t = _ga_block(e, "tolerance")
-    out = {"enabled": _ga_flag(t, "enabled", "tolerance"),
-           "samples": _ga_num(t, "samples", "tolerance", lo=1, hi=10 ** 7, integer=True),
-           "seed": _ga_num(t, "seed", "tolerance", lo=0, hi=2 ** 32 - 1, integer=True),
-           "distribution": _ga_choice(t, "distribution", "tolerance", ("uniform", "normal")),
-           "length_mm": _ga_num(t, "length_mm", "tolerance", lo=0, hi=10, unit="mm"),
-           "joint_offset_deg": _ga_num(t, "joint_offset_deg", "tolerance", lo=0, hi=5, unit="deg"),
-           "mass_percent": _ga_num(t, "mass_percent", "tolerance", lo=0, hi=50, unit="%"),
-           "motor_percent": _ga_num(t, "motor_percent", "tolerance", lo=0, hi=50, unit="%")}
-    tolerances_of(out)          # the Monte Carlo's own invariants, before anything compiles
-    return out
 
 
 def ga_config(block: Mapping[str, Any], seed: int = 0):
@@ -481,6 +111,417 @@ def ga_config(block: Mapping[str, Any], seed: int = 0):
         return GAConfig(seed=int(seed), **kw).validate()
     except (GAError, TypeError) as err:
         raise ConfigError(str(err).replace("GAConfig.", "experiment.ga.", 1)) from None
+
+
+# ---- ga_reconfig: the designer's problem. Every block of experiment.* is one frozen dataclass below, each field's
+# range, unit and choices declared once (readers.setting) and checked by the one generic reader
+# (readers.read_settings); a block's cross-field rules are its _check. The design space, the GA's configuration and
+# the problem are then built by deltajax.optimize.workflow (errors there become ConfigError here).
+
+#: a lower bound of the memory of one evaluated point of a design (one 3x3 Jacobian in float32), for the refusal
+#: of populations that cannot be evaluated at once
+DESIGN_POINT_BYTES = 9 * 4
+
+from ..optimize.certify import MAX_EXTRA_DOUBLINGS  # noqa: E402  the certify stage's default
+from ..optimize.workflow import RECOMMEND_RULES  # noqa: E402  the one list (the rules of workflow.recommend)
+
+
+def _index_names():
+    from ..indices import INDEX_NAMES
+
+    return INDEX_NAMES
+
+
+def _bounds(path: str, v: Any) -> dict:
+    if not isinstance(v, Mapping) or not v:
+        raise ConfigError(f"{path} must be a non-empty mapping, got {v!r}")
+    return dict(v)
+
+
+def _int_list(n: int, lo: int):
+    def read(path: str, v: Any) -> tuple:
+        if not (isinstance(v, (list, tuple)) and len(v) == n and all(isinstance(x, int) and not isinstance(x, bool)
+                                                                     and x >= lo for x in v)):
+            raise ConfigError(f"{path} must be a list of {n} integers >= {lo}, got {v!r}")
+        return tuple(v)
+    return read
+
+
+def _objective_names(path: str, v: Any) -> tuple:
+    from ..optimize.designer import OBJECTIVES
+
+    if not isinstance(v, (list, tuple)) or not v:
+        raise ConfigError(f"{path} must be a non-empty list from {list(OBJECTIVES)}, got {v!r}")
+    for nm in v:
+        if nm not in OBJECTIVES:
+            raise ConfigError(f"{path}: unknown objective {nm!r}; known: {list(OBJECTIVES)}")
+    if len(set(v)) != len(v):
+        raise ConfigError(f"{path} has duplicates: {list(v)!r}")
+    return tuple(v)
+
+
+def _weights(path: str, v: Any) -> dict:
+    if not isinstance(v, Mapping):
+        raise ConfigError(f"{path} must be a mapping, got {v!r}")
+    return {k: read_field(f"{path}.{k}", x, lo=0) for k, x in v.items()}
+
+
+def _continue_from(path: str, v: Any) -> Optional[str]:
+    if v is not None and (not isinstance(v, str) or not v.strip()):
+        raise ConfigError(f"{path} must be null or the path of a finished ga_reconfig run (its directory or "
+                          f"results.h5), got {v!r}")
+    return v
+
+
+def _recommend(path: str, v: Any) -> str:
+    if v not in RECOMMEND_RULES:
+        raise ConfigError(f"{path} must be one of {', '.join(RECOMMEND_RULES)}, got {v!r}")
+    return v
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class DesignBlock:
+    """``experiment.design``: the design space (genes and their bounds; R samples of a reconfigurable design)."""
+    n_R: int = setting(lo=2)
+    bounds: dict = setting(read=_bounds)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class TaskBlock:
+    """``experiment.task``: the task cylinder and its search samples (rings, angles over the 60 deg wedge, levels)."""
+    diameter: float = setting(lo=0, lo_open=True, unit="m")
+    height: float = setting(lo=0, lo_open=True, unit="m")
+    z_top: float = setting(lo=0, lo_open=True, unit="m")
+    n_r: int = setting(lo=1)
+    n_phi: int = setting(lo=2)   # both ends of the 60 deg wedge
+    n_z: int = setting(lo=2)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class GoodWorkspaceBlock:
+    """``experiment.good_workspace``: the index and its threshold that make a point good."""
+    index: str = setting(choices=_index_names)
+    threshold: float = setting()
+    beta: float = setting(lo=0, hi=1)
+
+    def _check(self, path: str) -> None:
+        from ..indices import INDEX_RANGES
+
+        lo, hi = INDEX_RANGES[self.index]  # a threshold outside the index's range selects every point or none
+        read_field(f"{path}.threshold", self.threshold, lo=lo, hi=hi)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class JointsBlock:
+    """``experiment.joints``: the passive joints' kind, cone limit and neutral axes (degrees)."""
+    kind: str = setting(choices=("ball", "universal"))
+    limit_deg: float = setting(lo=0, lo_open=True, hi=180, unit="deg")
+    elbow_neutral_deg: float = setting(lo=-180, hi=180, unit="deg")
+    platform_neutral_deg: float = setting(lo=-180, hi=180, unit="deg")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class LinksBlock:
+    """``experiment.links``: link radii, required clearance and the base plate's overhang (m)."""
+    forearm_radius: float = setting(lo=0, hi=1)
+    upper_arm_radius: float = setting(lo=0, hi=1)
+    clearance: float = setting(lo=0, hi=1)
+    plate_overhang: float = setting(lo=-1, hi=1)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class MotorBlock:
+    """``experiment.motor``: the drive (torques at the motor shaft, speeds, rotor inertia, gearbox)."""
+    peak_torque: float = setting(lo=0, lo_open=True, unit="N m")
+    rated_torque: float = setting(lo=0, lo_open=True, unit="N m")
+    max_speed: float = setting(lo=0, lo_open=True, unit="rad/s")
+    corner_speed: float = setting(lo=0, lo_open=True, unit="rad/s")
+    rotor_inertia: float = setting(lo=0, unit="kg m^2")
+    efficiency: float = setting(lo=0, lo_open=True, hi=1)
+    gear_ratio: float = setting(lo=0, lo_open=True)
+
+    def _check(self, path: str) -> None:
+        if self.rated_torque > self.peak_torque:
+            raise ConfigError(f"{path}.rated_torque={self.rated_torque!r} N m must be <= {path}.peak_torque="
+                              f"{self.peak_torque!r} N m")
+        if self.corner_speed > self.max_speed:
+            raise ConfigError(f"{path}.corner_speed={self.corner_speed!r} rad/s must be <= {path}.max_speed="
+                              f"{self.max_speed!r} rad/s")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class CycleBlock:
+    """``experiment.cycle``: the pick-and-place cycle and its search samples."""
+    payload: float = setting(lo=0, unit="kg")
+    dwell: float = setting(lo=0, unit="s")
+    duration: float = setting(lo=0, lo_open=True, unit="s")
+    n_samples: int = setting(lo=5)
+    law: str = setting(choices=("poly5", "cycloidal", "modified_trapezoid"))
+    n_R_operating: int = setting(lo=1)
+
+    def _check(self, path: str) -> None:
+        if self.n_samples % 2 == 0:
+            raise ConfigError(f"{path}.n_samples must be odd (a sample at the place point), got {self.n_samples}")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RegularWorkspaceBlock:
+    """``experiment.regular_workspace``: the regular cylinder's shape, its search grid and, with ``search_refine``,
+    the continuous measure in the search (bisection and golden-section steps; rings, angles, levels)."""
+    hd_ratio: float = setting(lo=0, lo_open=True)
+    r_max: float = setting(lo=0, lo_open=True, unit="m")
+    z_min: float = setting(lo=0, unit="m")
+    z_max: float = setting(lo=0, lo_open=True, unit="m")
+    n_r: int = setting(lo=2)
+    n_phi: int = setting(lo=2)
+    n_z: int = setting(lo=2)
+    search_refine: bool = setting(False)
+    search_refine_steps: tuple = setting((10, 8), read=_int_list(2, 1))
+    search_refine_samples: tuple = setting((3, 2, 3), read=_int_list(3, 2))
+
+    GRID = ("hd_ratio", "r_max", "z_min", "z_max", "n_r", "n_phi", "n_z")
+
+    def grid(self) -> dict:
+        """The cylinder's shape and search grid, as :meth:`DesignerProblem.build` takes them."""
+        return {k: getattr(self, k) for k in self.GRID}
+
+    def _check(self, path: str) -> None:
+        if not self.z_min < self.z_max:
+            raise ConfigError(f"{path}.z_min={self.z_min!r} m must be < z_max={self.z_max!r} m")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ObjectivesBlock:
+    """``experiment.objectives``: Pareto or weighted, the objectives, the GA's primary one and the weights."""
+    mode: str = setting(choices=("pareto", "weighted"))
+    names: tuple = setting(read=_objective_names)
+    primary: str = setting()
+    weights: dict = setting(read=_weights)
+
+    def _check(self, path: str) -> None:
+        names = list(self.names)
+        if self.primary not in names:
+            raise ConfigError(f"{path}.primary must be one of {path}.names {names!r}, got {self.primary!r}")
+        for k in self.weights:
+            if k not in names:
+                raise ConfigError(f"{path}.weights.{k}: not in {path}.names {names!r}")
+        if self.mode == "weighted" and not any(w > 0 for w in self.weights.values()):
+            raise ConfigError(f"{path}.weights: all weights are zero (objectives.mode=weighted)")
+        if self.mode == "pareto" and len(names) < 2:
+            raise ConfigError(f"{path}.names needs >= 2 objectives for mode=pareto, got {names!r}")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ConstraintsBlock:
+    """``experiment.constraints``: which constraints hold, the required rate and the arm-length budget."""
+    task_in_good_workspace: bool = setting()
+    passive_joints: bool = setting()
+    interference: bool = setting()
+    min_picks_per_min: float = setting(lo=0)
+    max_arm_sum: Optional[float] = setting(lo=0, lo_open=True, unit="m")
+
+    GEOMETRIC = ("task_in_good_workspace", "passive_joints", "interference")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ScreenBlock:
+    """``experiment.screen``: the scrambled-Sobol screen of the gene box."""
+    enabled: bool = setting()
+    log2_size: int = setting(lo=0, hi=24)
+    seed_fraction: float = setting(lo=0, hi=1)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ParetoBlock:
+    """``experiment.pareto``: the NSGA-II stage."""
+    enabled: bool = setting()
+    population_size: int = setting(lo=4)
+    generations: int = setting(lo=1)
+    ref_min_factor: float = setting(lo=1, lo_open=True)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RefineBlock:
+    """``experiment.refine``: the optax descent from the front's points."""
+    enabled: bool = setting()
+    steps: int = setting(lo=1)
+    learning_rate: float = setting(lo=0, lo_open=True, hi=1)
+    penalty: float = setting(lo=0)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class FloorSolveBlock:
+    """``experiment.floor_solve``: the epsilon-constraint step of ``recommend=floor``; absent: off."""
+    enabled: bool = setting()
+    rounds: int = setting(lo=1)
+    candidates: int = setting(lo=1)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class VerifyBlock:
+    """``experiment.verify``: the fine grids of the verification and the certify stage's further doublings."""
+    n_R: int = setting(lo=2)
+    n_R_operating: int = setting(lo=1)
+    task_n_r: int = setting(lo=1)
+    task_n_phi: int = setting(lo=2)
+    task_n_z: int = setting(lo=2)
+    cycle_samples: int = setting(lo=5)
+    rw_n_r: int = setting(lo=2)
+    rw_n_phi: int = setting(lo=2)
+    rw_n_z: int = setting(lo=2)
+    # further doublings while a certified figure moves more than its tolerance (absent: the default)
+    certify_doublings: int = setting(MAX_EXTRA_DOUBLINGS, lo=0, hi=4)
+
+    def points(self) -> int:
+        """Evaluated points of one design on the fine grids."""
+        return (self.n_R * (self.task_n_r * self.task_n_phi * self.task_n_z + self.rw_n_r * self.rw_n_phi *
+                            self.rw_n_z) + self.n_R_operating * self.cycle_samples)
+
+    def _check(self, path: str) -> None:
+        if self.cycle_samples % 2 == 0:
+            raise ConfigError(f"{path}.cycle_samples must be odd and >= 5, got {self.cycle_samples!r}")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class ToleranceBlock:
+    """``experiment.tolerance``: the Monte Carlo of :mod:`deltajax.tolerance` (lengths in mm, masses and motor
+    constants in percent); absent: off."""
+    enabled: bool = setting()
+    samples: int = setting(lo=1, hi=10 ** 7)
+    seed: int = setting(lo=0, hi=2 ** 32 - 1)
+    distribution: str = setting(choices=("uniform", "normal"))
+    length_mm: float = setting(lo=0, hi=10, unit="mm")
+    joint_offset_deg: float = setting(lo=0, hi=5, unit="deg")
+    mass_percent: float = setting(lo=0, hi=50, unit="%")
+    motor_percent: float = setting(lo=0, hi=50, unit="%")
+
+    def _check(self, path: str) -> None:
+        tolerances_of(self)          # the Monte Carlo's own invariants, before anything compiles
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class MarginsBlock:
+    """``experiment.robust.margins``: the margin every constraint must hold by in a robust run's search,
+    verification and certification: the good-workspace index threshold raised by ``index``, the passive joints'
+    limit lowered by ``joint_deg``, the links' required clearance raised by ``clearance_mm``, the motor's peak and
+    rated torque derated by ``motor_percent`` (the cycle is planned with that torque headroom). Absent or 0: the
+    constraint as stated."""
+    index: float = setting(0.0, lo=0)
+    joint_deg: float = setting(0.0, lo=0, hi=180, hi_open=True, unit="deg")
+    clearance_mm: float = setting(0.0, lo=0, hi=1000, hi_open=True, unit="mm")
+    motor_percent: float = setting(0.0, lo=0, hi=100, hi_open=True, unit="%")
+
+
+def _margins(path: str, v: Any) -> MarginsBlock:
+    return MarginsBlock() if v is None else read_settings(MarginsBlock, v, path)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RobustBlock:
+    """``experiment.robust``: the robust recommendation (every constraint in >= ``probability`` of the Monte
+    Carlo samples) and the margins the search requires; absent: off."""
+    enabled: bool = setting()
+    probability: float = setting(lo=0, lo_open=True, hi=1)
+    confirm_seed: int = setting(lo=0, hi=2 ** 32 - 1)
+    max_candidates: int = setting(lo=1)
+    margins: MarginsBlock = setting(MarginsBlock(), read=_margins)
+
+
+def _ga(path: str, v: Any):
+    return ga_config({} if v is None else plain(v))
+
+
+def _reconfig(path: str, v: Any) -> dict:
+    return reconfig_settings(v, path)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class GaReconfigSettings:
+    """The main job's settings: ``experiment.*`` of ``experiment=ga_reconfig``, one typed block per config block
+    (SI units; angles in degrees, lengths in mm and percentages where the name says so), read once by
+    :func:`ga_reconfig_settings`."""
+    design: DesignBlock = setting()
+    task: TaskBlock = setting()
+    good_workspace: GoodWorkspaceBlock = setting()
+    joints: JointsBlock = setting()
+    links: LinksBlock = setting()
+    motor: MotorBlock = setting()
+    cycle: CycleBlock = setting()
+    regular_workspace: RegularWorkspaceBlock = setting()
+    objectives: ObjectivesBlock = setting()
+    constraints: ConstraintsBlock = setting()
+    ga: Any = setting(None, read=_ga)              # the GA's deltajax.optimize.GAConfig (absent: its defaults)
+    pareto: ParetoBlock = setting()
+    recommend: str = setting(read=_recommend)
+    recommend_band: float = setting(0.02, lo=0, hi=1)
+    recommend_floor: float = setting(1.2, lo=0, lo_open=True)
+    screen: ScreenBlock = setting()
+    refine: RefineBlock = setting()
+    floor_solve: FloorSolveBlock = setting(FloorSolveBlock(enabled=False, rounds=0, candidates=0))
+    tolerance: ToleranceBlock = setting(ToleranceBlock(
+        enabled=False, samples=0, seed=0, distribution="uniform", length_mm=0.0, joint_offset_deg=0.0, mass_percent=0.0,
+        motor_percent=0.0))
+    robust: RobustBlock = setting(RobustBlock(enabled=False, probability=1.0, confirm_seed=0, max_candidates=1))
+    verify: VerifyBlock = setting()
+    # rtmode: the R(t) operating spec's settings (deltajax.optimize.operating.spec_from_settings takes this mapping)
+    reconfig: Optional[dict] = setting(None, read=_reconfig)
+    name: str = setting("ga_reconfig")
+    resume: str = setting("auto", choices=("auto", "never", "must"))
+    stop_after: Optional[int] = setting(None, lo=1)
+    # a finished run (its directory or results.h5) this run continues with more budget; None: a new search
+    continue_from: Optional[str] = setting(None, read=_continue_from)
+
+    @property
+    def search_refine(self) -> tuple:
+        """The continuous regular-workspace measure in the search: () off, else ((bisection, golden-section steps),
+        (rings, angles, levels) of the unit cylinder) for :func:`deltajax.constraints.refine_cylinder`."""
+        rw = self.regular_workspace
+        return (rw.search_refine_steps, rw.search_refine_samples) if rw.search_refine else ()
+
+    def _check(self, path: str) -> "GaReconfigSettings":
+        from ..indices import INDEX_RANGES
+
+        task, rw, gw = self.task, self.regular_workspace, self.good_workspace
+        if task.z_top + task.height > rw.z_max or task.z_top < rw.z_min or task.diameter / 2 > rw.r_max:
+            raise ConfigError(f"{path}.task (z {task.z_top!r}..{task.z_top + task.height!r} m, radius "
+                              f"{task.diameter / 2!r} m) must lie inside {path}.regular_workspace's grid "
+                              f"(z {rw.z_min!r}..{rw.z_max!r} m, r <= {rw.r_max!r} m)")
+        out = self
+        if self.ga is None:
+            out = dataclasses.replace(out, ga=ga_config({}))
+        if self.reconfig is None:
+            out = dataclasses.replace(out, reconfig=reconfig_settings(None, f"{path}.reconfig"))
+        # every member of a generation is evaluated at once on the search grids: refuse a population that cannot fit
+        per_design = self.design.n_R * (task.n_r * task.n_phi * task.n_z + rw.n_r * rw.n_phi * rw.n_z) + \
+            self.cycle.n_R_operating * self.cycle.n_samples
+        for key, size in (("ga.population_size", out.ga.population_size),
+                          ("pareto.population_size", self.pareto.population_size)):
+            check_fits(f"{path}.{key}", size, float(size) * per_design * DESIGN_POINT_BYTES,
+                       f"{size:.3g} designs x {per_design} evaluated points each at once (a 3x3 Jacobian per point)")
+        m, lim = self.robust.margins, self.joints.limit_deg
+        if m.joint_deg > 0 and m.joint_deg >= lim:
+            raise ConfigError(f"{path}.robust.margins.joint_deg must be < {path}.joints.limit_deg ({lim:g} deg), "
+                              f"got {m.joint_deg!r} deg")
+        top = INDEX_RANGES[gw.index][1]
+        if m.index > 0 and top is not None and gw.threshold + m.index >= top:
+            raise ConfigError(f"{path}.robust.margins.index must be < {top:g} - {path}.good_workspace.threshold "
+                              f"({top - gw.threshold:g}; the index {gw.index} is at most {top:g}), got {m.index!r}")
+        if self.robust.enabled and not self.tolerance.enabled:
+            raise ConfigError(f"{path}.robust.enabled=true needs the tolerance stage: set "
+                              f"{path}.tolerance.enabled=true")
+        if self.robust.enabled and self.robust.confirm_seed == self.tolerance.seed:
+            raise ConfigError(f"{path}.robust.confirm_seed={self.robust.confirm_seed!r} must differ from "
+                              f"{path}.tolerance.seed (the confirmation is a fresh Monte Carlo)")
+        # the verification's fine grids, one design at least evaluated at once
+        fine = self.verify.points()
+        check_fits(f"{path}.verify", dataclasses.asdict(self.verify), float(fine) * DESIGN_POINT_BYTES,
+                   f"{fine:.3g} evaluated points of a design")
+        return out
+
+
+def ga_reconfig_settings(ectx: Mapping[str, Any]) -> GaReconfigSettings:
+    """Validate every field of ``experiment`` (one ``ConfigError`` line naming field and value)."""
+    return read_settings(GaReconfigSettings, ectx, "experiment")
 
 
 # ---- the run's identity and continuing a finished run (experiment.continue_from) ----
@@ -628,6 +669,6 @@ def ga_reconfig_build(ectx: Mapping[str, Any], robot, recon, *, n_R: Optional[in
         space, pb = setup(s, robot, recon, n_R=n_R)
     except SetupError as err:
         raise ConfigError(str(err)) from None
-    return s, space, pb, ga_config(s.ga)
+    return s, space, pb, s.ga
 # ---- end of ga_reconfig block ----
 

@@ -3,10 +3,13 @@
 from __future__ import annotations
 
 import math
-from typing import Any, Optional
+import dataclasses
+import typing
+from typing import Any, Callable, Mapping, Optional
 
 
-__all__ = ["ConfigError", "read_field", "read_choice", "read_names", "read_vector", "memory_bytes", "check_fits"]
+__all__ = ["ConfigError", "read_field", "read_choice", "read_names", "read_vector", "memory_bytes", "check_fits",
+           "setting", "read_settings", "plain"]
 
 
 class ConfigError(ValueError):
@@ -84,6 +87,98 @@ def read_vector(path: str, v: Any, n: int, unit: str = "m") -> list:
         raise ConfigError(f"{path} must be a list of {n} finite numbers{u}, got {v!r}")
     return items
 
+
+
+
+# ---- settings declared once: a frozen dataclass per block, each field's range, unit and choices as metadata ----
+@dataclasses.dataclass(frozen=True)
+class _Spec:
+    unit: str = ""
+    lo: Optional[float] = None
+    hi: Optional[float] = None
+    lo_open: bool = False
+    hi_open: bool = False
+    choices: Any = None          # a tuple of allowed values, or a zero-argument callable returning one (lazy)
+    read: Optional[Callable[[str, Any], Any]] = None   # a field's own reader (path, value) -> value
+
+
+def setting(default: Any = dataclasses.MISSING, *, unit: str = "", lo: Optional[float] = None,
+            hi: Optional[float] = None, lo_open: bool = False, hi_open: bool = False, choices: Any = None,
+            read: Optional[Callable[[str, Any], Any]] = None) -> Any:
+    """A field of a settings dataclass with what :func:`read_settings` checks it by: the range ``[lo, hi]``
+    (``lo_open``/``hi_open``: strict), its ``unit`` (in every message), its ``choices`` (a string field), or its own
+    ``read(path, value)`` (lists, mappings, values with a library reader). No ``default``: the key is required; a
+    nested settings dataclass with a default may be absent as a whole. The type comes from the annotation
+    (``bool``, ``int``, ``float``, ``str``, ``Optional[...]``: null allowed, or a settings dataclass)."""
+    md = {"deltajax": _Spec(unit, lo, hi, lo_open, hi_open, choices, read)}
+    if default is dataclasses.MISSING:
+        return dataclasses.field(metadata=md)
+    if dataclasses.is_dataclass(default) or isinstance(default, (dict, list)):
+        return dataclasses.field(default_factory=lambda d=default: d, metadata=md)
+    return dataclasses.field(default=default, metadata=md)
+
+
+def plain(x: Any) -> Any:
+    """A composed (OmegaConf) value as plain Python containers; anything else unchanged."""
+    if hasattr(x, "_metadata") and hasattr(x, "_get_node"):   # DictConfig / ListConfig, without importing omegaconf
+        from omegaconf import OmegaConf
+
+        return OmegaConf.to_container(x, resolve=True)
+    return x
+
+
+def _optional(tp) -> tuple:
+    if typing.get_origin(tp) is typing.Union and type(None) in typing.get_args(tp):
+        inner = [a for a in typing.get_args(tp) if a is not type(None)]
+        return (inner[0] if len(inner) == 1 else Any), True
+    return tp, False
+
+
+def _read_value(path: str, v: Any, tp, spec: _Spec) -> Any:
+    tp, none = _optional(tp)
+    if spec.read is not None:
+        return None if (v is None and none) else spec.read(path, v)
+    if dataclasses.is_dataclass(tp):
+        return read_settings(tp, v, path)
+    if tp is bool:
+        return read_field(path, v, kind="bool", none=none)
+    if tp in (int, float):
+        return read_field(path, v, kind="int" if tp is int else "float", lo=spec.lo, hi=spec.hi,
+                          lo_open=spec.lo_open, hi_open=spec.hi_open, none=none, unit=spec.unit)
+    if v is None and none:
+        return None
+    if spec.choices is not None:
+        return read_choice(path, v, spec.choices() if callable(spec.choices) else spec.choices)
+    if tp is str and not isinstance(v, str):
+        raise ConfigError(f"{path} must be a string, got {v!r}")
+    return v
+
+
+def read_settings(cls, block: Any, path: str):
+    """The settings dataclass ``cls`` of the config block at dotted ``path``, every field checked by its metadata
+    (:func:`setting`), nested blocks read the same way, then the block's own cross-field rules (its ``_check(path)``
+    method, if it has one). Unknown keys and missing required keys are refused, each as one line naming the block;
+    a bad value as one line naming the field and the value in its unit."""
+    block = plain(block)
+    if not isinstance(block, Mapping):
+        raise ConfigError(f"{path} must be a mapping, got {block!r}")
+    fields = dataclasses.fields(cls)
+    names = [f.name for f in fields]
+    extra = sorted(set(block) - set(names), key=str)
+    if extra:
+        raise ConfigError(f"{path}: unknown keys {', '.join(map(str, extra))}; valid keys: {', '.join(sorted(names))}")
+    required = [f.name for f in fields if f.default is dataclasses.MISSING
+                and f.default_factory is dataclasses.MISSING]
+    missing = sorted(set(required) - set(block))
+    if missing:
+        raise ConfigError(f"{path}: missing keys {', '.join(missing)}")
+    hints = typing.get_type_hints(cls)
+    out = {f.name: _read_value(f"{path}.{f.name}", block[f.name], hints[f.name],
+                               f.metadata.get("deltajax", _Spec()))
+           for f in fields if f.name in block}
+    obj = cls(**out)
+    check = getattr(obj, "_check", None)
+    return obj if check is None else (check(path) or obj)
 
 
 

@@ -204,10 +204,10 @@ def plots(ctx, data, objs, s) -> None:
     G = data.get("ga", {})
     # the GA minimises -picks/min / |baseline picks/min| when picks/min is its only objective
     scale = (abs(float(G["attrs"]["baseline_primary"]))
-             if s.mode != "weighted" and s.primary == "picks_per_min" and "baseline_primary" in G.get("attrs", {})
+             if s.objectives.mode != "weighted" and s.objectives.primary == "picks_per_min" and "baseline_primary" in G.get("attrs", {})
              else None)
     seeds = ["the baseline"]
-    if s.screen["enabled"] and not s.primary.startswith("regular"):
+    if s.screen.enabled and not s.objectives.primary.startswith("regular"):
         seeds.append("the screen's best designs")
     if s.continue_from is not None:
         seeds.append("the earlier run's front")
@@ -230,33 +230,33 @@ def floor_line(V, objs, s):
     from ..optimize.designer import DESIGN_SENSE
     from ..optimize.workflow import floor_limits
 
-    if s.recommend != "floor" or s.primary not in objs[:2] or len(objs) < 2:
+    if s.recommend != "floor" or s.objectives.primary not in objs[:2] or len(objs) < 2:
         return None
-    o = objs[1] if s.primary == objs[0] else objs[0]
-    lim = floor_limits(len(objs), list(objs).index(s.primary), s.recommend_floor, [DESIGN_SENSE[k] for k in objs])
+    o = objs[1] if s.objectives.primary == objs[0] else objs[0]
+    lim = floor_limits(len(objs), list(objs).index(s.objectives.primary), s.recommend_floor, [DESIGN_SENSE[k] for k in objs])
     return o, abs(float(lim[list(objs).index(o)])) * abs(float(np.asarray(V[o], float)[0]))
 
 
 def rule_text(s) -> str:
     """The recommendation rule in words (stored and printed with the recommendation)."""
     if s.recommend == "floor":
-        others = [o for o in s.objectives if o != s.primary]
-        return (f"floor: the best {s.primary} among verified front points with {', '.join(others)} at least "
+        others = [o for o in s.objectives.names if o != s.objectives.primary]
+        return (f"floor: the best {s.objectives.primary} among verified front points with {', '.join(others)} at least "
                 f"{s.recommend_floor:g} x the verified baseline's (if none has: the point closest to that floor)"
-                + ("; the floor step's designs included" if s.floor_solve["enabled"] else ""))
+                + ("; the floor step's designs included" if s.floor_solve.enabled else ""))
     if s.recommend == "band":
-        return (f"band: among verified front points whose {s.primary} is within {100 * s.recommend_band:g} % of "
-                f"the front's best, the best on {', '.join(o for o in s.objectives if o != s.primary)}")
+        return (f"band: among verified front points whose {s.objectives.primary} is within {100 * s.recommend_band:g} % of "
+                f"the front's best, the best on {', '.join(o for o in s.objectives.names if o != s.objectives.primary)}")
     if s.recommend == "knee":
         return "knee of the verified front (objectives normalised over the front)"
-    return f"best {s.primary} on the verified front"
+    return f"best {s.objectives.primary} on the verified front"
 
 
 def robust_text(s) -> str:
     """The robust recommendation's requirement in words (``experiment.robust``)."""
     return (f"robust: the rule applied among verified candidates holding every constraint in >= "
-            f"{100 * s.robust['probability']:g} % of {s.tolerance['samples']} Monte Carlo samples "
-            f"(seed {s.tolerance['seed']}), confirmed by a fresh Monte Carlo (seed {s.robust['confirm_seed']})")
+            f"{100 * s.robust.probability:g} % of {s.tolerance.samples} Monte Carlo samples "
+            f"(seed {s.tolerance.seed}), confirmed by a fresh Monte Carlo (seed {s.robust.confirm_seed})")
 
 
 def store_ga(res, gres, space, ga_cfg, ga_what: str, base_genes, seeds, baseline_primary: float, best_params) -> None:
@@ -302,7 +302,7 @@ def store_pareto(res, front, extra_X, objs, s) -> None:
     res.put("pareto", "objective_names", np.asarray(objs, dtype=object), units="1", dims=("objective",))
     res.put("pareto", "hypervolume_history", front.history_hv, units="1", dims=("generation",))
     res.set_attrs("pareto", n_evals=front.n_evals, algorithm="pymoo NSGA-II",
-                  population_size=s.pareto["population_size"], generations=s.pareto["generations"])
+                  population_size=s.pareto.population_size, generations=s.pareto.generations)
 
 
 def store_refine(res, ro, refined, space, objs, s) -> None:
@@ -316,7 +316,7 @@ def store_refine(res, ro, refined, space, objs, s) -> None:
     res.put("refine", "accepted", ro.accepted.astype(np.uint8), units="1", dims=("winner",))
     res.put("refine", "accepted_genes", refined, units="1", dims=("accepted_design", "gene"))
     res.set_attrs("refine", rule="accepted iff feasible on the search grids, no objective worse, primary better",
-                  steps=s.refine["steps"], learning_rate=s.refine["learning_rate"], penalty=s.refine["penalty"])
+                  steps=s.refine.steps, learning_rate=s.refine.learning_rate, penalty=s.refine.penalty)
 
 
 def store_floor(res, fo, names, first: int, objs, s) -> None:
@@ -330,12 +330,12 @@ def store_floor(res, fo, names, first: int, objs, s) -> None:
     res.put("floor", "start", np.asarray([names[i] for i in fo.start], dtype=object), units="1", dims=("design",),
             attrs={"meaning": "the verified front point its descent started from"})
     res.put("floor", "step", fo.step, units="1", dims=("design",),
-            attrs={"meaning": f"descent iterate (steps of experiment.refine.steps={s.refine['steps']} per round)"})
+            attrs={"meaning": f"descent iterate (steps of experiment.refine.steps={s.refine.steps} per round)"})
     res.put("floor", "F_predicted", fo.predicted, units="1", dims=("design", "objective"),
             attrs={"meaning": "predicted fine-grid objectives (search-grid values x the start's fine/search "
                               "ratio), normalised like verify/F"})
     res.set_attrs("floor", starts=",".join(names[i] for i in fo.starts), predicted_to_meet_floor=fo.n_predicted,
-                  rounds=s.floor_solve["rounds"], candidates=s.floor_solve["candidates"],
+                  rounds=s.floor_solve.rounds, candidates=s.floor_solve.candidates,
                   method="epsilon-constraint: projected Adam on the primary objective + constraint penalty from each "
                          "verified front point that meets the floor; iterates predicted to meet it verified")
 
@@ -379,12 +379,12 @@ def store_verify(res, space, cand, names, mv, Fv, nd, rec, hv, hv_base, ref, obj
                   hypervolume=hv, hypervolume_baseline_only=hv_base,
                   hypervolume_reference="objectives normalised by the baseline verified on the fine grids "
                                         "(sense x metric / |baseline|); reference point 0 for maximised objectives "
-                                        f"(zero picks/min, zero volume), {s.pareto['ref_min_factor']} x baseline for "
+                                        f"(zero picks/min, zero volume), {s.pareto.ref_min_factor} x baseline for "
                                         "minimised ones",
                   reference_point=np.asarray(ref), objectives=",".join(objs),
-                  grids=f"task {v['task_n_r']}x{v['task_n_phi']}x{v['task_n_z']}, cycle {v['cycle_samples']} samples, "
-                        f"regular grid {v['rw_n_z']}x{v['rw_n_r']}x{v['rw_n_phi']}, n_R {v['n_R']}, operating-R "
-                        f"candidates {v['n_R_operating']}")
+                  grids=f"task {v.task_n_r}x{v.task_n_phi}x{v.task_n_z}, cycle {v.cycle_samples} samples, "
+                        f"regular grid {v.rw_n_z}x{v.rw_n_r}x{v.rw_n_phi}, n_R {v.n_R}, operating-R "
+                        f"candidates {v.n_R_operating}")
 
 
 # -- the certify stage's group (deltajax.optimize.certify computes, this stores and prints) -----------------------
@@ -447,14 +447,14 @@ def store_certify(res, names, cert: dict, feas, marg: dict, front, Fv, rec: int,
                   tolerance_units="regular_volume relative; joint_margin_deg deg; interference_margin m; "
                                   "utilisations and index 1",
                   volume_floor=float("nan") if floor is None else float(floor),
-                  max_extra_doublings=int(v["certify_doublings"]),
-                  method=f"regular workspace by rays ({v['rw_n_z']} levels x {v['rw_n_phi']} rays per pass, "
-                         f"{v['rw_n_r']} samples along a ray, passes {','.join(RAY_PASSES)}); task cylinder "
-                         f"{int(t['n_r']) + 1} x {2 * int(t['n_phi']) - 1} x {int(t['n_z']) + 2} samples + golden-"
-                         f"section search from the worst; cycle {8 * (int(v['cycle_samples']) - 1) + 1} samples + "
+                  max_extra_doublings=int(v.certify_doublings),
+                  method=f"regular workspace by rays ({v.rw_n_z} levels x {v.rw_n_phi} rays per pass, "
+                         f"{v.rw_n_r} samples along a ray, passes {','.join(RAY_PASSES)}); task cylinder "
+                         f"{int(t.n_r) + 1} x {2 * int(t.n_phi) - 1} x {int(t.n_z) + 2} samples + golden-"
+                         f"section search from the worst; cycle {8 * (int(v.cycle_samples) - 1) + 1} samples + "
                          "golden-section search in t from the worst joint margin, clearance and peak torque utilisation (the RMS "
                          "from the samples); then every density doubled, and doubled again (at most "
-                         f"{int(v['certify_doublings'])} more times) while a figure moved more than its tolerance")
+                         f"{int(v.certify_doublings)} more times) while a figure moved more than its tolerance")
 
 
 def certify_lines(Cg) -> list:
@@ -560,9 +560,9 @@ def store_robust(res, rc: RobustChoice, design_names: Sequence[str], nominal: in
     res.put(g, "checked_row", np.asarray(rc.checked, int), units="1", dims=("checked",),
             attrs={"meaning": "verify rows checked, in the order the rule picked them"})
     res.put(g, "p_selection", np.asarray(rc.p_selection, float), units="1", dims=("checked",),
-            attrs={"meaning": f"fraction of the samples (seed {s.tolerance['seed']}) in which every constraint holds"})
+            attrs={"meaning": f"fraction of the samples (seed {s.tolerance.seed}) in which every constraint holds"})
     res.put(g, "p_confirm", np.asarray(rc.p_confirm, float), units="1", dims=("checked",),
-            attrs={"meaning": f"the fresh Monte Carlo's fraction (seed {s.robust['confirm_seed']}); NaN: not "
+            attrs={"meaning": f"the fresh Monte Carlo's fraction (seed {s.robust.confirm_seed}); NaN: not "
                               "confirmed (below the probability in the selection)"})
     if rc.confirm is not None:
         _put_design_block(res, f"{g}/confirm", [design_names[rc.chosen]], [rc.chosen], rc.confirm, tol_text)
@@ -570,8 +570,8 @@ def store_robust(res, rc: RobustChoice, design_names: Sequence[str], nominal: in
     for who, i in (("nominal", nominal), ("robust", rc.chosen)):
         for m in ("picks_per_min", "regular_volume"):
             cost[f"{who}_{m}"] = float(mv[m][i]) if i >= 0 else float("nan")
-    res.set_attrs(g, probability=float(s.robust["probability"]), confirm_seed=int(s.robust["confirm_seed"]),
-                  selection_seed=int(s.tolerance["seed"]), max_candidates=int(s.robust["max_candidates"]),
+    res.set_attrs(g, probability=float(s.robust.probability), confirm_seed=int(s.robust.confirm_seed),
+                  selection_seed=int(s.tolerance.seed), max_candidates=int(s.robust.max_candidates),
                   nominal_recommended=design_names[nominal] if nominal >= 0 else "none",
                   robust_recommended=design_names[rc.chosen] if rc.chosen >= 0 else "none",
                   exhausted=bool(rc.exhausted),

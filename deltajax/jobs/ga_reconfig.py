@@ -56,15 +56,15 @@ def run(ctx) -> None:
     if "report" in done:
         ctx.log(f"{path} holds a complete ga_reconfig run (stages {','.join(done)}); nothing to do")
         return
-    objs = list(s.objectives)
+    objs = list(s.objectives.names)
     sense = np.asarray([DESIGN_SENSE[o] for o in objs], float)
     carried = earlier.genes if earlier is not None else np.zeros((0, space.dim))
     st = State(ctx=ctx, res=ctx.results, path=path, fp=fp, s=s, space=space, pb=setup.problem, seed=ctx.seed,
                ga_cfg=setup.ga, earlier=earlier, objs=objs,
-               primary=s.primary, jp=objs.index(s.primary), sense=sense, carried=carried,
+               primary=s.objectives.primary, jp=objs.index(s.objectives.primary), sense=sense, carried=carried,
                base_genes=space.baseline_genes(), scr_front=np.zeros((0, space.dim)),
                front_X=np.zeros((0, space.dim)), extra_X=np.zeros((0, space.dim)),
-               refined=np.zeros((0, space.dim)), ref=np.where(sense < 0, 0.0, s.pareto["ref_min_factor"]),
+               refined=np.zeros((0, space.dim)), ref=np.where(sense < 0, 0.0, s.pareto.ref_min_factor),
                stored=_stored(path, done))
     st.seeds = np.concatenate([st.base_genes[None], carried])
     if runner.run(SEARCH, st):
@@ -85,7 +85,7 @@ def _prepare(st: State) -> None:
     from ..optimize.designer import CONSTRAINT_NAMES, FEASIBILITY_TOL
 
     ctx, s, space, pb, objs = st.ctx, st.s, st.space, st.pb, st.objs
-    st.ev = W.batch_evaluator(pb, space, max(s.pareto["population_size"], 2))
+    st.ev = W.batch_evaluator(pb, space, max(s.pareto.population_size, 2))
     st.ev_cheap = W.batch_evaluator(pb, space, 256, regular=False)  # screen and refinement (no regular workspace)
     if st.earlier is not None:
         ctx.log(f"continuing {st.earlier.path}: its {len(st.carried)} verified front designs seed the GA and NSGA-II "
@@ -116,11 +116,11 @@ def _screen(st: State) -> None:
     from ..optimize.designer import DESIGN_UNITS
 
     ctx, res, s, space, primary = st.ctx, st.res, st.s, st.space, st.primary
-    bar = ctx.progress(total=2 ** s.screen["log2_size"], desc="screen (Sobol)")
-    sc = W.screen(st.ev_cheap, space, primary, st.sense[st.jp], s.screen["log2_size"], seed=st.seed,
+    bar = ctx.progress(total=2 ** s.screen.log2_size, desc="screen (Sobol)")
+    sc = W.screen(st.ev_cheap, space, primary, st.sense[st.jp], s.screen.log2_size, seed=st.seed,
                   progress=bar.update)
     bar.close()
-    top = sc["X"][sc["order"][:max(int(s.screen["seed_fraction"] * st.ga_cfg.population_size), 1)]]
+    top = sc["X"][sc["order"][:max(int(s.screen.seed_fraction * st.ga_cfg.population_size), 1)]]
     res.put_axis("screen", "seed_design", np.arange(len(top)), units="1")
     res.put_axis("screen", "gene", np.arange(space.dim), units="1")
     res.put("screen", "top_genes", top, units="1", dims=("seed_design", "gene"))
@@ -159,10 +159,10 @@ def _ga_result(st: State, finished: bool) -> None:
     from ..optimize import workflow as W
 
     ctx, s, space, objs, primary, ga_cfg = st.ctx, st.s, st.space, st.objs, st.primary, st.ga_cfg
-    wvec = (np.asarray([s.weights.get(o, 0.0) for o in objs]) * st.scale if s.mode == "weighted"
+    wvec = (np.asarray([s.objectives.weights.get(o, 0.0) for o in objs]) * st.scale if s.objectives.mode == "weighted"
             else np.where(np.asarray(objs) == primary, st.scale, 0.0))
-    st.ga_what = ("weighted sum " + " + ".join(f"{s.weights.get(o, 0.0):g} x {o}" for o in objs)
-                  if s.mode == "weighted" else f"primary objective {primary}")
+    st.ga_what = ("weighted sum " + " + ".join(f"{s.objectives.weights.get(o, 0.0):g} x {o}" for o in objs)
+                  if s.objectives.mode == "weighted" else f"primary objective {primary}")
     ck = None if s.resume == "never" else ST.load_checkpoint(st.path)
     ctx.log("GA stage already finished: reusing its checkpoint" if finished else
             f"resuming the GA from generation {ck['generations_done']}" if ck else f"starting the GA ({st.ga_what})")
@@ -211,11 +211,11 @@ def _pareto(st: State) -> None:
     from ..optimize.pareto import nsga2
 
     s, space = st.s, st.space
-    bar = st.ctx.progress(total=s.pareto["generations"], desc="NSGA-II")
+    bar = st.ctx.progress(total=s.pareto.generations, desc="NSGA-II")
     front = nsga2(W.pareto_eval(st.ev, st.objs, st.scale), space.dim, len(st.objs), n_constr=len(CONSTRAINT_NAMES),
-                  pop_size=s.pareto["population_size"], n_gen=s.pareto["generations"], seed=st.seed,
+                  pop_size=s.pareto.population_size, n_gen=s.pareto.generations, seed=st.seed,
                   initial=np.concatenate([st.base_genes[None], st.best[None], st.carried,
-                                          st.scr_front[:s.pareto["population_size"] // 2],
+                                          st.scr_front[:s.pareto.population_size // 2],
                                           st.gres.final_population]), ref=st.ref,
                   progress=bar.update)
     bar.close()
@@ -244,8 +244,8 @@ def _refine(st: State) -> None:
     order = np.argsort(sense[jp] * np.nan_to_num(prim, nan=-sense[jp] * np.inf))
     winners = np.concatenate([st.best[None], st.front_X[order[:REFINE_MAX - 1]]])
     ro = W.refine_designs(st.pb, st.space, winners, st.objs, st.scale, primary,
-                          steps=s.refine["steps"], learning_rate=s.refine["learning_rate"],
-                          penalty=s.refine["penalty"], evaluate=st.ev, evaluate_cheap=st.ev_cheap,
+                          steps=s.refine.steps, learning_rate=s.refine.learning_rate,
+                          penalty=s.refine.penalty, evaluate=st.ev, evaluate_cheap=st.ev_cheap,
                           progress=bar.update)
     bar.close()
     st.refined = ro.genes_after[ro.accepted]
@@ -267,7 +267,7 @@ def _verify(st: State) -> None:
     from ..optimize.pareto import hypervolume
 
     ctx, s, space, earlier, carried = st.ctx, st.s, st.space, st.earlier, st.carried
-    space_v = dataclasses.replace(space, n_R=s.verify["n_R"]) if space.reconfigurable else space
+    space_v = dataclasses.replace(space, n_R=s.verify.n_R) if space.reconfigurable else space
     pb_fine = W.designer_problem(s, fine=True)
     cand = np.concatenate([st.base_genes[None], st.best[None], st.front_X, st.refined, st.extra_X])
     names = (["baseline", "ga_best"] + [f"pareto_{i}" for i in range(len(st.front_X))]
@@ -291,9 +291,9 @@ def _verify(st: State) -> None:
     bv = np.asarray([float(mv[o][0]) for o in st.objs])           # normalised by the *verified* baseline
     scale_v = np.where(np.isfinite(bv) & (bv != 0), st.sense / np.abs(np.where(bv != 0, bv, 1)), st.scale)
     Fv, ok, nd = _front_of(mv, st.objs, scale_v)
-    if s.recommend == "floor" and s.floor_solve["enabled"]:
+    if s.recommend == "floor" and s.floor_solve.enabled:
         cand, names, mv, Fv, ok, nd = _floor_step(st, cand, names, mv, Fv, nd, pb_fine, space_v, scale_v)
-    elif s.floor_solve["enabled"]:
+    elif s.floor_solve.enabled:
         ctx.log(f"floor step: skipped (it solves for the floor rule's answer; experiment.recommend={s.recommend})")
     rec = W.recommend(Fv, nd, s.recommend, st.jp, band=s.recommend_band, floor=s.recommend_floor, sense=st.sense)
     hv = hypervolume(Fv[nd], st.ref) if len(nd) else 0.0
@@ -331,13 +331,13 @@ def _floor_step(st, cand, names, mv, Fv, nd, pb_fine, space_v, scale_v):
     from ..optimize.floor import solve_floor
 
     s, ctx = st.s, st.ctx
-    bar = ctx.progress(total=s.floor_solve["rounds"] + 1, desc="floor step")
+    bar = ctx.progress(total=s.floor_solve.rounds + 1, desc="floor step")
     fo = solve_floor(st.pb, st.space, cand, Fv, nd, st.objs, st.scale, st.primary,
                      W.floor_limits(len(st.objs), st.jp, s.recommend_floor, st.sense), evaluate=st.ev,
                      evaluate_cheap=st.ev_cheap, evaluate_fine=W.batch_evaluator(pb_fine, space_v, 8),
-                     steps=s.refine["steps"], learning_rate=s.refine["learning_rate"],
-                     penalty=s.refine["penalty"], rounds=s.floor_solve["rounds"],
-                     n_fine=s.floor_solve["candidates"], progress=bar.update)
+                     steps=s.refine.steps, learning_rate=s.refine.learning_rate,
+                     penalty=s.refine.penalty, rounds=s.floor_solve.rounds,
+                     n_fine=s.floor_solve.candidates, progress=bar.update)
     bar.close()
     # an iterate equal to a design already verified (e.g. one a continued run carried from the earlier run, whose
     # own floor step descended from the same start) is not verified twice under two names
@@ -381,10 +381,10 @@ def _plots(st: State) -> None:
 SEARCH = (
     Stage("prepare", _prepare, record=False),
     Stage("screen", _screen, load=_screen_load,
-          when=lambda st: st.s.screen["enabled"] and not st.primary.startswith("regular")),
+          when=lambda st: st.s.screen.enabled and not st.primary.startswith("regular")),
     Stage("ga", _ga, load=lambda st: _ga_result(st, finished=True)),
-    Stage("pareto", _pareto, load=_pareto_load, when=lambda st: st.s.pareto["enabled"]),
-    Stage("refine", _refine, load=_refine_load, when=lambda st: st.s.refine["enabled"]),
+    Stage("pareto", _pareto, load=_pareto_load, when=lambda st: st.s.pareto.enabled),
+    Stage("refine", _refine, load=_refine_load, when=lambda st: st.s.refine.enabled),
     Stage("verify", _verify),
 )
 
@@ -406,7 +406,7 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
 
     ctx, res, s, space, objs, sense, jp = st.ctx, st.res, st.s, st.space, st.objs, st.sense, st.jp
     V = load(st.path)["verify"]
-    space_v = dataclasses.replace(space, n_R=s.verify["n_R"]) if space.reconfigurable else space
+    space_v = dataclasses.replace(space, n_R=s.verify.n_R) if space.reconfigurable else space
     pb = W.designer_problem(s, fine=True)
     names = [str(n) for n in np.asarray(V["design_name"]).reshape(-1)]
     genes = np.asarray(V["genes"], float).reshape(len(names), -1)
@@ -423,7 +423,7 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
         if i in cert or i < 0:
             return
         c = CE.certify_design(pb, space_v.decode(jnp.asarray(genes[i])), R_op[i],
-                              max_extra_doublings=int(s.verify["certify_doublings"]))
+                              max_extra_doublings=int(s.verify.certify_doublings))
         cert[i] = c
         bar.update(1)
         for k in CE.CERTIFIED_METRICS:
@@ -476,14 +476,14 @@ def _tolerance(st: State) -> None:
 
     ctx, res, s, space, sense, jp = st.ctx, st.res, st.s, st.space, st.sense, st.jp
     V = overlay(load(st.path))                          # what verify and certify stored
-    space_v = dataclasses.replace(space, n_R=s.verify["n_R"]) if space.reconfigurable else space
+    space_v = dataclasses.replace(space, n_R=s.verify.n_R) if space.reconfigurable else space
     pb_fine = W.designer_problem(s, fine=True, nominal=True)   # a built robot is judged by the stated constraints
     tol = R.tolerances_of(s)
     text = TL.describe(tol)
     names = [str(n) for n in V["design_name"]]
     genes = np.asarray(V["genes"], float).reshape(len(names), -1)
     rec = int(V["attrs"]["recommended"])
-    n_s = int(s.tolerance["samples"])
+    n_s = int(s.tolerance.samples)
 
     def analyse_rows(rows, seed):
         bar = ctx.progress(total=len(rows) * (n_s + 1), desc=f"tolerance (Monte Carlo, seed {seed})")
@@ -494,10 +494,10 @@ def _tolerance(st: State) -> None:
 
     ctx.log(f"tolerance: {n_s} Monte Carlo samples of {text}")
     rows = [0] + ([rec] if rec > 0 else [])
-    a = analyse_rows(rows, int(s.tolerance["seed"]))
+    a = analyse_rows(rows, int(s.tolerance.seed))
     entries = [("baseline", 0, 0)] + ([("recommended", rows.index(rec), rec)] if rec >= 0 else [])
     results = [a]
-    if s.robust["enabled"]:
+    if s.robust.enabled:
         Fv = np.asarray(V["F"], float).reshape(len(names), -1)
 
         def rule(nd):
@@ -505,8 +505,8 @@ def _tolerance(st: State) -> None:
 
         known = {r: TL.select([a], [(0, i)]) for i, r in enumerate(rows)}
         rc = RB.robust_choice(analyse_rows, Fv, np.asarray(V["feasible"]).astype(bool), rule,
-                              float(s.robust["probability"]), int(s.tolerance["seed"]), int(s.robust["confirm_seed"]),
-                              int(s.robust["max_candidates"]), known=known, log=ctx.log)
+                              float(s.robust.probability), int(s.tolerance.seed), int(s.robust.confirm_seed),
+                              int(s.robust.max_candidates), known=known, log=ctx.log)
         R.store_robust(res, rc, names, rec, V, s, text)
         entries = [e for e in entries if e[0] != "recommended"]
         if rec >= 0:
@@ -519,13 +519,13 @@ def _tolerance(st: State) -> None:
             ctx.log(f"robust recommendation: {names[rc.chosen]} (every constraint holds in "
                     f"{100 * rc.p_selection[rc.checked.index(rc.chosen)]:.1f} % of the samples, "
                     f"{100 * float(rc.confirm['p_all'][0]):.1f} % of a fresh Monte Carlo, seed "
-                    f"{s.robust['confirm_seed']}); nominal: {names[rec]}; {len(rc.checked)} candidates checked")
+                    f"{s.robust.confirm_seed}); nominal: {names[rec]}; {len(rc.checked)} candidates checked")
         else:
             res.set_attrs("verify", recommended_nominal=rec)
             if rec >= 0:
                 entries.append(("recommended", rows.index(rec), rec))
             ctx.log(f"WARNING robust: no verified candidate holds every constraint in >= "
-                    f"{100 * s.robust['probability']:g} % of the samples ({len(rc.checked)} checked"
+                    f"{100 * s.robust.probability:g} % of the samples ({len(rc.checked)} checked"
                     + (", every feasible one" if rc.exhausted else "") + "); the recommendation stays the nominal "
                     f"one ({names[rec] if rec >= 0 else 'none'}), which does not meet experiment.robust.probability; "
                     "to search for designs that hold with a margin, set experiment.robust.margins (group "
@@ -536,7 +536,7 @@ def _tolerance(st: State) -> None:
     frozen = None
     if space.reconfigurable:    # the stricter question: each built robot run at its design's nominal operating R
         frozen = TL.analyse(pb_fine, space_v, genes[[e[2] for e in entries]], tol, samples=n_s,
-                            seed=int(s.tolerance["seed"]), operating_R="nominal")
+                            seed=int(s.tolerance.seed), operating_R="nominal")
         R.store_frozen(res, roles, [names[e[2]] for e in entries], [e[2] for e in entries], frozen, text)
     for line in R.headline_lines(dict(sel, role=roles, design_name=[names[e[2]] for e in entries],
                                        attrs={"samples": n_s}, frozen_R=frozen), roles):
@@ -559,7 +559,7 @@ def _export(st: State) -> None:
         ctx.log("export: no recommended design (no feasible candidate on the fine grids), so no datasheets and no "
                 "model files")
         return
-    designs = run_designs(st.space, summary, st.s.motor)
+    designs = run_designs(st.space, summary, dataclasses.asdict(st.s.motor))
     write(ctx, designs)
     ctx.write_figures()
     recommended = [d for d in designs if d[0] == "recommended"]
@@ -588,7 +588,7 @@ def _report(st: State) -> None:
 #: a stage's place before the stage existed stays as it was (its later stages read what it had).
 ANSWER = (
     Stage("certify", _certify, when=lambda st: not {"tolerance", "results"} & set(st.runner.done)),
-    Stage("tolerance", _tolerance, when=lambda st: st.s.tolerance["enabled"] and "results" not in st.runner.done),
+    Stage("tolerance", _tolerance, when=lambda st: st.s.tolerance.enabled and "results" not in st.runner.done),
     Stage("results", _results),
     Stage("plots", _plots),
     Stage("export", _export),   # done once the datasheets are in results.h5, their figures and the models on disk

@@ -26,6 +26,7 @@ run) is the application's business: :mod:`deltajax.jobs.designer_state`. Nothing
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from typing import Any, Callable, Mapping, Optional, Sequence
 
@@ -57,11 +58,9 @@ class SetupError(ValueError):
 # -- setup ---------------------------------------------------------------------------------------------------
 
 def required_margins(s) -> dict:
-    """``experiment.robust.margins`` of settings ``s`` (:data:`deltajax.config.ga_reconfig.ROBUST_MARGINS`;
+    """``experiment.robust.margins`` of settings ``s`` (:class:`deltajax.config.ga_reconfig.MarginsBlock`;
     every margin 0 where the run states none)."""
-    m = dict.fromkeys(("index", "joint_deg", "clearance_mm", "motor_percent"), 0.0)
-    m.update(s.robust.get("margins") or {})
-    return m
+    return dataclasses.asdict(s.robust.margins)
 
 
 def designer_problem(s, *, fine: bool = False, nominal: bool = False):
@@ -75,22 +74,22 @@ def designer_problem(s, *, fine: bool = False, nominal: bool = False):
     from .designer import DesignerProblem
 
     mg = {k: 0.0 for k in required_margins(s)} if nominal else required_margins(s)
-    links_kw = dict(s.links)
+    links_kw = dataclasses.asdict(s.links)
     if mg["clearance_mm"]:
         links_kw["clearance"] = links_kw["clearance"] + 1e-3 * mg["clearance_mm"]
-    motor_kw = {k: v for k, v in s.motor.items() if k != "gear_ratio"}
+    motor_kw = {k: v for k, v in dataclasses.asdict(s.motor).items() if k != "gear_ratio"}
     if mg["motor_percent"]:
         for k in ("peak_torque", "rated_torque"):
             motor_kw[k] = motor_kw[k] * (1.0 - mg["motor_percent"] / 100.0)
-    joints = C.JointModel(limit=math.radians(s.joints["limit_deg"] - mg["joint_deg"]),
-                          elbow_neutral=math.radians(s.joints["elbow_neutral_deg"]),
-                          platform_neutral=math.radians(s.joints["platform_neutral_deg"]), kind=s.joints["kind"])
+    joints = C.JointModel(limit=math.radians(s.joints.limit_deg - mg["joint_deg"]),
+                          elbow_neutral=math.radians(s.joints.elbow_neutral_deg),
+                          platform_neutral=math.radians(s.joints.platform_neutral_deg), kind=s.joints.kind)
     links = C.LinkModel(**links_kw)
-    good = C.GoodSpec(joints=joints, links=links, threshold=s.good["threshold"] + mg["index"], index=s.good["index"],
-                      beta=s.good["beta"])
+    good = C.GoodSpec(joints=joints, links=links, threshold=s.good_workspace.threshold + mg["index"], index=s.good_workspace.index,
+                      beta=s.good_workspace.beta)
     motor = C.Motor(**motor_kw)
-    task, cycle, regular = dict(s.task), dict(s.cycle), dict(s.regular)
-    n_op = s.cycle["n_R_operating"]
+    task, cycle, regular = dataclasses.asdict(s.task), dataclasses.asdict(s.cycle), s.regular_workspace.grid()
+    n_op = s.cycle.n_R_operating
     # the continuous regular-workspace measure: full settings on the fine grids, the lighter search settings
     # (experiment.regular_workspace.search_refine) on the search grids, or the grid's measure there
     # the verification finds it by rays (deltajax.optimize.certify.ray_cylinders; verify.rw_n_phi rays per level,
@@ -98,23 +97,22 @@ def designer_problem(s, *, fine: bool = False, nominal: bool = False):
     from .certify import RAY_DENSITY
 
     v = s.verify
-    rays = tuple(RAY_DENSITY._replace(n_phi=v["rw_n_phi"], n_z=v["rw_n_z"], n_along=v["rw_n_r"]))
+    rays = tuple(RAY_DENSITY._replace(n_phi=v.rw_n_phi, n_z=v.rw_n_z, n_along=v.rw_n_r))
     refine = {"rw_refine": True, "rw_rays": rays} if fine else (
         {"rw_refine": True, "rw_refine_steps": s.search_refine[0], "rw_refine_samples": s.search_refine[1]}
         if s.search_refine else {"rw_refine": False})
     if fine:
-        v = s.verify
-        task.update(n_r=v["task_n_r"], n_phi=v["task_n_phi"], n_z=v["task_n_z"])
-        cycle["n_samples"] = v["cycle_samples"]
-        regular.update(n_r=v["rw_n_r"], n_phi=v["rw_n_phi"], n_z=v["rw_n_z"])
-        n_op = v["n_R_operating"]
-    enabled = [k for k in ("task_in_good_workspace", "passive_joints", "interference") if s.constraints[k]]
+        task.update(n_r=v.task_n_r, n_phi=v.task_n_phi, n_z=v.task_n_z)
+        cycle["n_samples"] = v.cycle_samples
+        regular.update(n_r=v.rw_n_r, n_phi=v.rw_n_phi, n_z=v.rw_n_z)
+        n_op = v.n_R_operating
+    enabled = [k for k in s.constraints.GEOMETRIC if getattr(s.constraints, k)]
     enabled.append("cycle_rate")
-    if s.constraints["max_arm_sum"] is not None:
+    if s.constraints.max_arm_sum is not None:
         enabled.append("size_budget")
     return DesignerProblem.build(task=task, cycle=cycle, motor=motor, joints=joints, links=links, good=good,
-                                 regular=regular, n_R_operating=n_op, min_picks=s.constraints["min_picks_per_min"],
-                                 max_arm_sum=s.constraints["max_arm_sum"], enabled=enabled,
+                                 regular=regular, n_R_operating=n_op, min_picks=s.constraints.min_picks_per_min,
+                                 max_arm_sum=s.constraints.max_arm_sum, enabled=enabled,
                                  operating=operating_spec(s),  # rtmode
                                  **refine)
 
@@ -123,7 +121,7 @@ def operating_spec(s):  # rtmode: the screw linkage is sized for the design spac
     """The R(t) operating spec of ``experiment.reconfig`` (None in the default per-task mode)."""
     from .operating import OperatingError, spec_from_settings
 
-    b = s.bounds
+    b = s.design.bounds
     rr = (b["R_min"][0], b["R_max"][1]) if "R_min" in b and "R_max" in b else None
     try:
         return spec_from_settings(s.reconfig, rr)
@@ -147,10 +145,10 @@ def setup(s, robot, recon, *, n_R: Optional[int] = None):
         raise SetupError("robot.mass is required by experiment=ga_reconfig (the cycle rate needs dynamics)")
     dt = rob.mass.gear_ratio.dtype
     rob = eqx.tree_at(lambda r: (r.mass.gear_ratio, r.mass.rotor_inertia), rob,
-                      (jnp.asarray(s.motor["gear_ratio"], dt), jnp.asarray(s.motor["rotor_inertia"], dt)))
+                      (jnp.asarray(s.motor.gear_ratio, dt), jnp.asarray(s.motor.rotor_inertia, dt)))
     base = eqx.tree_at(lambda r: r.robot, base, rob) if recon is not None else rob
     try:
-        space = DesignSpace.from_bounds(base, s.bounds, n_R=s.n_R if n_R is None else n_R,
+        space = DesignSpace.from_bounds(base, s.design.bounds, n_R=s.design.n_R if n_R is None else n_R,
                                         prefix="experiment.design.bounds")
         pb = designer_problem(s)
     except (DesignSpaceError, ConstraintError, ValueError) as err:

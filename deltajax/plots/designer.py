@@ -148,7 +148,7 @@ def ga_pareto(V, objs, s, units, floor=None):
         ax.plot(x[o] * sx, y[o] * sy, "o", color="C0", ms=6, label="Pareto front (verified, all feasible)")
     ax.plot(x[0] * sx, y[0] * sy, "k*", ms=14, label="baseline franco2026" + ("" if feas[0] else " (infeasible)"))
     if gi >= 0 and feas[gi]:
-        ax.plot(x[gi] * sx, y[gi] * sy, "s", color="C2", ms=8, mfc="none", mew=2, label=f"GA best on {s.primary}")
+        ax.plot(x[gi] * sx, y[gi] * sy, "s", color="C2", ms=8, mfc="none", mew=2, label=f"GA best on {s.objectives.primary}")
     ea_i = [i for i, n in enumerate(names) if n.startswith("earlier_")]
     if ea_i:
         ax.plot(x[ea_i] * sx, y[ea_i] * sy, "o", color="C7", ms=9, mfc="none", mew=1.2,
@@ -166,7 +166,7 @@ def ga_pareto(V, objs, s, units, floor=None):
         (ax.axhline if on_y else ax.axvline)(floor[1] * (sy if on_y else sx), color="C3", ls="--", lw=1, alpha=0.7,
                                              label=f"floor: {s.recommend_floor:g} x the baseline's {floor[0]}")
     if rec >= 0:
-        what = (f"band: {s.primary} within {100 * s.recommend_band:g} % of the best, then the most {o1}"
+        what = (f"band: {s.objectives.primary} within {100 * s.recommend_band:g} % of the best, then the most {o1}"
                 if s.recommend == "band" else s.recommend)
         ax.plot(x[rec] * sx, y[rec] * sy, "D", color="C3", ms=10, label=f"recommended ({what})")
         M = V.get("margins") if isinstance(V, dict) else None      # certified margins (group certify)
