@@ -103,13 +103,15 @@ def test_settings_are_read_from_their_declared_metadata():
         limit: Optional[float] = setting(None, lo=0, hi=180, hi_open=True, unit="deg")
         inner: Inner = setting(Inner(speed=1.0))
         flag: bool = setting()
+        n_squared: int = 0          # derived: no config key, filled in by _check
 
         def _check(self, path):
             if self.limit is not None and self.limit > 10 * self.n:
                 raise ConfigError(f"{path}.limit={self.limit!r} deg must be <= 10 x {path}.n")
+            return dataclasses.replace(self, n_squared=self.n ** 2)
 
     ok = read_settings(Outer, {"n": 3, "flag": True, "inner": {"speed": 2}}, "experiment")
-    assert ok == Outer(n=3, flag=True, inner=Inner(speed=2.0, law="poly5"), limit=None)
+    assert ok == Outer(n=3, flag=True, inner=Inner(speed=2.0, law="poly5"), limit=None, n_squared=9)
     assert isinstance(ok.inner.speed, float)
     assert read_settings(Outer, {"n": 3, "flag": False}, "e").inner == Inner(speed=1.0)   # a default block
     bad = [({"n": 1, "flag": True}, r"^e\.n must be >= 2, got 1$"),
@@ -123,6 +125,7 @@ def test_settings_are_read_from_their_declared_metadata():
            ({"n": 3, "flag": True, "inner": {}}, r"^e\.inner: missing keys speed$"),
            ({"n": 3}, r"^e: missing keys flag$"),
            ({"n": 3, "flag": True, "speed": 1}, r"^e: unknown keys speed; valid keys: flag, inner, limit, n$"),
+           ({"n": 3, "flag": True, "n_squared": 4}, r"^e: unknown keys n_squared; "),                # derived
            ([1, 2], r"^e must be a mapping, got \[1, 2\]$")]
     for block, match in bad:
         with pytest.raises(ConfigError, match=match):

@@ -157,12 +157,15 @@ def _read_value(path: str, v: Any, tp, spec: _Spec) -> Any:
 def read_settings(cls, block: Any, path: str):
     """The settings dataclass ``cls`` of the config block at dotted ``path``, every field checked by its metadata
     (:func:`setting`), nested blocks read the same way, then the block's own cross-field rules (its ``_check(path)``
-    method, if it has one). Unknown keys and missing required keys are refused, each as one line naming the block;
-    a bad value as one line naming the field and the value in its unit."""
+    method, if it has one; what it returns, if not None, is the result: a block with derived fields filled in, i.e.
+    fields declared without :func:`setting`, which are no config keys). Unknown keys and missing required keys are
+    refused, each as one line naming the block; a bad value as one line naming the field and the value in its
+    unit."""
     block = plain(block)
     if not isinstance(block, Mapping):
         raise ConfigError(f"{path} must be a mapping, got {block!r}")
-    fields = dataclasses.fields(cls)
+    # a field declared without setting() is derived (no config key: it keeps its default unless _check fills it)
+    fields = [f for f in dataclasses.fields(cls) if "deltajax" in f.metadata]
     names = [f.name for f in fields]
     extra = sorted(set(block) - set(names), key=str)
     if extra:
@@ -173,8 +176,7 @@ def read_settings(cls, block: Any, path: str):
     if missing:
         raise ConfigError(f"{path}: missing keys {', '.join(missing)}")
     hints = typing.get_type_hints(cls)
-    out = {f.name: _read_value(f"{path}.{f.name}", block[f.name], hints[f.name],
-                               f.metadata.get("deltajax", _Spec()))
+    out = {f.name: _read_value(f"{path}.{f.name}", block[f.name], hints[f.name], f.metadata["deltajax"])
            for f in fields if f.name in block}
     obj = cls(**out)
     check = getattr(obj, "_check", None)
