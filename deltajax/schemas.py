@@ -202,7 +202,7 @@ class DatasheetSchema:
     gear_ratio: float = _REQ
 
 
-# ga_reconfig has no schema here: its job's reader checks every key and value (config.validate_ga_reconfig).
+# ga_reconfig's schema is generated from its settings (deltajax.config: readers.schema_of(GaReconfigSettings)).
 
 
 #: experiment name -> schema, registered as ``schema/experiment/<name>``.
@@ -218,13 +218,15 @@ EXPERIMENT_SCHEMAS = {
 }
 
 
-def register_schemas() -> None:
-    """Register the schemas in Hydra's ConfigStore (idempotent; run.py calls it at import)."""
+def register_schemas(experiments: Optional[Dict[str, Any]] = None) -> None:
+    """Register the schemas in Hydra's ConfigStore (idempotent; run.py calls it at import, through
+    :func:`deltajax.config.register_schemas`, with the generated ones added): ``experiments`` name -> schema,
+    default :data:`EXPERIMENT_SCHEMAS`."""
     from hydra.core.config_store import ConfigStore
 
     cs = ConfigStore.instance()
     cs.store(group="schema/robot", name="delta", node=RobotSchema)
-    for name, node in EXPERIMENT_SCHEMAS.items():
+    for name, node in (EXPERIMENT_SCHEMAS if experiments is None else experiments).items():
         cs.store(group="schema/experiment", name=name, node=node)
 
 

@@ -429,7 +429,7 @@ BAD = [
     ("ga_reconfig", "experiment.task.n_phi=1", "experiment.task.n_phi must be >= 2, got 1"),   # both wedge ends
     ("ga_reconfig", "experiment.verify.task_n_phi=1", "experiment.verify.task_n_phi must be >= 2, got 1"),
     ("ga_reconfig", "experiment.ga.sigma=inf", r"experiment.ga.sigma \(gene units, genes in \[0,1\]\) must be in"),
-    ("ga_reconfig", "+experiment.foo=1", r"experiment: unknown keys foo; valid keys: constraints, "),
+    ("ga_reconfig", "+experiment.foo=1", r"experiment.foo is not a setting of experiment; valid keys: constraints, "),
     ("reconfig_indices", "robot.R_range.max=10", r"robot.R_range.max=10.0 m: at R = 10 m the geometry can reach nothing"),
     ("ga_reconfig", "robot.forearm=0.35", r"robot.R_range.max=0.495 m: at R = 0.495 m the geometry can reach nothing"),
     ("workspace_grid", "experiment.checkpoint_s=-1", "experiment.checkpoint_s must be >= 0 s, got -1.0 s"),

@@ -224,7 +224,10 @@ def test_a_different_config_into_a_finished_dir_is_refused(full_run):
     ("experiment.motor.rated_torque=10", "experiment.motor.rated_torque=10.0 N m must be <="),
     ("experiment.objectives.primary=volume", "experiment.objectives.primary must be one of"),
     ("experiment.objectives.names=[picks_per_min,volume]", "unknown objective 'volume'"),
-    ("+experiment.task.radius=0.1", "experiment.task: unknown keys"),
+    ("+experiment.task.radius=0.1", "experiment.task.radius is not a setting of experiment.task; valid keys: diameter"),
+    # the settings' declaration is also the structured config Hydra composes against (config.readers.schema_of)
+    ("experiment.task.n_r=abc", "experiment.task.n_r: Value 'abc' of type 'str' could not be converted to Integer"),
+    ("experiment.task.radius=0.1", "valid keys: diameter, height, n_phi, n_r, n_z, z_top"),  # no + needed
     ("experiment.cycle.n_samples=48", "must be odd"),
     ("experiment.verify.rw_n_r=0", "experiment.verify.rw_n_r must be >= 2, got 0"),
     ("experiment.regular_workspace.z_min=0.9", "z_min=0.9 m must be < z_max"),

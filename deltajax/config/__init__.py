@@ -120,7 +120,18 @@ def validate_config(cfg: Mapping[str, Any], robot=None, recon=None, *, run_dir=N
     return None if build is None else build(e, cfg, robot, recon)
 
 
-from ..schemas import EXPERIMENT_SCHEMAS, RobotSchema, register_schemas, schema_keys, unknown_key  # noqa: E402
+from ..schemas import EXPERIMENT_SCHEMAS as _WRITTEN_SCHEMAS, RobotSchema, schema_keys, unknown_key  # noqa: E402
+from ..schemas import register_schemas as _register  # noqa: E402
+from .readers import schema_of  # noqa: E402
+
+#: experiment name -> its structured-config schema: generated from the job's settings where they are declared
+#: with :func:`deltajax.config.readers.setting` (ga_reconfig), else the hand-written one of :mod:`deltajax.schemas`
+EXPERIMENT_SCHEMAS = {**_WRITTEN_SCHEMAS, "ga_reconfig": schema_of(GaReconfigSettings, "GaReconfigSchema")}
+
+
+def register_schemas() -> None:
+    """Register every schema in Hydra's ConfigStore (idempotent; run.py calls it at import)."""
+    _register(EXPERIMENT_SCHEMAS)
 
 
 def check_keys(cfg: Mapping[str, Any]) -> None:

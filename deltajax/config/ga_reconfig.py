@@ -366,11 +366,11 @@ class VerifyBlock:
     task_n_phi: int = setting(lo=2)
     task_n_z: int = setting(lo=2)
     cycle_samples: int = setting(lo=5)
+    # further doublings while a certified figure moves more than its tolerance (absent: the default)
+    certify_doublings: int = setting(MAX_EXTRA_DOUBLINGS, lo=0, hi=4)
     rw_n_r: int = setting(lo=2)
     rw_n_phi: int = setting(lo=2)
     rw_n_z: int = setting(lo=2)
-    # further doublings while a certified figure moves more than its tolerance (absent: the default)
-    certify_doublings: int = setting(MAX_EXTRA_DOUBLINGS, lo=0, hi=4)
 
     def points(self) -> int:
         """Evaluated points of one design on the fine grids."""
@@ -440,6 +440,11 @@ class GaReconfigSettings:
     """The main job's settings: ``experiment.*`` of ``experiment=ga_reconfig``, one typed block per config block
     (SI units; angles in degrees, lengths in mm and percentages where the name says so), read once by
     :func:`ga_reconfig_settings`."""
+    name: str = setting("ga_reconfig")
+    resume: str = setting("auto", choices=("auto", "never", "must"))
+    stop_after: Optional[int] = setting(None, lo=1)
+    # a finished run (its directory or results.h5) this run continues with more budget; None: a new search
+    continue_from: Optional[str] = setting(None, read=_continue_from)
     design: DesignBlock = setting()
     task: TaskBlock = setting()
     good_workspace: GoodWorkspaceBlock = setting()
@@ -450,26 +455,21 @@ class GaReconfigSettings:
     regular_workspace: RegularWorkspaceBlock = setting()
     objectives: ObjectivesBlock = setting()
     constraints: ConstraintsBlock = setting()
+    screen: ScreenBlock = setting()
     ga: Any = setting(None, read=_ga)              # the GA's deltajax.optimize.GAConfig (absent: its defaults)
     pareto: ParetoBlock = setting()
-    recommend: str = setting(read=_recommend)
-    recommend_band: float = setting(0.02, lo=0, hi=1)
-    recommend_floor: float = setting(1.2, lo=0, lo_open=True)
-    screen: ScreenBlock = setting()
     refine: RefineBlock = setting()
+    recommend: str = setting(read=_recommend)
+    recommend_floor: float = setting(1.2, lo=0, lo_open=True)
+    recommend_band: float = setting(0.02, lo=0, hi=1)
     floor_solve: FloorSolveBlock = setting(FloorSolveBlock(enabled=False, rounds=0, candidates=0))
+    verify: VerifyBlock = setting()
     tolerance: ToleranceBlock = setting(ToleranceBlock(
         enabled=False, samples=0, seed=0, distribution="uniform", length_mm=0.0, joint_offset_deg=0.0, mass_percent=0.0,
         motor_percent=0.0))
     robust: RobustBlock = setting(RobustBlock(enabled=False, probability=1.0, confirm_seed=0, max_candidates=1))
-    verify: VerifyBlock = setting()
     # rtmode: the R(t) operating spec's settings (deltajax.optimize.operating.spec_from_settings takes this mapping)
     reconfig: Optional[dict] = setting(None, read=_reconfig)
-    name: str = setting("ga_reconfig")
-    resume: str = setting("auto", choices=("auto", "never", "must"))
-    stop_after: Optional[int] = setting(None, lo=1)
-    # a finished run (its directory or results.h5) this run continues with more budget; None: a new search
-    continue_from: Optional[str] = setting(None, read=_continue_from)
 
     @property
     def search_refine(self) -> tuple:

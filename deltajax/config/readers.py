@@ -9,7 +9,7 @@ from typing import Any, Callable, Mapping, Optional
 
 
 __all__ = ["ConfigError", "read_field", "read_choice", "read_names", "read_vector", "memory_bytes", "check_fits",
-           "setting", "read_settings", "plain"]
+           "setting", "read_settings", "plain", "schema_of"]
 
 
 class ConfigError(ValueError):
@@ -176,11 +176,44 @@ def read_settings(cls, block: Any, path: str):
     if missing:
         raise ConfigError(f"{path}: missing keys {', '.join(missing)}")
     hints = typing.get_type_hints(cls)
+    # a block given as null where it has a default: absent (a structured config holds absent optional blocks as null)
+    given = {f.name for f in fields if f.name in block and not (
+        block[f.name] is None and dataclasses.is_dataclass(_optional(hints[f.name])[0])
+        and (f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING))}
     out = {f.name: _read_value(f"{path}.{f.name}", block[f.name], hints[f.name], f.metadata["deltajax"])
-           for f in fields if f.name in block}
+           for f in fields if f.name in given}
     obj = cls(**out)
     check = getattr(obj, "_check", None)
     return obj if check is None else (check(path) or obj)
+
+
+
+def schema_of(cls, name: Optional[str] = None):
+    """The Hydra structured-config schema of settings dataclass ``cls`` (registered in the ConfigStore): its config
+    fields, nested blocks as nested schemas, each typed as declared (``bool``, ``int``, ``float``, ``str``,
+    ``Optional[...]``; ``Any`` where the field has its own reader: lists, mappings, paths) and required (``???``)
+    unless the field has a default (a block with a default: ``Optional``, absent as null). So the keys and types
+    Hydra composes against come from the same declaration as the ranges :func:`read_settings` checks."""
+    from omegaconf import MISSING
+
+    hints = typing.get_type_hints(cls)
+    out = []
+    for f in dataclasses.fields(cls):
+        spec = f.metadata.get("deltajax")
+        if spec is None:
+            continue
+        tp, none = _optional(hints[f.name])
+        has_default = f.default is not dataclasses.MISSING or f.default_factory is not dataclasses.MISSING
+        if dataclasses.is_dataclass(tp) and spec.read is None:
+            sub = schema_of(tp)
+            out.append((f.name, Optional[sub], dataclasses.field(default=None)) if has_default or none else
+                       (f.name, sub, dataclasses.field(default_factory=sub)))
+            continue
+        if spec.read is not None or tp not in (bool, int, float, str):
+            tp, none = Any, False
+        default = f.default if f.default is not dataclasses.MISSING else (None if has_default else MISSING)
+        out.append((f.name, Optional[tp] if none or default is None else tp, dataclasses.field(default=default)))
+    return dataclasses.make_dataclass(name or f"{cls.__name__}Schema", out)
 
 
 
