@@ -33,7 +33,7 @@ import numpy as np
 
 from ..config import ConfigError, GaReconfigSettings as Settings, ga_reconfig_build, ga_reconfig_settings
 from . import designer_state as ST
-from .stages import Runner, Stage, State, Stop
+from .stages import Runner, Stage, State, Stop, release_memory
 
 __all__ = ["run", "build", "settings_from_config", "Settings", "STAGES"]
 
@@ -424,6 +424,7 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
             return
         c = CE.certify_design(pb, space_v.decode(jnp.asarray(genes[i])), R_op[i],
                               max_extra_doublings=int(s.verify.certify_doublings))
+        release_memory()                 # each design's densest programs free ~1 GiB that glibc would keep
         cert[i] = c
         bar.update(1)
         for k in CE.CERTIFIED_METRICS:

@@ -12,9 +12,10 @@ everything around that, identically for every job:
   in-memory stage never rebuilds the state it would not use.
 * **stops**: a stage that raises :class:`Stop` (``experiment.stop_after``) ends the run resumable, with the
   message logged.
-* **timing and log lines**: each computed stage logs ``[name: wall s, CPU-s, peak GiB]`` (CPU-seconds of the
-  process: on a shared machine the figure to compare; the process's peak resident memory so far, so the stage that
-  raises it shows -- what a scheduler's memory request must cover) and its wall time is kept in
+* **timing and log lines**: each computed stage logs ``[name: wall s, CPU-s, peak GiB, GiB in use]``
+  (CPU-seconds of the process: on a shared machine the figure to compare; the process's peak resident memory so
+  far, so the stage that raises it shows -- what a scheduler's memory request must cover; what it still holds once
+  the memory the stage freed went back to the system, :func:`release_memory`) and its wall time is kept in
   :attr:`Runner.timings`.
 
 Stages share one mutable :class:`State` (the job's settings, problem and what earlier stages handed on), so a
@@ -31,7 +32,32 @@ import types
 from pathlib import Path
 from typing import Any, Callable, Iterable, Optional
 
-__all__ = ["Stage", "State", "Stop", "Runner"]
+__all__ = ["Stage", "State", "Stop", "Runner", "release_memory"]
+
+
+def release_memory() -> None:
+    """Hand the memory a finished computation freed back to the operating system: Python's cycles collected, then
+    glibc's ``malloc_trim`` (its per-thread arenas keep freed memory, which XLA's worker threads then do not
+    reuse: a certify program at its densest left 1.9 GiB resident of which the trim returned 1.1 GiB, and each
+    later stage's peak stacked on the last). Nothing where the C library is not glibc."""
+    import ctypes
+    import gc
+
+    gc.collect()
+    try:
+        ctypes.CDLL("libc.so.6").malloc_trim(0)
+    except (OSError, AttributeError):
+        pass
+
+
+def _in_use() -> str:
+    """``, x.xx GiB in use``: the process's resident memory now (Linux), else nothing."""
+    try:
+        with open("/proc/self/statm") as f:
+            pages = int(f.read().split()[1])
+    except (OSError, ValueError, IndexError):
+        return ""
+    return f", {pages * resource.getpagesize() / 2 ** 30:.2f} GiB in use"
 
 
 class Stop(Exception):
@@ -149,7 +175,8 @@ class Runner:
             self.ctx.results.set_attrs(**{self.attr_stages: ",".join(self.done)})
             self.ctx.results.flush()
         peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20  # kB on Linux
-        self.ctx.log(f"[{name}: {self.timings[name]:.1f} s, {cpu:.1f} CPU-s, peak {peak:.2f} GiB]")
+        release_memory()          # the next stage's peak starts from what is still in use, not from this one's
+        self.ctx.log(f"[{name}: {self.timings[name]:.1f} s, {cpu:.1f} CPU-s, peak {peak:.2f} GiB{_in_use()}]")
         self._t = (time.perf_counter(), time.process_time())
 
     def run(self, stages: Iterable[Stage], state: State) -> bool:
