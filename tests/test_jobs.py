@@ -74,6 +74,21 @@ def test_ga_reconfig_with_optional_stages_on(toy_run):
 
 
 @pytest.mark.slow
+def test_stage_log_lines_carry_time_and_memory(toy_run):
+    """The stage engine logs each computed stage's wall time, CPU-seconds, the process's peak memory so far and what
+    it holds once the stage's freed memory went back to the system (never more than the peak)."""
+    import re
+
+    path = toy_run("ga_reconfig")
+    log = (path.parent / "run.log").read_text()
+    lines = {m[0]: m[1:] for m in re.findall(r"\[(\w+): ([\d.]+) s, ([\d.]+) CPU-s, peak ([\d.]+) GiB, "
+                                              r"([\d.]+) GiB in use\]", log)}
+    assert {"ga", "verify", "certify", "results"} <= set(lines), log[-2000:]
+    for name, (wall, cpu, peak, in_use) in lines.items():
+        assert 0 < float(in_use) <= float(peak) < 64, (name, peak, in_use)
+
+
+@pytest.mark.slow
 def test_ga_reconfig_with_optional_stages_off(toy_run):
     path = toy_run("ga_reconfig", *GA_STAGES_OFF)
     _assert_complete(path, "ga_reconfig")
