@@ -251,7 +251,6 @@ def test_workspace_job_schema_generated_from_its_settings_composes_the_same_conf
      r"^experiment.grid.bounds must be null when the grid is sized from the reach bound \(experiment.grid.x=null\)"),
     ("workspace_grid", "experiment.grid.bounds=[[0.0,1.0]]",
      r"^experiment.grid.bounds must be null or \[\[x0,x1\],\[y0,y1\],\[z0,z1\]\] \(m\), got \[\[0.0, 1.0\]\]$"),
-    ("workspace_grid", "precision=float32", None),   # backend auto: resolved to jax in float32
     ("reconfig_workspace", "experiment.chunk_points=0", r"^experiment.chunk_points must be >= 1, got 0$"),
     ("reconfig_indices", "experiment.criterion=volume", r"^experiment.criterion must be one of .*, got 'volume'$"),
     ("reconfig_indices", "experiment.mode=slow", r"^experiment.mode must be one of exact, fast, got 'slow'$"),
@@ -264,10 +263,25 @@ def test_workspace_job_schema_generated_from_its_settings_composes_the_same_conf
 ])
 def test_workspace_job_settings_refused_by_their_metadata(experiment, override, message):
     cfg = compose(experiment, override)
-    if message is None:
-        s = C.validate_config(cfg, *C.robot_from_config(cfg.robot))
-        assert s.backend == "jax" and s.plan is not None and s.grid.shape[0] > 1
-        return
     with pytest.raises(ConfigError, match=message) as err:
         validate(cfg)
     assert "\n" not in str(err.value)
+
+
+def test_workspace_grid_builder_fills_in_what_the_block_lacks():
+    """The builder's derived fields: the grid built from the block (a null axis sized from the robot's reach
+    bound on whole steps of h), the backend resolved (auto: jax in float32), the shard of the top-level keys, the
+    devices resolved and the shard plan."""
+    from deltajax.workspace import Grid
+    from deltajax.workspace.driver import reach_box
+
+    cfg = compose("workspace_grid", "experiment.grid.h=0.1", "experiment.grid.z=[0.0,0.6]", "experiment.grid.x=null",
+                  "experiment.grid.bounds=null", "precision=float32", "n_shards=2", "shard=1",
+                  "experiment.chunk_points=63")
+    robot, recon = C.robot_from_config(cfg.robot)
+    s = C.validate_config(cfg, robot, recon)
+    lo, hi = reach_box(robot)[0]
+    assert isinstance(s.grid, Grid) and s.grid.x[0] <= lo and s.grid.x[-1] >= hi and s.grid.h == 0.1
+    assert s.backend == "jax" and (s.shard, s.n_shards, s.precision) == (1, 2, "float32") and s.n_dev >= 1
+    assert s.plan.x_start > 0 and s.plan.x_stop == s.grid.shape[0]
+    assert s.params == {"b_v": 2.0, "b_f": 4.2, "beta": 0.5} and s.robot_key["forearm"] == str(cfg.robot.forearm)
