@@ -156,3 +156,132 @@ def test_every_main_job_setting_declares_how_it_is_checked():
     assert len(names) > 80 and "experiment.robust.margins.joint_deg" in names
     s = G.ga_reconfig_settings(compose("ga_reconfig").experiment)
     assert s.robust.margins.clearance_mm == 0.0 and s.verify.certify_doublings == 2 and s.ga.population_size > 0
+
+
+# -- the grid jobs and the kernel benchmark: settings declared once too (deltajax.config.workspace) --------------
+from deltajax import config as C  # noqa: E402
+
+def _workspace_job_settings():
+    from deltajax.config import workspace as W
+
+    return {"workspace_grid": W.WorkspaceGridSettings, "reconfig_workspace": W.PaperGridSettings,
+            "reconfig_indices": W.ReconfigIndicesSettings, "bench_kernel": W.BenchKernelSettings,
+            "indices_examples": W.IndicesExamplesSettings}
+
+
+WORKSPACE_JOBS = ["workspace_grid", "reconfig_workspace", "reconfig_indices", "bench_kernel", "indices_examples"]
+
+
+def _yaml_keys(node, path):
+    """The dotted keys of a YAML block, nested blocks walked, in the file's order."""
+    for k, v in node.items():
+        if isinstance(v, dict):
+            yield from _yaml_keys(v, f"{path}.{k}")
+        yield f"{path}.{k}"
+
+
+@pytest.mark.parametrize("job", WORKSPACE_JOBS)
+def test_every_workspace_job_setting_declares_how_it_is_checked(job):
+    """Every key of configs/experiment/<job>.yaml (name included, nested blocks walked) is a field of the job's
+    settings declared with setting() metadata, in the YAML's order; every number has a range or its own reader;
+    the fields without metadata (derived by the builder) are no config keys; the default YAML reads."""
+    import dataclasses
+    import typing
+
+    from omegaconf import OmegaConf
+
+    from deltajax.run import CONFIG_DIR
+
+    def walk(cls, path):
+        for f in dataclasses.fields(cls):
+            spec = f.metadata.get("deltajax")
+            if spec is None:                      # derived: no config key
+                continue
+            tp = typing.get_type_hints(cls)[f.name]
+            tp = next((a for a in typing.get_args(tp) if a is not type(None)), tp)   # Optional[X] -> X
+            if dataclasses.is_dataclass(tp):
+                yield from walk(tp, f"{path}.{f.name}")
+            elif tp in (int, float) and spec.read is None:
+                assert spec.lo is not None or spec.hi is not None, f"{path}.{f.name}: no range"
+            yield f"{path}.{f.name}"
+
+    cls = _workspace_job_settings()[job]
+    yaml = OmegaConf.to_container(OmegaConf.load(f"{CONFIG_DIR}/experiment/{job}.yaml"))["experiment"]
+    assert list(walk(cls, "experiment")) == list(_yaml_keys(yaml, "experiment"))
+    derived = [f.name for f in dataclasses.fields(cls) if "deltajax" not in f.metadata]
+    assert not set(derived) & set(yaml)
+    cfg = compose(job)
+    s = C.validate_config(cfg, *C.robot_from_config(cfg.robot))
+    assert isinstance(s, cls) and s.name == job
+
+
+@pytest.mark.parametrize("job", WORKSPACE_JOBS)
+def test_workspace_job_schema_generated_from_its_settings_composes_the_same_config(job):
+    """readers.schema_of(<the job's settings>) registered as the job's structured config (as main does for
+    ga_reconfig) composes the default YAML to the same experiment block as the hand-written schema: the same
+    values, the same keys in the same order (the stored config does not change when the schema is switched)."""
+    from hydra import compose as hydra_compose, initialize_config_dir
+    from hydra.core.config_store import ConfigStore
+    from omegaconf import OmegaConf
+
+    from deltajax.config.readers import schema_of
+    from deltajax.run import CONFIG_DIR
+
+    def keys(node):
+        return [(k, keys(v) if isinstance(v, dict) else None) for k, v in node.items()]
+
+    today = OmegaConf.to_container(compose(job).experiment)
+    try:
+        ConfigStore.instance().store(group="schema/experiment", name=job, node=schema_of(_workspace_job_settings()[job]))
+        with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+            generated = OmegaConf.to_container(hydra_compose(config_name="config",
+                                                             overrides=[f"experiment={job}"]).experiment)
+    finally:
+        C.register_schemas()    # the registered schemas as before
+    assert generated == today and keys(generated) == keys(today)
+
+
+@pytest.mark.parametrize("experiment, override, message", [
+    ("workspace_grid", "experiment.grid.h=0", r"^experiment.grid.h must be > 0 m, got 0.0 m$"),
+    ("workspace_grid", "experiment.backend=cuda", r"^experiment.backend must be one of auto, jax, numba, got 'cuda'$"),
+    ("workspace_grid", "experiment.devices=0", r"^experiment.devices must be >= 1, got 0$"),
+    ("workspace_grid", "experiment.checkpoint_s=-1", r"^experiment.checkpoint_s must be >= 0 s, got -1.0 s$"),
+    ("workspace_grid", "experiment.store=[volume]", r"^experiment.store entry must be one of .*, got 'volume'$"),
+    ("workspace_grid", "experiment.grid.x=null",
+     r"^experiment.grid.bounds must be null when the grid is sized from the reach bound \(experiment.grid.x=null\)"),
+    ("workspace_grid", "experiment.grid.bounds=[[0.0,1.0]]",
+     r"^experiment.grid.bounds must be null or \[\[x0,x1\],\[y0,y1\],\[z0,z1\]\] \(m\), got \[\[0.0, 1.0\]\]$"),
+    ("reconfig_workspace", "experiment.chunk_points=0", r"^experiment.chunk_points must be >= 1, got 0$"),
+    ("reconfig_indices", "experiment.criterion=volume", r"^experiment.criterion must be one of .*, got 'volume'$"),
+    ("reconfig_indices", "experiment.mode=slow", r"^experiment.mode must be one of exact, fast, got 'slow'$"),
+    ("reconfig_indices", "beta=1.0", r"^beta must be in \(0, 1\), got 1.0$"),
+    ("bench_kernel", "experiment.dtypes=[]", r"^experiment.dtypes must list at least 1 of float32, float64, got \[\]$"),
+    ("bench_kernel", "experiment.R=0", r"^experiment.R must be > 0 m, got 0.0 m$"),
+    ("bench_kernel", "precision=float32", r"^experiment.dtypes lists float64, which needs precision=float64"),
+    ("indices_examples", "experiment.matrix=full", r"^experiment.matrix must be one of full3x4, theta3x3, got 'full'$"),
+    ("indices_examples", "experiment.beta=0", r"^experiment.beta must be in \(0, 1\), got 0.0$"),
+])
+def test_workspace_job_settings_refused_by_their_metadata(experiment, override, message):
+    cfg = compose(experiment, override)
+    with pytest.raises(ConfigError, match=message) as err:
+        validate(cfg)
+    assert "\n" not in str(err.value)
+
+
+def test_workspace_grid_builder_fills_in_what_the_block_lacks():
+    """The builder's derived fields: the grid built from the block (a null axis sized from the robot's reach
+    bound on whole steps of h), the backend resolved (auto: jax in float32), the shard of the top-level keys, the
+    devices resolved and the shard plan."""
+    from deltajax.workspace import Grid
+    from deltajax.workspace.driver import reach_box
+
+    cfg = compose("workspace_grid", "experiment.grid.h=0.1", "experiment.grid.z=[0.0,0.6]", "experiment.grid.x=null",
+                  "experiment.grid.bounds=null", "precision=float32", "n_shards=2", "shard=1",
+                  "experiment.chunk_points=63")
+    robot, recon = C.robot_from_config(cfg.robot)
+    s = C.validate_config(cfg, robot, recon)
+    lo, hi = reach_box(robot)[0]
+    assert isinstance(s.grid, Grid) and s.grid.x[0] <= lo and s.grid.x[-1] >= hi and s.grid.h == 0.1
+    assert s.backend == "jax" and (s.shard, s.n_shards, s.precision) == (1, 2, "float32") and s.n_dev >= 1
+    assert s.plan.x_start > 0 and s.plan.x_stop == s.grid.shape[0]
+    assert s.params == {"b_v": 2.0, "b_f": 4.2, "beta": 0.5} and s.robot_key["forearm"] == str(cfg.robot.forearm)
