@@ -281,7 +281,8 @@ def test_workspace_grid_builder_fills_in_what_the_block_lacks():
     robot, recon = C.robot_from_config(cfg.robot)
     s = C.validate_config(cfg, robot, recon)
     lo, hi = reach_box(robot)[0]
-    assert isinstance(s.grid, Grid) and s.grid.x[0] <= lo and s.grid.x[-1] >= hi and s.grid.h == 0.1
+    g = s.built_grid
+    assert isinstance(g, Grid) and g.x[0] <= lo and g.x[-1] >= hi and g.h == 0.1 and s.grid.x is None  # the block
     assert s.backend == "jax" and (s.shard, s.n_shards, s.precision) == (1, 2, "float32") and s.n_dev >= 1
-    assert s.plan.x_start > 0 and s.plan.x_stop == s.grid.shape[0]
+    assert s.plan.x_start > 0 and s.plan.x_stop == g.shape[0]
     assert s.params == {"b_v": 2.0, "b_f": 4.2, "beta": 0.5} and s.robot_key["forearm"] == str(cfg.robot.forearm)

@@ -148,8 +148,8 @@ def _devices(path: str, v: Any) -> Any:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class WorkspaceGridSettings:
-    """``experiment=workspace_grid``: the grid (m; after :func:`workspace_grid_settings`, ``grid`` is the
-    :class:`deltajax.workspace.Grid` built from the block, the robot sizing null axes), the k~ parameters, the
+    """``experiment=workspace_grid``: the grid block (m; ``built_grid`` is the :class:`deltajax.workspace.Grid`
+    :func:`workspace_grid_settings` builds from it, the robot sizing null axes), the k~ parameters, the
     index fields stored, points per chunk, the backend (resolved by the builder: ``auto`` is Numba on a CPU in
     float64, else JAX), the devices used, resume/checkpoint/stop settings. Derived by the builder: this job's
     shard of ``n_shards`` (top-level keys), the devices resolved (``n_dev``), what identifies the numbers for a
@@ -173,6 +173,7 @@ class WorkspaceGridSettings:
     robot_key: Optional[dict] = None
     precision: str = "float64"
     plan: Any = None     # this shard's chunks of whole x-planes (:func:`grid_plan`)
+    built_grid: Any = None   # the deltajax.workspace.Grid of the grid block
 
     @property
     def params(self) -> dict:
@@ -211,7 +212,7 @@ def workspace_grid_settings(e, cfg, robot, recon) -> WorkspaceGridSettings:
     elif backend == "numba" and not f64:
         raise ConfigError("experiment.backend=numba computes in float64: use precision=float64 or backend=jax")
     return dataclasses.replace(
-        s, grid=grid, backend=backend, shard=shard, n_shards=n_shards, n_dev=n_dev,
+        s, built_grid=grid, backend=backend, shard=shard, n_shards=n_shards, n_dev=n_dev,
         robot_key={k: str(v) for k, v in cfg.get("robot").items()}, precision=str(cfg.get("precision")),
         plan=grid_plan(grid.shape, s.chunk_points, n_dev, shard, n_shards))
 

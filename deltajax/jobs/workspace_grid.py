@@ -66,7 +66,7 @@ def _settings(ctx) -> dict:
     from ..workspace import FIELD_NAMES
 
     s = ctx.settings                 # checked before the run (config.workspace_grid_settings)
-    grid, store, params, backend, plan = s.grid, list(s.store), s.params, s.backend, s.plan
+    grid, store, params, backend, plan = s.built_grid, list(s.store), s.params, s.backend, s.plan
     nx, ny, nz = grid.shape
     n_local = plan.x_stop - plan.x_start
     n_idx = len(FIELD_NAMES)
@@ -95,7 +95,7 @@ def _store_grid(st: State, planes_done: int) -> None:
     writer too): ``planes_done`` x-planes of ``st.n_local`` are finished."""
     from ..workspace import FIELD_NAMES
 
-    r, grid, plan, planes, params = st.ctx.results, st.s.grid, st.s.plan, st.planes, st.s.params
+    r, grid, plan, planes, params = st.ctx.results, st.s.built_grid, st.s.plan, st.planes, st.s.params
     r.put_axis(GROUP, "x", grid.x[plan.x_start:plan.x_stop], units="m")
     r.put_axis(GROUP, "y", grid.y, units="m")
     r.put_axis(GROUP, "z", grid.z, units="m")
@@ -133,7 +133,7 @@ def _chunk(st: State, la: int, lb: int) -> dict:
     first chunk, which includes compilation)."""
     from ..workspace import FIELD_NAMES
 
-    plan, timing, (_, ny, nz) = st.s.plan, st.timing, st.s.grid.shape
+    plan, timing, (_, ny, nz) = st.s.plan, st.timing, st.s.built_grid.shape
     a, b = plan.x_start + la, plan.x_start + lb  # global x-planes of this chunk
     n = (b - a) * plan.plane
     ok, vals = st.evaluate(st.ctx.robot, a, b)  # both backends: the planes' rows first (the JAX path pads after)
@@ -155,7 +155,7 @@ def _grid(st: State) -> None:
     into results.h5 every ``experiment.checkpoint_s`` seconds and resumed from it; ``experiment.stop_after``
     stops after that many chunks as if killed (the run is then incomplete). Hands on ``done`` (x-planes) and the
     evaluation rate (points/s after the first chunk)."""
-    ctx, plan, grid = st.ctx, st.s.plan, st.s.grid
+    ctx, plan, grid = st.ctx, st.s.plan, st.s.built_grid
     checkpoint = ResultsCheckpoint(ctx.results, GROUP, st.arrays, st.key, (plan.x_start, plan.x_stop),
                                    functools.partial(_store_grid, st), _check, done_attr="planes_done",
                                    remedy="move it away to keep it, or add fresh=true to start over")
@@ -201,7 +201,7 @@ def _store(st: State) -> None:
     incomplete (resumable)."""
     from ..workspace import FIELD_NAMES
 
-    ctx, grid, plan, done, first_chunk_s = st.ctx, st.s.grid, st.s.plan, st.done, st.timing["first_s"]
+    ctx, grid, plan, done, first_chunk_s = st.ctx, st.s.built_grid, st.s.plan, st.done, st.timing["first_s"]
     _store_grid(st, done)
     # points_evaluated: the work of the whole run (every finished x-plane, those of the processes before a resume
     # included: what an uninterrupted run reports); the rate is this process's
@@ -227,7 +227,7 @@ def _plots(st: State) -> None:
     """The reachable set's figure (a single run only: a shard holds part of the grid)."""
     from .. import plots
 
-    st.ctx.savefig(plots.workspace_grid(st.s.grid, st.reach), "workspace_grid")
+    st.ctx.savefig(plots.workspace_grid(st.s.built_grid, st.reach), "workspace_grid")
 
 
 STAGES = (
