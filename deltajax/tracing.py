@@ -23,7 +23,7 @@ import jax
 import numpy as np
 
 __all__ = ["traced_once", "persistent", "program_cache_dir", "STATS", "PROGRAMS_KEPT", "content_key",
-           "stable_key", "shared_program", "PROGRAMS", "PROGRAMS_MAX"]
+           "stable_key", "shared_program", "PROGRAMS", "PROGRAMS_MAX", "forget"]
 
 F = TypeVar("F", bound=Callable)
 
@@ -123,7 +123,8 @@ def program_cache_dir():
 #: problem content or input shape adds one)
 PROGRAMS_KEPT = 64
 
-#: programs exported or read by this process: (kind, key) -> jitted call of the exported program
+#: programs exported or read by this process: (kind, hash of key and input structure) -> jitted call of the
+#: exported program
 _LOADED: dict = {}
 #: what :func:`persistent` did in this process (``exported``: traced and written, ``loaded``: read from disk)
 STATS = {"exported": 0, "loaded": 0}
@@ -146,10 +147,10 @@ def persistent(fn: Callable, kind: str, key: str) -> Callable:
         spec = [jax.ShapeDtypeStruct(jax.numpy.shape(a), jax.numpy.result_type(a)) for a in leaves]
         h = hashlib.sha256("\n".join([_environment_key(), kind, key, repr(in_tree), repr(spec)]).encode())
         h = h.hexdigest()[:32]
-        prog = _LOADED.get(h)
+        prog = _LOADED.get((kind, h))
         if prog is None:
             prog = _load_or_export(fn, in_tree, spec, root / kind / f"{h}.jaxexport")
-            _LOADED[h] = prog
+            _LOADED[(kind, h)] = prog
         run, out_tree = prog
         return jax.tree_util.tree_unflatten(out_tree, run(*leaves))
 
@@ -284,3 +285,14 @@ def shared_program(kind: str, pb, space, settings: tuple, build: Callable[[], An
         while len(PROGRAMS) > PROGRAMS_MAX:
             PROGRAMS.pop(next(iter(PROGRAMS)))
     return PROGRAMS[key]
+
+
+def forget(kind: str) -> int:
+    """Drop this process's programs of ``kind`` (:func:`shared_program`, :func:`persistent`): a program a job will
+    not call again gives back its compiled code (a certify program at its densest held ~0.3 GiB). Programs kept on
+    disk stay there. Returns how many were dropped."""
+    mine = [k for k in PROGRAMS if k[0] == kind] + [k for k in _LOADED if k[0] == kind]
+    for k in mine:
+        PROGRAMS.pop(k, None)
+        _LOADED.pop(k, None)
+    return len(mine)

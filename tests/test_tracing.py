@@ -86,6 +86,25 @@ def test_persistent_exports_once_reads_back_and_gives_the_numbers_of_the_program
     assert len(list((program_cache / "demo").glob("*.jaxexport"))) == 3
 
 
+def test_forget_drops_one_kinds_programs_and_keeps_the_others(program_cache, monkeypatch):
+    monkeypatch.setattr(T, "PROGRAMS", {})
+    x, y = np.linspace(0, 3, 7), np.linspace(1, 2, 7)
+    built = []
+
+    def build():
+        built.append(1)
+        return jax.jit(_fn)
+
+    for kind in ("certified", "other"):
+        T.shared_program(kind, None, None, ("k",), build, persist=True)(x, y)
+    assert len(built) == 2 and {k[0] for k in T._LOADED} >= {"certified", "other"}
+    assert T.forget("certified") == 2                      # its shared program and its exported twin
+    assert {k[0] for k in T.PROGRAMS} == {"other"} and "certified" not in {k[0] for k in T._LOADED}
+    T.shared_program("other", None, None, ("k",), build)     # still kept: not built again
+    T.shared_program("certified", None, None, ("k",), build)  # dropped: built again when asked for
+    assert len(built) == 3
+
+
 def test_a_damaged_program_is_rebuilt_with_a_warning(program_cache):
     f = jax.jit(_fn)
     x = np.ones(3)

@@ -403,6 +403,7 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
     from ..optimize import certify as CE
     from ..optimize import workflow as W
     from ..optimize.pareto import non_dominated
+    from ..tracing import forget
 
     ctx, res, s, space, objs, sense, jp = st.ctx, st.res, st.s, st.space, st.objs, st.sense, st.jp
     V = load(st.path)["verify"]
@@ -450,6 +451,7 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
             break
         run(rec)
     bar.close()
+    forget("certified")         # no later stage calls the certify programs: their compiled code goes (~0.3 GiB each)
     floor = (float(s.recommend_floor) * mv["regular_volume"][0]
              if s.recommend == "floor" and "regular_volume" in objs else None)
     marg = CE.design_margins(mv, threshold=pb.good.threshold, min_picks=pb.min_picks, max_arm_sum=pb.max_arm_sum,
