@@ -286,3 +286,118 @@ def test_workspace_grid_builder_fills_in_what_the_block_lacks():
     assert s.backend == "jax" and (s.shard, s.n_shards, s.precision) == (1, 2, "float32") and s.n_dev >= 1
     assert s.plan.x_start > 0 and s.plan.x_stop == g.shape[0]
     assert s.params == {"b_v": 2.0, "b_f": 4.2, "beta": 0.5} and s.robot_key["forearm"] == str(cfg.robot.forearm)
+
+
+# -- the other jobs' settings declared the same way (dynamics_cycle, datasheet, boundary_search, reconfig_motion) --
+def _declared_jobs():
+    from deltajax.config import boundary as B, dynamics as D, motion as M
+
+    # (experiment, settings class, the blocks its fields' own readers read: one block, or one per entry of a
+    # mapping (a setup per robot, a case per name, its class by its kind))
+    return [("dynamics_cycle", D.DynamicsCycleSettings, {"setups": ("each", [D.CycleSetupBlock])}),
+            ("datasheet", D.DatasheetSettings, {}),
+            ("boundary_search", B.BoundarySearchSettings, {}),
+            ("reconfig_motion", M.ReconfigMotionSettings, {"mechanism": ("one", [M.MechanismBlock]),
+                                                           "cases": ("each", [M.AdeptCaseBlock, M.TaskCaseBlock])})]
+
+
+#: numbers whose every finite value is meaningful (no range): a heading, an offset
+_ANY_NUMBER = {"heading_deg", "d3"}
+
+
+def _config_fields(cls):
+    import dataclasses
+
+    return [f for f in dataclasses.fields(cls) if "deltajax" in f.metadata]
+
+
+def _check_block(cls, block, path):
+    """Every config field of ``cls`` declares how it is checked; ``block`` (the default YAML's) has exactly its
+    config fields (the required ones at least), in the order declared."""
+    import dataclasses
+    import typing
+
+    fields = _config_fields(cls)
+    names = [f.name for f in fields]
+    assert set(block) <= set(names), f"{path}: YAML keys {sorted(set(block) - set(names))} are no settings"
+    required = [f.name for f in fields if f.default is dataclasses.MISSING
+                and f.default_factory is dataclasses.MISSING]
+    assert set(required) <= set(block), f"{path}: required settings {set(required) - set(block)} not in the YAML"
+    assert [n for n in names if n in block] == list(block), f"{path}: fields not ordered as the YAML"
+    hints = typing.get_type_hints(cls)
+    for f in fields:
+        spec = f.metadata["deltajax"]
+        tp = hints[f.name]
+        tp = next((a for a in typing.get_args(tp) if a is not type(None)), tp)   # Optional[X] -> X
+        if tp in (int, float) and spec.read is None and f.name not in _ANY_NUMBER:
+            assert spec.lo is not None or spec.hi is not None, f"{path}.{f.name}: no range"
+        if tp is str and spec.read is None and f.name != "name":
+            assert spec.choices is not None, f"{path}.{f.name}: a string without choices"
+        if dataclasses.is_dataclass(tp) and spec.read is None:
+            _check_block(tp, block.get(f.name) or {}, f"{path}.{f.name}")
+
+
+@pytest.mark.parametrize("job", ["dynamics_cycle", "datasheet", "boundary_search", "reconfig_motion"])
+def test_every_declared_job_setting_declares_how_it_is_checked(job):
+    """Each job's settings mirror its YAML key for key (name included, nested blocks as blocks, in the YAML's
+    order); every config field carries setting() metadata (a field without is derived: no YAML key), every
+    number a range or its own reader, every string its choices; the default config reads without a refusal."""
+    from omegaconf import OmegaConf
+
+    _, cls, inner = next(j for j in _declared_jobs() if j[0] == job)
+    cfg = compose(job)
+    e = OmegaConf.to_container(cfg.experiment, resolve=True)
+    _check_block(cls, e, "experiment")
+    for key, (how, classes) in inner.items():    # blocks read by a field's own reader
+        items = {"": e[key]} if how == "one" else {f".{k}": v for k, v in e[key].items()}
+        assert items
+        for name, block in items.items():
+            kind = classes[0] if len(classes) == 1 else next(c for c in classes
+                                                             if c.__name__.lower().startswith(block["kind"]))
+            _check_block(kind, block, f"experiment.{key}{name}")
+    s = validate_settings(cfg)
+    assert isinstance(s, cls) and s.name == job
+
+
+def validate_settings(cfg):
+    import jax
+
+    from deltajax import config as C
+
+    jax.config.update("jax_enable_x64", True)   # as the CLI at its default precision (the mechanism's range check)
+    robot, recon = C.robot_from_config(cfg.robot)
+    return C.validate_config(cfg, robot, recon)
+
+
+@pytest.mark.parametrize("job", ["dynamics_cycle", "datasheet", "boundary_search", "reconfig_motion"])
+def test_declared_settings_compose_the_default_config_unchanged(job):
+    """readers.schema_of(the job's settings), registered as the job's structured config, composes the default
+    YAML to the same config as today, key for key and in the same order (ready to replace the hand-written
+    schema of deltajax.schemas, or to add one where there is none)."""
+    import json
+
+    from hydra import compose as hydra_compose, initialize_config_dir
+    from hydra.core.config_store import ConfigStore
+    from omegaconf import OmegaConf
+
+    from deltajax import config as C
+    from deltajax.config.readers import schema_of
+    from deltajax.run import CONFIG_DIR
+
+    _, cls, _ = next(j for j in _declared_jobs() if j[0] == job)
+    today = OmegaConf.to_container(compose(job), resolve=True)
+    repo = ConfigStore.instance().repo["schema"]["experiment"]
+    before = repo.get(f"{job}.yaml")
+    try:
+        ConfigStore.instance().store(group="schema/experiment", name=job, node=schema_of(cls))
+        with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
+            generated = OmegaConf.to_container(hydra_compose(config_name="config", overrides=[f"experiment={job}"]),
+                                               resolve=True)
+    finally:
+        if before is None:
+            repo.pop(f"{job}.yaml", None)
+        else:
+            repo[f"{job}.yaml"] = before
+        C.register_schemas()
+    assert generated == today
+    assert json.dumps(generated) == json.dumps(today)      # the same keys in the same order

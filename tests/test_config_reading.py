@@ -48,8 +48,8 @@ def test_job_specs_are_plain_values_read_once():
     robot, recon = C.robot_from_config(cfg.robot)
     spec = C.dynamics_cycle_spec(cfg.experiment, cfg, robot, recon)
     assert spec.n_samples == 401 and spec.method == "virtual_work"
-    assert set(spec.setups) == {spec.cfg_name, "franco2026", "industrial"}
-    assert spec.setups["industrial"]["torque_limit"] == 140.0
+    assert spec.analysed() == list(dict.fromkeys([spec.cfg_name, "franco2026", "industrial"]))
+    assert spec.setup("industrial").torque_limit == 140.0 and spec.setup("no_block") == spec.setups["default"]
     with pytest.raises(ConfigError, match=r"experiment\.n_samples must be >= 11, got 5"):
         C.dynamics_cycle_spec(OmegaConf.merge(cfg.experiment, {"n_samples": 5}), cfg, robot, recon)
     b = C.boundary_search_spec(compose("boundary_search").experiment)

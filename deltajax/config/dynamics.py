@@ -11,98 +11,176 @@ import dataclasses
 from typing import Any, Mapping, Optional
 
 from .ga_reconfig import ga_reconfig_build
-from .readers import ConfigError, check_fits, read_choice, read_field, read_vector
+from .readers import ConfigError, check_fits, read_choice, read_field, read_settings, read_vector, setting
 from .robot import robot_from_config
 
-__all__ = ["DynamicsCycleSettings", "dynamics_cycle_spec", "DatasheetSettings", "source_run", "datasheet_settings"]
+__all__ = ["DynamicsCycleSettings", "dynamics_cycle_spec", "DatasheetSettings", "source_run", "datasheet_settings",
+           "CycleSetupBlock", "GaMotionBlock", "DatasheetMotorBlock"]
 
 
-def _cycle_setup(s, path: str) -> dict:
-    out = dict(centre=read_vector(f"{path}.centre", s.get("centre"), 3),
-               heading_deg=read_field(f"{path}.heading_deg", s.get("heading_deg"), unit="deg"))
-    for k, unit in (("duration", "s"), ("torque_limit", "N m"), ("speed_limit", "rad/s")):
-        out[k] = read_field(f"{path}.{k}", s.get(k), lo=0, lo_open=True, unit=unit)
-    return out
+def _presets():
+    from .. import presets
+
+    return presets.PRESETS
 
 
-@dataclasses.dataclass(frozen=True)
+def _motion_laws():
+    from ..trajectory import MOTION_LAWS
+
+    return MOTION_LAWS
+
+
+def _centre(path: str, v: Any) -> list:
+    return read_vector(path, v, 3)
+
+
+def _preset_names(path: str, v: Any) -> tuple:
+    return tuple(read_choice(f"{path} entry", name, _presets()) for name in (v or []))
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class CycleSetupBlock:
+    """``experiment.setups.<robot>``: where the standard cycle sits (centre, m, z down), its heading (deg), its
+    nominal duration (s) and the arm-side actuator limits (N m, rad/s)."""
+    centre: list = setting(read=_centre)
+    heading_deg: float = setting(0.0, unit="deg")
+    duration: float = setting(lo=0, lo_open=True, unit="s")
+    torque_limit: float = setting(lo=0, lo_open=True, unit="N m")
+    speed_limit: float = setting(lo=0, lo_open=True, unit="rad/s")
+
+
+def _setups(path: str, v: Any) -> dict:
+    if not isinstance(v, Mapping):
+        raise ConfigError(f"{path} must be a mapping of robot name (or default) -> cycle setup, got {v!r}")
+    return {str(k): read_settings(CycleSetupBlock, b, f"{path}.{k}") for k, b in v.items()}
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class GaMotionBlock:
+    """``experiment.ga_motion``: the GA paper's test motion, its amplitude (rad) and duration (s)."""
+    amplitude: float = setting(lo=0, lo_open=True, unit="rad")
+    duration: float = setting(lo=0, lo_open=True, unit="s")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
 class DynamicsCycleSettings:
-    """``experiment=dynamics_cycle``: the inverse-dynamics formulation, cycle samples, motion law and blend, the
-    presets analysed besides the config robot (named ``cfg_name``), each robot's cycle setup (centre m, heading
-    deg, duration s, torque N m and speed rad/s limits), the GA paper's motion (rad, s), the moving-R amplitude (m)."""
+    """``experiment=dynamics_cycle``: the presets analysed besides the config robot (named ``cfg_name``, derived
+    from ``robot.name``), the inverse-dynamics formulation, cycle samples, motion law and blend, each robot's cycle
+    setup (:meth:`setup`: its own block or ``default``), the GA paper's motion (rad, s), the moving-R amplitude
+    (m)."""
 
-    method: str
-    n_samples: int
-    law: str
-    blend: float
-    robots: tuple
-    cfg_name: str
-    setups: dict
-    ga_amplitude: float
-    ga_duration: float
-    recon_R_amplitude: float
+    name: str = setting("dynamics_cycle")
+    robots: tuple = setting((), read=_preset_names)
+    method: str = setting("virtual_work", choices=("virtual_work", "lagrange"))
+    n_samples: int = setting(lo=11)
+    law: str = setting("poly5", choices=_motion_laws)
+    blend: float = setting(lo=0, hi=1, hi_open=True)
+    setups: dict = setting({}, read=_setups)
+    ga_motion: GaMotionBlock = setting()
+    recon_R_amplitude: float = setting(lo=0, unit="m")
+    cfg_name: str = "robot"              # derived: the config robot's name (robot.name)
+
+    @property
+    def ga_amplitude(self) -> float:
+        return self.ga_motion.amplitude
+
+    @property
+    def ga_duration(self) -> float:
+        return self.ga_motion.duration
+
+    def analysed(self) -> list:
+        """The names of the analysed robots, each once: the config robot's, then ``robots``."""
+        return list(dict.fromkeys([self.cfg_name, *self.robots]))
+
+    def setup(self, name: str) -> CycleSetupBlock:
+        """The cycle setup of the analysed robot ``name``: its own block, else ``default``."""
+        return self.setups[name if name in self.setups else "default"]
 
 
 def dynamics_cycle_spec(e, cfg=None, robot=None, recon=None) -> DynamicsCycleSettings:
-    """``experiment.*`` of dynamics_cycle; ``setups`` holds one entry per analysed robot name (its own block or
-    ``default``), the config robot's under ``cfg_name``."""
-    from .. import presets
-    from ..trajectory import MOTION_LAWS
-
+    """``experiment.*`` of dynamics_cycle (:class:`DynamicsCycleSettings`), with what needs more than the block:
+    the robot's mass model, its name (``cfg_name``), a setup for every analysed robot, the moving R within the
+    robot's R range (``recon``) and the cycles' memory."""
     if robot is not None and robot.mass is None:
         raise ConfigError("experiment=dynamics_cycle needs a mass model: add a `mass:` block to the robot config "
                           f"(robot.mass), robot {(cfg or {}).get('robot', {}).get('name')!r} has none")
-    robots = list(e.get("robots") or [])
-    for name in robots:
-        read_choice("experiment.robots entry", name, presets.PRESETS)
-    cfg_name = "robot" if cfg is None else str(cfg.get("robot", {}).get("name", "robot"))
-    blocks = e.get("setups") or {}
-    setups = {}
-    for name in [cfg_name] + robots:
-        key = name if name in blocks else "default"
-        if key not in blocks:
+    s = read_settings(DynamicsCycleSettings, e, "experiment")
+    if cfg is not None:
+        s = dataclasses.replace(s, cfg_name=str(cfg.get("robot", {}).get("name", "robot")))
+    names = s.analysed()
+    for name in names:
+        if name not in s.setups and "default" not in s.setups:
             raise ConfigError(f"experiment.setups.{name} (or experiment.setups.default) is required")
-        setups[name] = _cycle_setup(blocks.get(key), f"experiment.setups.{key}")
-    gm = e.get("ga_motion") or {}
-    amp = read_field("experiment.recon_R_amplitude", e.get("recon_R_amplitude"), lo=0, unit="m")
+    amp = s.recon_R_amplitude
     if recon is not None and amp != 0.0:
         R0, lo, hi = float(recon.robot.base_radius), float(recon.R_min), float(recon.R_max)
         if not (lo <= R0 - amp and R0 + amp <= hi + 1e-12):
             raise ConfigError(f"experiment.recon_R_amplitude={amp!r} m takes R = {R0} +- {amp} m outside "
                               f"[{lo}, {hi}] m")
-    n_samples = read_field("experiment.n_samples", e.get("n_samples"), kind="int", lo=11)
     # positions, velocities and accelerations of every analysed robot's cycle (float64), at least
-    check_fits("experiment.n_samples", n_samples, 72.0 * n_samples * len(setups), f"{len(setups)} cycles of "
-          f"{n_samples} samples")
-    return DynamicsCycleSettings(
-                method=read_choice("experiment.method", e.get("method"), ("virtual_work", "lagrange")),
-                n_samples=n_samples,
-                law=read_choice("experiment.law", e.get("law"), MOTION_LAWS),
-                blend=read_field("experiment.blend", e.get("blend"), lo=0, hi=1, hi_open=True),
-                robots=tuple(robots), cfg_name=cfg_name, setups=setups,
-                ga_amplitude=read_field("experiment.ga_motion.amplitude", gm.get("amplitude"), lo=0, lo_open=True,
-                                    unit="rad"),
-                ga_duration=read_field("experiment.ga_motion.duration", gm.get("duration"), lo=0, lo_open=True, unit="s"),
-                recon_R_amplitude=amp)
+    check_fits("experiment.n_samples", s.n_samples, 72.0 * s.n_samples * len(names), f"{len(names)} cycles of "
+               f"{s.n_samples} samples")
+    return s
 
 
-@dataclasses.dataclass(frozen=True)
+def _payloads(path: str, v: Any) -> tuple:
+    out = tuple(read_field(f"{path}[{i}]", p, lo=0, unit="kg") for i, p in enumerate(v or []))
+    if not out:
+        raise ConfigError(f"{path} must list at least one payload (kg)")
+    return out
+
+
+def _cylinder_grid(path: str, v: Any) -> tuple:
+    grid = list(v or [])
+    if len(grid) != 3:
+        raise ConfigError(f"{path} must be [rings, angles, levels], got {grid!r}")
+    return tuple(read_field(f"{path}[{i}]", g, kind="int", lo=2) for i, g in enumerate(grid))
+
+
+def _point(path: str, v: Any) -> tuple:
+    return tuple(read_vector(path, v, 3))
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class DatasheetMotorBlock:
+    """``experiment.motor`` of the datasheet (a preset source's drive, motor side): the keyword arguments of
+    :class:`deltajax.Motor` (:meth:`kwargs`)."""
+    peak_torque: float = setting(lo=0, lo_open=True, unit="N m")
+    rated_torque: float = setting(lo=0, lo_open=True, unit="N m")
+    max_speed: float = setting(lo=0, lo_open=True, unit="rad/s")
+    corner_speed: float = setting(lo=0, lo_open=True, unit="rad/s")
+    rotor_inertia: float = setting(0.0, lo=0, unit="kg m^2")
+    efficiency: float = setting(1.0, lo=0, lo_open=True, hi=1)
+
+    def kwargs(self) -> dict:
+        return dataclasses.asdict(self)
+
+    def _check(self, path: str) -> None:
+        for lo_k, hi_k, unit in (("rated_torque", "peak_torque", "N m"), ("corner_speed", "max_speed", "rad/s")):
+            if getattr(self, lo_k) > getattr(self, hi_k):
+                raise ConfigError(f"{path}.{lo_k}={getattr(self, lo_k)!r} {unit} must be <= {path}.{hi_k}="
+                                  f"{getattr(self, hi_k)!r} {unit}")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
 class DatasheetSettings:
-    """``experiment=datasheet`` and the top-level ``source`` (kg, s, m, N m, rad/s); ``kind``: "preset" or
-    "run_dir"."""
+    """``experiment=datasheet`` (kg, s, m, N m, rad/s) and, derived, the top-level ``source`` with its ``kind``
+    ("preset" or "run_dir") and, for a run directory, its design space and motor settings."""
 
-    source: str
-    kind: str
-    payloads: tuple
-    vendor_dwell: float
-    hd_ratio: float
-    volume_h: float
-    n_samples: int
-    cylinder_grid: tuple
-    centre: Optional[tuple]
-    R: Optional[float]
-    motor: dict
-    gear_ratio: float
+    name: str = setting("datasheet")
+    payloads: tuple = setting(read=_payloads)
+    vendor_dwell: float = setting(lo=0, unit="s")
+    hd_ratio: float = setting(lo=0, lo_open=True, unit="1")
+    volume_h: float = setting(lo=0, lo_open=True, unit="m")
+    n_samples: int = setting(lo=3)
+    cylinder_grid: tuple = setting(read=_cylinder_grid)
+    centre: Optional[tuple] = setting(None, read=_point)
+    R: Optional[float] = setting(None, lo=0, lo_open=True, unit="m")
+    motor: DatasheetMotorBlock = setting()
+    gear_ratio: float = setting(lo=0, lo_open=True, unit="motor speed / arm speed")
+    # derived: the top-level source (a preset name or an absolute run directory) and what it brings
+    source: str = ""
+    kind: str = ""
     source_space: Any = None            # kind "run_dir": the source run's design space, rebuilt from its settings
     source_motor: Optional[dict] = None  # kind "run_dir": the source run's motor settings
 
@@ -152,33 +230,6 @@ def datasheet_settings(e, cfg=None, robot=None, recon=None) -> DatasheetSettings
     else:
         raise ConfigError(f"source={src!r} is neither a preset ({', '.join(sorted(presets.PRESETS))}) nor a run "
                           "directory with a results.h5")
-    pos = lambda k, unit: read_field(f"experiment.{k}", e.get(k), lo=0, lo_open=True, unit=unit)  # noqa: E731
-    payloads = [read_field(f"experiment.payloads[{i}]", p, lo=0, unit="kg") for i, p in enumerate(e.get("payloads") or [])]
-    if not payloads:
-        raise ConfigError("experiment.payloads must list at least one payload (kg)")
-    grid = e.get("cylinder_grid") or []
-    if len(grid) != 3:
-        raise ConfigError(f"experiment.cylinder_grid must be [rings, angles, levels], got {list(grid)!r}")
-    mcfg = e.get("motor") or {}
-    motor = {k: read_field(f"experiment.motor.{k}", mcfg.get(k), lo=0, lo_open=(k != "rotor_inertia"), unit=u)
-             for k, u in (("peak_torque", "N m"), ("rated_torque", "N m"), ("max_speed", "rad/s"),
-                          ("corner_speed", "rad/s"), ("rotor_inertia", "kg m^2"), ("efficiency", "1"))}
-    for lo_k, hi_k, unit in (("rated_torque", "peak_torque", "N m"), ("corner_speed", "max_speed", "rad/s")):
-        if motor[lo_k] > motor[hi_k]:
-            raise ConfigError(f"experiment.motor.{lo_k}={motor[lo_k]!r} {unit} must be <= experiment.motor.{hi_k}="
-                              f"{motor[hi_k]!r} {unit}")
-    if motor["efficiency"] > 1:
-        raise ConfigError(f"experiment.motor.efficiency must be in (0, 1], got {motor['efficiency']!r}")
-    centre = e.get("centre")
-    R = e.get("R")
-    return DatasheetSettings(
-        source=src, kind=kind, payloads=tuple(payloads),
-        vendor_dwell=read_field("experiment.vendor_dwell", e.get("vendor_dwell"), lo=0, unit="s"),
-        hd_ratio=pos("hd_ratio", "1"), volume_h=pos("volume_h", "m"),
-        n_samples=read_field("experiment.n_samples", e.get("n_samples"), kind="int", lo=3),
-        cylinder_grid=tuple(read_field(f"experiment.cylinder_grid[{i}]", g, kind="int", lo=2)
-                            for i, g in enumerate(grid)),
-        centre=None if centre is None else tuple(read_vector("experiment.centre", centre, 3)),
-        R=None if R is None else read_field("experiment.R", R, lo=0, lo_open=True, unit="m"),
-        motor=motor, gear_ratio=pos("gear_ratio", "motor speed / arm speed"),
-        **(dict(zip(("source_space", "source_motor"), source_run(src))) if kind == "run_dir" else {}))
+    s = read_settings(DatasheetSettings, e, "experiment")
+    return dataclasses.replace(s, source=src, kind=kind, **(
+        dict(zip(("source_space", "source_motor"), source_run(src))) if kind == "run_dir" else {}))

@@ -6,141 +6,234 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from typing import Any, Optional
+from typing import Any, Mapping, Optional
 
 from ..geometry import GeometryError, ReconfigurableDelta
-from .readers import ConfigError, check_fits, read_choice, read_field, read_vector
+from .readers import ConfigError, check_fits, read_settings, read_vector, setting
 
-__all__ = ["MECHANISM_FIELDS", "ReconfigMotionSettings", "reconfig_motion_spec"]
-
-
-#: the numeric settings of experiment.mechanism (deltajax.mechanism.example_screw_linkage / DirectRadial), with the
-#: ranges the mechanism needs, checked in the units the config writes them in
-MECHANISM_FIELDS = {
-    "lead": dict(lo=0, lo_open=True, unit="m"), "d2": dict(lo=0, lo_open=True, unit="m"), "d3": dict(unit="m"),
-    "sweep_deg": dict(lo=0, hi=90, lo_open=True, hi_open=True, unit="deg"),
-    "efficiency": dict(lo=0, hi=1, lo_open=True), "back_efficiency": dict(lo=0, hi=1, lo_open=True),
-    "gear_ratio": dict(lo=0, lo_open=True), "assembly": dict(kind="int", choices=(1, -1)),
-    "nut_side": dict(kind="int", choices=(1, -1)),
-}
+__all__ = ["MECHANISM_FIELDS", "ReconfigMotionSettings", "reconfig_motion_spec", "DriveBlock", "MechanismBlock",
+           "RefineBlock", "AdeptCaseBlock", "TaskCaseBlock"]
 
 
-@dataclasses.dataclass(frozen=True)
+def _index_names():
+    from ..indices import INDEX_NAMES
+
+    return INDEX_NAMES
+
+
+def _aggregates():
+    from ..motion import AGGREGATES
+
+    return AGGREGATES
+
+
+def _boundaries():
+    from ..motion import BOUNDARIES
+
+    return BOUNDARIES
+
+
+def _mechanisms():
+    from ..mechanism import MECHANISMS
+
+    return MECHANISMS
+
+
+def _motion_laws():
+    from ..trajectory import MOTION_LAWS
+
+    return MOTION_LAWS
+
+
+def _sign(path: str, v: Any) -> int:
+    if isinstance(v, bool) or v not in (1, -1):
+        raise ConfigError(f"{path} must be one of 1, -1, got {v!r}")
+    return int(v)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class DriveBlock:
+    """``experiment.drive``: the limits of the R drive at the R joint (:class:`deltajax.RDriveLimits`)."""
+    speed: float = setting(lo=0, lo_open=True, unit="m/s")
+    acceleration: float = setting(lo=0, lo_open=True, unit="m/s^2")
+    force: float = setting(lo=0, lo_open=True, unit="N")
+
+
+def _drive(path: str, v: Any):
+    from ..motion import RDriveLimits
+
+    return RDriveLimits(**dataclasses.asdict(read_settings(DriveBlock, v, path)))
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class MechanismBlock:
+    """``experiment.mechanism``: the reconfiguration mechanism's kind and the arguments of
+    :func:`deltajax.mechanism.example_screw_linkage` / :class:`deltajax.mechanism.DirectRadial` it sets, in the
+    units the config writes them in (``lead`` in m per screw turn; the linkage stores a pitch in m/rad). Unset
+    (None): the mechanism's own default."""
+    kind: str = setting("screw_linkage", choices=_mechanisms)
+    lead: Optional[float] = setting(None, lo=0, lo_open=True, unit="m")
+    d2: Optional[float] = setting(None, lo=0, lo_open=True, unit="m")
+    d3: Optional[float] = setting(None, unit="m")
+    sweep_deg: Optional[float] = setting(None, lo=0, hi=90, lo_open=True, hi_open=True, unit="deg")
+    efficiency: Optional[float] = setting(None, lo=0, hi=1, lo_open=True)
+    back_efficiency: Optional[float] = setting(None, lo=0, hi=1, lo_open=True)
+    gear_ratio: Optional[float] = setting(None, lo=0, lo_open=True)
+    assembly: Optional[int] = setting(None, read=_sign)
+    nut_side: Optional[int] = setting(None, read=_sign)
+
+    def kwargs(self) -> dict:
+        """The arguments set (the mechanism's keyword arguments)."""
+        return {f.name: getattr(self, f.name) for f in dataclasses.fields(self)
+                if f.name != "kind" and getattr(self, f.name) is not None}
+
+
+def _mechanism(path: str, v: Any) -> MechanismBlock:
+    return MechanismBlock() if v is None else read_settings(MechanismBlock, v, path)
+
+
+#: the settings of experiment.mechanism besides its kind (:class:`MechanismBlock`, whose metadata checks them)
+MECHANISM_FIELDS = tuple(f.name for f in dataclasses.fields(MechanismBlock) if f.name != "kind")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class RefineBlock:
+    """``experiment.refine``: the optax spline refinement of the DP's R(t) (learning rate in m per Adam step)."""
+    enabled: bool = setting(True)
+    n_ctrl: int = setting(16, lo=6)
+    steps: int = setting(150, lo=1)
+    learning_rate: float = setting(2e-4, lo=0, lo_open=True)
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class AdeptCaseBlock:
+    """``experiment.cases.<name>`` of ``kind: adept``: the standard 25/305/25 mm cycle (centre m, z down; heading
+    deg; duration s), its blend, motion law and samples, and the DP's boundary condition."""
+    kind: str = setting(choices=("adept", "task"))
+    centre: list = setting(read=lambda path, v: read_vector(path, v, 3))
+    heading_deg: float = setting(unit="deg")
+    duration: float = setting(lo=0, lo_open=True, unit="s")
+    blend: float = setting(0.5, lo=0, hi=1, hi_open=True)
+    law: str = setting("poly5", choices=_motion_laws)
+    n_samples: int = setting(lo=3)
+    boundary: str = setting("free", choices=_boundaries)
+
+    def samples(self) -> int:
+        return self.n_samples
+
+
+def _points(path: str, v: Any) -> list:
+    return [read_vector(f"{path}[{i}]", q, 3) for i, q in enumerate(v or [])]
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class TaskCaseBlock:
+    """``experiment.cases.<name>`` of ``kind: task``: rest-to-rest moves through task points (m, z down), each
+    segment's duration (s), samples and motion law, open or closed, and the DP's boundary condition."""
+    kind: str = setting(choices=("adept", "task"))
+    points: list = setting([], read=_points)
+    segment_duration: float = setting(lo=0, lo_open=True, unit="s")
+    samples_per_segment: int = setting(lo=2)
+    law: str = setting("poly5", choices=_motion_laws)
+    boundary: str = setting("free", choices=_boundaries)
+    closed: bool = setting(False)
+
+    def samples(self) -> int:
+        return self.samples_per_segment * max(1, len(self.points))
+
+
+def _cases(path: str, v: Any) -> dict:
+    from .readers import read_choice
+
+    if not isinstance(v, Mapping) or not v:
+        raise ConfigError(f"{path} must list at least one case")
+    out = {}
+    for name, c in v.items():
+        p = f"{path}.{name}"
+        kind = read_choice(f"{p}.kind", c.get("kind") if isinstance(c, Mapping) else None, ("adept", "task"))
+        out[str(name)] = read_settings(AdeptCaseBlock if kind == "adept" else TaskCaseBlock, c, p)
+    return out
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
 class ReconfigMotionSettings:
-    """``experiment=reconfig_motion``: the selection criterion and aggregate, the k~ parameters, the R step (m) and
-    the robot's R samples at it (``recon``), the arms' torque (N m) and speed (rad/s) limits, the R drive limits
-    (:class:`deltajax.RDriveLimits`), the reconfiguration mechanism (and its range check), the spline
-    refinement, and each case's (Cartesian cycle, boundary condition)."""
+    """``experiment=reconfig_motion``: the selection criterion and aggregate, the k~ parameters, the R step (m),
+    the R drive limits (``drive``: :class:`deltajax.RDriveLimits`), the arms' torque (N m) and speed (rad/s)
+    limits, the reconfiguration mechanism's settings, the spline refinement and the cases. Derived by
+    :func:`reconfig_motion_spec` from the robot: its R samples at ``R_step`` (``recon``), the mechanism (``mech``,
+    and its range check ``mech_info``) and each case's (Cartesian cycle, boundary condition) (``cycles``)."""
 
-    criterion: str
-    aggregate: str
-    b_v: float
-    b_f: float
-    R_step: float
-    torque_limit: float
-    speed_limit: float
-    beta: float
-    drive: Any
-    recon: Any
-    mech: Any
-    refine: dict
-    cases: dict
+    name: str = setting("reconfig_motion")
+    criterion: str = setting("k_tilde", choices=_index_names)
+    aggregate: str = setting("integral", choices=_aggregates)
+    b_v: float = setting(lo=0, lo_open=True)
+    b_f: float = setting(lo=0, lo_open=True)
+    beta: float = setting(0.5, lo=0, hi=1, lo_open=True, hi_open=True)
+    R_step: float = setting(lo=0, lo_open=True, unit="m")
+    drive: Any = setting(read=_drive)
+    torque_limit: float = setting(lo=0, lo_open=True, unit="N m")
+    speed_limit: float = setting(lo=0, lo_open=True, unit="rad/s")
+    # read by its own reader so that its structured config holds the keys written (each unset one: the default)
+    mechanism: MechanismBlock = setting(MechanismBlock(), read=_mechanism)
+    refine: RefineBlock = setting(RefineBlock())
+    cases: dict = setting(read=_cases)
+    # derived (from the robot): see the docstring
+    recon: Any = None
+    mech: Any = None
     mech_info: Optional[dict] = None
+    cycles: Optional[dict] = None
 
 
 def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> ReconfigMotionSettings:
-    """``experiment.*`` of reconfig_motion as plain values and library objects: the R drive limits
-    (:class:`deltajax.RDriveLimits`), the reconfiguration mechanism, and each case's Cartesian cycle."""
+    """``experiment.*`` of reconfig_motion (:class:`ReconfigMotionSettings`), with what needs the robot: its R
+    samples at ``R_step``, the mechanism over its R range, each case's Cartesian cycle (``dtype``) and the DP's
+    memory."""
     import jax.numpy as jnp
 
     from .. import trajectory as tr
-    from ..indices import INDEX_NAMES
-    from ..mechanism import MECHANISMS, DirectRadial, example_screw_linkage
-    from ..motion import AGGREGATES, BOUNDARIES, RDriveLimits
+    from ..mechanism import DirectRadial, example_screw_linkage
 
     if recon is None:
         raise ConfigError("experiment=reconfig_motion needs a reconfigurable robot: robot.R_range is null")
     if recon.robot.mass is None:
         raise ConfigError("experiment=reconfig_motion needs a mass model: robot.mass is null")
-    pos = lambda k, unit="": read_field(f"experiment.{k}", e.get(k), lo=0, lo_open=True, unit=unit)  # noqa: E731
-    out = dict(criterion=read_choice("experiment.criterion", e.get("criterion", "k_tilde"), INDEX_NAMES),
-               aggregate=read_choice("experiment.aggregate", e.get("aggregate", "integral"), AGGREGATES),
-               b_v=pos("b_v"), b_f=pos("b_f"), R_step=pos("R_step", "m"), torque_limit=pos("torque_limit", "N m"),
-               speed_limit=pos("speed_limit", "rad/s"),
-               beta=read_field("experiment.beta", e.get("beta", 0.5), lo=0, hi=1, lo_open=True, hi_open=True))
-    d = e.get("drive")
-    if d is None:
-        raise ConfigError("experiment.drive is required (speed m/s, acceleration m/s^2, force N)")
-    lim = {k: read_field(f"experiment.drive.{k}", d.get(k), lo=0, lo_open=True, unit=unit)
-           for k, unit in (("speed", "m/s"), ("acceleration", "m/s^2"), ("force", "N"))}
-    out["drive"] = RDriveLimits(**lim)
+    s = read_settings(ReconfigMotionSettings, e, "experiment")
     try:  # the DP's R samples: the robot's range at experiment.R_step
-        out["recon"] = ReconfigurableDelta.from_range(recon.robot, float(recon.R_min), float(recon.R_max),
-                                                      out["R_step"])
+        R = ReconfigurableDelta.from_range(recon.robot, float(recon.R_min), float(recon.R_max), s.R_step)
     except GeometryError as err:
-        raise ConfigError(f"experiment.R_step={out['R_step']!r} m: {err}") from None
+        raise ConfigError(f"experiment.R_step={s.R_step!r} m: {err}") from None
     # the DP's table: every R sample at every time sample of a case (3 at least)
-    check_fits("experiment.R_step", out["R_step"], 3 * 8.0 * out["recon"].n_R,
-          f"{out['recon'].n_R:.3g} R samples at each time sample", unit="m")
-    mech = dict(e.get("mechanism") or {})
-    kind = read_choice("experiment.mechanism.kind", mech.pop("kind", "screw_linkage"), MECHANISMS)
-    for k, v in mech.items():  # in the units the config gives them (the linkage stores lead as a pitch in m/rad)
-        if k in MECHANISM_FIELDS:
-            rule = dict(MECHANISM_FIELDS[k])
-            choices = rule.pop("choices", None)
-            mech[k] = read_field(f"experiment.mechanism.{k}", v, **rule)
-            if choices is not None and mech[k] not in choices:
-                raise ConfigError(f"experiment.mechanism.{k} must be one of {', '.join(map(str, choices))}, "
-                                  f"got {v!r}")
+    check_fits("experiment.R_step", s.R_step, 3 * 8.0 * R.n_R, f"{R.n_R:.3g} R samples at each time sample",
+               unit="m")
+    mech, mech_info = None, None
     try:
-        if kind == "direct":
-            out["mech"] = DirectRadial(**mech)
+        if s.mechanism.kind == "direct":
+            mech = DirectRadial(**s.mechanism.kwargs())
         else:
             R0, R1 = float(recon.R_min), float(recon.R_max)
-            out["mech"] = example_screw_linkage(R0, R1, **mech)
-            out["mech_info"] = out["mech"].check_range(R0, R1)
+            mech = example_screw_linkage(R0, R1, **s.mechanism.kwargs())
+            mech_info = mech.check_range(R0, R1)
     except (TypeError, ValueError) as err:
         raise ConfigError(f"experiment.mechanism: {err}") from None
-    ref = e.get("refine") or {}
-    out["refine"] = dict(enabled=read_field("experiment.refine.enabled", ref.get("enabled", True), kind="bool"),
-                         n_ctrl=read_field("experiment.refine.n_ctrl", ref.get("n_ctrl", 16), kind="int", lo=6),
-                         steps=read_field("experiment.refine.steps", ref.get("steps", 150), kind="int", lo=1),
-                         learning_rate=read_field("experiment.refine.learning_rate", ref.get("learning_rate", 2e-4),
-                                              lo=0, lo_open=True))
-    cases = e.get("cases")
-    if not cases:
-        raise ConfigError("experiment.cases must list at least one case")
     dtype = jnp.result_type(float) if dtype is None else dtype
-    out["cases"] = {}
-    for name, c in cases.items():
+    cycles = {}
+    for name, c in s.cases.items():
         p = f"experiment.cases.{name}"
-        kind = read_choice(f"{p}.kind", c.get("kind"), ("adept", "task"))
-        boundary = read_choice(f"{p}.boundary", c.get("boundary", "free"), BOUNDARIES)
-        law = read_choice(f"{p}.law", c.get("law", "poly5"), tr.MOTION_LAWS)
         # the cycle's samples (position, velocity, acceleration) and the DP's table over them and the R samples
-        key = "n_samples" if kind == "adept" else "samples_per_segment"
-        per = read_field(f"{p}.{key}", c.get(key), kind="int", lo=3 if kind == "adept" else 2)
-        n_t = per * (1 if kind == "adept" else max(1, len(c.get("points") or [])))
-        check_fits(f"{p}.{key}", per, n_t * (72.0 + 8.0 * out["recon"].n_R),
-              f"{n_t} cycle samples x {out['recon'].n_R} R samples (the DP's table)")
+        key = "n_samples" if c.kind == "adept" else "samples_per_segment"
+        n_t = c.samples()
+        check_fits(f"{p}.{key}", getattr(c, key), n_t * (72.0 + 8.0 * R.n_R),
+                   f"{n_t} cycle samples x {R.n_R} R samples (the DP's table)")
         try:
-            if kind == "adept":
-                cyc = tr.adept_cycle(read_vector(f"{p}.centre", c.get("centre"), 3),
-                                     heading=math.radians(read_field(f"{p}.heading_deg", c.get("heading_deg"), unit="deg")),
-                                     duration=read_field(f"{p}.duration", c.get("duration"), lo=0, lo_open=True, unit="s"),
-                                     law=law, blend=read_field(f"{p}.blend", c.get("blend", 0.5), lo=0, hi=1, hi_open=True),
-                                     n_samples=read_field(f"{p}.n_samples", c.get("n_samples"), kind="int", lo=3),
-                                     dtype=dtype)
+            if c.kind == "adept":
+                cyc = tr.adept_cycle(c.centre, heading=math.radians(c.heading_deg), duration=c.duration, law=c.law,
+                                     blend=c.blend, n_samples=c.n_samples, dtype=dtype)
             else:
-                pts = [read_vector(f"{p}.points[{i}]", q, 3) for i, q in enumerate(c.get("points") or [])]
-                cyc = tr.task_path(pts, segment_duration=read_field(f"{p}.segment_duration", c.get("segment_duration"),
-                                                                lo=0, lo_open=True, unit="s"),
-                                   law=law, samples_per_segment=read_field(f"{p}.samples_per_segment",
-                                                                       c.get("samples_per_segment"), kind="int", lo=2),
-                                   closed=read_field(f"{p}.closed", c.get("closed", False), kind="bool"), dtype=dtype)
+                cyc = tr.task_path(c.points, segment_duration=c.segment_duration, law=c.law,
+                                   samples_per_segment=c.samples_per_segment, closed=c.closed, dtype=dtype)
         except ValueError as err:
             if isinstance(err, ConfigError):
                 raise
             raise ConfigError(f"{p}: {err}") from None
-        out["cases"][name] = (cyc, boundary)
-    return ReconfigMotionSettings(**out)
+        cycles[name] = (cyc, c.boundary)
+    return dataclasses.replace(s, recon=R, mech=mech, mech_info=mech_info, cycles=cycles)

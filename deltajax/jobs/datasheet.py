@@ -81,7 +81,7 @@ def _designs_from_preset(name: str, spec):
     robot = preset_robot(name)
     if robot is None:
         raise ConfigError(f"source={name!r}: the preset has no mass model, a datasheet needs one")
-    return [(name, robot, Motor(**spec.motor), spec.gear_ratio, spec.R)]
+    return [(name, robot, Motor(**spec.motor.kwargs()), spec.gear_ratio, spec.R)]
 
 
 def save(res, group: str, ds) -> None:

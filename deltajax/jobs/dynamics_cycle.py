@@ -148,10 +148,10 @@ def _in_dtype(robot, dtype):
 def _robot(st: State, name: str, last: bool) -> None:
     """One robot along the standard cycle (its own centre, heading, duration and limits) and the GA paper's motion:
     each case computed, stored (flushed once both are) and drawn (:func:`_case`)."""
-    spec, s = st.spec, st.spec.setups[name]
+    spec, s = st.spec, st.spec.setup(name)
     robot = _in_dtype(st.robots[name], st.dtype)
-    limits = Limits(torque=s["torque_limit"], speed=s["speed_limit"])
-    cycle = tr.adept_cycle(s["centre"], heading=math.radians(s["heading_deg"]), duration=s["duration"],
+    limits = Limits(torque=s.torque_limit, speed=s.speed_limit)
+    cycle = tr.adept_cycle(s.centre, heading=math.radians(s.heading_deg), duration=s.duration,
                            law=spec.law, blend=spec.blend, n_samples=spec.n_samples, dtype=st.dtype)
     for case, cyc in {"adept": cycle, "ga_motion": st.ga}.items():
         _case(st, name, robot, s, limits, case, cyc)
@@ -172,8 +172,8 @@ def _case(st: State, name: str, robot, s: dict, limits, case: str, cyc) -> None:
     gap = float(np.nanmax(np.abs(np.asarray(prof.tau) - np.asarray(check.tau)))) if bool(m.reachable) else 0.0
     st.max_formulation_gap = max(st.max_formulation_gap, gap)
     g = f"dynamics/{name}/{case}"
-    _save_case(res, g, prof, dict(duration=float(cyc.duration), method=method, limits_torque=s["torque_limit"],
-                                  limits_speed=s["speed_limit"], formulation_gap_Nm=gap,
+    _save_case(res, g, prof, dict(duration=float(cyc.duration), method=method, limits_torque=s.torque_limit,
+                                  limits_speed=s.speed_limit, formulation_gap_Nm=gap,
                                   forearm_model=robot.mass.forearm_model))
     mg = f"dynamics/{name}/{case}_metrics"
     # stored as peak_joint_*: actuator (joint) rates, unlike the GA's end-effector peak_speed (m/s)
@@ -194,8 +194,8 @@ def _case(st: State, name: str, robot, s: dict, limits, case: str, cyc) -> None:
             f"RMS {np.array2string(np.asarray(m.rms_torque), precision=3)} N m, "
             f"peak speed {np.array2string(np.asarray(m.peak_speed), precision=3)} rad/s at T = "
             f"{float(cyc.duration):.3f} s; min cycle time {float(m.cycle_time):.4f} s "
-            f"({float(m.cycles_per_minute):.1f} cycles/min) under {s['torque_limit']} N m, "
-            f"{s['speed_limit']} rad/s; |tau_{method} - tau_{other}| <= {gap:.2e} N m")
+            f"({float(m.cycles_per_minute):.1f} cycles/min) under {s.torque_limit} N m, "
+            f"{s.speed_limit} rad/s; |tau_{method} - tau_{other}| <= {gap:.2e} N m")
     if case == "adept" and bool(m.ok):
         prof_min = profile_jit(robot, cyc, m.cycle_time, method=method)
         _save_case(res, f"dynamics/{name}/adept_at_min_cycle_time", prof_min,
@@ -216,8 +216,8 @@ def _moving_R(st: State) -> None:
     robot = _in_dtype(recon.robot, st.dtype)
     R0, A = float(recon.robot.base_radius), spec.recon_R_amplitude
     cyc = tr.with_R_profile(st.ga, R0, amplitude=A)
-    s = spec.setups[cfg_name]
-    limits = Limits(torque=s["torque_limit"], speed=s["speed_limit"])
+    s = spec.setup(cfg_name)
+    limits = Limits(torque=s.torque_limit, speed=s.speed_limit)
     m = st.metrics_jit(robot, cyc, limits, method=method)
     prof = st.profile_jit(robot, cyc, method=method)
     check = st.profile_jit(robot, cyc, method=st.other)

@@ -55,8 +55,8 @@ def run(ctx) -> None:
     st = State(ctx=ctx, res=ctx.results, s=s, kw=dict(b_v=s.b_v, b_f=s.b_f, beta=s.beta),
                tables_jit=jax.jit(mo.path_tables, static_argnames=("criterion",)),
                arms=Limits(torque=s.torque_limit, speed=s.speed_limit), cases={},
-               bar=ctx.progress(total=(4 + bool(s.refine["enabled"])) * len(s.cases), desc="reconfig_motion"))
-    stages = [Stage(f"{case}/{step}", functools.partial(fn, case=case)) for case in s.cases
+               bar=ctx.progress(total=(4 + bool(s.refine.enabled)) * len(s.cycles), desc="reconfig_motion"))
+    stages = [Stage(f"{case}/{step}", functools.partial(fn, case=case)) for case in s.cycles
               for step, fn in CASE_STAGES]
     Runner(ctx, "reconfig_motion", resumable=False).run((*stages, Stage("mechanism", _store_mechanism)), st)
 
@@ -71,7 +71,7 @@ def _paths(st: State, case: str) -> None:
     """R(t) of one case by every method: the index tables on the R samples, the best fixed R, the pointwise
     argmax, the path DP under the drive limits and (if on) its spline refinement; wall and CPU seconds timed."""
     s, recon, lim = st.s, st.s.recon, st.s.drive
-    cyc, boundary = s.cases[case]
+    cyc, boundary = s.cycles[case]
     c = st.cases[case] = State(cyc=cyc, boundary=boundary)
     t0 = time.perf_counter()
     c0 = time.process_time()
@@ -84,13 +84,13 @@ def _paths(st: State, case: str) -> None:
     c.dp = dp = mo.resolve_path(recon, cyc, s.criterion, limits=lim, aggregate=s.aggregate, boundary=boundary,
                                 tables=tab, **st.kw)
     c.t_dp = time.perf_counter() - t0
-    _done(st, case, "spline refinement" if s.refine["enabled"] else "reports")
+    _done(st, case, "spline refinement" if s.refine.enabled else "reports")
     if not dp.ok:
         raise RuntimeError(f"case {case!r}: no R(t) meets the drive limits {lim} on this path (bands {dp.bands})")
-    if s.refine["enabled"]:
+    if s.refine.enabled:
         c.rf = refine_path(recon, cyc, dp, s.criterion, limits=lim, aggregate=s.aggregate,
-                           boundary=boundary, n_ctrl=s.refine["n_ctrl"], steps=s.refine["steps"],
-                           learning_rate=s.refine["learning_rate"], **st.kw)
+                           boundary=boundary, n_ctrl=s.refine.n_ctrl, steps=s.refine.steps,
+                           learning_rate=s.refine.learning_rate, **st.kw)
         _done(st, case, "reports")
     else:
         c.rf = None
