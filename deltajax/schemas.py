@@ -1,11 +1,12 @@
-"""Hydra structured-config schemas: the keys and types of the robot block and of every experiment block.
+"""Hydra structured-config schemas: the robot block's (written here) and the registration of every experiment's.
 
 Registered in the ConfigStore by :func:`register_schemas` (``deltajax.run`` calls it at import). A mistyped key,
 a wrong type or an unknown ``+key`` is rejected at composition (``configs/config.yaml`` puts
-``schema/robot`` before the robot group and ``schema/experiment/<name>`` before the experiment group;
-``optional``: an experiment without a schema is validated by its job only). Values and defaults live in the
-YAML files; ranges and cross-field rules are checked by :func:`deltajax.config.validate_config`. Pure data:
-imports nothing from deltajax.
+``schema/robot`` before the robot group and ``schema/experiment/<name>`` before the experiment group). The
+experiments' schemas are generated from their settings dataclasses (:data:`deltajax.config.EXPERIMENT_SCHEMAS`,
+:func:`deltajax.config.readers.schema_of`), where ranges, units and choices are declared too. Values live in the
+YAML files; the robot's ranges and cross-field rules are checked by :func:`deltajax.config.validate_config`. Pure
+data: imports nothing from deltajax.
 """
 
 from __future__ import annotations
@@ -13,14 +14,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Dict, List, Optional
 
-__all__ = ["RobotSchema", "EXPERIMENT_SCHEMAS", "register_schemas", "unknown_key", "schema_keys"]
-
-_REQ = "???"  # omegaconf.MISSING: the YAML must give a value
-
-
-def _list(*items):
-    return dataclasses.field(default_factory=lambda: list(items))
-
+__all__ = ["RobotSchema", "register_schemas", "unknown_key", "schema_keys"]
 
 @dataclasses.dataclass
 class RRangeSchema:
@@ -61,172 +55,15 @@ class RobotSchema:
     mass: Optional[MassSchema] = None
 
 
-@dataclasses.dataclass
-class GridSchema:
-    x: Optional[List[float]] = None
-    y: Optional[List[float]] = None
-    z: Optional[List[float]] = None
-    h: float = _REQ
-    bounds: Optional[List[List[float]]] = None
-
-
-@dataclasses.dataclass
-class WorkspaceGridSchema:
-    name: str = "workspace_grid"
-    grid: GridSchema = dataclasses.field(default_factory=GridSchema)
-    b_v: float = _REQ
-    b_f: float = _REQ
-    beta: float = _REQ
-    store: List[str] = _list()
-    chunk_points: int = _REQ
-    backend: str = "auto"
-    devices: Any = "all"  # 'all' or a count
-    checkpoint_s: float = 60.0
-    resume: bool = True
-    stop_after: Optional[int] = None
-
-
-@dataclasses.dataclass
-class ReconfigWorkspaceSchema:
-    name: str = "reconfig_workspace"
-    h: float = _REQ
-    chunk_points: int = _REQ
-    checkpoint: bool = True
-
-
-@dataclasses.dataclass
-class ReconfigIndicesSchema:
-    name: str = "reconfig_indices"
-    h: float = _REQ
-    criterion: str = "k_tilde"
-    mode: str = "fast"
-    b_v: float = _REQ
-    b_f: float = _REQ
-    slices_z: List[float] = _list()
-    slice_index: str = "omega_v"
-    chunk_points: int = _REQ
-    checkpoint: bool = True
-    store_fields: List[str] = _list()
-
-
-@dataclasses.dataclass
-class IndicesExamplesSchema:
-    name: str = "indices_examples"
-    R_step: float = _REQ
-    points: List[List[float]] = _list()
-    b_v: float = _REQ
-    b_f: float = _REQ
-    beta: float = _REQ
-    matrix: str = "theta3x3"
-
-
-@dataclasses.dataclass
-class BenchKernelSchema:
-    name: str = "bench_kernel"
-    n_points: int = _REQ
-    n_baseline: int = _REQ
-    block: int = 4096
-    repeats: int = _REQ
-    R: float = _REQ
-    dtypes: List[str] = _list()
-
-
-@dataclasses.dataclass
-class CycleSetupSchema:
-    centre: List[float] = _list()
-    heading_deg: float = 0.0
-    duration: float = _REQ
-    torque_limit: float = _REQ
-    speed_limit: float = _REQ
-
-
-@dataclasses.dataclass
-class GAMotionSchema:
-    amplitude: float = _REQ
-    duration: float = _REQ
-
-
-@dataclasses.dataclass
-class DynamicsCycleSchema:
-    name: str = "dynamics_cycle"
-    robots: List[str] = _list()
-    method: str = "virtual_work"
-    n_samples: int = _REQ
-    law: str = "poly5"
-    blend: float = _REQ
-    setups: Dict[str, CycleSetupSchema] = dataclasses.field(default_factory=dict)
-    ga_motion: GAMotionSchema = dataclasses.field(default_factory=GAMotionSchema)
-    recon_R_amplitude: float = _REQ
-
-
-@dataclasses.dataclass
-class BoundarySearchSchema:
-    name: str = "boundary_search"
-    centre: List[float] = _list()
-    eps: float = _REQ
-    steps_deg: List[float] = _list()
-    rho_max: float = _REQ
-    predictor: str = "tangent"
-    half_space: bool = True
-    volume_rule: str = "pyramid"
-    profile_samples: int = _REQ
-    grid_h: float = _REQ
-    grid_box: List[List[float]] = _list()
-    centre_sweep_z: List[float] = _list()
-    sweep_step_deg: float = _REQ
-    timing_repeats: int = _REQ
-
-
-@dataclasses.dataclass
-class MotorSchema:
-    peak_torque: float = _REQ
-    rated_torque: float = _REQ
-    max_speed: float = _REQ
-    corner_speed: float = _REQ
-    rotor_inertia: float = 0.0
-    efficiency: float = 1.0
-
-
-@dataclasses.dataclass
-class DatasheetSchema:
-    name: str = "datasheet"
-    payloads: List[float] = _list()
-    vendor_dwell: float = _REQ
-    hd_ratio: float = _REQ
-    volume_h: float = _REQ
-    n_samples: int = _REQ
-    cylinder_grid: List[int] = _list()
-    centre: Optional[List[float]] = None
-    R: Optional[float] = None
-    motor: MotorSchema = dataclasses.field(default_factory=MotorSchema)
-    gear_ratio: float = _REQ
-
-
-# ga_reconfig's schema is generated from its settings (deltajax.config: readers.schema_of(GaReconfigSettings)).
-
-
-#: experiment name -> schema, registered as ``schema/experiment/<name>``.
-EXPERIMENT_SCHEMAS = {
-    "workspace_grid": WorkspaceGridSchema,
-    "reconfig_workspace": ReconfigWorkspaceSchema,
-    "reconfig_indices": ReconfigIndicesSchema,
-    "indices_examples": IndicesExamplesSchema,
-    "bench_kernel": BenchKernelSchema,
-    "dynamics_cycle": DynamicsCycleSchema,
-    "boundary_search": BoundarySearchSchema,
-    "datasheet": DatasheetSchema,
-}
-
-
-def register_schemas(experiments: Optional[Dict[str, Any]] = None) -> None:
-    """Register the schemas in Hydra's ConfigStore (idempotent; run.py calls it at import, through
-    :func:`deltajax.config.register_schemas`, with the generated ones added): ``experiments`` name -> schema,
-    default :data:`EXPERIMENT_SCHEMAS`."""
+def register_schemas(experiments: Dict[str, Any]) -> None:
+    """Register the robot's schema and ``experiments`` (name -> schema; the experiments' are generated from their
+    settings, :data:`deltajax.config.EXPERIMENT_SCHEMAS`) in Hydra's ConfigStore (idempotent; run.py calls it at
+    import, through :func:`deltajax.config.register_schemas`)."""
     from hydra.core.config_store import ConfigStore
 
     cs = ConfigStore.instance()
     cs.store(group="schema/robot", name="delta", node=RobotSchema)
-    for name, node in (EXPERIMENT_SCHEMAS if experiments is None else experiments).items():
+    for name, node in experiments.items():
         cs.store(group="schema/experiment", name=name, node=node)
 
 

@@ -132,113 +132,8 @@ def test_settings_are_read_from_their_declared_metadata():
             read_settings(Outer, block, "e")
 
 
-def test_every_main_job_setting_declares_how_it_is_checked():
-    """Every field of the main job's settings tree carries metadata (deltajax.config.readers.setting); every
-    number either a range or its own reader; the default YAML reads without a refusal."""
-    import dataclasses
-    import typing
-
-    from deltajax.config import ga_reconfig as G
-
-    def walk(cls, path):
-        for f in dataclasses.fields(cls):
-            spec = f.metadata.get("deltajax")
-            assert spec is not None, f"{path}.{f.name} has no setting() metadata"
-            tp = typing.get_type_hints(cls)[f.name]
-            tp = next((a for a in typing.get_args(tp) if a is not type(None)), tp)   # Optional[X] -> X
-            if dataclasses.is_dataclass(tp):
-                yield from walk(tp, f"{path}.{f.name}")
-            elif tp in (int, float) and spec.read is None and f.name != "threshold":   # threshold: by the index
-                assert spec.lo is not None or spec.hi is not None, f"{path}.{f.name}: no range"
-            yield f"{path}.{f.name}"
-
-    names = list(walk(G.GaReconfigSettings, "experiment"))
-    assert len(names) > 80 and "experiment.robust.margins.joint_deg" in names
-    s = G.ga_reconfig_settings(compose("ga_reconfig").experiment)
-    assert s.robust.margins.clearance_mm == 0.0 and s.verify.certify_doublings == 2 and s.ga.population_size > 0
-
-
-# -- the grid jobs and the kernel benchmark: settings declared once too (deltajax.config.workspace) --------------
+# -- the grid jobs and the kernel benchmark: refusals by their settings' metadata, derived fields ---------------
 from deltajax import config as C  # noqa: E402
-
-def _workspace_job_settings():
-    from deltajax.config import workspace as W
-
-    return {"workspace_grid": W.WorkspaceGridSettings, "reconfig_workspace": W.PaperGridSettings,
-            "reconfig_indices": W.ReconfigIndicesSettings, "bench_kernel": W.BenchKernelSettings,
-            "indices_examples": W.IndicesExamplesSettings}
-
-
-WORKSPACE_JOBS = ["workspace_grid", "reconfig_workspace", "reconfig_indices", "bench_kernel", "indices_examples"]
-
-
-def _yaml_keys(node, path):
-    """The dotted keys of a YAML block, nested blocks walked, in the file's order."""
-    for k, v in node.items():
-        if isinstance(v, dict):
-            yield from _yaml_keys(v, f"{path}.{k}")
-        yield f"{path}.{k}"
-
-
-@pytest.mark.parametrize("job", WORKSPACE_JOBS)
-def test_every_workspace_job_setting_declares_how_it_is_checked(job):
-    """Every key of configs/experiment/<job>.yaml (name included, nested blocks walked) is a field of the job's
-    settings declared with setting() metadata, in the YAML's order; every number has a range or its own reader;
-    the fields without metadata (derived by the builder) are no config keys; the default YAML reads."""
-    import dataclasses
-    import typing
-
-    from omegaconf import OmegaConf
-
-    from deltajax.run import CONFIG_DIR
-
-    def walk(cls, path):
-        for f in dataclasses.fields(cls):
-            spec = f.metadata.get("deltajax")
-            if spec is None:                      # derived: no config key
-                continue
-            tp = typing.get_type_hints(cls)[f.name]
-            tp = next((a for a in typing.get_args(tp) if a is not type(None)), tp)   # Optional[X] -> X
-            if dataclasses.is_dataclass(tp):
-                yield from walk(tp, f"{path}.{f.name}")
-            elif tp in (int, float) and spec.read is None:
-                assert spec.lo is not None or spec.hi is not None, f"{path}.{f.name}: no range"
-            yield f"{path}.{f.name}"
-
-    cls = _workspace_job_settings()[job]
-    yaml = OmegaConf.to_container(OmegaConf.load(f"{CONFIG_DIR}/experiment/{job}.yaml"))["experiment"]
-    assert list(walk(cls, "experiment")) == list(_yaml_keys(yaml, "experiment"))
-    derived = [f.name for f in dataclasses.fields(cls) if "deltajax" not in f.metadata]
-    assert not set(derived) & set(yaml)
-    cfg = compose(job)
-    s = C.validate_config(cfg, *C.robot_from_config(cfg.robot))
-    assert isinstance(s, cls) and s.name == job
-
-
-@pytest.mark.parametrize("job", WORKSPACE_JOBS)
-def test_workspace_job_schema_generated_from_its_settings_composes_the_same_config(job):
-    """readers.schema_of(<the job's settings>) registered as the job's structured config (as main does for
-    ga_reconfig) composes the default YAML to the same experiment block as the hand-written schema: the same
-    values, the same keys in the same order (the stored config does not change when the schema is switched)."""
-    from hydra import compose as hydra_compose, initialize_config_dir
-    from hydra.core.config_store import ConfigStore
-    from omegaconf import OmegaConf
-
-    from deltajax.config.readers import schema_of
-    from deltajax.run import CONFIG_DIR
-
-    def keys(node):
-        return [(k, keys(v) if isinstance(v, dict) else None) for k, v in node.items()]
-
-    today = OmegaConf.to_container(compose(job).experiment)
-    try:
-        ConfigStore.instance().store(group="schema/experiment", name=job, node=schema_of(_workspace_job_settings()[job]))
-        with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-            generated = OmegaConf.to_container(hydra_compose(config_name="config",
-                                                             overrides=[f"experiment={job}"]).experiment)
-    finally:
-        C.register_schemas()    # the registered schemas as before
-    assert generated == today and keys(generated) == keys(today)
 
 
 @pytest.mark.parametrize("experiment, override, message", [
@@ -288,21 +183,23 @@ def test_workspace_grid_builder_fills_in_what_the_block_lacks():
     assert s.params == {"b_v": 2.0, "b_f": 4.2, "beta": 0.5} and s.robot_key["forearm"] == str(cfg.robot.forearm)
 
 
-# -- the other jobs' settings declared the same way (dynamics_cycle, datasheet, boundary_search, reconfig_motion) --
-def _declared_jobs():
-    from deltajax.config import boundary as B, dynamics as D, motion as M
+# -- every job's settings declared once, and its structured config generated from them ------------------------
+def _inner_blocks():
+    """The blocks read by a field's own reader (so not walked as nested dataclasses): dotted key -> ("one": the
+    block, "each": one block per entry of a mapping, its class by its ``kind`` where there are several; classes)."""
+    from deltajax.config import dynamics as D, ga_reconfig as G, motion as M
 
-    # (experiment, settings class, the blocks its fields' own readers read: one block, or one per entry of a
-    # mapping (a setup per robot, a case per name, its class by its kind))
-    return [("dynamics_cycle", D.DynamicsCycleSettings, {"setups": ("each", [D.CycleSetupBlock])}),
-            ("datasheet", D.DatasheetSettings, {}),
-            ("boundary_search", B.BoundarySearchSettings, {}),
-            ("reconfig_motion", M.ReconfigMotionSettings, {"mechanism": ("one", [M.MechanismBlock]),
-                                                           "cases": ("each", [M.AdeptCaseBlock, M.TaskCaseBlock])})]
+    return {"dynamics_cycle": {"setups": ("each", [D.CycleSetupBlock])},
+            "reconfig_motion": {"mechanism": ("one", [M.MechanismBlock]),
+                                "cases": ("each", [M.AdeptCaseBlock, M.TaskCaseBlock])},
+            "ga_reconfig": {"robust.margins": ("one", [G.MarginsBlock])}}
 
 
-#: numbers whose every finite value is meaningful (no range): a heading, an offset
-_ANY_NUMBER = {"heading_deg", "d3"}
+#: numbers whose every finite value is meaningful (no range of their own): a heading, an offset, and the
+#: good-workspace threshold (its range is the chosen index's, checked by its block)
+_ANY_NUMBER = {"heading_deg", "d3", "threshold"}
+#: strings checked against another setting, not a fixed list: the primary objective (one of the objectives)
+_FREE_STRING = {"name", "primary"}
 
 
 def _config_fields(cls):
@@ -331,73 +228,82 @@ def _check_block(cls, block, path):
         tp = next((a for a in typing.get_args(tp) if a is not type(None)), tp)   # Optional[X] -> X
         if tp in (int, float) and spec.read is None and f.name not in _ANY_NUMBER:
             assert spec.lo is not None or spec.hi is not None, f"{path}.{f.name}: no range"
-        if tp is str and spec.read is None and f.name != "name":
+        if tp is str and spec.read is None and f.name not in _FREE_STRING:
             assert spec.choices is not None, f"{path}.{f.name}: a string without choices"
         if dataclasses.is_dataclass(tp) and spec.read is None:
             _check_block(tp, block.get(f.name) or {}, f"{path}.{f.name}")
 
 
-@pytest.mark.parametrize("job", ["dynamics_cycle", "datasheet", "boundary_search", "reconfig_motion"])
-def test_every_declared_job_setting_declares_how_it_is_checked(job):
+@pytest.mark.parametrize("job", sorted(C.SETTINGS_CLASSES))
+def test_every_job_setting_declares_how_it_is_checked(job):
     """Each job's settings mirror its YAML key for key (name included, nested blocks as blocks, in the YAML's
     order); every config field carries setting() metadata (a field without is derived: no YAML key), every
     number a range or its own reader, every string its choices; the default config reads without a refusal."""
     from omegaconf import OmegaConf
 
-    _, cls, inner = next(j for j in _declared_jobs() if j[0] == job)
+    cls = C.SETTINGS_CLASSES[job]
     cfg = compose(job)
     e = OmegaConf.to_container(cfg.experiment, resolve=True)
     _check_block(cls, e, "experiment")
-    for key, (how, classes) in inner.items():    # blocks read by a field's own reader
-        items = {"": e[key]} if how == "one" else {f".{k}": v for k, v in e[key].items()}
+    for key, (how, classes) in _inner_blocks().get(job, {}).items():    # blocks read by a field's own reader
+        node = e
+        for part in key.split("."):
+            node = node[part]
+        items = {"": node} if how == "one" else {f".{k}": v for k, v in node.items()}
         assert items
         for name, block in items.items():
             kind = classes[0] if len(classes) == 1 else next(c for c in classes
                                                              if c.__name__.lower().startswith(block["kind"]))
             _check_block(kind, block, f"experiment.{key}{name}")
     s = validate_settings(cfg)
+    s = getattr(s, "settings", s)                  # the main job's setup holds its settings
     assert isinstance(s, cls) and s.name == job
 
 
 def validate_settings(cfg):
     import jax
 
-    from deltajax import config as C
-
     jax.config.update("jax_enable_x64", True)   # as the CLI at its default precision (the mechanism's range check)
     robot, recon = C.robot_from_config(cfg.robot)
     return C.validate_config(cfg, robot, recon)
 
 
-@pytest.mark.parametrize("job", ["dynamics_cycle", "datasheet", "boundary_search", "reconfig_motion"])
-def test_declared_settings_compose_the_default_config_unchanged(job):
-    """readers.schema_of(the job's settings), registered as the job's structured config, composes the default
-    YAML to the same config as today, key for key and in the same order (ready to replace the hand-written
-    schema of deltajax.schemas, or to add one where there is none)."""
+@pytest.mark.parametrize("job", sorted(C.SETTINGS_CLASSES))
+def test_the_structured_config_is_generated_from_the_settings(job):
+    """The schema Hydra composes each job against is the one generated from its settings (readers.schema_of: the
+    same keys, nested the same way), and it composes the default YAML to the file's own values, key for key and
+    in the file's order (what a run stores as its config)."""
+    import dataclasses
     import json
 
-    from hydra import compose as hydra_compose, initialize_config_dir
+    import yaml
     from hydra.core.config_store import ConfigStore
     from omegaconf import OmegaConf
 
-    from deltajax import config as C
-    from deltajax.config.readers import schema_of
     from deltajax.run import CONFIG_DIR
 
-    _, cls, _ = next(j for j in _declared_jobs() if j[0] == job)
-    today = OmegaConf.to_container(compose(job), resolve=True)
-    repo = ConfigStore.instance().repo["schema"]["experiment"]
-    before = repo.get(f"{job}.yaml")
-    try:
-        ConfigStore.instance().store(group="schema/experiment", name=job, node=schema_of(cls))
-        with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
-            generated = OmegaConf.to_container(hydra_compose(config_name="config", overrides=[f"experiment={job}"]),
-                                               resolve=True)
-    finally:
-        if before is None:
-            repo.pop(f"{job}.yaml", None)
-        else:
-            repo[f"{job}.yaml"] = before
-        C.register_schemas()
-    assert generated == today
-    assert json.dumps(generated) == json.dumps(today)      # the same keys in the same order
+    def keys(schema):
+        hints = {f.name: f.type for f in dataclasses.fields(schema)}
+        out = []
+        for name, tp in hints.items():
+            inner = [a for a in getattr(tp, "__args__", ()) if dataclasses.is_dataclass(a)]
+            sub = tp if dataclasses.is_dataclass(tp) else (inner[0] if inner else None)
+            out.append((name, keys(sub) if sub is not None else None))
+        return out
+
+    stored = ConfigStore.instance().repo["schema"]["experiment"][f"{job}.yaml"].node
+    generated = OmegaConf.structured(C.readers.schema_of(C.SETTINGS_CLASSES[job]))
+    assert list(stored.keys()) == list(generated.keys())
+    assert keys(C.EXPERIMENT_SCHEMAS[job]) == keys(C.readers.schema_of(C.SETTINGS_CLASSES[job]))
+    with open(f"{CONFIG_DIR}/experiment/{job}.yaml") as f:
+        written = yaml.safe_load(f)["experiment"]
+    composed = OmegaConf.to_container(compose(job).experiment, resolve=True)
+    assert composed == written
+    assert json.dumps(list(_dotted(composed))) == json.dumps(list(_dotted(written)))   # the same keys, in order
+
+
+def _dotted(node, path=""):
+    for k, v in node.items():
+        yield f"{path}{k}"
+        if isinstance(v, dict):
+            yield from _dotted(v, f"{path}{k}.")

@@ -22,7 +22,7 @@ from typing import Any, Mapping, Optional
 
 __all__ = ["ConfigError", "robot_from_config", "mass_from_config", "validate_config", "check_keys", "valid_keys",
            "register_schemas", "TOP_LEVEL_KEYS",
-           "EXPERIMENT_SETTINGS", "EXPERIMENT_SCHEMAS", "BenchKernelSettings",
+           "EXPERIMENT_SETTINGS", "EXPERIMENT_SCHEMAS", "SETTINGS_CLASSES", "BenchKernelSettings",
            "PaperGridSettings", "IndicesExamplesSettings", "DatasheetSettings", "GaReconfigSettings", "source_run",
            "WorkspaceGridSettings", "ReconfigIndicesSettings", "grid_plan", "DynamicsCycleSettings",
            "BoundarySearchSettings", "ReconfigMotionSettings",
@@ -120,13 +120,28 @@ def validate_config(cfg: Mapping[str, Any], robot=None, recon=None, *, run_dir=N
     return None if build is None else build(e, cfg, robot, recon)
 
 
-from ..schemas import EXPERIMENT_SCHEMAS as _WRITTEN_SCHEMAS, RobotSchema, schema_keys, unknown_key  # noqa: E402
+from ..schemas import RobotSchema, schema_keys, unknown_key  # noqa: E402
 from ..schemas import register_schemas as _register  # noqa: E402
 from .readers import schema_of  # noqa: E402
 
-#: experiment name -> its structured-config schema: generated from the job's settings where they are declared
-#: with :func:`deltajax.config.readers.setting` (ga_reconfig), else the hand-written one of :mod:`deltajax.schemas`
-EXPERIMENT_SCHEMAS = {**_WRITTEN_SCHEMAS, "ga_reconfig": schema_of(GaReconfigSettings, "GaReconfigSchema")}
+#: experiment name -> the job's settings dataclass, every config field declared with
+#: :func:`deltajax.config.readers.setting` (key, type, default, range, unit, choices)
+SETTINGS_CLASSES = {
+    "workspace_grid": WorkspaceGridSettings,
+    "reconfig_workspace": PaperGridSettings,
+    "reconfig_indices": ReconfigIndicesSettings,
+    "indices_examples": IndicesExamplesSettings,
+    "bench_kernel": BenchKernelSettings,
+    "dynamics_cycle": DynamicsCycleSettings,
+    "boundary_search": BoundarySearchSettings,
+    "reconfig_motion": ReconfigMotionSettings,
+    "ga_reconfig": GaReconfigSettings,
+    "datasheet": DatasheetSettings,
+}
+#: experiment name -> its structured-config schema (``schema/experiment/<name>``), generated from its settings
+#: (:func:`deltajax.config.readers.schema_of`): the keys and types Hydra composes against are declared where the
+#: ranges :func:`deltajax.config.readers.read_settings` checks are
+EXPERIMENT_SCHEMAS = {name: schema_of(cls, f"{cls.__name__}Schema") for name, cls in SETTINGS_CLASSES.items()}
 
 
 def register_schemas() -> None:
