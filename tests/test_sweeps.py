@@ -176,6 +176,26 @@ def test_worker_cpus_sources():
     assert resolve_worker_cpus(None, environ={}, available=6) == (6, "all CPUs of the process")
 
 
+def test_worker_keeps_freed_memory_only_before_jax_starts():
+    """The worker tells glibc to keep freed memory for reuse before XLA's threads exist (a fresh process: mallopt
+    accepts every parameter, and JAX runs after it); in a process whose backend already runs (this one) it changes
+    nothing and says so."""
+    import subprocess
+    import sys
+
+    from deltajax.sweeps.worker import keep_freed_memory
+
+    import jax
+
+    jax.numpy.zeros(1).block_until_ready()                       # this process: the backend is up
+    assert keep_freed_memory() == "unchanged (backend already initialised)"
+    code = ("from deltajax.sweeps.worker import apply_worker_env; a = apply_worker_env(1); print(a['malloc']); "
+            "import jax; print(jax.numpy.ones(3).sum())")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.split("\n")[:2] == ["freed memory kept for reuse", "3.0"], out.stdout
+
+
 @given(nx=st.integers(1, 60), ny=st.integers(1, 9), nz=st.integers(1, 9), chunk=st.integers(1, 400),
        n_dev=st.integers(1, 4), data=st.data())
 def test_shards_partition_the_grid_on_chunk_boundaries(nx, ny, nz, chunk, n_dev, data):

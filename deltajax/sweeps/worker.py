@@ -15,7 +15,7 @@ from typing import Any, Mapping, Optional
 
 from .layout import Callback
 
-__all__ = ["WorkerEnv", "resolve_worker_cpus", "apply_worker_env"]
+__all__ = ["WorkerEnv", "resolve_worker_cpus", "apply_worker_env", "keep_freed_memory", "MALLOC_REUSE"]
 
 
 def _available_cpus() -> int:
@@ -58,7 +58,7 @@ def resolve_worker_cpus(launcher_cfg: Optional[Mapping[str, Any]], environ: Mapp
 
 
 def apply_worker_env(cpus: int, host_devices: Optional[int] = None, gpu_preallocate: bool = False,
-                     environ: Optional[dict] = None) -> dict[str, Any]:
+                     environ: Optional[dict] = None, malloc_reuse: bool = True) -> dict[str, Any]:
     """Set the environment of this process for ``cpus`` CPUs, before JAX creates its backend.
 
     * ``PJRT_NPROC=cpus``: XLA's CPU client sizes its thread pool from it (default: all cores of the node,
@@ -66,7 +66,10 @@ def apply_worker_env(cpus: int, host_devices: Optional[int] = None, gpu_prealloc
     * ``OMP/MKL/OPENBLAS/NUMBA_NUM_THREADS=cpus`` for libraries loaded later;
     * ``jax_num_cpu_devices=host_devices`` (only while no backend exists): the CPUs appear as that many JAX
       devices, over which grid experiments shard their chunks;
-    * ``XLA_PYTHON_CLIENT_PREALLOCATE=false`` unless ``gpu_preallocate``: several jobs can share one GPU.
+    * ``XLA_PYTHON_CLIENT_PREALLOCATE=false`` unless ``gpu_preallocate``: several jobs can share one GPU;
+    * with ``malloc_reuse``, glibc's allocator told to keep freed memory for reuse (:func:`keep_freed_memory`,
+      before XLA's threads start): a batch program's outputs then land in memory already mapped instead of fresh
+      pages the kernel must fault in on every call (docs/BENCHMARKS.md: the JAX kernel 1.5-1.8x per CPU-second).
 
     Values already present in the environment win (an explicit user setting is kept). In a reused worker
     process (joblib) whose backend already exists nothing JAX-side can change; this is reported.
@@ -88,6 +91,8 @@ def apply_worker_env(cpus: int, host_devices: Optional[int] = None, gpu_prealloc
         numba.set_num_threads(min(cpus, numba.config.NUMBA_NUM_THREADS))
     applied: dict[str, Any] = {"cpus": cpus, "PJRT_NPROC": env["PJRT_NPROC"],
                                "XLA_PYTHON_CLIENT_PREALLOCATE": env.get("XLA_PYTHON_CLIENT_PREALLOCATE", "")}
+    if environ is None:
+        applied["malloc"] = keep_freed_memory() if malloc_reuse else "glibc defaults (malloc_reuse=false)"
     if environ is None:  # this process: the Numba thread pool size in effect (numba reads NUMBA_NUM_THREADS once)
         import numba
 
@@ -107,20 +112,46 @@ def apply_worker_env(cpus: int, host_devices: Optional[int] = None, gpu_prealloc
     return applied
 
 
+#: glibc ``mallopt`` parameters (M_MMAP_THRESHOLD, M_TRIM_THRESHOLD, M_TOP_PAD) of :func:`keep_freed_memory`
+MALLOC_REUSE = {-3: 1 << 30, -1: 1 << 30, -2: 64 << 20}
+
+
+def keep_freed_memory() -> str:
+    """Tell glibc's allocator to serve buffers below 1 GiB from its heap and keep up to 1 GiB of freed memory
+    instead of handing it back at once (its defaults map each large buffer afresh and unmap it when freed, so every
+    call of a batch program pays the page faults of its outputs again). Only before JAX's backend starts (its
+    thread arenas are made then); what the stage engine frees between stages still goes back
+    (:func:`deltajax.jobs.stages.release_memory`). Returns what was done, for the log."""
+    import ctypes
+
+    from jax._src import xla_bridge
+
+    if xla_bridge.backends_are_initialized():
+        return "unchanged (backend already initialised)"
+    try:
+        libc = ctypes.CDLL("libc.so.6")
+        ok = all(libc.mallopt(k, v) == 1 for k, v in MALLOC_REUSE.items())
+    except (OSError, AttributeError):
+        return "unchanged (not glibc)"
+    return "freed memory kept for reuse" if ok else "unchanged (mallopt refused)"
+
+
 class WorkerEnv(Callback):
     """Hydra callback: prepare each job's process (threads, host devices, GPU memory) before it runs.
 
     Registered in ``configs/config.yaml`` under ``hydra.callbacks.worker_env``; its arguments are overrides:
     ``hydra.callbacks.worker_env.cpus=8`` (default: see :func:`resolve_worker_cpus`),
     ``hydra.callbacks.worker_env.host_devices=1`` (default: one JAX host device per CPU),
-    ``hydra.callbacks.worker_env.gpu_preallocate=true``.
+    ``hydra.callbacks.worker_env.gpu_preallocate=true``, ``hydra.callbacks.worker_env.malloc_reuse=false``
+    (glibc's defaults: freed buffers unmapped at once).
     """
 
     def __init__(self, cpus: Optional[int] = None, host_devices: Optional[int] = None,
-                 gpu_preallocate: bool = False) -> None:
+                 gpu_preallocate: bool = False, malloc_reuse: bool = True) -> None:
         self.cpus = cpus
         self.host_devices = host_devices
         self.gpu_preallocate = bool(gpu_preallocate)
+        self.malloc_reuse = bool(malloc_reuse)
 
     def on_job_start(self, config, **kwargs: Any) -> None:
         from omegaconf import OmegaConf
@@ -133,7 +164,7 @@ class WorkerEnv(Callback):
             cpus, why = int(self.cpus), "hydra.callbacks.worker_env.cpus"
         else:
             cpus, why = resolve_worker_cpus(launcher)
-        applied = apply_worker_env(cpus, self.host_devices, self.gpu_preallocate)
+        applied = apply_worker_env(cpus, self.host_devices, self.gpu_preallocate, malloc_reuse=self.malloc_reuse)
         os.environ["DELTAJAX_WORKER_ENV"] = json.dumps({**applied, "cpus_from": why})
         print(f"[deltajax] worker: {cpus} CPUs ({why}); XLA threads PJRT_NPROC={applied['PJRT_NPROC']}, "
-              f"host devices {applied['host_devices']}", flush=True)
+              f"host devices {applied['host_devices']}; malloc: {applied['malloc']}", flush=True)
