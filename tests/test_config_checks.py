@@ -187,12 +187,11 @@ def test_workspace_grid_builder_fills_in_what_the_block_lacks():
 def _inner_blocks():
     """The blocks read by a field's own reader (so not walked as nested dataclasses): dotted key -> ("one": the
     block, "each": one block per entry of a mapping, its class by its ``kind`` where there are several; classes)."""
-    from deltajax.config import dynamics as D, ga_reconfig as G, motion as M
+    from deltajax.config import dynamics as D, motion as M
 
     return {"dynamics_cycle": {"setups": ("each", [D.CycleSetupBlock])},
             "reconfig_motion": {"mechanism": ("one", [M.MechanismBlock]),
-                                "cases": ("each", [M.AdeptCaseBlock, M.TaskCaseBlock])},
-            "ga_reconfig": {"robust.margins": ("one", [G.MarginsBlock])}}
+                                "cases": ("each", [M.AdeptCaseBlock, M.TaskCaseBlock])}}
 
 
 #: numbers whose every finite value is meaningful (no range of their own): a heading, an offset, and the

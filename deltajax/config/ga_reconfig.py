@@ -412,10 +412,6 @@ class MarginsBlock:
     motor_percent: float = setting(0.0, lo=0, hi=100, hi_open=True, unit="%")
 
 
-def _margins(path: str, v: Any) -> MarginsBlock:
-    return MarginsBlock() if v is None else read_settings(MarginsBlock, v, path)
-
-
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class RobustBlock:
     """``experiment.robust``: the robust recommendation (every constraint in >= ``probability`` of the Monte
@@ -424,7 +420,7 @@ class RobustBlock:
     probability: float = setting(lo=0, lo_open=True, hi=1)
     confirm_seed: int = setting(lo=0, hi=2 ** 32 - 1)
     max_candidates: int = setting(lo=1)
-    margins: MarginsBlock = setting(MarginsBlock(), read=_margins)
+    margins: MarginsBlock = setting(MarginsBlock())     # absent or null: every margin 0
 
 
 def _ga(path: str, v: Any):
