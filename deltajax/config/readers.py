@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import copy
 import dataclasses
 import typing
 from typing import Any, Callable, Mapping, Optional
@@ -113,7 +114,9 @@ def setting(default: Any = dataclasses.MISSING, *, unit: str = "", lo: Optional[
     md = {"deltajax": _Spec(unit, lo, hi, lo_open, hi_open, choices, read)}
     if default is dataclasses.MISSING:
         return dataclasses.field(metadata=md)
-    if dataclasses.is_dataclass(default) or isinstance(default, (dict, list)):
+    if isinstance(default, (dict, list)):           # a fresh copy per instance, never one shared mutable default
+        return dataclasses.field(default_factory=lambda d=default: copy.deepcopy(d), metadata=md)
+    if dataclasses.is_dataclass(default):           # a frozen block: one instance may serve every default
         return dataclasses.field(default_factory=lambda d=default: d, metadata=md)
     return dataclasses.field(default=default, metadata=md)
 
