@@ -69,7 +69,7 @@ def apply_worker_env(cpus: int, host_devices: Optional[int] = None, gpu_prealloc
     * ``XLA_PYTHON_CLIENT_PREALLOCATE=false`` unless ``gpu_preallocate``: several jobs can share one GPU;
     * with ``malloc_reuse``, glibc's allocator told to keep freed memory for reuse (:func:`keep_freed_memory`,
       before XLA's threads start): a batch program's outputs then land in memory already mapped instead of fresh
-      pages the kernel must fault in on every call (docs/BENCHMARKS.md: the JAX kernel 1.5-1.8x per CPU-second).
+      pages the kernel must fault in on every call (docs/BENCHMARKS.md: the JAX kernel 1.4-1.7x per CPU-second).
 
     Values already present in the environment win (an explicit user setting is kept). In a reused worker
     process (joblib) whose backend already exists nothing JAX-side can change; this is reported.
