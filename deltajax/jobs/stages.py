@@ -27,6 +27,7 @@ from __future__ import annotations
 
 import dataclasses
 import resource
+import sys
 import time
 import types
 from pathlib import Path
@@ -174,7 +175,7 @@ class Runner:
             self.done.append(name)
             self.ctx.results.set_attrs(**{self.attr_stages: ",".join(self.done)})
             self.ctx.results.flush()
-        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20  # kB on Linux
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** (30 if sys.platform == "darwin" else 20)
         release_memory()          # the next stage's peak starts from what is still in use, not from this one's
         self.ctx.log(f"[{name}: {self.timings[name]:.1f} s, {cpu:.1f} CPU-s, peak {peak:.2f} GiB{_in_use()}]")
         self._t = (time.perf_counter(), time.process_time())
