@@ -8,7 +8,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any
 
-from .readers import ConfigError, read_field, read_settings, read_vector, setting
+from .readers import ConfigError, read_box, read_field, read_settings, read_vector, setting
 
 __all__ = ["BoundarySearchSettings", "boundary_search_spec"]
 
@@ -43,16 +43,6 @@ def _steps_deg(path: str, v: Any) -> list:
     return steps
 
 
-def _grid_box(path: str, v: Any) -> list:
-    if not hasattr(v, "__len__") or len(v) != 3:
-        raise ConfigError(f"{path} must be [[x0, x1], [y0, y1], [z0, z1]] (m), got {v!r}")
-    box = [read_vector(f"{path}[{i}]", b, 2) for i, b in enumerate(v)]
-    for (a, b), name in zip(box, "xyz"):
-        if not b > a:
-            raise ConfigError(f"{path} {name} side must have lo < hi (m), got {[a, b]!r}")
-    return box
-
-
 def _heights(path: str, v: Any) -> tuple:
     return tuple(read_field(f"{path}[{i}]", z, unit="m") for i, z in enumerate(v or []))
 
@@ -85,7 +75,7 @@ class BoundarySearchSettings:
     volume_rule: str = setting(choices=_volume_rules)
     profile_samples: int = setting(lo=2)
     grid_h: float = setting(lo=0, lo_open=True, unit="m")
-    grid_box: list = setting(read=_grid_box)
+    grid_box: list = setting(read=read_box)
     centre_sweep_z: tuple = setting((), read=_heights)
     sweep_step_deg: float = setting(lo=0, lo_open=True, unit="deg")
     timing_repeats: int = setting(3, lo=1)

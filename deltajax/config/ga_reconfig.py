@@ -17,7 +17,7 @@ from typing import Any, Mapping, Optional
 import numpy as np
 
 from ..rundir import config_differences, recorded
-from .readers import ConfigError, check_fits, plain, read_field, read_settings, setting
+from .readers import ConfigError, check_fits, read_field, read_settings, setting
 
 __all__ = ["GaReconfigSettings", "GaReconfigSetup", "ga_reconfig_settings", "ga_reconfig_build", "validate_ga_reconfig",
            "validate_ga_reconfig_run_dir", "DESIGN_POINT_BYTES", "RECOMMEND_RULES", "job_fingerprint",
@@ -424,7 +424,7 @@ class RobustBlock:
 
 
 def _ga(path: str, v: Any):
-    return ga_config({} if v is None else plain(v))
+    return ga_config({} if v is None else v)   # read_settings hands on plain values
 
 
 def _reconfig(path: str, v: Any) -> dict:

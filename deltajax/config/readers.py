@@ -9,7 +9,7 @@ import typing
 from typing import Any, Callable, Mapping, Optional
 
 
-__all__ = ["ConfigError", "read_field", "read_choice", "read_names", "read_vector", "memory_bytes", "check_fits",
+__all__ = ["ConfigError", "read_field", "read_choice", "read_names", "read_vector", "read_box", "memory_bytes", "check_fits",
            "setting", "read_settings", "plain", "schema_of"]
 
 
@@ -90,6 +90,18 @@ def read_vector(path: str, v: Any, n: int, unit: str = "m") -> list:
 
 
 
+
+def read_box(path: str, v: Any, *, optional: bool = False) -> list:
+    """A box ``[[x0, x1], [y0, y1], [z0, z1]]`` (m), each side of positive width, as three ``[lo, hi]`` lists
+    (``optional``: the setting may be null, which the message says)."""
+    if not hasattr(v, "__len__") or len(v) != 3:
+        raise ConfigError(f"{path} must be {'null or ' if optional else ''}[[x0,x1],[y0,y1],[z0,z1]] (m), "
+                          f"got {v!r}")
+    box = [read_vector(f"{path}[{i}]", b, 2) for i, b in enumerate(v)]
+    for (lo, hi), k in zip(box, "xyz"):
+        if not hi > lo:
+            raise ConfigError(f"{path} ({k}) must have lo < hi (m), got {[lo, hi]!r}")
+    return box
 
 # ---- settings declared once: a frozen dataclass per block, each field's range, unit and choices as metadata ----
 @dataclasses.dataclass(frozen=True)

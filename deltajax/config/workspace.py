@@ -19,7 +19,7 @@ import dataclasses
 import math
 from typing import Any, Mapping, Optional
 
-from .readers import ConfigError, check_fits, read_field, read_names, read_settings, read_vector, setting
+from .readers import ConfigError, check_fits, read_field, read_names, read_box, read_settings, read_vector, setting
 from .robot import n_steps
 
 __all__ = ["workspace_grid_from_config", "paper_grid_from_config", "WorkspaceGridSettings", "GridBlock", "grid_plan",
@@ -58,14 +58,8 @@ def _axis(path: str, v: Any) -> tuple:
 
 
 def _box(path: str, v: Any) -> tuple:
-    """The box [[x0,x1],[y0,y1],[z0,z1]] (m) of ``volume_box``, each side of positive width."""
-    if not hasattr(v, "__len__") or len(v) != 3:
-        raise ConfigError(f"{path} must be null or [[x0,x1],[y0,y1],[z0,z1]] (m), got {v!r}")
-    box = [read_vector(f"{path}[{i}]", b, 2) for i, b in enumerate(v)]
-    for (lo, hi), k in zip(box, "xyz"):
-        if not hi > lo:
-            raise ConfigError(f"{path} ({k}) must have lo < hi (m), got {[lo, hi]!r}")
-    return tuple(tuple(b) for b in box)
+    """The box [[x0,x1],[y0,y1],[z0,z1]] (m) of ``volume_box`` (null: the grid's end points)."""
+    return tuple(tuple(b) for b in read_box(path, v, optional=True))
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
