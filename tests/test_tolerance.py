@@ -314,7 +314,7 @@ def test_margins_tighten_every_constraint_by_the_stated_amount_and_the_nominal_p
 
 
 def test_a_continued_run_may_change_the_budget_but_not_the_margins():
-    from deltajax.config.ga_reconfig import problem_differences
+    from deltajax.config.ga_reconfig_run import problem_differences
 
     old = {"experiment": {"ga": {"generations": 10}, "robust": {"enabled": False}}, "seed": 0}
     zero = {"experiment": {"ga": {"generations": 40}, "robust": {"enabled": True, "margins": {

@@ -38,8 +38,9 @@ __all__ = ["ConfigError", "robot_from_config", "mass_from_config", "validate_con
 
 from .readers import (ConfigError, check_fits, read_choice, read_field, read_names,  # noqa: E402,F401
                       read_vector)  # the one set of readers
-from .ga_reconfig import (GaReconfigSettings, GaReconfigSetup, validate_ga_reconfig, validate_ga_reconfig_run_dir,  # noqa: E402,F401
-                          ga_reconfig_build, ga_reconfig_settings)
+from .ga_reconfig import GaReconfigSettings, ga_reconfig_settings  # noqa: E402,F401
+from .ga_reconfig_run import (GaReconfigSetup, ga_reconfig_build, validate_ga_reconfig,  # noqa: E402,F401
+                              validate_ga_reconfig_run_dir)
 from .robot import check_reach_over_range, mass_from_config, robot_from_config  # noqa: E402
 from .workspace import (BenchKernelSettings, IndicesExamplesSettings, PaperGridSettings,  # noqa: E402
                         ReconfigIndicesSettings, WorkspaceGridSettings, bench_kernel_settings, grid_plan,

@@ -10,7 +10,7 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Mapping, Optional
 
-from .ga_reconfig import ga_reconfig_build
+from .ga_reconfig_run import ga_reconfig_build
 from .readers import ConfigError, check_fits, read_choice, read_field, read_settings, read_vector, setting
 from .robot import robot_from_config
 

@@ -1,6 +1,6 @@
 """The main job's state in ``results.h5``: the GA checkpoint (:func:`load_checkpoint`, :func:`put_checkpoint`) and a
 continued run's earlier front joined to the verified candidates (:func:`carry_earlier`; the earlier run itself is read with
-the settings, :func:`deltajax.config.ga_reconfig.earlier_run`). The finished stages and restaging before a resume
+the settings, :func:`deltajax.config.ga_reconfig_run.earlier_run`). The finished stages and restaging before a resume
 are :mod:`deltajax.rundir`'s (``recorded``, ``restage``).
 
 Application wing: it reads the results file; the engines (:mod:`deltajax.optimize`) never do.

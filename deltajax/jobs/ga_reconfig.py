@@ -19,7 +19,7 @@ recommendation: worst cases searched at the verification's density and at twice 
 Carlo over manufacturing and model tolerances on the certified answer, :mod:`deltajax.optimize.robust`;
 ``experiment.robust``: the robust recommendation) -> results (summary) ->
 plots -> report (``report.html``, the self-contained run report of :mod:`deltajax.runreport`). ``experiment.continue_from`` (more budget for
-a finished run, :func:`deltajax.config.ga_reconfig.earlier_run`): its verified front seeds the GA and NSGA-II and
+a finished run, :func:`deltajax.config.ga_reconfig_run.earlier_run`): its verified front seeds the GA and NSGA-II and
 joins the verified candidates with its stored metrics, so the recommendation cannot be one its recommendation
 dominates.
 The GA paper's claims are *not* compared here (different metrics); see docs/REPRODUCTION.md §5.
