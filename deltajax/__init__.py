@@ -16,15 +16,16 @@ from .mass import MassModel
 from .dynamics import inverse_dynamics
 from .trajectory import Cycle, adept_cycle, ga_paper_motion
 from .cycle import Limits, cycle_metrics, cycle_profile
-from .constraints import (GoodSpec, JointModel, LinkModel, Motor, drive_loads, good_point, interference,
-                          joint_angles, picks_per_minute, regular_workspace)
+from .constraints import (GoodSpec, JointModel, LinkModel, good_point, interference, joint_angles,
+                          regular_workspace)
+from .drive import Motor, drive_loads, picks_per_minute
 from .motion import RDriveLimits, resolve_path
 from .motion_refine import refine_path
 from .datasheet import Datasheet, DatasheetError
 from .datasheet import datasheet as datasheet  # the function; the module stays importable as deltajax.datasheet
 from .runreport import ReportError, write_report  # the main job's HTML run report (plotly imported on use)
 from .optimize.certify import certify_design as certify  # worst cases found, the density doubled, margins
-from . import (constraints, cycle, dynamics, export, io, kinematics, mechanism, motion, optimize, reference,
+from . import (constraints, cycle, drive, dynamics, export, io, kinematics, mechanism, motion, optimize, reference,
                tolerance, trajectory, workspace)
 
 __version__ = "0.1.0"
@@ -49,6 +50,6 @@ __all__ = [
     # taking a design out
     "datasheet", "Datasheet", "DatasheetError", "write_report", "ReportError",
     # modules
-    "workspace", "optimize", "constraints", "kinematics", "cycle", "dynamics", "trajectory", "motion", "mechanism",
-    "export", "io", "reference",
+    "workspace", "optimize", "constraints", "drive", "kinematics", "cycle", "dynamics", "trajectory", "motion",
+    "mechanism", "export", "io", "reference",
 ]

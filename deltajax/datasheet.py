@@ -35,7 +35,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .constraints import Motor, cycle_rate
+from .drive import Motor, cycle_rate
 from .geometry import Delta, ReconfigurableDelta
 from .kinematics import ik
 from .mass import STANDARD_GRAVITY

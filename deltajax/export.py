@@ -61,7 +61,7 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
-from .constraints import Motor, with_drive
+from .drive import Motor, with_drive
 from .geometry import CHAIN_ANGLES, Delta, ReconfigurableDelta
 from .kinematics import ik
 

@@ -13,7 +13,11 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-__all__ = ["float_leaf", "check_range"]
+__all__ = ["float_leaf", "check_range", "ConstraintError"]
+
+
+class ConstraintError(ValueError):
+    """Invalid constraint model: motor, joints, links, good-workspace spec (names the field and the value)."""
 
 
 def float_leaf(x: Any) -> jax.Array:

@@ -27,7 +27,7 @@ from typing import Optional, Union
 import equinox as eqx
 
 from .geometry import Delta, ReconfigurableDelta
-from .constraints import Motor
+from .drive import Motor
 from .mass import MassModel
 
 __all__ = ["franco2026", "boundary2d", "industrial", "franco2026_mass", "industrial_mass", "PRESETS", "get",

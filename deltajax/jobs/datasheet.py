@@ -20,7 +20,7 @@ import numpy as np
 
 from .. import plots
 from ..config import ConfigError
-from ..constraints import Motor
+from ..drive import Motor
 from ..datasheet import MOTOR_FIELDS, ROW_FIELDS, UNITS, datasheet
 
 __all__ = ["run", "run_designs", "write", "save"]
