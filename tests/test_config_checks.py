@@ -124,6 +124,7 @@ def test_settings_are_read_from_their_declared_metadata():
             r"^e\.inner\.law must be one of cycloidal, poly5, got 'x'$"),
            ({"n": 3, "flag": True, "inner": {}}, r"^e\.inner: missing keys speed$"),
            ({"n": 3}, r"^e: missing keys flag$"),
+           ({"n": 3, "flag": "???"}, r"^e: missing keys flag$"),     # left MISSING by the structured config
            ({"n": 3, "flag": True, "speed": 1}, r"^e: unknown keys speed; valid keys: flag, inner, limit, n$"),
            ({"n": 3, "flag": True, "n_squared": 4}, r"^e: unknown keys n_squared; "),                # derived
            ([1, 2], r"^e must be a mapping, got \[1, 2\]$")]
