@@ -1,12 +1,11 @@
-"""Hydra structured-config schemas: the robot block's (written here) and the registration of every experiment's.
+"""Hydra structured-config schemas: their registration, and the walkers that name an unknown key with the valid ones.
 
 Registered in the ConfigStore by :func:`register_schemas` (``deltajax.run`` calls it at import). A mistyped key,
 a wrong type or an unknown ``+key`` is rejected at composition (``configs/config.yaml`` puts
-``schema/robot`` before the robot group and ``schema/experiment/<name>`` before the experiment group). The
-experiments' schemas are generated from their settings dataclasses (:data:`deltajax.config.EXPERIMENT_SCHEMAS`,
-:func:`deltajax.config.readers.schema_of`), where ranges, units and choices are declared too. Values live in the
-YAML files; the robot's ranges and cross-field rules are checked by :func:`deltajax.config.validate_config`. Pure
-data: imports nothing from deltajax.
+``schema/robot`` before the robot group and ``schema/experiment/<name>`` before the experiment group). Every
+schema is generated from its settings dataclass (:data:`deltajax.config.ROBOT_SCHEMA`,
+:data:`deltajax.config.EXPERIMENT_SCHEMAS`, :func:`deltajax.config.readers.schema_of`), where ranges, units, choices
+and cross-field rules are declared too. Values live in the YAML files. Imports nothing from deltajax.
 """
 
 from __future__ import annotations
@@ -14,55 +13,18 @@ from __future__ import annotations
 import dataclasses
 from typing import Any, Dict, List, Optional
 
-__all__ = ["RobotSchema", "register_schemas", "unknown_key", "schema_keys"]
-
-@dataclasses.dataclass
-class RRangeSchema:
-    min: Optional[float] = None
-    max: Optional[float] = None
-    step: Optional[float] = None
+__all__ = ["register_schemas", "unknown_key", "schema_keys"]
 
 
-@dataclasses.dataclass
-class MassSchema:
-    upper_arm_mass: Optional[float] = None
-    upper_arm_com_fraction: Optional[float] = None
-    upper_arm_inertia_factor: Optional[float] = None
-    upper_arm_inertia: Optional[float] = None
-    rotor_inertia: Optional[float] = None
-    gear_ratio: Optional[float] = None
-    elbow_mass: Optional[float] = None
-    forearm_mass: Optional[float] = None
-    forearm_elbow_fraction: Optional[float] = None
-    forearm_model: Optional[str] = None  # rigid_rod | point_split (deltajax/mass.py validates the value)
-    forearm_inertia_factor: Optional[float] = None
-    platform_mass: Optional[float] = None
-    payload_mass: Optional[float] = None
-    carriage_mass: Optional[float] = None
-    gravity: Optional[float] = None
-
-
-@dataclasses.dataclass
-class RobotSchema:
-    name: str = "custom"
-    base_radius: Optional[float] = None
-    platform_radius: Optional[float] = None
-    upper_arm: Optional[float] = None
-    forearm: Optional[float] = None
-    theta_min_deg: Optional[float] = None
-    theta_max_deg: Optional[float] = None
-    R_range: Optional[RRangeSchema] = None
-    mass: Optional[MassSchema] = None
-
-
-def register_schemas(experiments: Dict[str, Any]) -> None:
-    """Register the robot's schema and ``experiments`` (name -> schema; the experiments' are generated from their
-    settings, :data:`deltajax.config.EXPERIMENT_SCHEMAS`) in Hydra's ConfigStore (idempotent; run.py calls it at
-    import, through :func:`deltajax.config.register_schemas`)."""
+def register_schemas(robot: Any, experiments: Dict[str, Any]) -> None:
+    """Register the ``robot`` schema (``schema/robot``, name ``delta``) and ``experiments`` (name -> schema,
+    ``schema/experiment``) in Hydra's ConfigStore, both generated from their settings
+    (:data:`deltajax.config.ROBOT_SCHEMA`, :data:`deltajax.config.EXPERIMENT_SCHEMAS`); idempotent (run.py calls it
+    at import, through :func:`deltajax.config.register_schemas`)."""
     from hydra.core.config_store import ConfigStore
 
     cs = ConfigStore.instance()
-    cs.store(group="schema/robot", name="delta", node=RobotSchema)
+    cs.store(group="schema/robot", name="delta", node=robot)
     for name, node in experiments.items():
         cs.store(group="schema/experiment", name=name, node=node)
 

@@ -124,6 +124,7 @@ def test_settings_are_read_from_their_declared_metadata():
             r"^e\.inner\.law must be one of cycloidal, poly5, got 'x'$"),
            ({"n": 3, "flag": True, "inner": {}}, r"^e\.inner: missing keys speed$"),
            ({"n": 3}, r"^e: missing keys flag$"),
+           ({"n": 3, "flag": "???"}, r"^e: missing keys flag$"),     # left MISSING by the structured config
            ({"n": 3, "flag": True, "speed": 1}, r"^e: unknown keys speed; valid keys: flag, inner, limit, n$"),
            ({"n": 3, "flag": True, "n_squared": 4}, r"^e: unknown keys n_squared; "),                # derived
            ([1, 2], r"^e must be a mapping, got \[1, 2\]$")]
@@ -194,9 +195,10 @@ def _inner_blocks():
                                 "cases": ("each", [M.AdeptCaseBlock, M.TaskCaseBlock])}}
 
 
-#: numbers whose every finite value is meaningful (no range of their own): a heading, an offset, and the
-#: good-workspace threshold (its range is the chosen index's, checked by its block)
-_ANY_NUMBER = {"heading_deg", "d3", "threshold"}
+#: numbers whose every finite value is meaningful (no range of their own): a heading, an offset, the
+#: good-workspace threshold (its range is the chosen index's, checked by its block) and the robot's joint limits
+#: (their order and span are the geometry's rule, deltajax.Delta.from_degrees)
+_ANY_NUMBER = {"heading_deg", "d3", "threshold", "theta_min_deg", "theta_max_deg"}
 #: strings checked against another setting, not a fixed list: the primary objective (one of the objectives)
 _FREE_STRING = {"name", "primary"}
 
@@ -208,18 +210,20 @@ def _config_fields(cls):
 
 
 def _check_block(cls, block, path):
-    """Every config field of ``cls`` declares how it is checked; ``block`` (the default YAML's) has exactly its
-    config fields (the required ones at least), in the order declared."""
+    """Every config field of ``cls`` declares how it is checked; ``block`` (the default YAML's; None: the YAML's
+    block is null, so only the declaration is checked) has exactly its config fields (the required ones at least),
+    in the order declared."""
     import dataclasses
     import typing
 
     fields = _config_fields(cls)
     names = [f.name for f in fields]
-    assert set(block) <= set(names), f"{path}: YAML keys {sorted(set(block) - set(names))} are no settings"
-    required = [f.name for f in fields if f.default is dataclasses.MISSING
-                and f.default_factory is dataclasses.MISSING]
-    assert set(required) <= set(block), f"{path}: required settings {set(required) - set(block)} not in the YAML"
-    assert [n for n in names if n in block] == list(block), f"{path}: fields not ordered as the YAML"
+    if block is not None:
+        assert set(block) <= set(names), f"{path}: YAML keys {sorted(set(block) - set(names))} are no settings"
+        required = [f.name for f in fields if f.default is dataclasses.MISSING
+                    and f.default_factory is dataclasses.MISSING]
+        assert set(required) <= set(block), f"{path}: required settings {set(required) - set(block)} not in the YAML"
+        assert [n for n in names if n in block] == list(block), f"{path}: fields not ordered as the YAML"
     hints = typing.get_type_hints(cls)
     for f in fields:
         spec = f.metadata["deltajax"]
@@ -230,7 +234,7 @@ def _check_block(cls, block, path):
         if tp is str and spec.read is None and f.name not in _FREE_STRING:
             assert spec.choices is not None, f"{path}.{f.name}: a string without choices"
         if dataclasses.is_dataclass(tp) and spec.read is None:
-            _check_block(tp, block.get(f.name) or {}, f"{path}.{f.name}")
+            _check_block(tp, None if block is None else block.get(f.name, {}), f"{path}.{f.name}")
 
 
 @pytest.mark.parametrize("job", sorted(C.SETTINGS_CLASSES))
@@ -306,3 +310,71 @@ def _dotted(node, path=""):
         yield f"{path}{k}"
         if isinstance(v, dict):
             yield from _dotted(v, f"{path}{k}.")
+
+
+# -- the robot block: declared once as well (deltajax.config.robot.RobotSettings), its schema generated -------------
+def _robot_presets():
+    from pathlib import Path
+
+    from deltajax.run import CONFIG_DIR
+
+    return sorted(p.stem for p in (Path(CONFIG_DIR) / "robot").glob("*.yaml"))
+
+
+@pytest.mark.parametrize("robot", _robot_presets())
+def test_every_robot_setting_declares_how_it_is_checked(robot):
+    """Each configs/robot/*.yaml mirrors RobotSettings key for key (name included, R_range and mass as blocks, in
+    the file's order), every number a range (the joint limits: any value), every string its choices; composed
+    against the schema registered as schema/robot (generated from RobotSettings) it is the file's own values, key
+    for key and in the file's order (what a run stores as its config); it reads without a refusal."""
+    import json
+
+    import yaml
+    from hydra.core.config_store import ConfigStore
+    from omegaconf import OmegaConf
+
+    from deltajax.config.readers import read_settings, schema_of
+    from deltajax.run import CONFIG_DIR
+
+    with open(f"{CONFIG_DIR}/robot/{robot}.yaml") as f:
+        written = yaml.safe_load(f)
+    _check_block(C.RobotSettings, written, "robot")
+    stored = ConfigStore.instance().repo["schema"]["robot"]["delta.yaml"].node
+    assert list(stored.keys()) == list(OmegaConf.structured(schema_of(C.RobotSettings)).keys())
+    composed = OmegaConf.to_container(compose("workspace_grid", f"robot={robot}").robot, resolve=True)
+    assert composed == written
+    assert json.dumps(list(_dotted(composed))) == json.dumps(list(_dotted(written)))   # the same keys, in order
+    assert read_settings(C.RobotSettings, composed, "robot").name == robot
+    C.robot_from_config(composed)
+
+
+def test_the_mass_block_is_every_mass_model_field():
+    """robot.mass declares a config key for every field of deltajax.mass.MassModel (generated from
+    deltajax.mass.MASS_FIELDS), plus the absolute upper_arm_inertia, each with the unit MASS_FIELDS gives it."""
+    import dataclasses
+
+    from deltajax.config.robot import MassBlock
+    from deltajax.mass import MASS_FIELDS, MassModel
+
+    declared = {f.name: f.metadata["deltajax"] for f in _config_fields(MassBlock)}
+    assert set(declared) == {f.name for f in dataclasses.fields(MassModel)} | {"upper_arm_inertia"}
+    assert all(declared[name].unit == ("" if unit == "1" else unit) for name, unit, _kind in MASS_FIELDS)
+
+
+@pytest.mark.parametrize("override, message", [
+    ("robot.base_radius=0", r"^robot.base_radius must be > 0 m, got 0.0 m$"),
+    ("robot.platform_radius=-0.01", r"^robot.platform_radius must be >= 0 m, got -0.01 m$"),
+    ("robot.R_range.step=0", r"^robot.R_range.step must be > 0 m, got 0.0 m$"),
+    ("robot.mass.gear_ratio=0", r"^robot.mass.gear_ratio must be > 0, got 0.0$"),
+    ("robot.mass.upper_arm_inertia=-1e-3", r"^robot.mass.upper_arm_inertia must be >= 0 kg m\^2, got -0.001 kg m\^2$"),
+    ("robot.mass.upper_arm_mass=null", r"^robot.mass.upper_arm_mass is required$"),
+    ("robot.mass.upper_arm_inertia=1e-3",
+     r"^robot.mass: give upper_arm_inertia or upper_arm_inertia_factor, not both$"),
+    ("robot.mass.forearm_model=rods", r"^robot.mass.forearm_model must be one of point_split, rigid_rod, got 'rods'$"),
+    ("robot.mass.forearm_inertia_factor=0.3",
+     r"^robot.mass.forearm_inertia_factor must be <= s \(1 - s\) = 0.25 .*, got 0.3$"),
+])
+def test_robot_settings_refused_by_their_metadata_and_rules(override, message):
+    with pytest.raises(ConfigError, match=message) as err:
+        validate(compose("workspace_grid", override))
+    assert "\n" not in str(err.value)

@@ -364,7 +364,7 @@ def test_mass_config_validation():
                  ({"upper_arm_mass": 1.0, "gear_ratio": 0.0}, "robot.mass.gear_ratio"),
                  ({"upper_arm_mass": 1.0, "platform_mass": "heavy"}, "robot.mass.platform_mass"),
                  ({"upper_arm_mass": 1.0, "rotor_inertia": float("nan")}, "robot.mass.rotor_inertia"),
-                 ({"upper_arm_mass": 1.0, "wheels": 2}, "robot.mass.wheels"),
+                 ({"upper_arm_mass": 1.0, "wheels": 2}, "robot.mass: unknown keys wheels"),
                  ({"forearm_mass": 0.1}, "robot.mass.upper_arm_mass")]
     for mass, field in bad_cases:
         with pytest.raises(ConfigError, match=field.replace(".", r"\.")):

@@ -68,9 +68,9 @@ def test_config_errors_name_field():
     assert recon.n_R == 358
     with pytest.raises(ConfigError, match=r"robot\.forearm"):
         robot_from_config({**good, "forearm": "long"})
-    with pytest.raises(ConfigError, match=r"robot: forearm must be > 0 m, got -0.4"):
+    with pytest.raises(ConfigError, match=r"^robot\.forearm must be > 0 m, got -0\.4 m$"):
         robot_from_config({**good, "forearm": -0.4})
-    with pytest.raises(ConfigError, match=r"robot\.upper_arm is required"):
+    with pytest.raises(ConfigError, match=r"^robot: missing keys upper_arm$"):
         robot_from_config({k: v for k, v in good.items() if k != "upper_arm"})
     with pytest.raises(ConfigError, match=r"robot\.R_range.*empty R range"):
         robot_from_config({**good, "R_range": dict(min=0.5, max=0.2, step=0.001)})

@@ -2,7 +2,7 @@
 that knows config paths. One module per settings family; this package ties them together:
 
 - ``readers.py``: the field readers and :class:`ConfigError`;
-- ``robot.py``: the robot and its mass model (``robot.*``);
+- ``robot.py``: the robot and its mass model (``robot.*``, :class:`RobotSettings`);
 - ``workspace.py``: the grid jobs and the kernel benchmark (workspace_grid, reconfig_workspace, reconfig_indices,
   bench_kernel, indices_examples);
 - ``dynamics.py``: dynamics_cycle and datasheet;
@@ -10,7 +10,8 @@ that knows config paths. One module per settings family; this package ties them 
 - ``motion.py``: reconfig_motion;
 - ``ga_reconfig.py``: the main job;
 - here: the top-level keys and checks, :data:`EXPERIMENT_SETTINGS` (experiment -> settings builder),
-  :data:`RUN_DIR_CHECKS`, :func:`validate_config`, :func:`check_keys`, :func:`valid_keys`, and every public name
+  :data:`RUN_DIR_CHECKS`, :data:`ROBOT_SCHEMA`, :data:`EXPERIMENT_SCHEMAS`, :func:`validate_config`,
+  :func:`check_keys`, :func:`valid_keys`, and every public name
   of the modules above (``from deltajax.config import X``).
 
 Every error raised here names the config field and the value, before anything is compiled.
@@ -21,7 +22,7 @@ from __future__ import annotations
 from typing import Any, Mapping, Optional
 
 __all__ = ["ConfigError", "robot_from_config", "mass_from_config", "validate_config", "check_keys", "valid_keys",
-           "register_schemas", "TOP_LEVEL_KEYS",
+           "register_schemas", "TOP_LEVEL_KEYS", "RobotSettings", "ROBOT_SCHEMA",
            "EXPERIMENT_SETTINGS", "EXPERIMENT_SCHEMAS", "SETTINGS_CLASSES", "BenchKernelSettings",
            "PaperGridSettings", "IndicesExamplesSettings", "DatasheetSettings", "GaReconfigSettings", "source_run",
            "WorkspaceGridSettings", "ReconfigIndicesSettings", "grid_plan", "DynamicsCycleSettings",
@@ -41,7 +42,7 @@ from .readers import (ConfigError, check_fits, read_choice, read_field, read_nam
 from .ga_reconfig import GaReconfigSettings, ga_reconfig_settings  # noqa: E402,F401
 from .ga_reconfig_run import (GaReconfigSetup, ga_reconfig_build, validate_ga_reconfig,  # noqa: E402,F401
                               validate_ga_reconfig_run_dir)
-from .robot import check_reach_over_range, mass_from_config, robot_from_config  # noqa: E402
+from .robot import RobotSettings, check_reach_over_range, mass_from_config, robot_from_config  # noqa: E402
 from .workspace import (BenchKernelSettings, IndicesExamplesSettings, PaperGridSettings,  # noqa: E402
                         ReconfigIndicesSettings, WorkspaceGridSettings, bench_kernel_settings, grid_plan,
                         indices_examples_settings, paper_grid_from_config, paper_grid_settings,
@@ -121,7 +122,7 @@ def validate_config(cfg: Mapping[str, Any], robot=None, recon=None, *, run_dir=N
     return None if build is None else build(e, cfg, robot, recon)
 
 
-from ..schemas import RobotSchema, schema_keys, unknown_key  # noqa: E402
+from ..schemas import schema_keys, unknown_key  # noqa: E402
 from ..schemas import register_schemas as _register  # noqa: E402
 from .readers import schema_of  # noqa: E402
 
@@ -143,11 +144,14 @@ SETTINGS_CLASSES = {
 #: (:func:`deltajax.config.readers.schema_of`): the keys and types Hydra composes against are declared where the
 #: ranges :func:`deltajax.config.readers.read_settings` checks are
 EXPERIMENT_SCHEMAS = {name: schema_of(cls, f"{cls.__name__}Schema") for name, cls in SETTINGS_CLASSES.items()}
+#: the robot block's structured-config schema (``schema/robot``, name ``delta``), generated from
+#: :class:`RobotSettings` as the experiments' are from theirs
+ROBOT_SCHEMA = schema_of(RobotSettings, "RobotSchema")
 
 
 def register_schemas() -> None:
     """Register every schema in Hydra's ConfigStore (idempotent; run.py calls it at import)."""
-    _register(EXPERIMENT_SCHEMAS)
+    _register(ROBOT_SCHEMA, EXPERIMENT_SCHEMAS)
 
 
 def check_keys(cfg: Mapping[str, Any]) -> None:
@@ -162,7 +166,7 @@ def check_keys(cfg: Mapping[str, Any]) -> None:
         raise ConfigError(f"unknown top-level key(s) {', '.join(map(str, extra))}; "
                           f"valid keys: {', '.join(TOP_LEVEL_KEYS)}")
     e = cfg.get("experiment")
-    blocks = (("robot", cfg.get("robot"), RobotSchema),
+    blocks = (("robot", cfg.get("robot"), ROBOT_SCHEMA),
               ("experiment", e, EXPERIMENT_SCHEMAS.get(e.get("name")) if e is not None else None))
     for path, node, schema in blocks:
         msg = None if node is None or schema is None else unknown_key(node, schema, path)
@@ -177,7 +181,7 @@ def valid_keys(full_key: str, experiment: Optional[str] = None) -> Optional[list
     parts = full_key.split(".")
     if len(parts) == 1:
         return list(TOP_LEVEL_KEYS)
-    schema = RobotSchema if parts[0] == "robot" else EXPERIMENT_SCHEMAS.get(experiment or "")
+    schema = ROBOT_SCHEMA if parts[0] == "robot" else EXPERIMENT_SCHEMAS.get(experiment or "")
     if parts[0] not in ("robot", "experiment") or schema is None:
         return None
     return schema_keys(schema, parts[1:-1])

@@ -175,10 +175,12 @@ def read_settings(cls, block: Any, path: str):
     method, if it has one; what it returns, if not None, is the result: a block with derived fields filled in, i.e.
     fields declared without :func:`setting`, which are no config keys). Unknown keys and missing required keys are
     refused, each as one line naming the block; a bad value as one line naming the field and the value in its
-    unit."""
+    unit. A value left ``???`` (OmegaConf's MISSING: a required field of the schema that the YAML does not give)
+    is a missing key."""
     block = plain(block)
     if not isinstance(block, Mapping):
         raise ConfigError(f"{path} must be a mapping, got {block!r}")
+    block = {k: v for k, v in block.items() if not (isinstance(v, str) and v == "???")}
     # a field declared without setting() is derived (no config key: it keeps its default unless _check fills it)
     fields = [f for f in dataclasses.fields(cls) if "deltajax" in f.metadata]
     names = [f.name for f in fields]
