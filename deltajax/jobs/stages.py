@@ -331,8 +331,6 @@ class Checkpoint:
         except (KeyError, TypeError, ValueError) as e:
             raise self.refuse(f"its {self.group} is malformed ({type(e).__name__}: {e})") from None
 
-    open = load
-
     def commit(self, *state: Any) -> None:
         """Make ``state`` the stage's checkpoint: staged (``save``), stamped with the run's fingerprint, flushed
         (durable once this returns) and logged."""

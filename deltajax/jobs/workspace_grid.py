@@ -96,6 +96,7 @@ def _store_grid(st: State, planes_done: int) -> None:
     from ..workspace import FIELD_NAMES
 
     r, grid, plan, planes, params = st.ctx.results, st.s.built_grid, st.s.plan, st.planes, st.s.params
+    key = st.runner.fingerprint          # the run's identity, which the grid stage's checkpoint carries
     r.put_axis(GROUP, "x", grid.x[plan.x_start:plan.x_stop], units="m")
     r.put_axis(GROUP, "y", grid.y, units="m")
     r.put_axis(GROUP, "z", grid.z, units="m")
@@ -114,10 +115,10 @@ def _store_grid(st: State, planes_done: int) -> None:
         r.put(GROUP, k, v, units={"count": "1", "volume": "m^3", "volume_box": "m^3"}.get(k, "1"), dims=())
     r.set_attrs(GROUP, shard_axis="x", shard=st.s.shard, n_shards=st.s.n_shards, shard_start=plan.x_start,
                 shard_stop=plan.x_stop, shard_axis_size=grid.shape[0], shard_reduce=REDUCER,
-                planes_done=planes_done, complete=int(planes_done == st.n_local), resume_key=st.key, h=grid.h,
+                planes_done=planes_done, complete=int(planes_done == st.n_local), resume_key=key, h=grid.h,
                 n_points=grid.n_points, box_volume=grid.box_volume, b_v=params["b_v"], b_f=params["b_f"],
                 beta=params["beta"], chunk_planes=plan.planes_per_chunk,
-                resume_seal=seal(st.key, planes_done, plan.x_start, plan.x_stop),
+                resume_seal=seal(key, planes_done, plan.x_start, plan.x_stop),
                 description="fixed-R workspace grid: reachability, indices and their statistics")
 
 
