@@ -43,7 +43,9 @@ class CheckpointMismatch(RuntimeError):
 
 
 def fingerprint(obj: Any) -> str:
-    """Short sha256 of a JSON-able description of a job."""
+    """Short sha256 of a JSON-able description of a job: the memory-mapped store's identity of its checkpoint
+    (:class:`MemmapCheckpoint`, whose callers are library functions with no run; a CLI job's checkpoints in
+    results.h5 carry the run's fingerprint, :class:`deltajax.jobs.stages.Checkpoint`)."""
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
