@@ -1,11 +1,10 @@
-"""The main job's state in ``results.h5``: what the GA checkpoint holds (:func:`read_checkpoint`,
-:func:`put_checkpoint`, :data:`GA_CHECKPOINT`; its identity, verification and commits are the stage engine's,
-:class:`deltajax.jobs.stages.Checkpoint`) and a continued run's earlier front joined to the verified candidates
-(:func:`carry_earlier`; the earlier run itself is read with the settings,
-:func:`deltajax.config.ga_reconfig.earlier_run`). The finished stages and restaging before a resume are
-:mod:`deltajax.rundir`'s (``recorded``, ``restage``).
+"""The main job's state in ``results.h5``: the GA checkpoint's contents (:data:`GA_CHECKPOINT`) and a
+continued run's earlier front joined to the verified candidates (:func:`carry_earlier`; the earlier run itself is read with
+the settings, :func:`deltajax.config.ga_reconfig.earlier_run`). The finished stages and restaging before a resume
+are :mod:`deltajax.rundir`'s (``recorded``, ``restage``).
 
-Application wing: it reads the results file; the engines (:mod:`deltajax.optimize`) never do.
+Application wing: it reads the results file; the engines (:mod:`deltajax.optimize`) never do. The checkpoint's identity,
+verification and commits are the stage engine's (:class:`deltajax.jobs.stages.Checkpoint`).
 """
 
 from __future__ import annotations
