@@ -95,20 +95,22 @@ def test_ga_converges_stays_in_bounds_and_is_reproducible():
 
 
 def test_kill_and_resume_is_bit_identical(tmp_path):
-    from deltajax.jobs.designer_state import load_checkpoint, put_checkpoint
+    """Killed after its first checkpoint (committed into results.h5 through the stage engine, as the main job does)
+    and resumed in a new process: the very same result."""
+    import types
+
     from deltajax.io import ResultsFile
+    from deltajax.jobs.designer_state import GA_CHECKPOINT
+    from deltajax.jobs.stages import Runner
+
+    def checkpoint():
+        ctx = types.SimpleNamespace(results=ResultsFile(tmp_path / "results.h5"), log=lambda line: None)
+        return Runner(ctx, "ga_reconfig", resumable=False, fingerprint="run").checkpoint("ga", **GA_CHECKPOINT)
 
     full = run_ga(sphere, 4, CFG)
-    path = tmp_path / "results.h5"
-    res = ResultsFile(path)
-
-    def save(ck):
-        put_checkpoint(res, ck)
-        res.flush()
-
-    killed = run_ga(sphere, 4, CFG, save_checkpoint=save, stop_after=8)  # "killed" after the first checkpoint
+    killed = run_ga(sphere, 4, CFG, save_checkpoint=checkpoint().commit, stop_after=8)  # "killed" after 8
     assert killed.generations_done == 8
-    ck = load_checkpoint(path)  # what a new process finds on disk
+    ck = checkpoint().load()  # what a new process finds on disk
     assert ck["generations_done"] == 8
     resumed = run_ga(sphere, 4, CFG, checkpoint=ck)
     assert resumed.resumed_from == 8
@@ -117,8 +119,8 @@ def test_kill_and_resume_is_bit_identical(tmp_path):
     np.testing.assert_array_equal(resumed.final_population, full.final_population)
     for k, v in full.history.items():
         np.testing.assert_array_equal(resumed.history[k], v, err_msg=k)
-    with pytest.raises(GAError, match="fingerprint"):  # changed settings never restart silently
-        run_ga(sphere, 4, GAConfig(**{**CFG.__dict__, "sigma": 0.1}), checkpoint=ck)
+    with pytest.raises(GAError, match=r"checkpoint leaf \d+ is .* expected"):  # another optimiser's state: refused
+        run_ga(sphere, 4, GAConfig(**{**CFG.__dict__, "population_size": 12}), checkpoint=ck)
 
 
 def test_second_ga_selectable():

@@ -166,16 +166,22 @@ def test_tampered_stopped_run_is_refused_on_resume(stopped_run, tmp_path, tamper
 def test_library_reads_of_a_tampered_checkpoint_refuse_it(stopped_run, tmp_path):
     """The job's own reads (not only the run directory's claim) verify: the checkpoint loader and the re-staging
     of a resume never use or re-checksum edited data."""
-    from deltajax.jobs import designer_state as W
+    import types
+
+    from deltajax.jobs.designer_state import GA_CHECKPOINT
+    from deltajax.jobs.stages import Runner
     from deltajax.rundir import recorded, restage
 
     path = _copy(stopped_run, tmp_path) / "results.h5"
-    assert W.load_checkpoint(path)["generations_done"] == 2
+    ctx = types.SimpleNamespace(results=dio.ResultsFile(path), log=lambda line: None)
+    checkpoint = Runner(ctx, "ga_reconfig", fingerprint=recorded(path, "ga_reconfig")[0]).checkpoint(
+        "ga", **GA_CHECKPOINT)
+    assert checkpoint.load()["generations_done"] == 2
     assert recorded(path, "ga_reconfig")[1] == ["screen"]
     with h5py.File(path, "r+") as f:
         f["ga/checkpoint"].attrs["generations_done"] = 3
     with pytest.raises(CheckpointError, match="'generations_done' does not match its checksum.*fresh=true"):
-        W.load_checkpoint(path)
+        checkpoint.load()
     with pytest.raises(dio.ChecksumError, match="generations_done"):
         recorded(path, "ga_reconfig")
     with pytest.raises(dio.ChecksumError, match="generations_done"):

@@ -10,7 +10,7 @@ import pytest
 
 import deltajax.io as dio
 from deltajax.sweeps import LEGACY, REDUCERS, ShardError, get_reducer, merge_shards, register_reducer
-from deltajax.workspace.chunks import CheckpointMismatch, ResultsCheckpoint, reduce_plane_shards, run_chunks, seal
+from deltajax.workspace.chunks import reduce_plane_shards
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -115,44 +115,3 @@ def test_merge_uses_the_registered_reducer_and_the_sweeps_cli(tmp_path, monkeypa
     assert main([str(shards[0]), "-o", str(tmp_path / "x.h5")]) == 2  # one shard of two: refused, exit 2
 
 
-def test_results_file_checkpoint_resumes_bit_identically_and_refuses_tampering(tmp_path):
-    """The engine with results.h5 as its checkpoint (workspace_grid's store), at toy size."""
-    import h5py
-
-    n, chunk = 10, 3
-
-    def job(path, max_chunks=None):
-        res = dio.ResultsFile(path)
-        arrays = {"a": np.full(n, np.nan), "b": np.zeros((n, 2), np.int64)}
-        done = {"n": 0}
-
-        def stage(d):
-            res.put("g", "a", arrays["a"], units="1")
-            res.put("g", "b", arrays["b"], units="1")
-            res.set_attrs("g", done=d, resume_key="k", shard_start=0, shard_stop=n, resume_seal=seal("k", d, 0, n))
-
-        ck = ResultsCheckpoint(res, "g", arrays, "k", (0, n), stage)
-        out, complete = run_chunks(n, chunk, lambda a, b: {"a": np.sqrt(np.arange(a, b)),
-                                                          "b": np.stack([np.arange(a, b)] * 2, -1)},
-                                   {"a": (float, None), "b": (int, None)}, checkpoint=ck, max_chunks=max_chunks,
-                                   progress=lambda k: done.update(n=done["n"] + k))
-        stage(done["n"])
-        res.flush()
-        return out, complete, done["n"]
-
-    ref, ok, _ = job(tmp_path / "ref.h5")
-    assert ok
-    part = tmp_path / "part.h5"
-    assert job(part, max_chunks=2)[1:] == (False, 6)
-    out, ok, done = job(part)  # resumes at item 6
-    assert ok and done == n and np.array_equal(out["a"], ref["a"]) and np.array_equal(out["b"], ref["b"])
-    job(tmp_path / "p2.h5", max_chunks=1)
-    with h5py.File(tmp_path / "p2.h5", "r+") as f:
-        f["g"].attrs["done"] = 6  # edited without its seal
-    with pytest.raises(CheckpointMismatch, match="do not match their checksum"):
-        job(tmp_path / "p2.h5")
-    job(tmp_path / "p3.h5", max_chunks=1)
-    with h5py.File(tmp_path / "p3.h5", "r+") as f:
-        f["g/b"][0, 0] = 5
-    with pytest.raises(CheckpointMismatch, match="g/b does not match its checksum"):
-        job(tmp_path / "p3.h5")

@@ -259,9 +259,11 @@ def robust_text(s) -> str:
             f"(seed {s.tolerance.seed}), confirmed by a fresh Monte Carlo (seed {s.robust.confirm_seed})")
 
 
-def store_ga(res, gres, space, ga_cfg, ga_what: str, base_genes, seeds, baseline_primary: float, best_params) -> None:
+def store_ga(res, gres, space, ga_cfg, ga_what: str, base_genes, seeds, baseline_primary: float, best_params,
+             fingerprint: str) -> None:
     """Group ``ga``: the GA's per-generation history, its best design (genes and parameters), the gene bounds and
-    the run's settings (:func:`deltajax.optimize.run_ga`'s result ``gres``)."""
+    the run's settings (:func:`deltajax.optimize.run_ga`'s result ``gres``; ``fingerprint``: the run's, which its
+    checkpoint carried)."""
     from ..optimize.designer import DESIGN_UNITS
 
     res.put_axis("ga", "generation", np.arange(1, gres.generations_done + 1), units="1")
@@ -284,7 +286,7 @@ def store_ga(res, gres, space, ga_cfg, ga_what: str, base_genes, seeds, baseline
     res.set_attrs("ga", algorithm=ga_cfg.algorithm, population_size=ga_cfg.population_size,
                   generations=ga_cfg.generations, sigma=ga_cfg.sigma, seed=ga_cfg.seed,
                   fitness_best=gres.best_fitness, objective=ga_what, resumed_from=gres.resumed_from,
-                  fingerprint=gres.fingerprint, seeded_with=len(seeds), baseline_primary=baseline_primary,
+                  fingerprint=fingerprint, seeded_with=len(seeds), baseline_primary=baseline_primary,
                   constraint_handling="feasibility_first (1e3 + violation)")
 
 

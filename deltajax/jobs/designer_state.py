@@ -1,23 +1,23 @@
-"""The main job's state in ``results.h5``: the GA checkpoint (:func:`load_checkpoint`, :func:`put_checkpoint`) and a
+"""The main job's state in ``results.h5``: the GA checkpoint's contents (:data:`GA_CHECKPOINT`) and a
 continued run's earlier front joined to the verified candidates (:func:`carry_earlier`; the earlier run itself is read with
 the settings, :func:`deltajax.config.ga_reconfig_run.earlier_run`). The finished stages and restaging before a resume
 are :mod:`deltajax.rundir`'s (``recorded``, ``restage``).
 
-Application wing: it reads the results file; the engines (:mod:`deltajax.optimize`) never do.
+Application wing: it reads the results file; the engines (:mod:`deltajax.optimize`) never do. The checkpoint's identity,
+verification and commits are the stage engine's (:class:`deltajax.jobs.stages.Checkpoint`).
 """
 
 from __future__ import annotations
 
 import math
 import re
-from pathlib import Path
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
 from ..optimize.workflow import STORED_METRIC, SetupError
 
-__all__ = ["load_checkpoint", "put_checkpoint", "carry_earlier"]
+__all__ = ["read_checkpoint", "put_checkpoint", "GA_CHECKPOINT", "carry_earlier"]
 
 
 # -- results-file bookkeeping (checkpoint, restaging, stages) -------------------------------------------------------
@@ -26,43 +26,24 @@ def _history_name(k: str) -> str:
     return k.replace("/", "__")
 
 
-def load_checkpoint(path) -> Any:
-    """The GA checkpoint stored in a results.h5, or None; verified (checksums, integrity record) before use.
-
-    Raises:
-        deltajax.rundir.CheckpointError: the checkpoint is damaged, edited or malformed (one line: the path, what
-            is wrong, ``fresh=true``).
-    """
-    from ..io import ChecksumError, ResultsGroupError, load
-    from ..rundir import CheckpointError
-
-    if not Path(path).exists():
-        return None
-    todo = "add fresh=true to start over (the checkpoint is part of results.h5)"
-    try:
-        ck = load(path, "ga/checkpoint", verify=True)
-    except ResultsGroupError:
-        return None
-    except ChecksumError as e:
-        raise CheckpointError(f"cannot resume the GA from {path}: {str(e).replace(f'{path}:', '')}; {todo}") from None
-    try:
-        attrs = ck["attrs"]
-        state = {k: v for k, v in ck["state"].items() if re.fullmatch(r"leaf_\d{3}", k)}
-        hist = {k.replace("__", "/"): v for k, v in ck["history"].items()
-                if k not in ("attrs", "units", "generation", "gene")}
-        out = {"fingerprint": str(attrs["fingerprint"]), "generations_done": int(attrs["generations_done"]),
-               "state": state, "key": ck["key"], "history": hist, "population": ck["population"],
-               "fitness": ck["fitness"]}
-    except (KeyError, TypeError, ValueError) as e:
-        raise CheckpointError(f"cannot resume the GA from {path}: its ga/checkpoint is malformed ({type(e).__name__}: "
-                              f"{e}); {todo}") from None
+def read_checkpoint(ck: Mapping[str, Any]) -> dict:
+    """The GA checkpoint (the ``ga/checkpoint`` group as :func:`deltajax.io.load` gives it, verified and of this run
+    by the stage engine, :class:`deltajax.jobs.stages.Checkpoint`) as :func:`deltajax.optimize.run_ga` resumes
+    from it. Raises KeyError, TypeError or ValueError when it is malformed (the engine's one-line refusal)."""
+    attrs = ck["attrs"]
+    out = {"generations_done": int(attrs["generations_done"]),
+           "state": {k: v for k, v in ck["state"].items() if re.fullmatch(r"leaf_\d{3}", k)},
+           "key": ck["key"], "population": ck["population"], "fitness": ck["fitness"],
+           "history": {k.replace("__", "/"): v for k, v in ck["history"].items()
+                       if k not in ("attrs", "units", "generation", "gene")}}
     if out["generations_done"] != len(np.asarray(ck["history"].get("generation", []))):
-        raise CheckpointError(f"cannot resume the GA from {path}: ga/checkpoint generations_done="
-                              f"{out['generations_done']} does not match its history; {todo}")
+        raise ValueError(f"generations_done={out['generations_done']} does not match its history")
     return out
 
 
 def put_checkpoint(res, ck: Mapping[str, Any]) -> None:
+    """Stage the GA checkpoint ``ck`` (as :func:`deltajax.optimize.run_ga` saves it) into group ``ga/checkpoint``
+    (the stage engine stamps the run's fingerprint and flushes)."""
     g = "ga/checkpoint"
     for k, v in ck["state"].items():
         res.put(f"{g}/state", k, v, units="1")
@@ -75,7 +56,12 @@ def put_checkpoint(res, ck: Mapping[str, Any]) -> None:
         res.put(f"{g}/history", _history_name(k), v, units="1", dims=dims)
     res.put(g, "population", ck["population"], units="1", dims=("member", "gene"))
     res.put(g, "fitness", ck["fitness"], units="1", dims=("member",))
-    res.set_attrs(g, fingerprint=ck["fingerprint"], generations_done=int(ck["generations_done"]))
+    res.set_attrs(g, generations_done=n)
+
+
+#: The GA stage's checkpoint on the stage engine: ``runner.checkpoint("ga", **GA_CHECKPOINT)``.
+GA_CHECKPOINT = dict(group="ga/checkpoint", save=put_checkpoint, read=read_checkpoint, what="GA checkpoint",
+                     note=lambda ck: f"generation {int(ck['generations_done'])}")
 
 
 # -- continuing a finished run with more budget (experiment.continue_from) --------------------------------------------

@@ -51,8 +51,8 @@ def run(ctx) -> None:
     setup = ctx.settings                     # built and checked once, before anything compiled
     s, space, earlier = setup.settings, setup.space, setup.earlier
     runner, path, fp = Runner(ctx, "ga_reconfig"), ctx.run_dir / "results.h5", setup.fingerprint
-    done = runner.open(fp, resume=s.resume, partial_what="GA checkpoint",
-                       has_partial=lambda p: ST.load_checkpoint(p) is not None)
+    runner.checkpoint("ga", **ST.GA_CHECKPOINT)     # the GA commits its generations through the stage engine
+    done = runner.open(fp, resume=s.resume)
     if "report" in done:
         ctx.log(f"{path} holds a complete ga_reconfig run (stages {','.join(done)}); nothing to do")
         return
@@ -154,7 +154,8 @@ def _screen_load(st: State) -> None:
 
 def _ga_result(st: State, finished: bool) -> None:
     """The GA on the primary objective (or the weighted sum), run or resumed from its checkpoint in the results
-    file (a finished GA is read back from it); :class:`Stop` after ``experiment.stop_after`` generations."""
+    file (the runner's: verified, of this run, committed every ``checkpoint_every`` generations; a finished GA is
+    read back from it); :class:`Stop` after ``experiment.stop_after`` generations."""
     from ..optimize import GAError, run_ga
     from ..optimize import workflow as W
 
@@ -163,22 +164,17 @@ def _ga_result(st: State, finished: bool) -> None:
             else np.where(np.asarray(objs) == primary, st.scale, 0.0))
     st.ga_what = ("weighted sum " + " + ".join(f"{s.objectives.weights.get(o, 0.0):g} x {o}" for o in objs)
                   if s.objectives.mode == "weighted" else f"primary objective {primary}")
-    ck = None if s.resume == "never" else ST.load_checkpoint(st.path)
+    checkpoint = st.runner.checkpoints["ga"]
+    ck = None if s.resume == "never" else checkpoint.load()
     ctx.log("GA stage already finished: reusing its checkpoint" if finished else
             f"resuming the GA from generation {ck['generations_done']}" if ck else f"starting the GA ({st.ga_what})")
     bar = ctx.progress(total=ga_cfg.generations, desc=f"GA {ga_cfg.algorithm}")
     bar.update(int(ck["generations_done"]) if ck else 0)
 
-    def save(c):
-        ST.put_checkpoint(st.res, c)
-        st.res.flush()
-
     try:
         gres = run_ga(W.ga_fitness(st.pb, space, objs, wvec), space.dim, ga_cfg, init_genes=st.seeds, checkpoint=ck,
-                      save_checkpoint=save, stop_after=s.stop_after, progress=bar.update,
-                      program_key=W.ga_fitness_key(st.pb, space, objs, wvec),
-                      fingerprint_extra={"space": [space.names, space.lower, space.upper, space.n_R,
-                                                   space.reconfigurable], "job": st.fp})
+                      save_checkpoint=checkpoint.commit, stop_after=s.stop_after, progress=bar.update,
+                      program_key=W.ga_fitness_key(st.pb, space, objs, wvec))
     except GAError as err:
         raise ConfigError(f"{err} ({st.path})") from None
     finally:
@@ -198,7 +194,7 @@ def _ga(st: State) -> None:
 
     _ga_result(st, finished=False)
     R.store_ga(st.res, st.gres, st.space, st.ga_cfg, st.ga_what, st.base_genes, st.seeds,
-               float(st.base[st.primary]), np.asarray(st.space.to_params(jnp.asarray(st.best))))
+               float(st.base[st.primary]), np.asarray(st.space.to_params(jnp.asarray(st.best))), st.fp)
     st.ctx.log(f"GA best ({st.ga_what}): fitness {st.gres.best_fitness:.5g}, {st.space.describe(st.best)}")
 
 

@@ -39,8 +39,7 @@ from .stages import Runner, Stage, State
 
 from ..workspace.evaluators import (make_evaluator, make_grid_evaluator,  # (the job's kernels; also benchmarked)
                                 make_numba_evaluator)
-from ..workspace.chunks import (CheckpointMismatch, ResultsCheckpoint, plane_statistics, plane_summary,
-                               run_chunks, seal)
+from ..workspace.chunks import CheckpointMismatch, plane_statistics, plane_summary, run_chunks, seal
 
 GROUP = "workspace"
 #: the registered shard reducer (deltajax.sweeps.reducers) of group ``workspace``
@@ -54,9 +53,10 @@ __all__ = ["run", "make_evaluator", "make_grid_evaluator", "make_numba_evaluator
 # ---------------------------------------------------------------------------------------------------------
 def run(ctx) -> None:
     """The grid job: its settings read and checked once, then its stages: ``grid`` (this shard's chunks on the
-    chunk engine, checkpointed into and resumed from results.h5), ``store`` (results and summary) and ``plots``."""
+    chunk engine, checkpointed into and resumed from results.h5 by the stage engine), ``store`` (results and
+    summary) and ``plots``. The run's fingerprint (its checkpoint's ``resume_key``) is the resume key."""
     st = State(ctx=ctx, **_settings(ctx))
-    Runner(ctx, "workspace_grid", resumable=False).run(STAGES, st)
+    Runner(ctx, "workspace_grid", resumable=False, fingerprint=st.key).run(STAGES, st)
 
 
 def _settings(ctx) -> dict:
@@ -91,11 +91,12 @@ def _settings(ctx) -> dict:
 
 
 def _store_grid(st: State, planes_done: int) -> None:
-    """Stage this shard's arrays, statistics and attributes into the results (the chunk engine's checkpoint
-    writer too): ``planes_done`` x-planes of ``st.n_local`` are finished."""
+    """Stage this shard's arrays, statistics and attributes into the results (what the grid stage's checkpoint
+    commits too): ``planes_done`` x-planes of ``st.n_local`` are finished."""
     from ..workspace import FIELD_NAMES
 
     r, grid, plan, planes, params = st.ctx.results, st.s.built_grid, st.s.plan, st.planes, st.s.params
+    key = st.runner.fingerprint          # the run's identity, which the grid stage's checkpoint carries
     r.put_axis(GROUP, "x", grid.x[plan.x_start:plan.x_stop], units="m")
     r.put_axis(GROUP, "y", grid.y, units="m")
     r.put_axis(GROUP, "z", grid.z, units="m")
@@ -114,10 +115,10 @@ def _store_grid(st: State, planes_done: int) -> None:
         r.put(GROUP, k, v, units={"count": "1", "volume": "m^3", "volume_box": "m^3"}.get(k, "1"), dims=())
     r.set_attrs(GROUP, shard_axis="x", shard=st.s.shard, n_shards=st.s.n_shards, shard_start=plan.x_start,
                 shard_stop=plan.x_stop, shard_axis_size=grid.shape[0], shard_reduce=REDUCER,
-                planes_done=planes_done, complete=int(planes_done == st.n_local), resume_key=st.key, h=grid.h,
+                planes_done=planes_done, complete=int(planes_done == st.n_local), resume_key=key, h=grid.h,
                 n_points=grid.n_points, box_volume=grid.box_volume, b_v=params["b_v"], b_f=params["b_f"],
                 beta=params["beta"], chunk_planes=plan.planes_per_chunk,
-                resume_seal=seal(st.key, planes_done, plan.x_start, plan.x_stop),
+                resume_seal=seal(key, planes_done, plan.x_start, plan.x_stop),
                 description="fixed-R workspace grid: reachability, indices and their statistics")
 
 
@@ -152,13 +153,15 @@ def _chunk(st: State, la: int, lb: int) -> dict:
 
 def _grid(st: State) -> None:
     """Every chunk of this shard on the chunk engine (:func:`deltajax.workspace.chunks.run_chunks`), checkpointed
-    into results.h5 every ``experiment.checkpoint_s`` seconds and resumed from it; ``experiment.stop_after``
+    into results.h5 every ``experiment.checkpoint_s`` seconds and resumed from it (the runner's
+    :class:`deltajax.jobs.stages.ChunkCheckpoint`: of this run and shard, verified); ``experiment.stop_after``
     stops after that many chunks as if killed (the run is then incomplete). Hands on ``done`` (x-planes) and the
     evaluation rate (points/s after the first chunk)."""
     ctx, plan, grid = st.ctx, st.s.plan, st.s.built_grid
-    checkpoint = ResultsCheckpoint(ctx.results, GROUP, st.arrays, st.key, (plan.x_start, plan.x_stop),
-                                   functools.partial(_store_grid, st), _check, done_attr="planes_done",
-                                   remedy="move it away to keep it, or add fresh=true to start over")
+    checkpoint = st.runner.chunk_checkpoint("grid", GROUP, st.arrays, span=(plan.x_start, plan.x_stop),
+                                            save=lambda res, arrays, done: _store_grid(st, done), check=_check,
+                                            done_attr="planes_done", what="workspace grid",
+                                            note=lambda arrays, done: f"{done} of {st.n_local} x-planes")
     if st.s.backend == "jax":
         st.evaluate = make_grid_evaluator(grid, st.s.n_dev, planes=plan.planes_per_chunk, dtype=st.dtype,
                                           **st.s.params)

@@ -16,8 +16,6 @@ from __future__ import annotations
 
 import dataclasses
 import functools
-import hashlib
-import json
 from typing import Any, Callable, Mapping, Optional
 
 import jax
@@ -142,7 +140,6 @@ class GAResult:
     resumed_from: int
     final_population: np.ndarray
     final_fitness: np.ndarray
-    fingerprint: str
 
 
 def state_to_arrays(tree: Any) -> dict[str, np.ndarray]:
@@ -168,13 +165,6 @@ def arrays_to_state(template: Any, arrays: Mapping[str, np.ndarray]) -> Any:
 def _host(tree):
     """NumPy round trip: identical carries (values, dtypes, weak types) on fresh and resumed paths."""
     return jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x)), tree)
-
-
-def fingerprint(cfg: GAConfig, num_dims: int, extra: Optional[Mapping[str, Any]] = None) -> str:
-    """Hash of everything that must match for a checkpoint to be resumable."""
-    blob = json.dumps({"ga": dataclasses.asdict(cfg), "num_dims": num_dims, "extra": extra or {},
-                       "x64": bool(jax.config.jax_enable_x64)}, sort_keys=True, default=str)
-    return hashlib.sha256(blob.encode()).hexdigest()[:16]
 
 
 @functools.lru_cache(maxsize=16)   # like deltajax.optimize.workflow's programs: bounded in a long process
@@ -251,8 +241,7 @@ def run_ga(fitness_fn: Callable[[jax.Array], tuple[jax.Array, Mapping[str, jax.A
            cfg: GAConfig, *, init_genes: Optional[np.ndarray] = None,
            checkpoint: Optional[Mapping[str, Any]] = None,
            save_checkpoint: Optional[Callable[[dict[str, Any]], None]] = None,
-           stop_after: Optional[int] = None, fingerprint_extra: Optional[Mapping[str, Any]] = None,
-           progress: Optional[Callable[[int], Any]] = None, program_key: Optional[str] = None) -> GAResult:
+           stop_after: Optional[int] = None, progress: Optional[Callable[[int], Any]] = None, program_key: Optional[str] = None) -> GAResult:
     """Run (or resume) a GA.
 
     Args:
@@ -262,11 +251,11 @@ def run_ga(fitness_fn: Callable[[jax.Array], tuple[jax.Array, Mapping[str, jax.A
         cfg: GA settings.
         init_genes: genes (d,) of a design to seed the initial population with (member 0), e.g. the baseline, or
             (k, d) designs for members 0..k-1 (e.g. the baseline and the best of a quasi-random screen).
-        checkpoint: a previous checkpoint (as passed to ``save_checkpoint``) to resume from; its fingerprint
-            must match, otherwise :class:`GAError` (never a silent restart).
+        checkpoint: a previous checkpoint (as passed to ``save_checkpoint``) to resume from, of this very run: the
+            caller owns its identity (the CLI's stage engine, :class:`deltajax.jobs.stages.Checkpoint`, refuses
+            another run's); a state that does not fit these settings' optimiser is a :class:`GAError`.
         save_checkpoint: called on the host with a dict of NumPy arrays and attributes after every chunk.
         stop_after: stop (as if killed) after this many generations in total (for kill-and-resume tests).
-        fingerprint_extra: extra settings (objective, design space) that a checkpoint must match.
         progress: called with the number of generations completed by each chunk (e.g. a tqdm ``update``).
         program_key: a string naming everything ``fitness_fn`` computes (e.g.
             :func:`deltajax.optimize.workflow.ga_fitness_key`): the GA's programs are then kept across processes
@@ -276,7 +265,6 @@ def run_ga(fitness_fn: Callable[[jax.Array], tuple[jax.Array, Mapping[str, jax.A
         :class:`GAResult`.
     """
     cfg.validate()
-    fp = fingerprint(cfg, num_dims, fingerprint_extra)
     G = cfg.generations
     init_fn, chunk = _engine(fitness_fn, num_dims, dataclasses.replace(cfg, seed=0, generations=1,
                                                                           checkpoint_every=1), program_key)
@@ -287,9 +275,6 @@ def run_ga(fitness_fn: Callable[[jax.Array], tuple[jax.Array, Mapping[str, jax.A
     seed_genes = jnp.asarray(seed_genes)
 
     if checkpoint is not None:
-        if checkpoint.get("fingerprint") != fp:
-            raise GAError(f"checkpoint fingerprint {checkpoint.get('fingerprint')!r} does not match this run's "
-                          f"{fp!r}: the GA/objective/design settings changed; use a new run directory")
         template_state, template_key, _, _ = jax.eval_shape(init_fn, jax.random.PRNGKey(cfg.seed), seed_genes)
         state = arrays_to_state(template_state, checkpoint["state"])
         key = jnp.asarray(np.asarray(checkpoint["key"]))
@@ -317,7 +302,7 @@ def run_ga(fitness_fn: Callable[[jax.Array], tuple[jax.Array, Mapping[str, jax.A
             progress(n)
         if save_checkpoint is not None:
             save_checkpoint({
-                "fingerprint": fp, "generations_done": done, "state": state_to_arrays(state),
+                "generations_done": done, "state": state_to_arrays(state),
                 "key": np.asarray(key), "history": {k: np.asarray(v) for k, v in history.items()},
                 "population": last_pop, "fitness": last_fit,
             })
@@ -326,4 +311,4 @@ def run_ga(fitness_fn: Callable[[jax.Array], tuple[jax.Array, Mapping[str, jax.A
     best_genes = np.asarray(state.best_solution)
     return GAResult(best_genes=best_genes, best_fitness=float(state.best_fitness), history=hist,
                     generations_done=done, resumed_from=resumed_from, final_population=last_pop,
-                    final_fitness=last_fit, fingerprint=fp)
+                    final_fitness=last_fit)

@@ -4,14 +4,15 @@
   size), resuming at the first unfinished chunk of a checkpoint and committing a new one after each chunk (or
   every ``checkpoint_every_s`` seconds). Chunks are deterministic, so a resumed job ends bit for bit like an
   uninterrupted one.
-* Two checkpoint stores behind the same contract (``open`` -> the arrays and the items already done, validated;
-  ``commit`` -> the chunks done so far made durable): :class:`MemmapCheckpoint` (``.npy`` memory maps and a
-  ``state.json`` with a sha256 per finished chunk, in a checkpoint directory: the jobs of
-  :mod:`deltajax.workspace.driver`) and :class:`ResultsCheckpoint` (the job's own ``results.h5``, sealed by
-  :func:`seal` and checked dataset by dataset: ``workspace_grid``, whose partial file is a readable result and
-  a mergeable shard). A checkpoint written with other parameters, or damaged (unreadable, out of range,
-  resized, a finished chunk that no longer matches its checksum) is refused with :class:`CheckpointMismatch`,
-  never silently recomputed or used.
+* Checkpoint stores behind one contract (``open(n_items, chunk_size, outputs)`` -> the arrays and the items
+  already done, validated; ``commit(arrays, done_items)`` -> the chunks done so far made durable;
+  ``commit_last``: whether the last chunk is committed too): :class:`MemmapCheckpoint` here (``.npy`` memory
+  maps and a ``state.json`` with a sha256 per finished chunk, in a checkpoint directory: the jobs of
+  :mod:`deltajax.workspace.driver`), and the CLI stage engine's results-file store
+  (:class:`deltajax.jobs.stages.ChunkCheckpoint`: ``workspace_grid``, whose partial file is a readable result
+  and a mergeable shard, its attributes sealed by :func:`seal`). A checkpoint written with other parameters, or
+  damaged (unreadable, out of range, resized, a finished chunk that no longer matches its checksum) is refused
+  (:class:`CheckpointMismatch` here), never silently recomputed or used.
 * :class:`ShardPlan` cuts a grid of x-planes into chunks and gives one shard of N its contiguous block of
   them, on chunk boundaries, so that every point is computed in the same chunk position as in a single run.
 * :func:`plane_statistics`, :func:`plane_summary` and :func:`reduce_plane_shards` (the shard reducer
@@ -31,9 +32,9 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
 
-from ..io import ChecksumError, ResultsGroupError, read, write_atomic
+from ..io import write_atomic
 
-__all__ = ["CheckpointMismatch", "run_chunks", "MemmapCheckpoint", "ResultsCheckpoint", "ShardPlan", "seal",
+__all__ = ["CheckpointMismatch", "run_chunks", "MemmapCheckpoint", "ShardPlan", "seal",
            "plane_statistics", "plane_summary", "reduce_plane_shards"]
 
 
@@ -42,7 +43,9 @@ class CheckpointMismatch(RuntimeError):
 
 
 def fingerprint(obj: Any) -> str:
-    """Short sha256 of a JSON-able description of a job."""
+    """Short sha256 of a JSON-able description of a job: the memory-mapped store's identity of its checkpoint
+    (:class:`MemmapCheckpoint`, whose callers are library functions with no run; a CLI job's checkpoints in
+    results.h5 carry the run's fingerprint, :class:`deltajax.jobs.stages.Checkpoint`)."""
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
@@ -63,7 +66,8 @@ def run_chunks(n_items: int, chunk_size: int, compute: Callable[[int, int], dict
         fingerprint: JSON-able description of the job; a checkpoint with another fingerprint is refused.
         progress: called with the number of items finished after each chunk (e.g. ``tqdm.update``).
         max_chunks: stop after this many chunks in *this call* (as if killed; resume later).
-        checkpoint: another checkpoint store (e.g. a :class:`ResultsCheckpoint`) instead of ``checkpoint_dir``.
+        checkpoint: another checkpoint store (e.g. the stage engine's, :class:`deltajax.jobs.stages.ChunkCheckpoint`)
+            instead of ``checkpoint_dir``.
         checkpoint_every_s: commit at most this often (0: after every chunk).
 
     Returns:
@@ -189,88 +193,9 @@ def _chunk_sha256(arrays: dict) -> str:
 
 
 def seal(key: str, done: int, start: int, stop: int) -> str:
-    """Checksum of the attributes a resume from a results file trusts (its datasets carry their own)."""
+    """Checksum of the attributes a resume from a results file trusts (its datasets carry their own): the resume
+    key (the run's fingerprint), the items done and the shard's range."""
     return hashlib.sha256(json.dumps([key, int(done), int(start), int(stop)]).encode()).hexdigest()
-
-
-class ResultsCheckpoint:
-    """The job's results file as its checkpoint: ``commit`` stages the finished items and flushes the file.
-
-    The group carries ``<done_attr>`` (items finished), ``resume_key`` (everything that determines the numbers),
-    ``shard_start``/``shard_stop`` and ``resume_seal`` (:func:`seal` of those); :meth:`open` refuses a file
-    whose seal, key, range or any dataset's checksum does not match, and copies the finished items of every
-    array (leading axis = items) from it.
-
-    Args:
-        results: the run's :class:`deltajax.io.ResultsFile`.
-        group: the group holding the arrays.
-        arrays: name in the group -> preallocated array (leading axis: this job's items).
-        key: ``resume_key`` of this job.
-        span: (shard_start, shard_stop) of this job along the item axis.
-        stage: ``stage(done_items)`` stages everything into ``results`` (then flushed).
-        check: ``check(data, done) -> problem or ""``: consistency of the stored arrays beyond their checksums.
-        done_attr: the group attribute counting finished items.
-        remedy: what the refusal tells the user to do.
-    """
-
-    commit_last = False  # the job writes its final results itself
-
-    def __init__(self, results, group: str, arrays: Mapping[str, np.ndarray], key: str, span: tuple[int, int],
-                 stage: Callable[[int], None], check: Optional[Callable[[dict, int], str]] = None,
-                 done_attr: str = "done", remedy: str = "move it away to keep it, or start over"):
-        self.results, self.group, self.arrays, self.key = results, group, dict(arrays), key
-        self.span, self.stage, self.check, self.done_attr, self.remedy = span, stage, check, done_attr, remedy
-
-    def __str__(self) -> str:
-        return str(self.results.path)
-
-    def _refuse(self, what: str) -> CheckpointMismatch:
-        return CheckpointMismatch(f"cannot resume from {self.results.path}: {what}; {self.remedy}")
-
-    def open(self, n_items: int, chunk_size: int, outputs: dict) -> tuple[dict, int]:
-        missing = [n for n in outputs if n not in self.arrays]
-        if missing:
-            raise ValueError(f"ResultsCheckpoint has no arrays for outputs {missing}")
-        path = self.results.path
-        if not path.exists():
-            return self.arrays, 0
-        try:
-            a = read(path, self.group, max_elements=0).group_attrs[self.group]
-            try:
-                done = int(a[self.done_attr])
-                ok_seal = a.get("resume_seal") == seal(a["resume_key"], done, a["shard_start"], a["shard_stop"])
-            except (KeyError, TypeError, ValueError):
-                raise self._refuse("its checkpoint attributes are missing or malformed") from None
-            if not ok_seal:
-                raise self._refuse(f"its checkpoint attributes ({self.done_attr}, resume_key, shard range) do not "
-                                   f"match their checksum (the file is damaged or was edited)")
-            if a["resume_key"] != self.key or [int(a["shard_start"]), int(a["shard_stop"])] != list(self.span):
-                raise self._refuse("it was written by another grid, robot, backend or shard")
-            if not 0 <= done <= n_items:
-                raise self._refuse(f"{self.done_attr}={done} is outside 0..{n_items}")
-            stored = read(path, self.group, verify=True).variables[self.group]
-            data = {n: stored[n].data for n in self.arrays}
-        except ResultsGroupError:
-            raise self._refuse(f"it has no group {self.group!r}") from None
-        except ChecksumError as e:
-            raise self._refuse(str(e).split(": ", 1)[-1].replace(f"{path}:", "")) from None
-        except (OSError, KeyError) as e:
-            raise self._refuse(f"it is unreadable or incomplete ({type(e).__name__}: "
-                               f"{str(e).split('(')[0].strip()})") from None
-        for name, arr in data.items():
-            if arr.shape != self.arrays[name].shape:
-                raise self._refuse(f"{self.group}/{name} has shape {arr.shape}, this run expects "
-                                   f"{self.arrays[name].shape}")
-        problem = self.check(data, done) if self.check is not None else ""
-        if problem:
-            raise self._refuse(problem)
-        for name, arr in self.arrays.items():
-            arr[:done] = data[name][:done]
-        return self.arrays, done
-
-    def commit(self, arrays: dict, done_items: int) -> None:
-        self.stage(done_items)
-        self.results.flush()
 
 
 # -- shards of a grid of x-planes ---------------------------------------------------------------------------------
