@@ -8,7 +8,8 @@ that knows config paths. One module per settings family; this package ties them 
 - ``dynamics.py``: dynamics_cycle and datasheet;
 - ``boundary.py``: boundary_search;
 - ``motion.py``: reconfig_motion;
-- ``ga_reconfig.py``: the main job;
+- ``ga_reconfig.py``: the main job's settings; ``ga_reconfig_run.py``: its run built from them (identity, a
+  continued run's earlier run, the setup handed to the job);
 - here: the top-level keys and checks, :data:`EXPERIMENT_SETTINGS` (experiment -> settings builder),
   :data:`RUN_DIR_CHECKS`, :data:`ROBOT_SCHEMA`, :data:`EXPERIMENT_SCHEMAS`, :func:`validate_config`,
   :func:`check_keys`, :func:`valid_keys`, and every public name
