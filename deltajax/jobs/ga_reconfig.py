@@ -190,10 +190,10 @@ def _ga_result(st: State, finished: bool) -> None:
 def _ga(st: State) -> None:
     import jax.numpy as jnp
 
-    from . import designer_report as R
+    from . import designer_store as DS
 
     _ga_result(st, finished=False)
-    R.store_ga(st.res, st.gres, st.space, st.ga_cfg, st.ga_what, st.base_genes, st.seeds,
+    DS.store_ga(st.res, st.gres, st.space, st.ga_cfg, st.ga_what, st.base_genes, st.seeds,
                float(st.base[st.primary]), np.asarray(st.space.to_params(jnp.asarray(st.best))), st.fp)
     st.ctx.log(f"GA best ({st.ga_what}): fitness {st.gres.best_fitness:.5g}, {st.space.describe(st.best)}")
 
@@ -201,7 +201,7 @@ def _ga(st: State) -> None:
 def _pareto(st: State) -> None:
     """NSGA-II on the job's objectives, seeded with the baseline, the GA's best and final population, a continued
     run's front and the screen's non-dominated designs."""
-    from . import designer_report as R
+    from . import designer_store as DS
     from ..optimize import workflow as W
     from ..optimize.designer import CONSTRAINT_NAMES
     from ..optimize.pareto import nsga2
@@ -219,7 +219,7 @@ def _pareto(st: State) -> None:
     pfeas = np.all(front.pop_G <= 0, axis=1)
     extra = np.asarray([x for x in front.pop_X[pfeas] if not np.any(np.all(front.X == x, axis=1))])
     st.extra_X = extra.reshape(-1, space.dim)
-    R.store_pareto(st.res, front, st.extra_X, st.objs, s)
+    DS.store_pareto(st.res, front, st.extra_X, st.objs, s)
     st.ctx.log(f"NSGA-II: {len(front.X)} feasible non-dominated points after {front.n_evals} evaluations")
 
 
@@ -230,7 +230,7 @@ def _pareto_load(st: State) -> None:
 
 def _refine(st: State) -> None:
     """optax refinement of the winners: the GA's best and the front's best on the primary objective."""
-    from . import designer_report as R
+    from . import designer_store as DS
     from ..optimize import workflow as W
 
     s, sense, jp, primary = st.s, st.sense, st.jp, st.primary
@@ -245,7 +245,7 @@ def _refine(st: State) -> None:
                           progress=bar.update)
     bar.close()
     st.refined = ro.genes_after[ro.accepted]
-    R.store_refine(st.res, ro, st.refined, st.space, st.objs, s)
+    DS.store_refine(st.res, ro, st.refined, st.space, st.objs, s)
     gain = (ro.F_after[:, jp] / ro.F_before[:, jp] - 1.0)[ro.accepted] * 100
     st.ctx.log(f"refine: {int(ro.accepted.sum())} of {len(ro.accepted)} winners improved ({primary} "
                f"+{np.max(gain) if len(gain) else 0.0:.2f} % at most, every constraint kept)")
@@ -259,6 +259,7 @@ def _verify(st: State) -> None:
     """Every candidate on the fine grids (the regular workspace found by rays), a continued run's front joined with
     the metrics it verified, the floor step, and the recommendation by the job's rule."""
     from . import designer_report as R
+    from . import designer_store as DS
     from ..optimize import workflow as W
     from ..optimize.pareto import hypervolume
 
@@ -293,7 +294,7 @@ def _verify(st: State) -> None:
         ctx.log(f"floor step: skipped (it solves for the floor rule's answer; experiment.recommend={s.recommend})")
     rec = W.recommend(Fv, nd, s.recommend, st.jp, band=s.recommend_band, floor=s.recommend_floor, sense=st.sense)
     hv = hypervolume(Fv[nd], st.ref) if len(nd) else 0.0
-    R.store_verify(st.res, space, cand, names, mv, Fv, nd, rec, hv, hypervolume(Fv[:1], st.ref), st.ref, st.objs, s)
+    DS.store_verify(st.res, space, cand, names, mv, Fv, nd, rec, hv, hypervolume(Fv[:1], st.ref), st.ref, st.objs, s)
     st.res.set_attrs("verify", ga_best_design=ga_best_name)
     if earlier is not None:
         st.res.set_attrs("verify", continued_from=str(earlier.path), continued_from_fingerprint=earlier.fingerprint,
@@ -322,7 +323,7 @@ def _front_of(mv, objs, scale_v):
 def _floor_step(st, cand, names, mv, Fv, nd, pb_fine, space_v, scale_v):
     """The floor rule's answer solved for (:func:`deltajax.optimize.floor.solve_floor`): descents from the verified
     front points that meet the floor, their iterates verified on the fine grids and joined to the candidates."""
-    from . import designer_report as R
+    from . import designer_store as DS
     from ..optimize import workflow as W
     from ..optimize.floor import solve_floor
 
@@ -346,7 +347,7 @@ def _floor_step(st, cand, names, mv, Fv, nd, pb_fine, space_v, scale_v):
         cand = np.concatenate([cand, fo.genes])
         names = names + [f"floor_{i}" for i in range(len(fo.genes))]
         mv = {k: np.concatenate([mv[k], fo.metrics[k]]) for k in mv}
-        R.store_floor(st.res, fo, names, first, st.objs, s)
+        DS.store_floor(st.res, fo, names, first, st.objs, s)
     Fv, ok, nd = _front_of(mv, st.objs, scale_v)
     ctx.log(f"floor step: descents from {len(fo.starts)} verified front points that meet the floor, "
             f"{fo.n_predicted} iterates predicted to meet it, {len(fo.genes)} verified on the fine grids")
@@ -390,12 +391,12 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
     cases searched at the verification's density and at twice it, the change stated); the recommendation re-derived
     by the job's rule from the verified metrics with the certified ones in place (floor from the certified
     baseline), and certified in turn, until the rule's answer is a certified design (at most ``max_rounds``).
-    Group ``certify`` (:func:`deltajax.jobs.designer_report.store_certify`); ``verify``'s ``recommended`` becomes
+    Group ``certify`` (:func:`deltajax.jobs.designer_store.store_certify`); ``verify``'s ``recommended`` becomes
     the certified recommendation (``recommended_verified`` keeps the verification's)."""
     import jax.numpy as jnp
 
     from ..io import load
-    from . import designer_report as R
+    from . import designer_store as DS
     from ..optimize import certify as CE
     from ..optimize import workflow as W
     from ..optimize.pareto import non_dominated
@@ -452,7 +453,7 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
              if s.recommend == "floor" and "regular_volume" in objs else None)
     marg = CE.design_margins(mv, threshold=pb.good.threshold, min_picks=pb.min_picks, max_arm_sum=pb.max_arm_sum,
                              volume_floor=floor)
-    R.store_certify(res, names, cert, feas, marg, front, Fv, rec, rec0, floor, s)
+    DS.store_certify(res, names, cert, feas, marg, front, Fv, rec, rec0, floor, s)
     if path:
         res.set_attrs("certify", cycle_variant="fixed_R")
     res.set_attrs("verify", recommended=int(rec), recommended_verified=int(rec0))
@@ -469,6 +470,7 @@ def _tolerance(st: State) -> None:
     from .. import tolerance as TL
     from ..io import load
     from . import designer_report as R
+    from . import designer_store as DS
     from ..optimize import robust as RB
     from ..optimize import workflow as W
     from ..optimize.certify import overlay
@@ -506,7 +508,7 @@ def _tolerance(st: State) -> None:
         rc = RB.robust_choice(analyse_rows, Fv, np.asarray(V["feasible"]).astype(bool), rule,
                               float(s.robust.probability), int(s.tolerance.seed), int(s.robust.confirm_seed),
                               int(s.robust.max_candidates), known=known, log=ctx.log)
-        R.store_robust(res, rc, names, rec, V, s, text)
+        DS.store_robust(res, rc, names, rec, V, s, text)
         entries = [e for e in entries if e[0] != "recommended"]
         if rec >= 0:
             entries.append(("nominal_recommended", rows.index(rec), rec))
@@ -531,12 +533,12 @@ def _tolerance(st: State) -> None:
                     "tolerance's metric_percentiles show how far each constraint moves under the tolerances)")
     sel = TL.select(results, [(e[1] if isinstance(e[1], tuple) else (0, e[1])) for e in entries])
     roles = [e[0] for e in entries]
-    R.store_tolerance(res, roles, [names[e[2]] for e in entries], [e[2] for e in entries], sel, text)
+    DS.store_tolerance(res, roles, [names[e[2]] for e in entries], [e[2] for e in entries], sel, text)
     frozen = None
     if space.reconfigurable:    # the stricter question: each built robot run at its design's nominal operating R
         frozen = TL.analyse(pb_fine, space_v, genes[[e[2] for e in entries]], tol, samples=n_s,
                             seed=int(s.tolerance.seed), operating_R="nominal")
-        R.store_frozen(res, roles, [names[e[2]] for e in entries], [e[2] for e in entries], frozen, text)
+        DS.store_frozen(res, roles, [names[e[2]] for e in entries], [e[2] for e in entries], frozen, text)
     for line in R.headline_lines(dict(sel, role=roles, design_name=[names[e[2]] for e in entries],
                                        attrs={"samples": n_s}, frozen_R=frozen), roles):
         ctx.log(line)

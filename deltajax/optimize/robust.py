@@ -2,7 +2,7 @@
 
 The stage runs after ``verify`` on the verification problem and reads only what ``verify`` stored (so a resumed run
 computes the same): the Monte Carlo of :func:`deltajax.tolerance.analyse` for the baseline and the recommendation,
-stored in the results group ``tolerance`` by the application (:mod:`deltajax.jobs.designer_report`); this module
+stored in the results group ``tolerance`` by the application (:mod:`deltajax.jobs.designer_store`); this module
 only chooses.
 
 **Robust recommendation** (``experiment.robust.enabled``): the recommendation rule

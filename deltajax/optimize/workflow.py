@@ -47,7 +47,7 @@ __all__ = ["SetupError", "setup", "designer_problem", "required_margins", "scree
 RECOMMEND_RULES = ("floor", "band", "knee", "primary")   # the rules of :func:`recommend`
 
 #: The name under which ``verify`` stores a metric of the fine-grid evaluation (written by
-#: :func:`deltajax.jobs.designer_report.store_verify`, read back by :func:`deltajax.jobs.designer_state.carry_earlier`); others keep their own.
+#: :func:`deltajax.jobs.designer_store.store_verify`, read back by :func:`deltajax.jobs.designer_state.carry_earlier`); others keep their own.
 STORED_METRIC = {"g": "constraint_values"}
 
 
