@@ -7,14 +7,13 @@ becomes a one-line :class:`ConfigError`)."""
 from __future__ import annotations
 
 import dataclasses
-import hashlib
-import json
 from pathlib import Path
 from typing import Any, Mapping, Optional
 
 import numpy as np
 
 from ..rundir import config_differences, recorded
+from ..workspace.chunks import fingerprint
 from .ga_reconfig import GaReconfigSettings, ga_reconfig_settings
 from .readers import ConfigError
 
@@ -26,16 +25,17 @@ __all__ = ["GaReconfigSetup", "ga_reconfig_build", "validate_ga_reconfig", "vali
 # ---- the run's identity and continuing a finished run (experiment.continue_from) ----
 
 def job_fingerprint(cfg) -> str:
-    """Hash of everything that determines a run's results (not resume/stop_after/progress/plots)."""
+    """Hash of everything that determines a run's results (not resume/stop_after/progress/plots): the one
+    identity hash (:func:`deltajax.workspace.chunks.fingerprint`) of the config's experiment, robot, seed and
+    precision."""
     from omegaconf import OmegaConf
 
     c = OmegaConf.to_container(cfg, resolve=True) if OmegaConf.is_config(cfg) else dict(cfg)
     e = dict(c.get("experiment", {}))
     e.pop("resume", None)
     e.pop("stop_after", None)
-    blob = json.dumps({"experiment": e, "robot": c.get("robot"), "seed": c.get("seed"),
-                       "precision": c.get("precision")}, sort_keys=True, default=str)
-    return hashlib.sha256(blob.encode()).hexdigest()[:16]
+    return fingerprint({"experiment": e, "robot": c.get("robot"), "seed": c.get("seed"),
+                        "precision": c.get("precision")})
 
 
 

@@ -34,7 +34,7 @@ import numpy as np
 
 from ..io import write_atomic
 
-__all__ = ["CheckpointMismatch", "run_chunks", "MemmapCheckpoint", "ShardPlan", "seal",
+__all__ = ["CheckpointMismatch", "run_chunks", "MemmapCheckpoint", "ShardPlan", "seal", "fingerprint",
            "plane_statistics", "plane_summary", "reduce_plane_shards"]
 
 
@@ -43,9 +43,10 @@ class CheckpointMismatch(RuntimeError):
 
 
 def fingerprint(obj: Any) -> str:
-    """Short sha256 of a JSON-able description of a job: the memory-mapped store's identity of its checkpoint
-    (:class:`MemmapCheckpoint`, whose callers are library functions with no run; a CLI job's checkpoints in
-    results.h5 carry the run's fingerprint, :class:`deltajax.jobs.stages.Checkpoint`)."""
+    """Short sha256 of a JSON-able description of a job: the one identity hash, of the memory-mapped store's
+    checkpoint (:class:`MemmapCheckpoint`, whose callers are library functions with no run) and of a CLI run
+    (:func:`deltajax.config.ga_reconfig_run.job_fingerprint`; a CLI job's checkpoints in results.h5 carry the
+    run's, :class:`deltajax.jobs.stages.Checkpoint`)."""
     return hashlib.sha256(json.dumps(obj, sort_keys=True, default=str).encode()).hexdigest()[:16]
 
 
