@@ -182,7 +182,7 @@ def test_failed_point_is_reported_others_merge_and_merge_cli_recovers(cluster):
     status = {r["run"]: r["status"] for r in rows}
     assert status["0"] == status["1"] == "ok"
     for r in ("2", "3"):
-        assert status[r].startswith("failed: ConfigError: robot: forearm must be > 0 m, got -1.0"), status[r]
+        assert status[r].startswith("failed: ConfigError: robot.forearm must be > 0 m, got -1.0 m"), status[r]
     merged = sweep / "merged" / "robot.forearm=0.4" / "results.h5"
     assert status["merged/robot.forearm=0.4"] == "ok" and len(rows) == 5
     before = {k: v.data for k, v in read(merged).variables["workspace"].items()}
@@ -296,7 +296,7 @@ def test_summary_status_from_job_records(tmp_path):
 
     records = {
         "0": {"status": "ok"},
-        "1": {"status": "failed", "error": "ConfigError: robot: forearm must be > 0 m, got -1.0"},
+        "1": {"status": "failed", "error": "ConfigError: robot.forearm must be > 0 m, got -1.0 m"},
         "2": {"status": "running", "err": "slurmstepd-n1: error: *** JOB 6 ON n1 CANCELLED AT 2026-12-01T11:00:00 "
                                           "DUE TO JOB REQUEUE ***\n(an earlier run of the same job, before the offset)\n"
                                           "submitit WARNING - Bypassing signal SIGTERM\n"
@@ -323,9 +323,9 @@ def test_summary_status_from_job_records(tmp_path):
         (d / ".hydra" / "job_status.json").write_text(json.dumps(rec))
     rows = _rows(Path(summarize_sweep(tmp_path)["json"]).parent)
     status = {r["run"]: r["status"] for r in rows}
-    assert status == {"0": "ok", "1": "failed: ConfigError: robot: forearm must be > 0 m, got -1.0",
+    assert status == {"0": "ok", "1": "failed: ConfigError: robot.forearm must be > 0 m, got -1.0 m",
                       "2": "killed: slurmstepd-n1: error: *** STEP 7.0 ON n1 CANCELLED AT 2026-12-01T12:00:00 ***",
                       "3": "running", "4": "missing"}
     assert rows[1]["job"]["status"] == "failed" and "job" not in rows[4]
     csv = (tmp_path / "summary.csv").read_text().splitlines()
-    assert csv[2].startswith('1,run,"failed: ConfigError: robot: forearm must be > 0 m, got -1.0"')
+    assert csv[2].startswith('1,run,"failed: ConfigError: robot.forearm must be > 0 m, got -1.0 m"')
