@@ -191,6 +191,16 @@ def _unit_profile(robot: Delta, cycle):
     return z(prof.tau_inertial_unit), z(prof.tau_gravity), z(prof.theta_dot), ok
 
 
+def _drive_profile(robot: Delta, cycle, motor: Motor, gear_ratio, dwell, payload_mass):
+    """What :func:`drive_loads`, :func:`cycle_rate` and :func:`cycle_rate_refined` start from: the guarded motor,
+    the robot with the drive and payload (:func:`with_drive`), its unit-time profile (a, g, theta') on ``cycle``,
+    ``ok`` (reachable and a valid drive), and the gear ratio n and dwell in the profile's dtype."""
+    motor, gear_ratio, drive = _guarded_drive(motor, gear_ratio)
+    r = with_drive(robot, motor, gear_ratio, payload_mass)
+    a, g, thd, ok = _unit_profile(r, cycle)
+    return motor, r, a, g, thd, ok & drive, jnp.asarray(gear_ratio, a.dtype), jnp.asarray(dwell, a.dtype)
+
+
 def drive_loads(robot: Delta, cycle, motor: Motor, gear_ratio, *, duration=None, dwell=0.0,
                 payload_mass=None) -> DriveLoads:
     """Motor loads on ``cycle`` at ``duration`` (default: its nominal one) with gearbox ratio ``gear_ratio``.
@@ -208,12 +218,9 @@ def drive_loads(robot: Delta, cycle, motor: Motor, gear_ratio, *, duration=None,
     Every field is NaN and ``ok`` False where the cycle is unreachable or the motor or gear ratio is invalid
     (:func:`drive_ok`; a concrete invalid gear ratio raises :class:`ConstraintError`).
     """
-    motor, gear_ratio, drive = _guarded_drive(motor, gear_ratio)
-    r = with_drive(robot, motor, gear_ratio, payload_mass)
-    a, g, thd, ok = _unit_profile(r, cycle)
-    ok = ok & drive
+    motor, _, a, g, thd, ok, n, dw = _drive_profile(robot, cycle, motor, gear_ratio, dwell, payload_mass)
     T = cycle.duration if duration is None else jnp.asarray(duration, a.dtype)
-    return _loads_from_unit(a, g, thd, T, jnp.asarray(dwell, a.dtype), motor, jnp.asarray(gear_ratio, a.dtype), ok)
+    return _loads_from_unit(a, g, thd, T, dw, motor, n, ok)
 
 
 def _bisect_time(a, g, thd, motor, n, dwell, T_low, T_high, n_iter):
@@ -271,12 +278,7 @@ def cycle_rate(robot: Delta, cycle, motor: Motor, gear_ratio, *, dwell=0.0, payl
     rate (loads NaN, ``ok`` False) where the cycle is unreachable or the motor or gear ratio is invalid
     (:func:`drive_ok`; a concrete invalid gear ratio raises :class:`ConstraintError`).
     """
-    motor, gear_ratio, drive = _guarded_drive(motor, gear_ratio)
-    r = with_drive(robot, motor, gear_ratio, payload_mass)
-    a, g, thd, ok = _unit_profile(r, cycle)
-    ok = ok & drive
-    n = jnp.asarray(gear_ratio, a.dtype)
-    dw = jnp.asarray(dwell, a.dtype)
+    motor, _, a, g, thd, ok, n, dw = _drive_profile(robot, cycle, motor, gear_ratio, dwell, payload_mass)
     sg = jax.lax.stop_gradient                      # the derivative comes from _implicit_time, not the loop
     T = jnp.where(ok, _bisect_time(sg(a), sg(g), sg(thd), motor, sg(n), sg(dw), T_low, T_high, n_iter), jnp.nan)
     T = _implicit_time(T, a, g, thd, motor, n, dw, T_low)
@@ -314,12 +316,7 @@ def cycle_rate_refined(robot: Delta, cycle, path: Callable, refine: Callable, mo
     """
     from .trajectory import Cycle
 
-    motor, gear_ratio, drive = _guarded_drive(motor, gear_ratio)
-    r = with_drive(robot, motor, gear_ratio, payload_mass)
-    a, g, thd, ok = _unit_profile(r, cycle)
-    ok = ok & drive
-    n = jnp.asarray(gear_ratio, a.dtype)
-    dw = jnp.asarray(dwell, a.dtype)
+    motor, r, a, g, thd, ok, n, dw = _drive_profile(robot, cycle, motor, gear_ratio, dwell, payload_mass)
     T0 = jnp.where(ok, _bisect_time(a, g, thd, motor, n, dw, T_low, T_high, n_iter), jnp.nan)
     T0l = jnp.where(jnp.isfinite(T0), T0, cycle.duration)
 
