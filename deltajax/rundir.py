@@ -184,7 +184,7 @@ def _check_results(results: Path, state: str) -> None:
     generations done, ...) and group against the file's integrity record (:func:`deltajax.io.verify_file`).
     Raises :class:`CheckpointError` (one line: the path, what is wrong, what to do) when it is damaged,
     edited, truncated or missing."""
-    from .io import ChecksumError, verify_file  # the one HDF5 reader (io.py imports nothing of deltajax)
+    from .io import ChecksumError, verify_file  # the one HDF5 reader (deltajax/io/reader.py)
 
     if state == "resume":
         head, todo = "cannot resume", "move it away to keep it, or add fresh=true to start over"

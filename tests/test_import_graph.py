@@ -11,7 +11,7 @@ import pytest
 PKG = Path(__file__).resolve().parents[1] / "deltajax"
 
 #: modules that must not import any other deltajax module outside their own package
-GROUND = ["io.py", "papers.py", "reference.py", "eigen3.py", "fields.py", "_precision.py", "schemas.py", "regular.py", "plots"]
+GROUND = ["io", "papers.py", "reference.py", "eigen3.py", "fields.py", "_precision.py", "schemas.py", "regular.py", "plots"]
 
 
 def _module_file(parts: list[str]) -> Path | None:
