@@ -24,6 +24,7 @@ from .integrity import stored_record, to_python, verify_dataset, verify_group
 __all__ = ["Variable", "Contents", "ResultsGroupError", "read", "load", "groups", "open_xarray", "differences",
            "RUN_ATTRS", "verify_file"]
 
+
 class ResultsGroupError(KeyError):
     """A group that the results file does not have; the message lists the groups it has."""
 
