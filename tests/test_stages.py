@@ -66,6 +66,18 @@ def _job(path, fp="run-a", stop_at=None, resume="auto"):
     return ok, runner
 
 
+def test_a_resume_reads_the_checkpoint_once(tmp_path, monkeypatch):
+    # resume=must asks the checkpoint whether there is something to resume (Runner.open), then the stage loads it:
+    # the verified read of the group (the GA's: its whole population and history) happens once
+    part = tmp_path / "part.h5"
+    assert not _job(part, stop_at=4)[0]
+    reads = []
+    real = dio.load
+    monkeypatch.setattr(dio, "load", lambda path, group=None, **kw: (reads.append(group), real(path, group, **kw))[1])
+    ok, runner = _job(part, resume="must")
+    assert ok and reads.count("walk/checkpoint") == 1
+
+
 def test_stage_stopped_mid_way_resumes_from_its_checkpoint_bit_identically(tmp_path):
     ref = tmp_path / "ref.h5"
     assert _job(ref)[0]

@@ -272,6 +272,7 @@ class Checkpoint:
                  remedy: str = "add fresh=true to start over"):
         self.runner, self.stage, self.group, self.save, self.read = runner, stage, group, save, read
         self.what, self.note, self.attr, self.remedy = what, note, attr, remedy
+        self._loaded: Optional[tuple] = None   # (state,) read by load() since the last commit: read once per run
 
     @property
     def path(self) -> Path:
@@ -322,7 +323,16 @@ class Checkpoint:
         Raises:
             deltajax.rundir.CheckpointError: the checkpoint is another run's, damaged, edited or malformed
                 (one line: the path, what is wrong, what to do).
+
+        The file is read once: a second call before a :meth:`commit` (the runner's resume check in
+        :meth:`Runner.open`, then the stage) returns the same state (this run holds the results file's lock, so
+        nothing else writes it in between).
         """
+        if self._loaded is None:
+            self._loaded = (self._read(),)
+        return self._loaded[0]
+
+    def _read(self) -> Any:
         data = self._group()
         if data is None or self.read is None:
             return data
@@ -335,6 +345,7 @@ class Checkpoint:
         """Make ``state`` the stage's checkpoint: staged (``save``), stamped with the run's fingerprint, flushed
         (durable once this returns) and logged."""
         res = self.runner.ctx.results
+        self._loaded = None
         self.save(res, *state)
         res.set_attrs(self.group, **{self.attr: self._fingerprint()})
         res.flush()
