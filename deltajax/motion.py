@@ -45,15 +45,8 @@ reports them; w = 0 leaves only fixed R).
 For optimisers, :func:`path_optimum` returns the DP's optimal score as a pure function (jit/vmap over a
 population of designs; bands from :func:`path_bands`).
 
-**Smooth refinement** (:func:`deltajax.motion_refine.refine_path`): R(t) as a uniform cubic B-spline (``n_ctrl`` control points),
-initialised by least squares on the DP solution and improved with optax (Adam) on a smooth surrogate (the
-integral, or a soft-min for "min") with quadratic penalties on the limits. The spline's speed and acceleration
-are bounded in *continuous time* by its control-point differences (the derivative of a cubic B-spline is a
-quadratic B-spline with coefficients Delta c / h, its second derivative the linear B-spline Delta^2 c / h^2,
-both inside the convex hull of their coefficients), and the force is checked at every sample with the spline's
-analytic rates. The best iterate that satisfies every constraint is accepted only if the exact criterion
-(same samples, same weights) beats the DP's; otherwise the DP solution is returned unchanged and
-``accepted=False`` says so.
+**Smooth refinement** (a cubic B-spline R(t) improved by optax, accepted only when it beats the DP's exact
+criterion): :func:`deltajax.motion_refine.refine_path`, whose module docstring gives the method.
 """
 
 from __future__ import annotations
@@ -96,7 +89,6 @@ __all__ = [
 
 AGGREGATES = ("integral", "min")
 BOUNDARIES = ("free", "rest", "closed")
-
 
 
 class RDriveLimits(eqx.Module):
@@ -242,7 +234,8 @@ def _force_eval(coef, v, acc):
     return coef[..., 0] + v * (coef[..., 1] + v * coef[..., 2]) + acc * coef[..., 3]
 
 
-def _bands(recon: ReconfigurableDelta, cycle: Cycle, limits: RDriveLimits) -> tuple[int, int]:
+def path_bands(recon: ReconfigurableDelta, cycle: Cycle, limits: RDriveLimits) -> tuple[int, int]:
+    """(w, a): the speed and acceleration bands in R samples for this robot's R step and the cycle's dt (host)."""
     dR = float(recon.R_step)
     dt = float(cycle.duration) / (cycle.n_samples - 1)
     n = recon.n_R
@@ -323,7 +316,7 @@ def _dp_pass(value, feasible, coef, weights, dR, dt, fmax, k0, *, w: int, a: int
     else:
         P = wv[0][k0c] + wv[1][:, None]
         S = jnp.minimum(v[0][k0c], v[1][:, None])
-    slack = 1.0 + 1e-9   # as _bands: a limit that is exactly a whole number of samples keeps that band
+    slack = 1.0 + 1e-9   # as path_bands: a limit that is exactly a whole number of samples keeps that band
     init_ok = valid0 & (jnp.abs(ds)[None, :] * dR <= speed * dt * slack)
     if boundary in ("rest", "closed"):
         init_ok = init_ok & (ds[None, :] == 0)
@@ -452,7 +445,7 @@ def _evaluate(tables: PathTables, k, aggregate, dt, bands, ok) -> PathResult:
     R = np.asarray(tables.R)[k]
     v, acc = _int_rates(k, float(tables.R_step), dt)
     coef = np.asarray(tables.force_coef)[np.arange(K), k]
-    F = coef[:, 0] + v * (coef[:, 1] + v * coef[:, 2]) + acc * coef[:, 3]
+    F = _force_eval(coef, v, acc)
     val = np.asarray(tables.value)[np.arange(K), k]
     return PathResult(k=k, R=R, R_dot=v, R_ddot=acc, value=val, force_R=F, score=path_score(tables, k, aggregate),
                       ok=True, bands=bands)
@@ -495,7 +488,7 @@ def resolve_path(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_t
     if tables is None:
         tables = jax.jit(path_tables, static_argnames=("criterion",))(recon, cycle, criterion, b_v=b_v, b_f=b_f,
                                                                       beta=beta)
-    w, a = _bands(recon, cycle, limits)
+    w, a = path_bands(recon, cycle, limits)
     dt = float(cycle.duration) / (cycle.n_samples - 1)
     return resolve_tables(tables, dt, w, a, float(limits.force), aggregate=aggregate, boundary=boundary,
                           start_batch=start_batch)
@@ -532,11 +525,6 @@ def resolve_tables(tables: PathTables, dt: float, w: int, a: int, force_limit: f
     P, S, path = path_dp_jit(*args, k0, w=w, a=a, primary_min=pm, boundary=boundary, backtrack=True)
     ok = bool(np.isfinite(float(P)))
     return _evaluate(tables, np.asarray(path), aggregate, float(dt), (w, a), ok)
-
-
-def path_bands(recon: ReconfigurableDelta, cycle: Cycle, limits: RDriveLimits) -> tuple[int, int]:
-    """(w, a): the speed and acceleration bands in R samples for this robot's R step and the cycle's dt (host)."""
-    return _bands(recon, cycle, limits)
 
 
 def path_optimum(recon: ReconfigurableDelta, cycle: Cycle, criterion: str = "k_tilde", *, w: int, a: int,

@@ -8,6 +8,8 @@ beats the DP's exact criterion (same samples, same weights). Continuous-time rat
 cubic B-spline is a quadratic B-spline with coefficients Delta c / h and the second derivative the linear
 B-spline Delta^2 c / h^2, both inside the convex hull of their coefficients, so |Delta c| / h <= Rdot_max and
 |Delta^2 c| / h^2 <= Rddot_max bound the speed and acceleration at every instant, not only at the samples.
+The R force is checked at every sample with the spline's analytic rates; when no iterate is accepted the DP
+solution comes back unchanged (``accepted=False``).
 """
 
 from __future__ import annotations

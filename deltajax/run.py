@@ -22,6 +22,8 @@ import hydra
 from omegaconf import DictConfig, OmegaConf
 
 from .io import ResultsWriteError
+# BelowWarning and RunLogHandler: also named as deltajax.run.* by logging configs written before deltajax.runlog
+from .runlog import BelowWarning, RunLogHandler, api_logging, console_through_tqdm, run_log_open  # noqa: F401
 
 log = logging.getLogger("deltajax")
 
@@ -219,7 +221,7 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
             log.info(f"{run_dir} already holds the complete results of this {name} run; nothing to do "
                      f"(fresh=true recomputes them)")
             return run_dir / "results.h5"
-        stack.enter_context(_run_log_open())
+        stack.enter_context(run_log_open())
         dev = jax.devices()[0]
         attrs = {
             "deltajax_version": __version__,
@@ -235,7 +237,7 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
         results = ResultsFile(run_dir / "results.h5", attrs=attrs)
         ctx = RunContext(cfg=cfg, run_dir=run_dir, results=results, robot=robot, recon=recon, settings=settings)
         t0 = time.perf_counter()
-        with _console_through_tqdm():
+        with console_through_tqdm():
             module.run(ctx)
             results.set_attrs(wall_time_s=time.perf_counter() - t0)
             path = results.flush(final=True)
@@ -256,78 +258,6 @@ def _drop_checkpoints(ctx: RunContext) -> None:
     size = sum(p.stat().st_size for p in ck.rglob("*") if p.is_file())
     shutil.rmtree(ck)
     ctx.log(f"run complete: removed its checkpoint directory ({size / 1e6:.3g} MB)")
-
-
-class _TqdmHandler(logging.StreamHandler):
-    """A console handler that writes through ``tqdm.write`` so a log line never breaks a progress bar."""
-
-    def emit(self, record):
-        from tqdm import tqdm
-
-        try:
-            tqdm.write(self.format(record), file=self.stream)
-            self.flush()
-        except Exception:  # noqa: BLE001 - logging must not raise
-            self.handleError(record)
-
-
-@contextlib.contextmanager
-def _console_through_tqdm():
-    """Route every console logging handler of the root logger through ``tqdm.write`` (keeping its stream,
-    level, formatter and filters; ``tqdm.contrib.logging.logging_redirect_tqdm`` keeps only the first one)."""
-    root = logging.getLogger()
-    saved = list(root.handlers)
-    new = []
-    for h in saved:
-        if type(h) is logging.StreamHandler and h.stream in (sys.stdout, sys.stderr):
-            t = _TqdmHandler(h.stream)
-            t.setLevel(h.level)
-            t.setFormatter(h.formatter)
-            for f in h.filters:
-                t.addFilter(f)
-            new.append(t)
-        else:
-            new.append(h)
-    root.handlers = new
-    try:
-        yield
-    finally:
-        root.handlers = saved
-
-
-class RunLogHandler(logging.FileHandler):
-    """``<run_dir>/run.log``: written only while this process owns the run directory (between the claim in
-    :func:`execute` and the end of the run), so a refused rerun or a rejected config leaves another run's log,
-    and a directory it never claimed, untouched. Lines before the claim still reach the console."""
-
-    _active = False  # class-wide: one run at a time per process
-
-    def __init__(self, filename, mode: str = "a", encoding=None, delay: bool = True, errors=None):
-        super().__init__(filename, mode, encoding, delay=True, errors=errors)
-
-    def emit(self, record: logging.LogRecord) -> None:
-        if RunLogHandler._active:
-            super().emit(record)
-
-
-@contextlib.contextmanager
-def _run_log_open():
-    RunLogHandler._active = True
-    try:
-        yield
-    finally:
-        RunLogHandler._active = False
-        for h in logging.getLogger().handlers:
-            if isinstance(h, RunLogHandler):
-                h.close()  # reopened (delay) by the next run's first line
-
-
-class BelowWarning(logging.Filter):
-    """Logging filter (used by ``configs/hydra/job_logging/deltajax.yaml``): records below WARNING only, so
-    the run's lines go to stdout and warnings/errors to stderr."""
-
-    def filter(self, record: logging.LogRecord) -> bool:
-        return record.levelno < logging.WARNING
 
 
 def _user_errors() -> tuple:
@@ -415,38 +345,6 @@ def main(cfg: DictConfig) -> None:
         sys.exit(1)
 
 
-@contextlib.contextmanager
-def _api_logging(run_dir: Path):
-    """Logging for :func:`run_experiment`: the run's lines always go to ``<run_dir>/run.log`` (as under the
-    CLI) and, when the caller has configured no logging, to stdout (warnings and errors to stderr)."""
-    root = logging.getLogger()
-    # opened only once the run directory is claimed: a config rejected before that leaves no directory behind
-    file = RunLogHandler(run_dir / "run.log")
-    file.setFormatter(logging.Formatter("[%(asctime)s][%(name)s][%(levelname)s] - %(message)s"))
-    file.setLevel(logging.INFO)
-    added = [file]
-    if not root.handlers:
-        out = logging.StreamHandler(sys.stdout)
-        out.setFormatter(logging.Formatter("%(message)s"))
-        out.addFilter(BelowWarning())
-        err = logging.StreamHandler(sys.stderr)
-        err.setLevel(logging.WARNING)
-        err.setFormatter(logging.Formatter("%(levelname)s: %(message)s"))
-        added += [out, err]
-    level = log.level
-    if log.getEffectiveLevel() > logging.INFO:
-        log.setLevel(logging.INFO)  # the run's INFO lines reach run.log whatever the root level is
-    for h in added:
-        root.addHandler(h)
-    try:
-        yield
-    finally:
-        for h in added:
-            root.removeHandler(h)
-        log.setLevel(level)
-        file.close()
-
-
 def run_experiment(name: str, overrides: Iterable[str] = (), run_dir: Optional[os.PathLike] = None) -> Path:
     """Run an experiment from Python with the same configs as the CLI (Hydra compose API).
 
@@ -473,7 +371,7 @@ def run_experiment(name: str, overrides: Iterable[str] = (), run_dir: Optional[o
     if run_dir is None:
         # microseconds: two calls in one second must not share (and be refused by) one run directory
         run_dir = Path("outputs") / name / datetime.datetime.now().strftime("%Y-%m-%d_%H-%M-%S_%f")
-    with _api_logging(Path(run_dir)):
+    with api_logging(Path(run_dir)):
         return execute(cfg, Path(run_dir))
 
 
@@ -597,8 +495,8 @@ def cli(argv: Optional[list] = None) -> int:
 
 
 if __name__ == "__main__":
-    # run the imported module's cli, not this __main__ copy: Hydra's logging config instantiates
-    # deltajax.run.RunLogHandler, whose class-wide switch _run_log_open must flip (else no run.log via python -m)
+    # run the imported module's cli, not this __main__ copy: Hydra instantiates deltajax.run.RunDirWatch, whose
+    # class-wide record of created directories _remove_created must read (else a refused run leaves them behind)
     from deltajax.run import cli as _package_cli
 
     sys.exit(_package_cli())

@@ -140,7 +140,7 @@ def test_console_logging_goes_through_tqdm_and_keeps_routing():
     import io
     import logging
 
-    from deltajax.run import BelowWarning, _console_through_tqdm, _TqdmHandler
+    from deltajax.runlog import BelowWarning, TqdmHandler, console_through_tqdm
 
     root = logging.getLogger()
     out, err = logging.StreamHandler(sys.stdout), logging.StreamHandler(sys.stderr)
@@ -150,9 +150,9 @@ def test_console_logging_goes_through_tqdm_and_keeps_routing():
     saved = list(root.handlers)
     root.handlers = [out, err, f]
     try:
-        with _console_through_tqdm():
+        with console_through_tqdm():
             new = list(root.handlers)
-            assert [type(h) for h in new] == [_TqdmHandler, _TqdmHandler, logging.StreamHandler]
+            assert [type(h) for h in new] == [TqdmHandler, TqdmHandler, logging.StreamHandler]
             assert new[0].stream is sys.stdout and new[0].filters == out.filters  # info -> stdout only
             assert new[1].stream is sys.stderr and new[1].level == logging.WARNING  # warnings -> stderr
             assert new[2] is f

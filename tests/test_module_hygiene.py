@@ -13,8 +13,8 @@ import pytest
 PKG = Path(__file__).resolve().parents[1] / "deltajax"
 
 #: The application wing: the CLI, its settings and run directories, the jobs, sweeps, plots, reports, benchmarks.
-APP = ("run", "overrides", "schemas", "rundir", "sweep", "merge", "report", "runreport", "config", "jobs", "sweeps",
-       "plots", "benchmarks")
+APP = ("run", "runlog", "overrides", "schemas", "rundir", "sweep", "merge", "report", "runreport", "config", "jobs",
+       "sweeps", "plots", "benchmarks")
 #: The engines over the core.
 ENGINES = ("workspace", "motion", "motion_refine", "optimize", "datasheet", "export", "tolerance")
 #: Third-party libraries of the results file and the configuration: io and the application only.
