@@ -181,3 +181,40 @@ def test_a_second_process_reads_the_designers_evaluator_without_tracing_the_desi
     traced2, exported2, loaded2, picks2 = run()
     assert (traced2, exported2, loaded2) == (0, 0, 1)          # the designer's Python did not run
     assert picks2 == picks
+
+
+@pytest.mark.slow   # one warm toy run of the main job in a new process (~35 CPU-s)
+def test_a_second_process_of_the_main_job_builds_no_new_program(toy_run, tmp_path):
+    # The session's toy run of the main job (the shared fixture, this process's caches) built every program; a new
+    # process running the same settings reads its traced programs back (none exported again) and finds every
+    # program that takes 1 s or more to compile in the XLA cache: at the CLI's threshold (1 s) it writes no cache
+    # entry. Programs under the threshold compile again in every process (JAX keeps them nowhere); their count
+    # and time are printed, not asserted.
+    toy_run("ga_reconfig")
+    script = textwrap.dedent(f"""
+        import collections, sys, jax
+        jax.config.update("jax_enable_x64", True)
+        sys.path.insert(0, {os.path.dirname(__file__)!r})
+        from jax import monitoring
+        events, secs = collections.Counter(), collections.Counter()
+        monitoring.register_event_listener(lambda name, **kw: events.update([name]))
+        def duration(name, s, **kw):
+            secs[name] += s
+        monitoring.register_event_duration_secs_listener(duration)
+        from toy_jobs import overrides
+        from deltajax.run import run_experiment
+        from deltajax import tracing as T
+        run_experiment("ga_reconfig", overrides("ga_reconfig"), run_dir={str(tmp_path / "run")!r})
+        print("RESULT", T.STATS["exported"], T.STATS["loaded"], events["/jax/compilation_cache/cache_misses"],
+              events["/jax/compilation_cache/cache_hits"], events["/jax/compilation_cache/compile_requests_use_cache"],
+              round(secs["/jax/core/compile/jaxpr_trace_duration"], 2))
+    """)
+    env = {**os.environ, "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "1.0"}
+    r = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stderr[-3000:]
+    line = [ln for ln in r.stdout.splitlines() if ln.startswith("RESULT")][0].split()
+    exported, loaded, written, hits, requests, trace_s = (*map(int, line[1:6]), float(line[6]))
+    print(f"second process: {loaded} programs read back, {hits} of {requests} compilations from the XLA cache, "
+          f"tracing {trace_s} s")
+    assert exported == 0 and loaded > 0        # no program traced and exported anew: each was read back
+    assert written == 0 and hits > 0           # no program of >= 1 s compiled anew
