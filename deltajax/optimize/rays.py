@@ -19,15 +19,15 @@ Pure JAX, float64, vmappable.
 from __future__ import annotations
 
 import math
-from typing import Callable, NamedTuple, Sequence
+from typing import Callable, NamedTuple, Optional, Sequence
 
 import jax
 import jax.numpy as jnp
 
 from ..regular import RegularWorkspace
 
-__all__ = ["RAY_DENSITY", "RAY_PASSES", "RAY_BATCH", "RayDensity", "ray_cylinders", "ray_cylinder", "worst_in_cylinder",
-           "golden_min"]
+__all__ = ["RAY_DENSITY", "RAY_PASSES", "RAY_BATCH", "POSSIBLE_CHUNKS", "RayDensity", "ray_cylinders", "ray_cylinder",
+           "worst_in_cylinder", "golden_min", "good_where_possible"]
 
 _GOLD = (math.sqrt(5.0) - 1.0) / 2.0
 
@@ -90,14 +90,49 @@ def golden_min(f, a, b, n):
 RAY_BATCH = 1 << 16
 
 
-def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: int):
+#: Pairs per full good test call of :func:`good_where_possible` in :func:`ray_cylinders`, as a fraction of all the
+#: pairs of a search level (1/POSSIBLE_CHUNKS each; at most :data:`RAY_BATCH`).
+POSSIBLE_CHUNKS = 16
+
+
+def good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, chunk: int):
+    """``good_R(Rf[i], Pf[i])`` for every pair i, (M,) bools, with the full test run only where the cheap necessary
+    condition ``possible_R(R, p)`` holds (False elsewhere, which is the full test's answer there: ``possible_R``
+    False must imply ``good_R`` False, e.g. :func:`deltajax.constraints.good_point_possible`).
+
+    The pairs that may be good are packed to the front (in their order) and tested ``chunk`` at a time by a while
+    loop that stops after the last one: the same test at the same pairs, so the same answers, at the cost of the
+    possible pairs instead of all (working memory: ``chunk`` pairs). Vmapped over designs the loop runs until the
+    batch's design with the most possible pairs is done."""
+    M = Rf.shape[0]
+    maybe = jax.vmap(possible_R)(Rf, Pf)
+    count = jnp.sum(maybe.astype(jnp.int32))
+    pos = jnp.cumsum(maybe.astype(jnp.int32)) - 1
+    order = jnp.zeros((M,), jnp.int32).at[jnp.where(maybe, pos, M)].set(jnp.arange(M, dtype=jnp.int32), mode="drop")
+    K = max(min(int(chunk), M), 1)
+    n_chunks = -(-M // K)
+    order = jnp.concatenate([order, jnp.zeros((K * n_chunks - M,), jnp.int32)])
+
+    def body(st):
+        c, out = st
+        idx = jax.lax.dynamic_slice(order, (c * K,), (K,))
+        g = jax.vmap(good_R)(Rf[idx], Pf[idx])
+        live = c * K + jnp.arange(K) < count
+        return c + 1, out.at[jnp.where(live, idx, M)].set(g, mode="drop")
+
+    _, out = jax.lax.while_loop(lambda st: st[0] * K < count, body, (jnp.int32(0), jnp.zeros((M,), bool)))
+    return out
+
+
+def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: int, possible_R=None):
     """First bad radius along each ray, for each good set j (a point is good for set j when ``good_R(R, p)`` holds
     at any R of ``R_sets[j]``): ``phi[j]``, ``z[j]``, ``r_hi[j]`` (N,) per set; returns a list of (N,). ``n_along``
     samples in [0, r_hi], then the first bad interval searched again with ``n_along`` samples, ``n_levels`` times
     in all (every level a dense search, so an island inside the interval is found too). The value is the last good
     sample before the first bad one (never over-stated by the search), ``r_hi`` when every sample is good and 0
     when the axis point is bad. Every (R, point) pair of every set goes through one vmapped call of ``good_R``
-    (in batches of :data:`RAY_BATCH` pairs)."""
+    (in batches of :data:`RAY_BATCH` pairs); with ``possible_R`` (a necessary condition of ``good_R``) only the
+    pairs where it holds do (:func:`good_where_possible`: the same answers)."""
     dt = jnp.result_type(z[0])
     u = jnp.linspace(0.0, 1.0, n_along, dtype=dt)
     cs = [(jnp.cos(ph), jnp.sin(ph)) for ph in phi]
@@ -114,8 +149,13 @@ def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: i
                          jnp.broadcast_to(p[:, :, None, :], s.shape + (nR, 3)).reshape(-1, 3)))
         Rf = jnp.concatenate([r for r, _ in rows])
         Pf = jnp.concatenate([p for _, p in rows])
-        gf = (jax.vmap(good_R)(Rf, Pf) if Rf.shape[0] <= RAY_BATCH else                 # the one call,
-              jax.lax.map(lambda a: good_R(*a), (Rf, Pf), batch_size=RAY_BATCH))        # in batches
+        M = Rf.shape[0]
+        if possible_R is not None:                                                      # the one call, where
+            gf = good_where_possible(good_R, possible_R, Rf, Pf,                        # the pair may be good
+                                     min(-(-M // POSSIBLE_CHUNKS), RAY_BATCH))
+        else:
+            gf = (jax.vmap(good_R)(Rf, Pf) if M <= RAY_BATCH else                       # the one call,
+                  jax.lax.map(lambda a: good_R(*a), (Rf, Pf), batch_size=RAY_BATCH))    # in batches
         out, k = [], 0
         for j, (lo, hi, done, axis_bad) in enumerate(st):
             g = jnp.any(gf[k:k + sizes[j]].reshape(lo.shape[0], n_along, -1), axis=2)   # (N, n_along)
@@ -185,7 +225,7 @@ def _profile_cylinder(pz, pr, z_min, z_max, hd_ratio, d_max, n_c: int, n_golden:
 
 
 def ray_cylinders(good_R: Callable, R_sets: Sequence, r_max: float, z_min: float, z_max: float, hd_ratio: float,
-                  density: RayDensity = RAY_DENSITY, dtype=None) -> list:
+                  density: RayDensity = RAY_DENSITY, dtype=None, *, possible_R: Optional[Callable] = None) -> list:
     """The regular workspace from rays (module docstring) of each good set: a point is good for set j when
     ``good_R(R, p)`` (R scalar, p (3,) m, z down) holds at any R of ``R_sets[j]`` (an (n_j,) array: e.g. the
     design's R samples, R chosen per point; or the operating R alone). The largest cylinder on the z axis with
@@ -195,7 +235,11 @@ def ray_cylinders(good_R: Callable, R_sets: Sequence, r_max: float, z_min: float
 
     Each profile sample is a *level*: its z, the smallest first-bad radius of its rays, the phi of that ray and the
     phi span around it still unsearched. After the coarse pass, rays search [0, min(r_max, 0.65 D)] only (D: the
-    cylinder so far; a radius beyond that cannot bind), so the same samples give a finer radius."""
+    cylinder so far; a radius beyond that cannot bind), so the same samples give a finer radius.
+
+    ``possible_R(R, p) -> bool``: a cheap necessary condition of ``good_R`` (False only where ``good_R`` is False,
+    e.g. :func:`deltajax.constraints.good_point_possible`); the full test then runs only where it holds
+    (:func:`good_where_possible`), with the same answer."""
     dt = jnp.result_type(float) if dtype is None else dtype
     n = density
     nz, nphi = n.n_z, n.n_phi
@@ -264,7 +308,7 @@ def ray_cylinders(good_R: Callable, R_sets: Sequence, r_max: float, z_min: float
     def one_pass(i, sts):
         lay = [layout(i, st) for st in sts]
         radii = _first_bad(good_R, R_sets, [a[1].reshape(-1) for a in lay], [a[0].reshape(-1) for a in lay],
-                           [jnp.broadcast_to(a[2], (nz * nphi,)) for a in lay], n.n_along, n.n_levels)
+                           [jnp.broadcast_to(a[2], (nz * nphi,)) for a in lay], n.n_along, n.n_levels, possible_R)
         return [update(i, st, *a[:2], *a[3:], r.reshape(nz, nphi)) for st, a, r in zip(sts, lay, radii)]
 
     st0 = dict(z=jnp.full((T,), inf), r=jnp.full((T,), inf), phi=jnp.zeros((T,), dt), span=jnp.full((T,), dphi0, dt),
