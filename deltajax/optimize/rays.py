@@ -23,11 +23,12 @@ from typing import Callable, NamedTuple, Optional, Sequence
 
 import jax
 import jax.numpy as jnp
+import numpy as np
 
 from ..regular import RegularWorkspace
 
 __all__ = ["RAY_DENSITY", "RAY_PASSES", "RAY_BATCH", "POSSIBLE_CHUNKS", "RayDensity", "ray_cylinders", "ray_cylinder",
-           "worst_in_cylinder", "golden_min", "good_where_possible"]
+           "worst_in_cylinder", "golden_min", "good_where_possible", "any_good_where_possible"]
 
 _GOLD = (math.sqrt(5.0) - 1.0) / 2.0
 
@@ -124,6 +125,38 @@ def good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, chunk: i
     return out
 
 
+def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, group, n_groups: int, order, chunk: int):
+    """``any(good_R(Rf[i], Pf[i]) for i in group g)`` for every group g (``group``: (M,) ids in [0, n_groups)), (n_groups,)
+    bools, with the full test run only at pairs where ``possible_R`` holds (a necessary condition of ``good_R``)
+    and whose group is not known to be good yet: rounds of ``chunk`` pairs, taken in the static visiting
+    ``order`` (a permutation of the pairs, e.g. every group's first R, then every group's second, ...) from the
+    pairs still open, until none is. The answer does not depend on which pairs are tested or in what order (the
+    test is pure), so it is the full any's, at the cost of fewer full tests."""
+    M = Rf.shape[0]
+    maybe = jax.vmap(possible_R)(Rf, Pf)
+    K = max(min(int(chunk), M), 1)
+    order = jnp.asarray(order, jnp.int32)
+    group = jnp.asarray(group, jnp.int32)
+
+    def remaining(tested, sat):
+        return maybe & ~tested & ~sat[group]
+
+    def body(st):
+        c, tested, sat = st
+        rem = remaining(tested, sat)[order]
+        pos = jnp.cumsum(rem.astype(jnp.int32)) - 1
+        pick = jnp.zeros((K,), jnp.int32).at[jnp.where(rem & (pos < K), pos, K)].set(order, mode="drop")
+        live = jnp.arange(K) < jnp.sum(rem.astype(jnp.int32))
+        g = jax.vmap(good_R)(Rf[pick], Pf[pick]) & live
+        tested = tested.at[jnp.where(live, pick, M)].set(True, mode="drop")
+        sat = sat.at[jnp.where(g, group[pick], n_groups)].set(True, mode="drop")
+        return c + 1, tested, sat
+
+    _, _, sat = jax.lax.while_loop(lambda st: jnp.any(remaining(st[1], st[2])), body,
+                                   (jnp.int32(0), jnp.zeros((M,), bool), jnp.zeros((n_groups,), bool)))
+    return sat
+
+
 def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: int, possible_R=None):
     """First bad radius along each ray, for each good set j (a point is good for set j when ``good_R(R, p)`` holds
     at any R of ``R_sets[j]``): ``phi[j]``, ``z[j]``, ``r_hi[j]`` (N,) per set; returns a list of (N,). ``n_along``
@@ -132,11 +165,20 @@ def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: i
     sample before the first bad one (never over-stated by the search), ``r_hi`` when every sample is good and 0
     when the axis point is bad. Every (R, point) pair of every set goes through one vmapped call of ``good_R``
     (in batches of :data:`RAY_BATCH` pairs); with ``possible_R`` (a necessary condition of ``good_R``) only the
-    pairs where it holds do (:func:`good_where_possible`: the same answers)."""
+    pairs where it holds and whose point has no good R yet do (:func:`any_good_where_possible`: the same
+    answers)."""
     dt = jnp.result_type(z[0])
     u = jnp.linspace(0.0, 1.0, n_along, dtype=dt)
     cs = [(jnp.cos(ph), jnp.sin(ph)) for ph in phi]
     sizes = [ph.shape[0] * n_along * Rj.shape[0] for ph, Rj in zip(phi, R_sets)]
+    # the pairs' points (group ids over every set's samples, pairs point-major with R inner) and the visiting order
+    # of any_good_where_possible: every point's first R, then every point's second, ...
+    group = np.concatenate([off + np.repeat(np.arange(ph.shape[0] * n_along), Rj.shape[0])
+                            for off, ph, Rj in zip(np.cumsum([0] + [p.shape[0] * n_along for p in phi])[:-1], phi,
+                                                   R_sets)])
+    rank = np.concatenate([np.tile(np.arange(Rj.shape[0]), ph.shape[0] * n_along) for ph, Rj in zip(phi, R_sets)])
+    visit = np.lexsort((group, rank))
+    n_points = sum(ph.shape[0] for ph in phi) * n_along
 
     def level(i, st):
         rows = []
@@ -150,16 +192,21 @@ def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: i
         Rf = jnp.concatenate([r for r, _ in rows])
         Pf = jnp.concatenate([p for _, p in rows])
         M = Rf.shape[0]
-        if possible_R is not None:                                                      # the one call, where
-            gf = good_where_possible(good_R, possible_R, Rf, Pf,                        # the pair may be good
-                                     min(-(-M // POSSIBLE_CHUNKS), RAY_BATCH))
+        if possible_R is not None:    # the one call, where the pair may be good and its point has no good R yet
+            anyg = any_good_where_possible(good_R, possible_R, Rf, Pf, group, n_points, visit,
+                                           min(-(-M // POSSIBLE_CHUNKS), RAY_BATCH))
         else:
             gf = (jax.vmap(good_R)(Rf, Pf) if M <= RAY_BATCH else                       # the one call,
                   jax.lax.map(lambda a: good_R(*a), (Rf, Pf), batch_size=RAY_BATCH))    # in batches
-        out, k = [], 0
+        out, k, kp = [], 0, 0
         for j, (lo, hi, done, axis_bad) in enumerate(st):
-            g = jnp.any(gf[k:k + sizes[j]].reshape(lo.shape[0], n_along, -1), axis=2)   # (N, n_along)
+            npts = lo.shape[0] * n_along
+            if possible_R is not None:
+                g = anyg[kp:kp + npts].reshape(lo.shape[0], n_along)                   # (N, n_along)
+            else:
+                g = jnp.any(gf[k:k + sizes[j]].reshape(lo.shape[0], n_along, -1), axis=2)
             k += sizes[j]
+            kp += npts
             s = lo[:, None] + u[None, :] * (hi - lo)[:, None]
             jb = jnp.argmin(g, axis=1)
             all_good = jnp.all(g, axis=1)
