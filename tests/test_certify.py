@@ -9,6 +9,8 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from deltajax import constraints as C
 from deltajax.optimize import certify as CE
@@ -370,3 +372,62 @@ def test_certify_design_doubles_the_density_again_until_every_figure_settles(mon
     with pytest.raises(ValueError, match="max_extra_doublings"):
         CE.certify_design(None, _Design(), 0.2, density=dens, task_samples=task, cycle_samples=9,
                           max_extra_doublings=-1)
+
+
+@pytest.mark.slow   # ~5 s: each shape compiles both programs
+@settings(max_examples=8)
+@given(st.integers(0, 2 ** 31 - 1), st.sampled_from([(1, 4, 4), (7, 3, 5), (40, 5, 64), (13, 1, 2)]))
+def test_good_only_where_possible_is_the_full_test_and_skips_what_cannot_be_good(seed, shape):
+    n_pts, n_R, chunk = shape
+    # a random good set and a random necessary condition of it (possible where good, and at some other pairs):
+    # both packings give the full test's answer (per pair, and any over each point's R), and the full test runs in
+    # rounds of ``chunk`` lanes over the possible pairs only (it records every lane it computes, padding included):
+    # at most ceil(possible pairs / chunk) rounds, none when nothing is possible
+    from deltajax.optimize.rays import any_good_where_possible, good_where_possible
+
+    rng = np.random.default_rng(seed)
+    good = rng.random((n_pts, n_R)) < 0.3
+    possible = good | (rng.random((n_pts, n_R)) < 0.4)
+    Rf = np.tile(np.arange(n_R, dtype=float), n_pts)                  # pairs point-major, R inner
+    Pf = np.repeat(np.arange(n_pts, dtype=float), n_R)[:, None] * np.ones((1, 3))
+    G, Pm = jnp.asarray(good), jnp.asarray(possible)
+
+    def good_R(R, p):
+        return G[p[0].astype(int), R.astype(int)]
+
+    def possible_R(R, p):
+        return Pm[p[0].astype(int), R.astype(int)]
+
+    per_pair = jax.jit(lambda: good_where_possible(good_R, possible_R, jnp.asarray(Rf), jnp.asarray(Pf), chunk))()
+    np.testing.assert_array_equal(np.asarray(per_pair), good.reshape(-1))
+    group = np.repeat(np.arange(n_pts), n_R)
+    visit = np.lexsort((group, np.tile(np.arange(n_R), n_pts)))
+    asked = []
+
+    def good_logged(R, p):
+        jax.debug.callback(lambda r, q: asked.append((int(q[0]), int(r))), R, p)
+        return good_R(R, p)
+
+    any_R = any_good_where_possible(good_logged, possible_R, jnp.asarray(Rf), jnp.asarray(Pf), group, n_pts, visit,
+                                    chunk)
+    np.testing.assert_array_equal(np.asarray(any_R), good.any(axis=1))
+    jax.effects_barrier()
+    k = min(chunk, n_pts * n_R)
+    assert len(asked) <= k * -(-int(possible.sum()) // k)
+
+
+def test_ray_cylinders_with_a_necessary_condition_give_the_same_cylinders():
+    def good_R(R, p):
+        return jnp.hypot(p[0], p[1]) <= 0.15 + R - 0.4 * (p[2] - 0.45) ** 2
+
+    def possible_R(R, p):                                    # necessary: a wider barrel
+        return jnp.hypot(p[0], p[1]) <= 0.2 + R - 0.2 * (p[2] - 0.45) ** 2
+
+    dens = CE.RayDensity(n_phi=3, n_z=6, n_along=5, n_levels=2)
+    sets = [jnp.asarray([0.0, 0.05, 0.03]), jnp.asarray([0.02])]
+    full = CE.ray_cylinders(good_R, sets, R_MAX, Z0, Z1, HD, dens)
+    pruned = CE.ray_cylinders(good_R, sets, R_MAX, Z0, Z1, HD, dens, possible_R=possible_R)
+    for a, b in zip(full, pruned):
+        for k in ("volume", "diameter", "height", "z_top"):
+            assert float(getattr(a, k)) == float(getattr(b, k))
+    assert float(full[0].volume) > 0
