@@ -2,12 +2,14 @@
 
     python experiments/bench_evaluator.py                       # vs f021be3, 16 Sobol designs, median of 5
     python experiments/bench_evaluator.py --old-ref f021be3 --designs 32 --reps 7
+    python experiments/bench_evaluator.py --fine --designs 8    # the verification's evaluator (rays) vs 9518003
 
 The earlier version is ``deltajax/optimize/designer.py`` and ``deltajax/regular.py`` as ``git show <old-ref>``
 prints them, loaded as modules beside the current package (the rest of the package is today's: the good test
 itself is the same in both). Both evaluators run jitted and vmapped over the same scrambled Sobol designs of the
 default main-job problem (``experiment=ga_reconfig``, the coarse search problem of the NSGA-II stage and the
-screen), as :func:`deltajax.optimize.programs.batch_evaluator` builds them, compiled before timing.
+screen; ``--fine``: the verification's problem, its regular workspace found by rays), as
+:func:`deltajax.optimize.programs.batch_evaluator` builds them, compiled before timing.
 
 Printed: CPU-ms (``resource.getrusage``, both cores) and wall ms per design, median over ``--reps`` interleaved
 rounds, the ratio old / new (on a shared machine absolute times drift with the load; ratios measured in one
@@ -75,9 +77,11 @@ def load_old(ref: str):
 
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--old-ref", default="f021be3",
-                    help="git ref of the earlier evaluator (default: f021be3, main before this work; main's "
-                         "designer.py, regular.py and constraints.py were the same at ff00431)")
+    ap.add_argument("--old-ref", default=None,
+                    help="git ref of the earlier evaluator (default: f021be3 for the search evaluator, main before "
+                         "its work; 9518003 with --fine, main before the ray searches skipped impossible pairs)")
+    ap.add_argument("--fine", action="store_true",
+                    help="the verification's evaluator (fine grids, regular workspace by rays) instead of the search's")
     ap.add_argument("--designs", type=int, default=16, help="Sobol designs per call (the vmapped batch)")
     ap.add_argument("--reps", type=int, default=5, help="interleaved rounds (median reported)")
     ap.add_argument("--seed", type=int, default=7, help="Sobol scramble seed")
@@ -95,7 +99,16 @@ def main(argv=None):
 
     cfg = compose_config(["experiment=ga_reconfig"], CONFIG_DIR)
     robot, recon = robot_from_config(cfg.robot)
-    _, space, pb, _ = ga_reconfig_build(cfg.experiment, robot, recon)
+    s, space, pb, _ = ga_reconfig_build(cfg.experiment, robot, recon)
+    if args.old_ref is None:
+        args.old_ref = "9518003" if args.fine else "f021be3"
+    if args.fine:   # as the job's verify stage builds it
+        from dataclasses import replace
+
+        from deltajax.optimize.workflow import designer_problem
+
+        pb = designer_problem(s, fine=True)
+        space = replace(space, n_R=s.verify.n_R) if space.reconfigurable else space
     X = np.asarray(qmc.Sobol(d=space.dim, scramble=True, seed=args.seed).random(args.designs))
     old_eval = load_old(args.old_ref)
     progs = {name: jax.jit(jax.vmap(lambda g, f=f: f(pb, space.decode(g), regular=True)))
@@ -110,7 +123,8 @@ def main(argv=None):
             rows[name].append(_timed(f, X))
     med = {k: np.median(np.asarray(v), axis=0) for k, v in rows.items()}
     n = args.designs
-    print(f"deltajax {__import__('deltajax').__file__}; old = {args.old_ref}; load {os.getloadavg()[0]:.1f}; "
+    print(f"deltajax {__import__('deltajax').__file__}; {'verification' if args.fine else 'search'} evaluator; "
+          f"old = {args.old_ref}; load {os.getloadavg()[0]:.1f}; "
           f"{n} Sobol designs (seed {args.seed}) per call; median of {args.reps} interleaved rounds")
     for name in progs:
         c, w = med[name]
