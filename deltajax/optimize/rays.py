@@ -96,6 +96,14 @@ RAY_BATCH = 1 << 16
 POSSIBLE_CHUNKS = 16
 
 
+def _possible(possible_R: Callable, Rf, Pf):
+    """``possible_R`` at every pair, in batches of :data:`RAY_BATCH` pairs beyond that many (bounded memory at the
+    certification's densities, like the full test's batches)."""
+    if Rf.shape[0] <= RAY_BATCH:
+        return jax.vmap(possible_R)(Rf, Pf)
+    return jax.lax.map(lambda a: possible_R(*a), (Rf, Pf), batch_size=RAY_BATCH)
+
+
 def good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, chunk: int):
     """``good_R(Rf[i], Pf[i])`` for every pair i, (M,) bools, with the full test run only where the cheap necessary
     condition ``possible_R(R, p)`` holds (False elsewhere, which is the full test's answer there: ``possible_R``
@@ -106,7 +114,7 @@ def good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, chunk: i
     possible pairs instead of all (working memory: ``chunk`` pairs). Vmapped over designs the loop runs until the
     batch's design with the most possible pairs is done."""
     M = Rf.shape[0]
-    maybe = jax.vmap(possible_R)(Rf, Pf)
+    maybe = _possible(possible_R, Rf, Pf)
     count = jnp.sum(maybe.astype(jnp.int32))
     pos = jnp.cumsum(maybe.astype(jnp.int32)) - 1
     order = jnp.zeros((M,), jnp.int32).at[jnp.where(maybe, pos, M)].set(jnp.arange(M, dtype=jnp.int32), mode="drop")
@@ -133,7 +141,7 @@ def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, grou
     pairs still open, until none is. The answer does not depend on which pairs are tested or in what order (the
     test is pure), so it is the full any's, at the cost of fewer full tests."""
     M = Rf.shape[0]
-    maybe = jax.vmap(possible_R)(Rf, Pf)
+    maybe = _possible(possible_R, Rf, Pf)
     K = max(min(int(chunk), M), 1)
     order = jnp.asarray(order, jnp.int32)
     group = jnp.asarray(group, jnp.int32)
