@@ -400,15 +400,15 @@ def test_good_only_where_possible_is_the_full_test_and_skips_what_cannot_be_good
 
     per_pair = jax.jit(lambda: good_where_possible(good_R, possible_R, jnp.asarray(Rf), jnp.asarray(Pf), chunk))()
     np.testing.assert_array_equal(np.asarray(per_pair), good.reshape(-1))
-    group = np.repeat(np.arange(n_pts), n_R)
-    visit = np.lexsort((group, np.tile(np.arange(n_R), n_pts)))
     asked = []
 
     def good_logged(R, p):
         jax.debug.callback(lambda r, q: asked.append((int(q[0]), int(r))), R, p)
         return good_R(R, p)
 
-    any_R = any_good_where_possible(good_logged, possible_R, jnp.asarray(Rf), jnp.asarray(Pf), group, n_pts, visit,
+    Rm = np.repeat(np.arange(n_R, dtype=float), n_pts)               # R-major: every point's first R, then ...
+    Pm3 = np.tile(np.arange(n_pts, dtype=float), n_R)[:, None] * np.ones((1, 3))
+    any_R = any_good_where_possible(good_logged, possible_R, jnp.asarray(Rm), jnp.asarray(Pm3), [(n_pts, n_R)],
                                     chunk)
     np.testing.assert_array_equal(np.asarray(any_R), good.any(axis=1))
     jax.effects_barrier()

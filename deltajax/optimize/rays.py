@@ -133,35 +133,49 @@ def good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, chunk: i
     return out
 
 
-def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, group, n_groups: int, order, chunk: int):
-    """``any(good_R(Rf[i], Pf[i]) for i in group g)`` for every group g (``group``: (M,) ids in [0, n_groups)), (n_groups,)
-    bools, with the full test run only at pairs where ``possible_R`` holds (a necessary condition of ``good_R``)
-    and whose group is not known to be good yet: rounds of ``chunk`` pairs, taken in the static visiting
-    ``order`` (a permutation of the pairs, e.g. every group's first R, then every group's second, ...) from the
-    pairs still open, until none is. The answer does not depend on which pairs are tested or in what order (the
-    test is pure), so it is the full any's, at the cost of fewer full tests."""
+def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets: Sequence[tuple], chunk: int):
+    """For every point of every set, whether ``good_R`` holds at any of its R: ``sets`` = ((n_points, n_R), ...)
+    and the pairs (``Rf`` (M,), ``Pf`` (M, 3)) laid out set after set, each R-major (its first R at every point,
+    then its second R at every point, ...); returns (sum of n_points,) bools, the sets' points in order.
+
+    The full test runs only at pairs where ``possible_R`` holds (a necessary condition of ``good_R``) and whose
+    point has no good R yet: rounds of ``chunk`` pairs taken in layout order from the pairs still open, until none
+    is. The answer does not depend on which pairs are tested or in what order (the test is pure), so it is the full
+    any's, at the cost of fewer full tests. No array of M indices is built beyond the loop's own state (a constant
+    of that size bloated the certification's programs)."""
     M = Rf.shape[0]
     maybe = _possible(possible_R, Rf, Pf)
     K = max(min(int(chunk), M), 1)
-    order = jnp.asarray(order, jnp.int32)
-    group = jnp.asarray(group, jnp.int32)
+    starts = np.cumsum([0] + [n * r for n, r in sets])[:-1]
+    offs = np.cumsum([0] + [n for n, _ in sets])[:-1]
+    n_all = int(sum(n for n, _ in sets))
+
+    def open_points(sat):      # per pair: its point has no good R yet
+        return jnp.concatenate([jnp.tile(~sat[o:o + n], r) for (n, r), o in zip(sets, offs)])
+
+    def point_of(m):           # the point (index into sat) of pair m
+        out = jnp.zeros_like(m)
+        for (n, _), st, o in zip(sets, starts, offs):
+            out = jnp.where(m >= st, o + (m - st) % n, out)
+        return out
 
     def remaining(tested, sat):
-        return maybe & ~tested & ~sat[group]
+        return maybe & ~tested & open_points(sat)
 
     def body(st):
         c, tested, sat = st
-        rem = remaining(tested, sat)[order]
+        rem = remaining(tested, sat)
         pos = jnp.cumsum(rem.astype(jnp.int32)) - 1
-        pick = jnp.zeros((K,), jnp.int32).at[jnp.where(rem & (pos < K), pos, K)].set(order, mode="drop")
+        pick = jnp.zeros((K,), jnp.int32).at[jnp.where(rem & (pos < K), pos, K)].set(
+            jnp.arange(M, dtype=jnp.int32), mode="drop")
         live = jnp.arange(K) < jnp.sum(rem.astype(jnp.int32))
         g = jax.vmap(good_R)(Rf[pick], Pf[pick]) & live
         tested = tested.at[jnp.where(live, pick, M)].set(True, mode="drop")
-        sat = sat.at[jnp.where(g, group[pick], n_groups)].set(True, mode="drop")
+        sat = sat.at[jnp.where(g, point_of(pick), n_all)].set(True, mode="drop")
         return c + 1, tested, sat
 
     _, _, sat = jax.lax.while_loop(lambda st: jnp.any(remaining(st[1], st[2])), body,
-                                   (jnp.int32(0), jnp.zeros((M,), bool), jnp.zeros((n_groups,), bool)))
+                                   (jnp.int32(0), jnp.zeros((M,), bool), jnp.zeros((n_all,), bool)))
     return sat
 
 
@@ -179,15 +193,6 @@ def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: i
     u = jnp.linspace(0.0, 1.0, n_along, dtype=dt)
     cs = [(jnp.cos(ph), jnp.sin(ph)) for ph in phi]
     sizes = [ph.shape[0] * n_along * Rj.shape[0] for ph, Rj in zip(phi, R_sets)]
-    # the pairs' points (group ids over every set's samples, pairs point-major with R inner) and the visiting order
-    # of any_good_where_possible: every point's first R, then every point's second, ...
-    group = np.concatenate([off + np.repeat(np.arange(ph.shape[0] * n_along), Rj.shape[0])
-                            for off, ph, Rj in zip(np.cumsum([0] + [p.shape[0] * n_along for p in phi])[:-1], phi,
-                                                   R_sets)])
-    rank = np.concatenate([np.tile(np.arange(Rj.shape[0]), ph.shape[0] * n_along) for ph, Rj in zip(phi, R_sets)])
-    visit = np.lexsort((group, rank))
-    n_points = sum(ph.shape[0] for ph in phi) * n_along
-
     def level(i, st):
         rows = []
         for j, (lo, hi, _, _) in enumerate(st):
@@ -195,13 +200,18 @@ def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: i
             p = jnp.stack([s * cs[j][0][:, None], s * cs[j][1][:, None], jnp.broadcast_to(z[j][:, None], s.shape)],
                           axis=-1)
             nR = R_sets[j].shape[0]
-            rows.append((jnp.broadcast_to(R_sets[j], s.shape + (nR,)).reshape(-1),
-                         jnp.broadcast_to(p[:, :, None, :], s.shape + (nR, 3)).reshape(-1, 3)))
+            if possible_R is not None:   # R-major (any_good_where_possible's layout)
+                rows.append((jnp.broadcast_to(R_sets[j][:, None], (nR, s.size)).reshape(-1),
+                             jnp.broadcast_to(p.reshape(1, -1, 3), (nR, s.size, 3)).reshape(-1, 3)))
+            else:                        # point-major, R inner
+                rows.append((jnp.broadcast_to(R_sets[j], s.shape + (nR,)).reshape(-1),
+                             jnp.broadcast_to(p[:, :, None, :], s.shape + (nR, 3)).reshape(-1, 3)))
         Rf = jnp.concatenate([r for r, _ in rows])
         Pf = jnp.concatenate([p for _, p in rows])
         M = Rf.shape[0]
         if possible_R is not None:    # the one call, where the pair may be good and its point has no good R yet
-            anyg = any_good_where_possible(good_R, possible_R, Rf, Pf, group, n_points, visit,
+            anyg = any_good_where_possible(good_R, possible_R, Rf, Pf,
+                                           [(ph.shape[0] * n_along, Rj.shape[0]) for ph, Rj in zip(phi, R_sets)],
                                            min(-(-M // POSSIBLE_CHUNKS), RAY_BATCH))
         else:
             gf = (jax.vmap(good_R)(Rf, Pf) if M <= RAY_BATCH else                       # the one call,
