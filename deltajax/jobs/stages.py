@@ -272,7 +272,7 @@ class Checkpoint:
                  remedy: str = "add fresh=true to start over"):
         self.runner, self.stage, self.group, self.save, self.read = runner, stage, group, save, read
         self.what, self.note, self.attr, self.remedy = what, note, attr, remedy
-        self._loaded: Optional[tuple] = None   # (state,) read by load() since the last commit: read once per run
+        self._loaded: Optional[tuple] = None   # (file identity, state) of the last load() since the last commit
 
     @property
     def path(self) -> Path:
@@ -324,13 +324,21 @@ class Checkpoint:
             deltajax.rundir.CheckpointError: the checkpoint is another run's, damaged, edited or malformed
                 (one line: the path, what is wrong, what to do).
 
-        The file is read once: a second call before a :meth:`commit` (the runner's resume check in
-        :meth:`Runner.open`, then the stage) returns the same state (this run holds the results file's lock, so
-        nothing else writes it in between).
+        A second call before a :meth:`commit` (the runner's resume check in :meth:`Runner.open`, then the stage)
+        returns the state already read when the file is unchanged since (same inode, size and modification time,
+        in ns); a file changed in between is read and verified again.
         """
-        if self._loaded is None:
-            self._loaded = (self._read(),)
-        return self._loaded[0]
+        ident = self._identity()
+        if self._loaded is None or self._loaded[0] != ident or ident is None:
+            self._loaded = (ident, self._read())
+        return self._loaded[1]
+
+    def _identity(self) -> Optional[tuple]:
+        try:
+            st = self.path.stat()
+        except OSError:
+            return None
+        return st.st_ino, st.st_size, st.st_mtime_ns
 
     def _read(self) -> Any:
         data = self._group()
