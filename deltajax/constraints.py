@@ -49,7 +49,7 @@ from .fastmath import recip, rsqrt
 from .fields import ConstraintError, check_range, float_leaf
 from .geometry import CHAIN_ANGLES, Delta
 from .indices import point_kernel
-from .kinematics import elbows_unguarded, forearm_units_unguarded, guarded_configuration
+from .kinematics import elbows_unguarded, forearm_units_unguarded, from_chain_frames, guarded_configuration
 from .drive import (CycleRate, DriveLoads, Motor, cycle_rate, cycle_rate_refined, drive_loads,  # noqa: F401
                     drive_ok, min_cycle_time, motor_side, picks_per_minute, with_drive)  # re-exported: the designer's
 from .tracing import traced_once
@@ -58,7 +58,7 @@ from .regular import (REFINE_BISECT, REFINE_GOLDEN, REFINE_SAMPLES, RegularWorks
 
 __all__ = ["JointModel", "LinkModel", "GoodSpec", "JointAngles", "Interference", "PointCheck", "ConstraintError",
            "joint_angles", "joint_margin", "segment_distance", "segment_disc_distance", "interference", "good_point",
-           "good_point_possible", "largest_cylinder", "regular_workspace", "RegularWorkspace", "polar_grid",
+           "good_point_possible", "plate_blocks", "largest_cylinder", "regular_workspace", "RegularWorkspace", "polar_grid",
            "cylinder_samples", "refine_cylinder",
            # deltajax.drive's, re-exported
            "Motor", "DriveLoads", "CycleRate", "with_drive", "motor_side", "drive_ok", "drive_loads", "cycle_rate",
@@ -409,16 +409,62 @@ class PointCheck(NamedTuple):
     interference_margin: Float[Array, ""]
 
 
-def good_point_possible(robot: Delta, p: Float[Array, "3"], spec: GoodSpec) -> Bool[Array, ""]:
-    """A necessary condition of :func:`good_point` at ~3 % of its cost: reachable and the index at least the
-    threshold (the same kernel call that :func:`good_point` makes, without the passive joints and the links, which
-    are ~95 % of its cost). False means ``good_point(robot, p, spec).good`` is False, so a caller may skip the full
-    test there (:func:`deltajax.optimize.designer.evaluate_designer`'s regular-workspace grid). The threshold is
-    relaxed by 1e-9 so that a last-bit difference between the two compiled copies of the kernel can only let a
-    point through (to the full test), never drop a good one."""
+def _segment_meets_plate_region(q0, q1, radius, z_top):
+    """Does the segment [q0, q1] (base frame, z down) have a point with |xy| <= ``radius`` and z <= ``z_top``?
+    Closed form: the t-interval where |xy(t)|^2 <= radius^2 (a quadratic) meets the one where z(t) <= z_top (z
+    is linear) inside [0, 1]; False where ``radius`` is not positive."""
+    d = q1 - q0
+    a = d[0] * d[0] + d[1] * d[1]
+    b = 2.0 * (q0[0] * d[0] + q0[1] * d[1])
+    c = q0[0] * q0[0] + q0[1] * q0[1] - radius * radius
+    moves = a > jnp.finfo(a.dtype).tiny * jnp.maximum(jnp.abs(c), 1.0)      # not a vertical segment
+    disc = b * b - 4.0 * a * c
+    real = moves & (disc >= 0.0)
+    root = jnp.sqrt(jnp.where(real, disc, 0.0))
+    a_s = jnp.where(moves, a, 1.0)
+    t1 = jnp.where(moves, (-b - root) / (2.0 * a_s), 0.0)
+    t2 = jnp.where(moves, (-b + root) / (2.0 * a_s), 1.0)
+    over = jnp.where(moves, real, c <= 0.0)            # some t (of the line) lies over the disc of ``radius``
+    dz = d[2]
+    tz = (z_top - q0[2]) / jnp.where(dz != 0.0, dz, 1.0)
+    z_lo = jnp.where(dz < 0.0, tz, jnp.where((dz == 0.0) & (q0[2] > z_top), jnp.inf, -jnp.inf))
+    z_hi = jnp.where(dz > 0.0, tz, jnp.where((dz == 0.0) & (q0[2] > z_top), -jnp.inf, jnp.inf))
+    lo = jnp.maximum(jnp.maximum(t1, z_lo), 0.0)
+    hi = jnp.minimum(jnp.minimum(t2, z_hi), 1.0)
+    return over & (lo <= hi) & (radius > 0.0)
+
+
+def plate_blocks(robot: Delta, p, cos, sin, links: LinkModel, plate_radius) -> Bool[Array, ""]:
+    """A sufficient condition for a forearm's base-plate clearance to fail :func:`interference`'s requirement
+    (``segment_disc_distance - forearm_radius < clearance``), in closed form: some point of a forearm axis lies
+    over the disc shrunk by a margin and less than ``forearm_radius + clearance`` (less the margin) below the
+    plate's plane (above it: through the base). The exact clearance of such a segment is at most that point's
+    height (a point over the disc is its height from it), so it fails by more than the margin, which covers the
+    rounding of both computations (1e-9 m in float64). ``cos``, ``sin``: the actuated angles' (the kernel's)."""
+    dt = p.dtype
+    margin = jnp.maximum(jnp.asarray(1e-9, dt), 1e3 * jnp.finfo(dt).eps)
+    L1 = robot.upper_arm
+    B = from_chain_frames(jnp.stack([robot.base_radius + L1 * cos, jnp.zeros_like(cos), L1 * sin], axis=-1))
+    dirs = jnp.asarray([[math.cos(a), math.sin(a), 0.0] for a in CHAIN_ANGLES], dt)
+    Cp = p[None, :] + robot.platform_radius * dirs
+    Rp = robot.base_radius + links.plate_overhang if plate_radius is None else jnp.asarray(plate_radius, dt)
+    z_top = links.forearm_radius + links.clearance - margin
+    return jnp.any(jnp.stack([_segment_meets_plate_region(B[i], Cp[i], Rp - margin, z_top) for i in range(3)]))
+
+
+def good_point_possible(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, plate_radius=None) -> Bool[Array, ""]:
+    """A necessary condition of :func:`good_point` (same ``plate_radius``) at a few % of its cost: reachable, the
+    index at least the threshold (the same kernel call that :func:`good_point` makes) and no forearm through or
+    just under the base plate by a closed-form test (:func:`plate_blocks`); the passive joints and the exact link
+    clearances, most of the full test's cost, are left out. False means ``good_point(robot, p, spec,
+    plate_radius=plate_radius).good`` is False, so a caller may skip the full test there (the search evaluator's
+    regular-workspace grid, the ray searches of :mod:`deltajax.optimize.rays`). The threshold is relaxed by 1e-9 so
+    that a last-bit difference between the two compiled copies of the kernel can only let a point through (to the
+    full test), never drop a good one."""
     k = point_kernel(robot, p, beta=spec.beta)
     v = getattr(k.indices, spec.index)
-    return k.ok & (v >= spec.threshold - 1e-9)
+    cos, sin = jnp.stack([c.cos for c in k.chains]), jnp.stack([c.sin for c in k.chains])
+    return k.ok & (v >= spec.threshold - 1e-9) & ~plate_blocks(robot, p, cos, sin, spec.links, plate_radius)
 
 
 @traced_once

@@ -59,7 +59,8 @@ def _module_from_source(name: str, package: str, source: str):
 
 def load_old(ref: str):
     """``evaluate_designer`` as of git ``ref``: its designer module, with its ``C`` (the constraints) seeing the
-    regular-workspace functions of ``ref``'s ``deltajax/regular.py``."""
+    regular-workspace functions of ``ref``'s ``deltajax/regular.py`` and ``ref``'s cheap necessary condition
+    ``good_point_possible``."""
     import deltajax.constraints as C
 
     show = lambda path: subprocess.run(["git", "show", f"{ref}:{path}"], cwd=ROOT, check=True,  # noqa: E731
@@ -69,6 +70,10 @@ def load_old(ref: str):
     shim.__dict__.update({k: v for k, v in vars(C).items() if not k.startswith("__")})
     for n in old_regular.__all__:
         setattr(shim, n, getattr(old_regular, n))
+    # the cheap necessary condition of the good test as of ``ref`` (the full test itself is today's in both)
+    old_constraints = _module_from_source("deltajax._bench_old_constraints_src", "deltajax",
+                                          show("deltajax/constraints.py"))
+    shim.good_point_possible = old_constraints.good_point_possible
     old = _module_from_source("deltajax.optimize._bench_old_designer", "deltajax.optimize",
                               show("deltajax/optimize/designer.py"))
     old.C = shim

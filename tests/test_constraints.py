@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 
 import deltajax as dj
 from deltajax import constraints as C
+from deltajax.indices import point_kernel
 
 ROBOT = dj.presets.franco2026(fixed_R=0.2, with_mass=True)
 POINTS = np.array([[0.0, 0.0, 0.45], [0.15, 0.0, 0.4], [0.0, 0.15, 0.5], [-0.12, 0.07, 0.42], [0.05, -0.1, 0.3]])
@@ -352,7 +353,11 @@ def test_good_point_possible_is_necessary():
                       links=C.LinkModel(), threshold=0.3)
     pts, _, _ = C.polar_grid(0.45, 0.1, 0.9, 12, 3, 12)
     P = jnp.asarray(pts).reshape(-1, 3)
-    good = jax.jit(jax.vmap(lambda p: C.good_point(ROBOT, p, spec).good))(P)
-    maybe = jax.jit(jax.vmap(lambda p: C.good_point_possible(ROBOT, p, spec)))(P)
-    assert np.all(np.asarray(maybe) | ~np.asarray(good))
-    assert 0 < int(np.sum(good)) and int(np.sum(maybe)) < P.shape[0]   # neither test trivial on this grid
+    for plate in (None, 0.33):       # the plate's closed-form test (plate_blocks) rules points out too
+        good = jax.jit(jax.vmap(lambda p: C.good_point(ROBOT, p, spec, plate_radius=plate).good))(P)
+        maybe = jax.jit(jax.vmap(lambda p: C.good_point_possible(ROBOT, p, spec, plate_radius=plate)))(P)
+        assert np.all(np.asarray(maybe) | ~np.asarray(good))
+        assert 0 < int(np.sum(good)) and int(np.sum(maybe)) < P.shape[0]   # neither test trivial on this grid
+    reach = jax.jit(jax.vmap(lambda p: (k := point_kernel(ROBOT, p, beta=spec.beta)).ok
+                             & (k.indices.k_tilde >= spec.threshold - 1e-9)))(P)
+    assert int(np.sum(maybe)) < int(np.sum(reach))     # the plate test ruled out points that reach and index allow

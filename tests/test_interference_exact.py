@@ -140,3 +140,31 @@ def test_segment_disc_distance_equals_a_full_bisection_on_grazing_segments():
     unsigned = d >= 0
     assert unsigned.sum() > n
     assert np.max(np.abs(d[unsigned] - ref[unsigned])) <= 1e-13
+
+
+def test_plate_blocks_only_where_the_exact_plate_clearance_fails():
+    """constraints.plate_blocks (closed form; the search's necessary condition good_point_possible rules a point
+    out with it) is True only where the exact clearance of some forearm to the plate is below forearm_radius +
+    clearance, and catches most such configurations; plate radii placed near each forearm's closest approach to
+    the axis, so that forearms graze the rim."""
+    rng = np.random.default_rng(11)
+    n = 4000
+    links = C.LinkModel(forearm_radius=0.012, clearance=0.005)
+    P = np.stack([rng.uniform(-0.25, 0.25, n), rng.uniform(-0.25, 0.25, n), rng.uniform(-0.05, 0.6, n)], 1)
+    TH = rng.uniform(-1.2, 1.4, (n, 3))
+    B = np.asarray(jax.vmap(lambda t: dj.elbows(ROBOT, t))(jnp.asarray(TH)))
+    ang = np.array([0.0, 2 * np.pi / 3, 4 * np.pi / 3])
+    Cp = P[:, None] + float(ROBOT.platform_radius) * np.stack([np.cos(ang), np.sin(ang), np.zeros(3)], 1)[None]
+    # per configuration a plate radius at a forearm's closest approach to the axis (+- 2 cm): rim grazing
+    s = np.linspace(0.0, 1.0, 201)[None, :, None]
+    rho_min = np.hypot(*(B[:, 0, None, :2] + s * (Cp[:, 0, None, :2] - B[:, 0, None, :2])).transpose(2, 0, 1)).min(1)
+    Rp = np.clip(rho_min + rng.uniform(-0.02, 0.02, n), 0.0, None)
+    blocked = np.asarray(jax.jit(jax.vmap(lambda p, t, r: C.plate_blocks(ROBOT, p, jnp.cos(t), jnp.sin(t), links, r)))(
+        jnp.asarray(P), jnp.asarray(TH), jnp.asarray(Rp)))
+    exact = np.asarray(SEG_DISC(jnp.asarray(B.reshape(-1, 3)), jnp.asarray(Cp.reshape(-1, 3)),
+                                jnp.asarray(np.repeat(Rp, 3)))).reshape(n, 3).min(1)
+    fails = exact - float(links.forearm_radius) < float(links.clearance)
+    assert not np.any(blocked & ~fails)                            # sufficient: never blocks a clear plate
+    assert blocked.sum() > 0.8 * fails.sum() > 100                 # and not vacuous
+    near = np.abs(exact - float(links.forearm_radius + links.clearance)) < 2e-3
+    assert near.sum() > 20 and np.any(blocked & near)             # the boundary itself is exercised

@@ -355,7 +355,7 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         cyl = ray_cylinders(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good, sets,
                             float(pb.rw_r[-1]), float(pb.rw_z[0]), float(pb.rw_z[-1]), pb.hd_ratio,
                             RayDensity(*pb.rw_rays), dt,
-                            possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good))
+                            possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate))
         reg, regf = cyl[0], cyl[-1]
         out.update(regular_volume=reg.volume, regular_diameter=reg.diameter, regular_height=reg.height,
                    regular_z_top=reg.z_top, regular_volume_fixed=regf.volume, regular_diameter_fixed=regf.diameter)
@@ -367,7 +367,7 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         # full good tests only where the cheap necessary condition holds (reach and index)
         def good_grid(R_set):
             return _good_where_possible(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good,
-                                        lambda R, p: C.good_point_possible(at(R), p, pb.good), R_set, rw)
+                                        lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate), R_set, rw)
 
         if recon:   # the R samples and the operating R in one call (one compiled copy of the test)
             g_all = good_grid(jnp.concatenate([Rs, Rc[k][None]]))
@@ -388,7 +388,7 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
             if recon:   # R samples tried in the order of their good grid points, most first
                 rank = jnp.argsort(-jnp.sum(g_s, axis=1), stable=True)
                 all_any = lambda P: _all_any_good(  # noqa: E731
-                    good_at, lambda R, p: C.good_point_possible(at(R), p, pb.good), Rs[rank], P)
+                    good_at, lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate), Rs[rank], P)
             nb, ng = pb.rw_refine_steps
             unit = C.cylinder_samples(pb.hd_ratio, *pb.rw_refine_samples)
             reg = C.refine_cylinder(good_any, reg, r, z, pb.hd_ratio, unit=unit, n_bisect=nb, n_golden=ng,
