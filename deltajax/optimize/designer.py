@@ -223,7 +223,7 @@ def _nanmin(a, axis=-1):
 GRID_CHUNKS = 16
 
 
-def _good_where_possible(good, possible, Rs, pts):
+def _good_where_possible(good, possible, Rs, pts, decided=None):
     """``good(R, p)`` at every (R in ``Rs``, p in ``pts``), (nR, nP) bools, with the full test run only where the
     cheap necessary condition ``possible(R, p)`` holds (:func:`deltajax.optimize.rays.good_where_possible` on the
     R-major pairs, 1/GRID_CHUNKS of them per call): on the default problem's grid 6-56 % of the pairs are possible,
@@ -234,17 +234,20 @@ def _good_where_possible(good, possible, Rs, pts):
     M = nR * nP
     iR = jnp.repeat(jnp.arange(nR), nP)
     iP = jnp.tile(jnp.arange(nP), nR)
-    return good_where_possible(good, possible, Rs[iR], pts[iP], -(-M // GRID_CHUNKS)).reshape(nR, nP)
+    return good_where_possible(good, possible, Rs[iR], pts[iP], -(-M // GRID_CHUNKS), decided).reshape(nR, nP)
 
 
-def _all_any_good(good, possible, Rs, pts):
+def _all_any_good(good, possible, Rs, pts, decided=None):
     """``all(any(good(R, p) for R in Rs) for p in pts)``, the test of a cylinder's samples with R chosen per point
     (:func:`deltajax.constraints.refine_cylinder` in :func:`evaluate_designer`), with fewer full good tests: only
     pairs that pass the cheap necessary condition ``possible``; first one pair per point (its first possible R in
     the order of ``Rs``), then rounds of len(pts) pairs taken point by point from the points not yet good (all
     their remaining possible R, so a point with no good R is found bad within a round or two); it stops as soon
     as every point has a good R (True) or a point has none left (False). The answer does not depend on which
-    pairs are tested or in what order (the good test is pure), so it is the full any/all's."""
+    pairs are tested or in what order (the good test is pure), so it is the full any/all's. ``decided``: a cheaper
+    test deciding most pairs (:func:`deltajax.optimize.rays.settle_good`)."""
+    from .rays import settle_good
+
     nS, nR = pts.shape[0], Rs.shape[0]
     M = nS * nR
     maybe = jax.vmap(lambda p: jax.vmap(lambda R: possible(R, p))(Rs))(pts)       # (nS, nR): point-major order
@@ -271,7 +274,7 @@ def _all_any_good(good, possible, Rs, pts):
         iS = jnp.where(r0, jnp.arange(nS), pick // nR)
         iR = jnp.where(r0, first, pick % nR)
         live = jnp.where(r0, has, live)
-        g = jax.vmap(lambda i, j: good(Rs[i], pts[j]))(iR, iS) & live
+        g = settle_good(good, decided, Rs[iR], pts[iS], live) & live
         tested = tested.reshape(-1).at[jnp.where(live, iS * nR + iR, M)].set(True, mode="drop").reshape(nS, nR)
         sat = sat.at[jnp.where(g, iS, nS)].set(True, mode="drop")
         return c + 1, tested, sat
@@ -348,6 +351,9 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
     out["gear_ratio"] = gear * jnp.ones((), dt)
     out["arm_sum"] = arm_sum
     nan = jnp.asarray(jnp.nan, dt)
+    def decided(R, p):   # the good test's flag where its closed-form plate tests settle it (the full test elsewhere)
+        return C.good_point_decided(at(R), p, pb.good, plate_radius=plate)
+
     if rays:   # every ray search of both good sets (R per point; the operating R) in one call of the good test
         from .rays import RayDensity, ray_cylinders
 
@@ -355,7 +361,8 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         cyl = ray_cylinders(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good, sets,
                             float(pb.rw_r[-1]), float(pb.rw_z[0]), float(pb.rw_z[-1]), pb.hd_ratio,
                             RayDensity(*pb.rw_rays), dt,
-                            possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate))
+                            possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate),
+                            decided_R=decided)
         reg, regf = cyl[0], cyl[-1]
         out.update(regular_volume=reg.volume, regular_diameter=reg.diameter, regular_height=reg.height,
                    regular_z_top=reg.z_top, regular_volume_fixed=regf.volume, regular_diameter_fixed=regf.diameter)
@@ -367,7 +374,8 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         # full good tests only where the cheap necessary condition holds (reach and index)
         def good_grid(R_set):
             return _good_where_possible(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good,
-                                        lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate), R_set, rw)
+                                        lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate), R_set, rw,
+                                        decided)
 
         if recon:   # the R samples and the operating R in one call (one compiled copy of the test)
             g_all = good_grid(jnp.concatenate([Rs, Rc[k][None]]))
@@ -388,7 +396,8 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
             if recon:   # R samples tried in the order of their good grid points, most first
                 rank = jnp.argsort(-jnp.sum(g_s, axis=1), stable=True)
                 all_any = lambda P: _all_any_good(  # noqa: E731
-                    good_at, lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate), Rs[rank], P)
+                    good_at, lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate), Rs[rank], P,
+                    decided)
             nb, ng = pb.rw_refine_steps
             unit = C.cylinder_samples(pb.hd_ratio, *pb.rw_refine_samples)
             reg = C.refine_cylinder(good_any, reg, r, z, pb.hd_ratio, unit=unit, n_bisect=nb, n_golden=ng,

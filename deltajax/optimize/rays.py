@@ -28,7 +28,8 @@ import numpy as np
 from ..regular import RegularWorkspace
 
 __all__ = ["RAY_DENSITY", "RAY_PASSES", "RAY_BATCH", "POSSIBLE_CHUNKS", "RayDensity", "ray_cylinders", "ray_cylinder",
-           "worst_in_cylinder", "golden_min", "good_where_possible", "any_good_where_possible"]
+           "worst_in_cylinder", "golden_min", "good_where_possible", "any_good_where_possible",
+           "UNDECIDED_CHUNKS", "settle_good"]
 
 _GOLD = (math.sqrt(5.0) - 1.0) / 2.0
 
@@ -104,7 +105,46 @@ def _possible(possible_R: Callable, Rf, Pf):
     return jax.lax.map(lambda a: possible_R(*a), (Rf, Pf), batch_size=RAY_BATCH)
 
 
-def good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, chunk: int):
+#: The full tests that a chunk's undecided pairs get per step of :func:`settle_good`: 1/UNDECIDED_CHUNKS of the chunk.
+UNDECIDED_CHUNKS = 32
+
+
+def _packed(mask, size: int):
+    """Indices of the True entries of ``mask`` (M,) packed to the front in their order, padded to a multiple of
+    ``size`` with the first of them (0 when there is none: a padding lane repeats a packed pair), and their
+    count."""
+    M = mask.shape[0]
+    m = mask.astype(jnp.int32)
+    pos = jnp.cumsum(m) - 1
+    n = jnp.sum(m)
+    order = jnp.zeros((M,), jnp.int32).at[jnp.where(mask, pos, M)].set(jnp.arange(M, dtype=jnp.int32), mode="drop")
+    order = jnp.concatenate([order, jnp.zeros((size * -(-M // size) - M,), jnp.int32)])
+    return jnp.where(jnp.arange(order.shape[0]) < n, order, order[0]), n
+
+
+def settle_good(good_R: Callable, decided_R: Optional[Callable], R, P, live):
+    """``good_R`` at the pairs (R, P) of one chunk: without ``decided_R`` the full test at every pair; with it
+    (``(R, p) -> (good, decided)``, e.g. :func:`deltajax.constraints.good_point_decided`) its answer where it
+    decides, and the full test, packed, only at the live pairs it leaves undecided (a loop of chunks of
+    1/:data:`UNDECIDED_CHUNKS` of the chunk that does not run at all when none is)."""
+    if decided_R is None:
+        return jax.vmap(good_R)(R, P)
+    g, dec = jax.vmap(decided_R)(R, P)
+    K = R.shape[0]
+    k2 = max(K // UNDECIDED_CHUNKS, 1)
+    order, n = _packed(live & ~dec, k2)
+
+    def body(st):
+        c, g = st
+        idx = jax.lax.dynamic_slice(order, (c * k2,), (k2,))
+        gf = jax.vmap(good_R)(R[idx], P[idx])
+        return c + 1, g.at[jnp.where(c * k2 + jnp.arange(k2) < n, idx, K)].set(gf, mode="drop")
+
+    return jax.lax.while_loop(lambda st: st[0] * k2 < n, body, (jnp.int32(0), g))[1]
+
+
+def good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, chunk: int,
+                        decided_R: Optional[Callable] = None):
     """``good_R(Rf[i], Pf[i])`` for every pair i, (M,) bools, with the full test run only where the cheap necessary
     condition ``possible_R(R, p)`` holds (False elsewhere, which is the full test's answer there: ``possible_R``
     False must imply ``good_R`` False, e.g. :func:`deltajax.constraints.good_point_possible`).
@@ -112,28 +152,25 @@ def good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, chunk: i
     The pairs that may be good are packed to the front (in their order) and tested ``chunk`` at a time by a while
     loop that stops after the last one: the same test at the same pairs, so the same answers, at the cost of the
     possible pairs instead of all (working memory: ``chunk`` pairs). Vmapped over designs the loop runs until the
-    batch's design with the most possible pairs is done."""
+    batch's design with the most possible pairs is done. ``decided_R``: see :func:`settle_good`."""
     M = Rf.shape[0]
     maybe = _possible(possible_R, Rf, Pf)
-    count = jnp.sum(maybe.astype(jnp.int32))
-    pos = jnp.cumsum(maybe.astype(jnp.int32)) - 1
-    order = jnp.zeros((M,), jnp.int32).at[jnp.where(maybe, pos, M)].set(jnp.arange(M, dtype=jnp.int32), mode="drop")
     K = max(min(int(chunk), M), 1)
-    n_chunks = -(-M // K)
-    order = jnp.concatenate([order, jnp.zeros((K * n_chunks - M,), jnp.int32)])
+    order, count = _packed(maybe, K)
 
     def body(st):
         c, out = st
         idx = jax.lax.dynamic_slice(order, (c * K,), (K,))
-        g = jax.vmap(good_R)(Rf[idx], Pf[idx])
         live = c * K + jnp.arange(K) < count
+        g = settle_good(good_R, decided_R, Rf[idx], Pf[idx], live)
         return c + 1, out.at[jnp.where(live, idx, M)].set(g, mode="drop")
 
     _, out = jax.lax.while_loop(lambda st: st[0] * K < count, body, (jnp.int32(0), jnp.zeros((M,), bool)))
     return out
 
 
-def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets: Sequence[tuple], chunk: int):
+def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets: Sequence[tuple], chunk: int,
+                            decided_R: Optional[Callable] = None):
     """For every point of every set, whether ``good_R`` holds at any of its R: ``sets`` = ((n_points, n_R), ...)
     and the pairs (``Rf`` (M,), ``Pf`` (M, 3)) laid out set after set, each R-major (its first R at every point,
     then its second R at every point, ...); returns (sum of n_points,) bools, the sets' points in order.
@@ -142,7 +179,7 @@ def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets
     point has no good R yet: rounds of ``chunk`` pairs taken in layout order from the pairs still open, until none
     is. The answer does not depend on which pairs are tested or in what order (the test is pure), so it is the full
     any's, at the cost of fewer full tests. No array of M indices is built beyond the loop's own state (a constant
-    of that size bloated the certification's programs)."""
+    of that size bloated the certification's programs). ``decided_R``: see :func:`settle_good`."""
     M = Rf.shape[0]
     maybe = _possible(possible_R, Rf, Pf)
     K = max(min(int(chunk), M), 1)
@@ -169,7 +206,7 @@ def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets
         pick = jnp.zeros((K,), jnp.int32).at[jnp.where(rem & (pos < K), pos, K)].set(
             jnp.arange(M, dtype=jnp.int32), mode="drop")
         live = jnp.arange(K) < jnp.sum(rem.astype(jnp.int32))
-        g = jax.vmap(good_R)(Rf[pick], Pf[pick]) & live
+        g = settle_good(good_R, decided_R, Rf[pick], Pf[pick], live) & live
         tested = tested.at[jnp.where(live, pick, M)].set(True, mode="drop")
         sat = sat.at[jnp.where(g, point_of(pick), n_all)].set(True, mode="drop")
         return c + 1, tested, sat
@@ -179,7 +216,8 @@ def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets
     return sat
 
 
-def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: int, possible_R=None):
+def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: int, possible_R=None,
+               decided_R=None):
     """First bad radius along each ray, for each good set j (a point is good for set j when ``good_R(R, p)`` holds
     at any R of ``R_sets[j]``): ``phi[j]``, ``z[j]``, ``r_hi[j]`` (N,) per set; returns a list of (N,). ``n_along``
     samples in [0, r_hi], then the first bad interval searched again with ``n_along`` samples, ``n_levels`` times
@@ -212,7 +250,7 @@ def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: i
         if possible_R is not None:    # the one call, where the pair may be good and its point has no good R yet
             anyg = any_good_where_possible(good_R, possible_R, Rf, Pf,
                                            [(ph.shape[0] * n_along, Rj.shape[0]) for ph, Rj in zip(phi, R_sets)],
-                                           min(-(-M // POSSIBLE_CHUNKS), RAY_BATCH))
+                                           min(-(-M // POSSIBLE_CHUNKS), RAY_BATCH), decided_R)
         else:
             gf = (jax.vmap(good_R)(Rf, Pf) if M <= RAY_BATCH else                       # the one call,
                   jax.lax.map(lambda a: good_R(*a), (Rf, Pf), batch_size=RAY_BATCH))    # in batches
@@ -290,7 +328,8 @@ def _profile_cylinder(pz, pr, z_min, z_max, hd_ratio, d_max, n_c: int, n_golden:
 
 
 def ray_cylinders(good_R: Callable, R_sets: Sequence, r_max: float, z_min: float, z_max: float, hd_ratio: float,
-                  density: RayDensity = RAY_DENSITY, dtype=None, *, possible_R: Optional[Callable] = None) -> list:
+                  density: RayDensity = RAY_DENSITY, dtype=None, *, possible_R: Optional[Callable] = None,
+                  decided_R: Optional[Callable] = None) -> list:
     """The regular workspace from rays (module docstring) of each good set: a point is good for set j when
     ``good_R(R, p)`` (R scalar, p (3,) m, z down) holds at any R of ``R_sets[j]`` (an (n_j,) array: e.g. the
     design's R samples, R chosen per point; or the operating R alone). The largest cylinder on the z axis with
@@ -304,7 +343,10 @@ def ray_cylinders(good_R: Callable, R_sets: Sequence, r_max: float, z_min: float
 
     ``possible_R(R, p) -> bool``: a cheap necessary condition of ``good_R`` (False only where ``good_R`` is False,
     e.g. :func:`deltajax.constraints.good_point_possible`); the full test then runs only where it holds
-    (:func:`good_where_possible`), with the same answer."""
+    (:func:`good_where_possible`), with the same answer. ``decided_R(R, p) -> (good, decided)`` (with
+    ``possible_R``): a cheaper test that gives ``good_R``'s answer where it decides
+    (:func:`deltajax.constraints.good_point_decided`); ``good_R`` then runs only where it does not
+    (:func:`settle_good`), with the same answer."""
     dt = jnp.result_type(float) if dtype is None else dtype
     n = density
     nz, nphi = n.n_z, n.n_phi
@@ -373,7 +415,8 @@ def ray_cylinders(good_R: Callable, R_sets: Sequence, r_max: float, z_min: float
     def one_pass(i, sts):
         lay = [layout(i, st) for st in sts]
         radii = _first_bad(good_R, R_sets, [a[1].reshape(-1) for a in lay], [a[0].reshape(-1) for a in lay],
-                           [jnp.broadcast_to(a[2], (nz * nphi,)) for a in lay], n.n_along, n.n_levels, possible_R)
+                           [jnp.broadcast_to(a[2], (nz * nphi,)) for a in lay], n.n_along, n.n_levels, possible_R,
+                           decided_R)
         return [update(i, st, *a[:2], *a[3:], r.reshape(nz, nphi)) for st, a, r in zip(sts, lay, radii)]
 
     st0 = dict(z=jnp.full((T,), inf), r=jnp.full((T,), inf), phi=jnp.zeros((T,), dt), span=jnp.full((T,), dphi0, dt),
