@@ -426,9 +426,6 @@ def test_good_only_where_possible_is_the_full_test_and_skips_what_cannot_be_good
     per_pair = jax.jit(lambda: good_where_possible(good_logged, possible_R, jnp.asarray(Rf), jnp.asarray(Pf), chunk,
                                                    decided_R))()
     np.testing.assert_array_equal(np.asarray(per_pair), good.reshape(-1))
-    any_R = any_good_where_possible(good_logged, possible_R, jnp.asarray(Rm), jnp.asarray(Pm3), [(n_pts, n_R)],
-                                    chunk, decided_R)
-    np.testing.assert_array_equal(np.asarray(any_R), good.any(axis=1))
     jax.effects_barrier()
     und = {(i, j) for i, j in zip(*np.nonzero(possible & ~np.asarray(decided)))}
     assert set(asked) <= und                  # padding lanes repeat an undecided pair
@@ -445,13 +442,7 @@ def test_ray_cylinders_with_a_necessary_condition_give_the_same_cylinders():
     sets = [jnp.asarray([0.0, 0.05, 0.03]), jnp.asarray([0.02])]
     full = CE.ray_cylinders(good_R, sets, R_MAX, Z0, Z1, HD, dens)
     pruned = CE.ray_cylinders(good_R, sets, R_MAX, Z0, Z1, HD, dens, possible_R=possible_R)
-
-    def decided_R(R, p):     # decides away from the good set's boundary, answers wrongly near it
-        near = jnp.abs(jnp.hypot(p[0], p[1]) - (0.15 + R - 0.4 * (p[2] - 0.45) ** 2)) < 0.02
-        return jnp.where(near, ~good_R(R, p), good_R(R, p)), ~near
-
-    settled = CE.ray_cylinders(good_R, sets, R_MAX, Z0, Z1, HD, dens, possible_R=possible_R, decided_R=decided_R)
-    for a, b, c in zip(full, pruned, settled):
+    for a, b in zip(full, pruned):
         for k in ("volume", "diameter", "height", "z_top"):
-            assert float(getattr(a, k)) == float(getattr(b, k)) == float(getattr(c, k))
+            assert float(getattr(a, k)) == float(getattr(b, k))
     assert float(full[0].volume) > 0

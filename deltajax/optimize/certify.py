@@ -105,8 +105,7 @@ def _certified_once(pb, design, R_op, density: RayDensity, task_n, cycle_n: int)
     sets = [Rs, jnp.asarray(R_op, dt)[None]] if recon else [Rs]
     cyl = ray_cylinders(lambda R, p: chk(R, p).good, sets, float(reg_s["r_max"]), float(reg_s["z_min"]),
                         float(reg_s["z_max"]), pb.hd_ratio, density, dt,
-                        possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate),
-                        decided_R=lambda R, p: C.good_point_decided(at(R), p, pb.good, plate_radius=plate))
+                        possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate))
     reg, regf = cyl[0], cyl[-1]
     t = pb.settings["task"]
     task = (float(t["diameter"]), float(t["height"]), float(t["z_top"])) + tuple(task_n)

@@ -351,8 +351,8 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
     out["gear_ratio"] = gear * jnp.ones((), dt)
     out["arm_sum"] = arm_sum
     nan = jnp.asarray(jnp.nan, dt)
-    def decided(R, p):   # the good test's flag where its closed-form plate tests settle it (the full test elsewhere)
-        return C.good_point_decided(at(R), p, pb.good, plate_radius=plate)
+    def decided(R, p):   # the good test's flag where its closed-form plate tests settle it (the full test elsewhere;
+        return C.good_point_decided(at(R), p, pb.good, plate_radius=plate)   # the search grid and its refinement)
 
     if rays:   # every ray search of both good sets (R per point; the operating R) in one call of the good test
         from .rays import RayDensity, ray_cylinders
@@ -361,8 +361,7 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         cyl = ray_cylinders(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good, sets,
                             float(pb.rw_r[-1]), float(pb.rw_z[0]), float(pb.rw_z[-1]), pb.hd_ratio,
                             RayDensity(*pb.rw_rays), dt,
-                            possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate),
-                            decided_R=decided)
+                            possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate))
         reg, regf = cyl[0], cyl[-1]
         out.update(regular_volume=reg.volume, regular_diameter=reg.diameter, regular_height=reg.height,
                    regular_z_top=reg.z_top, regular_volume_fixed=regf.volume, regular_diameter_fixed=regf.diameter)

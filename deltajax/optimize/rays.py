@@ -169,8 +169,7 @@ def good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, chunk: i
     return out
 
 
-def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets: Sequence[tuple], chunk: int,
-                            decided_R: Optional[Callable] = None):
+def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets: Sequence[tuple], chunk: int):
     """For every point of every set, whether ``good_R`` holds at any of its R: ``sets`` = ((n_points, n_R), ...)
     and the pairs (``Rf`` (M,), ``Pf`` (M, 3)) laid out set after set, each R-major (its first R at every point,
     then its second R at every point, ...); returns (sum of n_points,) bools, the sets' points in order.
@@ -179,7 +178,11 @@ def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets
     point has no good R yet: rounds of ``chunk`` pairs taken in layout order from the pairs still open, until none
     is. The answer does not depend on which pairs are tested or in what order (the test is pure), so it is the full
     any's, at the cost of fewer full tests. No array of M indices is built beyond the loop's own state (a constant
-    of that size bloated the certification's programs). ``decided_R``: see :func:`settle_good`."""
+    of that size bloated the certification's programs).
+
+    Unlike :func:`good_where_possible` it takes no ``decided_R``: the ray searches sample densely where the good set
+    ends, where the plate often binds, so a cheaper test leaves ~12 % of their pairs undecided and the packed full
+    tests after it cost what it saves (measured on the verification's evaluator)."""
     M = Rf.shape[0]
     maybe = _possible(possible_R, Rf, Pf)
     K = max(min(int(chunk), M), 1)
@@ -206,7 +209,7 @@ def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets
         pick = jnp.zeros((K,), jnp.int32).at[jnp.where(rem & (pos < K), pos, K)].set(
             jnp.arange(M, dtype=jnp.int32), mode="drop")
         live = jnp.arange(K) < jnp.sum(rem.astype(jnp.int32))
-        g = settle_good(good_R, decided_R, Rf[pick], Pf[pick], live) & live
+        g = jax.vmap(good_R)(Rf[pick], Pf[pick]) & live
         tested = tested.at[jnp.where(live, pick, M)].set(True, mode="drop")
         sat = sat.at[jnp.where(g, point_of(pick), n_all)].set(True, mode="drop")
         return c + 1, tested, sat
@@ -216,8 +219,7 @@ def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets
     return sat
 
 
-def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: int, possible_R=None,
-               decided_R=None):
+def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: int, possible_R=None):
     """First bad radius along each ray, for each good set j (a point is good for set j when ``good_R(R, p)`` holds
     at any R of ``R_sets[j]``): ``phi[j]``, ``z[j]``, ``r_hi[j]`` (N,) per set; returns a list of (N,). ``n_along``
     samples in [0, r_hi], then the first bad interval searched again with ``n_along`` samples, ``n_levels`` times
@@ -250,7 +252,7 @@ def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: i
         if possible_R is not None:    # the one call, where the pair may be good and its point has no good R yet
             anyg = any_good_where_possible(good_R, possible_R, Rf, Pf,
                                            [(ph.shape[0] * n_along, Rj.shape[0]) for ph, Rj in zip(phi, R_sets)],
-                                           min(-(-M // POSSIBLE_CHUNKS), RAY_BATCH), decided_R)
+                                           min(-(-M // POSSIBLE_CHUNKS), RAY_BATCH))
         else:
             gf = (jax.vmap(good_R)(Rf, Pf) if M <= RAY_BATCH else                       # the one call,
                   jax.lax.map(lambda a: good_R(*a), (Rf, Pf), batch_size=RAY_BATCH))    # in batches
@@ -328,8 +330,7 @@ def _profile_cylinder(pz, pr, z_min, z_max, hd_ratio, d_max, n_c: int, n_golden:
 
 
 def ray_cylinders(good_R: Callable, R_sets: Sequence, r_max: float, z_min: float, z_max: float, hd_ratio: float,
-                  density: RayDensity = RAY_DENSITY, dtype=None, *, possible_R: Optional[Callable] = None,
-                  decided_R: Optional[Callable] = None) -> list:
+                  density: RayDensity = RAY_DENSITY, dtype=None, *, possible_R: Optional[Callable] = None) -> list:
     """The regular workspace from rays (module docstring) of each good set: a point is good for set j when
     ``good_R(R, p)`` (R scalar, p (3,) m, z down) holds at any R of ``R_sets[j]`` (an (n_j,) array: e.g. the
     design's R samples, R chosen per point; or the operating R alone). The largest cylinder on the z axis with
@@ -343,10 +344,7 @@ def ray_cylinders(good_R: Callable, R_sets: Sequence, r_max: float, z_min: float
 
     ``possible_R(R, p) -> bool``: a cheap necessary condition of ``good_R`` (False only where ``good_R`` is False,
     e.g. :func:`deltajax.constraints.good_point_possible`); the full test then runs only where it holds
-    (:func:`good_where_possible`), with the same answer. ``decided_R(R, p) -> (good, decided)`` (with
-    ``possible_R``): a cheaper test that gives ``good_R``'s answer where it decides
-    (:func:`deltajax.constraints.good_point_decided`); ``good_R`` then runs only where it does not
-    (:func:`settle_good`), with the same answer."""
+    (:func:`good_where_possible`), with the same answer."""
     dt = jnp.result_type(float) if dtype is None else dtype
     n = density
     nz, nphi = n.n_z, n.n_phi
@@ -415,8 +413,7 @@ def ray_cylinders(good_R: Callable, R_sets: Sequence, r_max: float, z_min: float
     def one_pass(i, sts):
         lay = [layout(i, st) for st in sts]
         radii = _first_bad(good_R, R_sets, [a[1].reshape(-1) for a in lay], [a[0].reshape(-1) for a in lay],
-                           [jnp.broadcast_to(a[2], (nz * nphi,)) for a in lay], n.n_along, n.n_levels, possible_R,
-                           decided_R)
+                           [jnp.broadcast_to(a[2], (nz * nphi,)) for a in lay], n.n_along, n.n_levels, possible_R)
         return [update(i, st, *a[:2], *a[3:], r.reshape(nz, nphi)) for st, a, r in zip(sts, lay, radii)]
 
     st0 = dict(z=jnp.full((T,), inf), r=jnp.full((T,), inf), phi=jnp.zeros((T,), dt), span=jnp.full((T,), dphi0, dt),
