@@ -532,8 +532,9 @@ def good_point_decided(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, pl
     """(good, decided): :func:`good_point`'s ``good`` (same ``plate_radius``) wherever ``decided``, at ~60 % of its
     cost: the forearms' exact plate clearances (a Newton search each) are replaced by closed-form tests
     (:func:`plate_blocks` and its converse) that settle them except where a forearm passes within a margin of the
-    rim at the required clearance (~2 % of the pairs that pass :func:`good_point_possible` on the main job's
-    problem). Where ``decided`` is False the caller runs :func:`good_point`
+    rim at the required clearance (2 % of the pairs that pass :func:`good_point_possible` on a polar grid of the
+    main job's regular-workspace range; 12 % of those of the ray searches, which sample densely where the good set
+    ends). Where ``decided`` is False the caller runs :func:`good_point`
     (:func:`deltajax.optimize.rays.settle_good`). Every other term is computed by the same functions on the same
     configuration as in :func:`good_point`, and ``margin >= 0`` splits exactly into its terms, so the flag is
     the exact one."""
