@@ -367,19 +367,22 @@ def test_good_point_decided_is_the_full_test_wherever_it_decides():
     # the closed-form plate tests settle all but the forearms that pass near the rim at the required clearance;
     # plate radii swept so that some do (those must come back undecided), and wherever it decides, the flag is
     # good_point's, bit for bit
-    spec = C.GoodSpec(joints=C.JointModel(limit=math.radians(50), platform_neutral=math.radians(40)),
-                      links=C.LinkModel(forearm_radius=0.012, clearance=0.005), threshold=0.2)
+    # (ball joints: a sign test instead of the cone angles; universal joints: their exact margin)
     pts, _, _ = C.polar_grid(0.4, 0.1, 0.8, 8, 3, 10)
     P = jnp.asarray(pts).reshape(-1, 3)
     plates = jnp.linspace(0.2, 0.45, 26)
+    for kind, limit in (("ball", 50), ("universal", 40)):
+        spec = C.GoodSpec(joints=C.JointModel(limit=math.radians(limit), platform_neutral=math.radians(40), kind=kind),
+                          links=C.LinkModel(forearm_radius=0.012, clearance=0.005), threshold=0.2)
 
-    @jax.jit
-    def both(P, Rp):
-        full = jax.vmap(lambda p: C.good_point(ROBOT, p, spec, plate_radius=Rp).good)(P)
-        g, dec = jax.vmap(lambda p: C.good_point_decided(ROBOT, p, spec, plate_radius=Rp))(P)
-        return full, g, dec
+        def both(P, Rp, spec=spec):
+            full = jax.vmap(lambda p: C.good_point(ROBOT, p, spec, plate_radius=Rp).good)(P)
+            g, dec = jax.vmap(lambda p: C.good_point_decided(ROBOT, p, spec, plate_radius=Rp))(P)
+            jm = jax.vmap(lambda p: C.good_point(ROBOT, p, spec, plate_radius=Rp).joint_margin)(P)
+            return full, g, dec, jm
 
-    full, g, dec = (np.asarray(a) for a in jax.vmap(lambda r: both(P, r))(plates))
-    assert np.array_equal(g[dec], full[dec])
-    assert 0 < int((~dec).sum()) < 0.05 * dec.size          # some undecided (rim grazing), few
-    assert full.any() and not full.all()
+        full, g, dec, jm = (np.asarray(a) for a in jax.jit(jax.vmap(lambda r: both(P, r)))(plates))
+        assert np.array_equal(g[dec], full[dec])
+        assert 0 < int((~dec).sum()) < 0.05 * dec.size          # some undecided (rim grazing), few
+        assert full.any() and not full.all()
+        assert np.any(jm < 0) and np.any(jm > 0)                # the joints' limit is crossed on this grid
