@@ -59,8 +59,8 @@ from .regular import (REFINE_BISECT, REFINE_GOLDEN, REFINE_SAMPLES, RegularWorks
 
 __all__ = ["JointModel", "LinkModel", "GoodSpec", "JointAngles", "Interference", "PointCheck", "ConstraintError",
            "joint_angles", "joint_margin", "segment_distance", "segment_disc_distance", "interference", "good_point",
-           "good_point_possible", "good_point_decided", "plate_blocks", "largest_cylinder", "regular_workspace", "RegularWorkspace", "polar_grid",
-           "cylinder_samples", "refine_cylinder",
+           "good_point_possible", "good_point_decided", "plate_blocks", "JOINT_BAND", "largest_cylinder",
+           "regular_workspace", "RegularWorkspace", "polar_grid", "cylinder_samples", "refine_cylinder",
            # deltajax.drive's, re-exported
            "Motor", "DriveLoads", "CycleRate", "with_drive", "motor_side", "drive_ok", "drive_loads", "cycle_rate",
            "cycle_rate_refined", "min_cycle_time", "picks_per_minute"]
@@ -564,16 +564,17 @@ def good_point(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, plate_radi
 
 def good_point_decided(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, plate_radius=None
                        ) -> tuple[Bool[Array, ""], Bool[Array, ""]]:
-    """(good, decided): :func:`good_point`'s ``good`` (same ``plate_radius``) wherever ``decided``, at a fraction of
-    its cost: the forearms' exact plate clearances (a Newton search each) are replaced by closed-form tests
+    """(good, decided): :func:`good_point`'s ``good`` (same ``plate_radius``) wherever ``decided``, at about half its
+    cost: the forearms' exact plate clearances (a Newton search each) are replaced by closed-form tests
     (:func:`plate_blocks` and its converse) that settle them except where a forearm passes within a margin of the
     rim at the required clearance, and ball joints' cone angles by a sign test without inverse trigonometry
-    (:func:`_ball_joints_decided`; undecided within ~1e-9 rad of the limit) (2 % of the pairs that pass :func:`good_point_possible` on a polar grid of the
-    main job's regular-workspace range; 12 % of those of the ray searches, which sample densely where the good set
-    ends). Where ``decided`` is False the caller runs :func:`good_point`
-    (:func:`deltajax.optimize.rays.settle_good`). Every other term is computed by the same functions on the same
-    configuration as in :func:`good_point`, ``margin >= 0`` splits exactly into its terms, and the closed-form
-    tests decide only outside a margin wider than both computations' rounding, so the flag is the exact one."""
+    (:func:`_ball_joints_decided`; undecided within ~1e-9 rad of the limit). Undecided: 2 % of the pairs that
+    pass :func:`good_point_possible` on a polar grid of the main job's regular-workspace range, 12 % of those of
+    the ray searches (they sample densely where the good set ends). Where ``decided`` is False the caller runs
+    :func:`good_point` (:func:`deltajax.optimize.rays.settle_good`). Every other term is computed by the same
+    functions on the same configuration as in :func:`good_point`, ``margin >= 0`` splits exactly into its terms,
+    and the closed-form tests decide only outside a margin wider than both computations' rounding, so the flag is
+    the exact one."""
     ok, v, cos, sin, robot_g, p_g, theta_g, ok_g = _solved(robot, p, spec)
     if spec.joints.kind == "ball":
         j_in, j_dec = _ball_joints_decided(robot_g, p_g, cos, sin, spec.joints)

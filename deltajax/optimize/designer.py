@@ -351,8 +351,9 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
     out["gear_ratio"] = gear * jnp.ones((), dt)
     out["arm_sum"] = arm_sum
     nan = jnp.asarray(jnp.nan, dt)
-    def decided(R, p):   # the good test's flag where its closed-form plate tests settle it (the full test elsewhere;
-        return C.good_point_decided(at(R), p, pb.good, plate_radius=plate)   # the search grid and its refinement)
+
+    def decided(R, p):   # the good test's flag where its closed-form plate and joint tests settle it (the search
+        return C.good_point_decided(at(R), p, pb.good, plate_radius=plate)   # grid and its refinement)
 
     if rays:   # every ray search of both good sets (R per point; the operating R) in one call of the good test
         from .rays import RayDensity, ray_cylinders
@@ -370,11 +371,11 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         grid = pb.rw_points.shape[:3]
         rw = jnp.asarray(pb.rw_points, dt).reshape(-1, 3)
 
-        # full good tests only where the cheap necessary condition holds (reach and index)
+        # good tests only where the cheap necessary condition holds (reach, index, plate), mostly decided cheaply
         def good_grid(R_set):
             return _good_where_possible(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good,
-                                        lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate), R_set, rw,
-                                        decided)
+                                        lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate),
+                                        R_set, rw, decided)
 
         if recon:   # the R samples and the operating R in one call (one compiled copy of the test)
             g_all = good_grid(jnp.concatenate([Rs, Rc[k][None]]))
