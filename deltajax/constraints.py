@@ -49,8 +49,8 @@ from .fastmath import recip, rsqrt
 from .fields import ConstraintError, check_range, float_leaf
 from .geometry import CHAIN_ANGLES, Delta
 from .indices import point_kernel
-from .kinematics import (chain_local, elbows_unguarded, forearm_units_unguarded, from_chain_frames,
-                         guarded_configuration, loop_vectors)
+from .kinematics import (elbows_from_cos_sin, elbows_unguarded, forearm_units_from_cos_sin, forearm_units_unguarded,
+                         guarded_configuration)
 from .drive import (CycleRate, DriveLoads, Motor, cycle_rate, cycle_rate_refined, drive_loads,  # noqa: F401
                     drive_ok, min_cycle_time, motor_side, picks_per_minute, with_drive)  # re-exported: the designer's
 from .tracing import traced_once
@@ -169,8 +169,7 @@ def _ball_joints_decided(robot: Delta, p, cos, sin, joints: JointModel):
     forearm units and the elbows' neutral axes from the actuated angles' cos and sin (angle addition, no
     transcendental per pair). Decided where every joint is inside the limit by more than :data:`JOINT_BAND` or
     one is outside by more: there :func:`_joint_margin` >= 0 gives the same answer."""
-    u = jnp.stack([jnp.stack(loop_vectors(*_dx_local(robot, p, i), cos[i], sin[i], robot.upper_arm, robot.forearm))
-                   for i in range(3)])
+    u = forearm_units_from_cos_sin(robot, p, cos, sin)
     ce, se = jnp.cos(joints.elbow_neutral), jnp.sin(joints.elbow_neutral)
     z = jnp.zeros_like(cos)
     n_e = jnp.stack([cos * ce - sin * se, z, sin * ce + cos * se], axis=-1)     # cos, sin of theta + neutral
@@ -184,12 +183,6 @@ def _ball_joints_decided(robot: Delta, p, cos, sin, joints: JointModel):
     d = jnp.concatenate([side(u, n_e), side(-u, n_p)])
     within = jnp.all(d < -JOINT_BAND)
     return within, within | jnp.any(d > JOINT_BAND)
-
-
-def _dx_local(robot: Delta, p, i: int):
-    """Chain i's (dx, y, z) of :func:`deltajax.kinematics.loop_vectors` (as :func:`forearm_units_unguarded`)."""
-    x, y, zz = chain_local(p[0], p[1], p[2], i)
-    return x + robot.platform_radius - robot.base_radius, y, zz
 
 
 # -- link interference -----------------------------------------------------------------------------------------
@@ -401,12 +394,22 @@ def interference(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"], l
     return _interference(robot, p, theta, ok, links, plate_radius)
 
 
+def _chain_axes(dtype):
+    """The chains' x axes in the base frame, (3, 3)."""
+    return jnp.asarray([[math.cos(a), math.sin(a), 0.0] for a in CHAIN_ANGLES], dtype)
+
+
+def _forearm_ends(robot: Delta, p):
+    """The forearms' ends C_i at the platform (base frame), (3, 3)."""
+    return p[None, :] + robot.platform_radius * _chain_axes(p.dtype)
+
+
 def _link_clearances(robot: Delta, p, theta, links: LinkModel):
     """Elbows B, forearm ends C (base frame) and the forearm-forearm and forearm-upper arm clearances (m) of a
     configuration already guarded (:func:`guarded_configuration`)."""
     B = elbows_unguarded(robot, theta)                                         # (3, 3) base frame
-    dirs = jnp.asarray([[math.cos(a), math.sin(a), 0.0] for a in CHAIN_ANGLES], B.dtype)  # chain x axes
-    C = p[None, :] + robot.platform_radius * dirs                     # forearm ends at the platform
+    dirs = _chain_axes(B.dtype)
+    C = _forearm_ends(robot, p)
     A = robot.base_radius * dirs
     pairs = ((0, 1), (1, 2), (2, 0))
     ff = jnp.min(jnp.stack([segment_distance(B[i], C[i], B[j], C[j]) for i, j in pairs])) - 2 * links.forearm_radius
@@ -511,15 +514,15 @@ def plate_blocks(robot: Delta, p, cos, sin, links: LinkModel, plate_radius) -> B
     plate's plane (above it: through the base). The exact clearance of such a segment is at most that point's
     height (a point over the disc is its height from it), so it fails by more than the margin, which covers the
     rounding of both computations (1e-9 m in float64). ``cos``, ``sin``: the actuated angles' (the kernel's)."""
-    dt = p.dtype
-    margin = _plate_margin(dt)
-    L1 = robot.upper_arm
-    B = from_chain_frames(jnp.stack([robot.base_radius + L1 * cos, jnp.zeros_like(cos), L1 * sin], axis=-1))
-    dirs = jnp.asarray([[math.cos(a), math.sin(a), 0.0] for a in CHAIN_ANGLES], dt)
-    Cp = p[None, :] + robot.platform_radius * dirs
-    Rp = robot.base_radius + links.plate_overhang if plate_radius is None else jnp.asarray(plate_radius, dt)
-    z_top = links.forearm_radius + links.clearance - margin
-    return jnp.any(jnp.stack([_segment_meets_plate_region(B[i], Cp[i], Rp - margin, z_top) for i in range(3)]))
+    Rp, _ = _plate_radius(robot, links, plate_radius, jnp.asarray(True), p.dtype)
+    return _plate_blocked(elbows_from_cos_sin(robot, cos, sin), _forearm_ends(robot, p), Rp, links)
+
+
+def _plate_blocked(B, C, Rp, links: LinkModel) -> Bool[Array, ""]:
+    """:func:`plate_blocks` of the forearm axes B_i C_i (base frame) and the plate radius ``Rp``."""
+    e = _plate_margin(B.dtype)
+    z_top = links.forearm_radius + links.clearance - e
+    return jnp.any(jnp.stack([_segment_meets_plate_region(B[i], C[i], Rp - e, z_top) for i in range(3)]))
 
 
 def good_point_possible(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, plate_radius=None) -> Bool[Array, ""]:
@@ -585,6 +588,6 @@ def good_point_decided(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, pl
     cl = spec.links.clearance
     rest = ok & ok_p & (v >= spec.threshold) & (ff >= cl) & (fu >= cl) & (p_g[2] >= cl)
     clear = _plate_clear(B, C, Rp, spec.links)
-    blocked = plate_blocks(robot_g, p_g, cos, sin, spec.links, Rp)
+    blocked = _plate_blocked(B, C, Rp, spec.links)
     # decided: a term certainly fails, or every term certainly holds
     return rest & j_in & clear, ~rest | (j_dec & ~j_in) | blocked | (j_in & clear)

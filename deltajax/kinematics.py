@@ -353,10 +353,13 @@ def elbows(robot: Delta, theta: Float[Array, "3"]) -> Float[Array, "3 3"]:
 
 def elbows_unguarded(robot: Delta, theta):
     """:func:`elbows` for a configuration already checked (:func:`guarded_configuration`): no guard, no NaN."""
+    return elbows_from_cos_sin(robot, jnp.cos(theta), jnp.sin(theta))
+
+
+def elbows_from_cos_sin(robot: Delta, c, s):
+    """:func:`elbows_unguarded` from the actuated angles' cos ``c`` and sin ``s`` (e.g. the IK's: no trigonometry)."""
     L1 = robot.upper_arm
-    local = jnp.stack([robot.base_radius + L1 * jnp.cos(theta), jnp.zeros_like(theta), L1 * jnp.sin(theta)],
-                      axis=-1)
-    return from_chain_frames(local)
+    return from_chain_frames(jnp.stack([robot.base_radius + L1 * c, jnp.zeros_like(c), L1 * s], axis=-1))
 
 
 class FKResult(NamedTuple):
@@ -456,7 +459,11 @@ def forearm_units(robot: Delta, p: Float[Array, "3"], theta: Float[Array, "3"]) 
 
 def forearm_units_unguarded(robot: Delta, p, theta):
     """:func:`forearm_units` for a configuration already checked (:func:`guarded_configuration`): no guard."""
-    c, s = jnp.cos(theta), jnp.sin(theta)
+    return forearm_units_from_cos_sin(robot, p, jnp.cos(theta), jnp.sin(theta))
+
+
+def forearm_units_from_cos_sin(robot: Delta, p, c, s):
+    """:func:`forearm_units_unguarded` from the actuated angles' cos ``c`` and sin ``s`` (no trigonometry)."""
     rows = []
     for i in range(3):
         x, y, z = chain_local(p[0], p[1], p[2], i)
