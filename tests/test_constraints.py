@@ -376,10 +376,9 @@ def test_good_point_decided_is_the_full_test_wherever_it_decides():
                           links=C.LinkModel(forearm_radius=0.012, clearance=0.005), threshold=0.2)
 
         def both(P, Rp, spec=spec):
-            full = jax.vmap(lambda p: C.good_point(ROBOT, p, spec, plate_radius=Rp).good)(P)
+            check = jax.vmap(lambda p: C.good_point(ROBOT, p, spec, plate_radius=Rp))(P)
             g, dec = jax.vmap(lambda p: C.good_point_decided(ROBOT, p, spec, plate_radius=Rp))(P)
-            jm = jax.vmap(lambda p: C.good_point(ROBOT, p, spec, plate_radius=Rp).joint_margin)(P)
-            return full, g, dec, jm
+            return check.good, g, dec, check.joint_margin
 
         full, g, dec, jm = (np.asarray(a) for a in jax.jit(jax.vmap(lambda r: both(P, r)))(plates))
         assert np.array_equal(g[dec], full[dec])
