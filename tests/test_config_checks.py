@@ -378,3 +378,29 @@ def test_robot_settings_refused_by_their_metadata_and_rules(override, message):
     with pytest.raises(ConfigError, match=message) as err:
         validate(compose("workspace_grid", override))
     assert "\n" not in str(err.value)
+
+
+@pytest.mark.parametrize("experiment, overrides", [
+    ("ga_reconfig", ["experiment.task.diameter=0", "robot.forearm=0.35"]),
+    ("ga_reconfig", ["+experiment.foo=1", "experiment.ga.sigma=inf"]),
+    ("ga_reconfig", ["robot=industrial", "experiment.cycle.dwell=-0.1"]),
+    ("workspace_grid", ["experiment.grid.x=null", "experiment.grid.h=0.05"]),
+    ("ga_reconfig", ["experiment.nope=1"]),                # refused by Hydra: the same error
+    ("ga_reconfig", ["~experiment.screen"]),               # refused by the schema: the same error
+])
+def test_the_tests_compose_helper_is_a_full_hydra_composition(experiment, overrides):
+    # _config_helpers.compose applies value overrides to a copy of the experiment's composed defaults: the same
+    # config (or the same error) as a full composition of the same command line
+    from omegaconf import OmegaConf
+
+    import _config_helpers as H
+
+    def outcome(f):
+        try:
+            cfg = f()
+        except Exception as e:  # noqa: BLE001 - compared below
+            return type(e).__name__, str(e)
+        return OmegaConf.to_container(cfg), OmegaConf.is_struct(cfg)
+
+    full = outcome(lambda: H._hydra_compose([f"experiment={experiment}", *overrides]))
+    assert outcome(lambda: H.compose(experiment, *overrides)) == full
