@@ -246,7 +246,7 @@ def _all_any_good(good, possible, Rs, pts, decided=None):
     as every point has a good R (True) or a point has none left (False). The answer does not depend on which
     pairs are tested or in what order (the good test is pure), so it is the full any/all's. ``decided``: a cheaper
     test deciding most pairs (:func:`deltajax.optimize.rays.settle_good`)."""
-    from .rays import settle_good
+    from .rays import first_open, settle_good
 
     nS, nR = pts.shape[0], Rs.shape[0]
     M = nS * nR
@@ -265,11 +265,7 @@ def _all_any_good(good, possible, Rs, pts, decided=None):
 
     def body(st):                                     # one compiled copy of the good test for every round
         c, tested, sat = st
-        rem = remaining(tested, sat).reshape(-1)
-        pos = jnp.cumsum(rem.astype(jnp.int32)) - 1
-        pick = jnp.zeros((K,), jnp.int32).at[jnp.where(rem & (pos < K), pos, K)].set(
-            jnp.arange(M, dtype=jnp.int32), mode="drop")
-        live = jnp.arange(K) < jnp.sum(rem.astype(jnp.int32))
+        pick, live = first_open(remaining(tested, sat).reshape(-1), K)
         r0 = c == 0
         iS = jnp.where(r0, jnp.arange(nS), pick // nR)
         iR = jnp.where(r0, first, pick % nR)

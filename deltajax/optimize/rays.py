@@ -29,7 +29,7 @@ from ..regular import RegularWorkspace
 
 __all__ = ["RAY_DENSITY", "RAY_PASSES", "RAY_BATCH", "POSSIBLE_CHUNKS", "RayDensity", "ray_cylinders", "ray_cylinder",
            "worst_in_cylinder", "golden_min", "good_where_possible", "any_good_where_possible",
-           "UNDECIDED_CHUNKS", "settle_good"]
+           "UNDECIDED_CHUNKS", "settle_good", "first_open"]
 
 _GOLD = (math.sqrt(5.0) - 1.0) / 2.0
 
@@ -122,6 +122,18 @@ def _packed(mask, size: int):
     return jnp.where(jnp.arange(order.shape[0]) < n, order, order[0]), n
 
 
+def first_open(mask, size: int):
+    """(pick, live): the indices of the first ``size`` True entries of ``mask`` (M,) in their order, (size,) int32
+    (0 beyond the last: a dead lane), and which lanes hold one -- the next round of a loop that tests the open
+    pairs ``size`` at a time (:func:`any_good_where_possible`, the designer's all-any test)."""
+    M = mask.shape[0]
+    m = mask.astype(jnp.int32)
+    pos = jnp.cumsum(m) - 1
+    pick = jnp.zeros((size,), jnp.int32).at[jnp.where(mask & (pos < size), pos, size)].set(
+        jnp.arange(M, dtype=jnp.int32), mode="drop")
+    return pick, jnp.arange(size) < jnp.sum(m)
+
+
 def settle_good(good_R: Callable, decided_R: Optional[Callable], R, P, live):
     """``good_R`` at the pairs (R, P) of one chunk: without ``decided_R`` the full test at every pair; with it
     (``(R, p) -> (good, decided)``, e.g. :func:`deltajax.constraints.good_point_decided`) its answer where it
@@ -204,11 +216,7 @@ def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets
 
     def body(st):
         c, tested, sat = st
-        rem = remaining(tested, sat)
-        pos = jnp.cumsum(rem.astype(jnp.int32)) - 1
-        pick = jnp.zeros((K,), jnp.int32).at[jnp.where(rem & (pos < K), pos, K)].set(
-            jnp.arange(M, dtype=jnp.int32), mode="drop")
-        live = jnp.arange(K) < jnp.sum(rem.astype(jnp.int32))
+        pick, live = first_open(remaining(tested, sat), K)
         g = jax.vmap(good_R)(Rf[pick], Pf[pick]) & live
         tested = tested.at[jnp.where(live, pick, M)].set(True, mode="drop")
         sat = sat.at[jnp.where(g, point_of(pick), n_all)].set(True, mode="drop")
