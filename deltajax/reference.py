@@ -28,8 +28,9 @@ def chain_local(p: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(x, y, z) of points p (n, 3) in each chain's local frame, each (n, 3) [point, chain]."""
     p = np.asarray(p, np.float64).reshape(-1, 3)
     ca, sa = np.cos(_ALPHA), np.sin(_ALPHA)
-    x = p[:, :1] * ca + p[:, 1:2] * sa
-    y = -p[:, :1] * sa + p[:, 1:2] * ca
+    with np.errstate(invalid="ignore"):   # a non-finite coordinate times sin(0): NaN, as in the other backends
+        x = p[:, :1] * ca + p[:, 1:2] * sa
+        y = -p[:, :1] * sa + p[:, 1:2] * ca
     z = np.broadcast_to(p[:, 2:3], x.shape)
     return x, y, z
 
