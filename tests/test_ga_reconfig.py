@@ -194,14 +194,35 @@ def test_pareto_disabled_runs_end_to_end(toy_run, refine):
 
 
 @pytest.mark.slow
-def test_pareto_on_refine_and_screen_off(tmp_path, caplog):
+def test_pareto_on_refine_and_screen_off(tmp_path, caplog, monkeypatch):
     # the same run covers the floor step's skip path at no extra cost: on, but another recommend rule (knee), so
-    # the job skips it with a log line (the floor step off is the GA_STAGES_OFF run)
+    # the job skips it with a log line (the floor step off is the GA_STAGES_OFF run); the certify stage's path
+    # where the recommendation turns out infeasible once certified (made so here: the run's one feasible candidate,
+    # so no design is recommended); and the job's progress bars (on here) each end full, n == total
+    import deltajax.optimize.certify as CE
+    from deltajax.run import RunContext
+
+    bars, make = [], RunContext.progress
+    monkeypatch.setattr(RunContext, "progress", lambda self, *a, **kw: bars.append(make(self, *a, **kw)) or bars[-1])
+    certified, certify = [], CE.certify_design
+
+    def certify_design(*a, **kw):
+        certified.append(dict(certify(*a, **kw)))
+        if len(certified) == 2:                           # the baseline, then the first recommendation
+            certified[-1]["joint_margin_deg"] = -1.0
+        return certified[-1]
+
+    monkeypatch.setattr(CE, "certify_design", certify_design)
     caplog.set_level(logging.INFO, logger="deltajax")
     p = run_experiment("ga_reconfig", TOY + ["experiment.refine.enabled=false", "experiment.screen.enabled=false",
-                                             "experiment.floor_solve.enabled=true", "experiment.recommend=knee"],
+                                             "experiment.floor_solve.enabled=true", "experiment.recommend=knee",
+                                             "progress=true"],
                        run_dir=tmp_path)
+    assert len(certified) == 2 and "certified pareto_0: " in caplog.text and "infeasible once certified" in caplog.text
+    assert "certified recommendation: none (the verification's was pareto_0)" in caplog.text
+    assert len(bars) >= 5 and all(b.n == b.total for b in bars), [(b.desc, b.n, b.total) for b in bars]
     data = load(p)
+    assert data["summary"]["attrs"]["recommended"] == "none"
     assert "refine" not in data and "screen" not in data and "pareto" in data
     assert "floor step: skipped (it solves for the floor rule's answer; experiment.recommend=knee)" in caplog.text
     assert "floor" not in data and not any(str(n).startswith("floor_") for n in data["verify"]["design_name"])

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from deltajax import io as dio
-from deltajax.jobs.stages import Runner, Stage, State, Stop
+from deltajax.jobs.stages import Runner, Stage, State, Stop, resize_bar
 from deltajax.rundir import CheckpointError, RunDirError
 from deltajax.workspace.chunks import run_chunks, seal
 
@@ -173,3 +173,21 @@ def test_chunk_checkpoint_resumes_bit_identically_and_refuses_tampering_or_anoth
         f["g/b"][0, 0] = 5
     with pytest.raises(CheckpointError, match="g/b does not match its checksum"):
         job(tmp_path / "p3.h5")
+
+
+def test_resize_bar_ends_a_bar_full_when_a_stage_needs_more_or_less_than_planned():
+    import io
+
+    from tqdm import tqdm
+
+    log = io.StringIO()
+    with tqdm(total=2, file=log, mininterval=0) as bar:      # planned: two designs; the stage finds a third
+        bar.update(2)
+        resize_bar(bar, 3)
+        bar.update(1)
+        assert (bar.n, bar.total) == (3, 3)
+    assert "3/2" not in log.getvalue() and "3/3" in log.getvalue()
+    with tqdm(total=2, file=io.StringIO(), mininterval=0) as bar:  # planned two, one was enough
+        bar.update(1)
+        resize_bar(bar, 1)
+        assert (bar.n, bar.total) == (1, 1)

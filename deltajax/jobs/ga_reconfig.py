@@ -33,7 +33,7 @@ import numpy as np
 
 from ..config import ConfigError, GaReconfigSettings as Settings, ga_reconfig_build, ga_reconfig_settings
 from . import designer_state as ST
-from .stages import Runner, Stage, State, Stop, release_memory
+from .stages import Runner, Stage, State, Stop, release_memory, resize_bar
 
 __all__ = ["run", "build", "settings_from_config", "Settings", "STAGES"]
 
@@ -420,6 +420,8 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
     def run(i):
         if i in cert or i < 0:
             return
+        if len(cert) >= bar.total:       # the rule moved on to a design not certified yet: one more than planned
+            resize_bar(bar, len(cert) + 1)
         c = CE.certify_design(pb, space_v.decode(jnp.asarray(genes[i])), R_op[i],
                               max_extra_doublings=int(s.verify.certify_doublings))
         release_memory()                 # each design's densest programs free ~1 GiB that glibc would keep
@@ -447,6 +449,7 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
         if rec < 0 or rec in cert:
             break
         run(rec)
+    resize_bar(bar, len(cert))           # the baseline was the answer: one design certified, not two
     bar.close()
     forget("certified")         # no later stage calls the certify programs: their compiled code goes (~0.3 GiB each)
     floor = (float(s.recommend_floor) * mv["regular_volume"][0]

@@ -41,7 +41,15 @@ from typing import Any, Callable, Iterable, Mapping, Optional
 
 import numpy as np
 
-__all__ = ["Stage", "State", "Stop", "Runner", "Checkpoint", "ChunkCheckpoint", "release_memory"]
+__all__ = ["Stage", "State", "Stop", "Runner", "Checkpoint", "ChunkCheckpoint", "release_memory", "resize_bar"]
+
+
+def resize_bar(bar, total: int) -> None:
+    """Set a progress bar's total to the work a stage turned out to need (more steps found along the way, or fewer
+    than planned), so that the bar ends at n == total rather than at 3/2 or 1/2."""
+    if bar.total != total:
+        bar.total = total
+        bar.refresh()
 
 
 def release_memory() -> None:
