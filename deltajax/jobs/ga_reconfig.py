@@ -420,8 +420,7 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
     def run(i):
         if i in cert or i < 0:
             return
-        if len(cert) >= bar.total:       # the rule moved on to a design not certified yet: one more than planned
-            resize_bar(bar, len(cert) + 1)
+        resize_bar(bar, max(bar.total, len(cert) + 1))   # the rule may move on to more designs than planned
         c = CE.certify_design(pb, space_v.decode(jnp.asarray(genes[i])), R_op[i],
                               max_extra_doublings=int(s.verify.certify_doublings))
         release_memory()                 # each design's densest programs free ~1 GiB that glibc would keep
@@ -431,11 +430,7 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
             if not (path and k in CE.CYCLE_METRICS):    # mode=path: the cycle's certified figures are the fixed R's
                 mv[k][i] = c[k]
         feas[i] = bool(CE.feasible_certified({k: np.asarray(v[i]) for k, v in mv.items()}, pb))
-        ctx.log(f"certified {names[i]}: " + ", ".join(
-            f"{k} {c[k]:.5g} (doubling moved it {c[k + '_change']:.2g}, tolerance {c[k + '_tolerance']:g})"
-            for k in CE.TOLERANCES) + f"; density doubled {c['doublings']}x (cycle {c['cycle_samples']} samples)"
-            + ("" if c["converged"] else "; NOT within every tolerance")
-            + ("" if feas[i] else "; infeasible once certified"))
+        ctx.log(f"certified {names[i]}: {CE.describe(c)}" + ("" if feas[i] else "; infeasible once certified"))
 
     run(0)
     rec, front, Fv = rec0, np.zeros((0,), int), None
@@ -449,7 +444,7 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
         if rec < 0 or rec in cert:
             break
         run(rec)
-    resize_bar(bar, len(cert))           # the baseline was the answer: one design certified, not two
+    resize_bar(bar, len(cert))           # fewer than planned when the baseline was the answer
     bar.close()
     forget("certified")         # no later stage calls the certify programs: their compiled code goes (~0.3 GiB each)
     floor = (float(s.recommend_floor) * mv["regular_volume"][0]

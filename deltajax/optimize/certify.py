@@ -39,7 +39,7 @@ Pure JAX, float64, vmappable (the good test is :func:`deltajax.constraints.good_
 from __future__ import annotations
 
 import math
-from typing import Callable, Mapping
+from typing import Any, Callable, Mapping
 
 import jax
 import jax.numpy as jnp
@@ -49,7 +49,7 @@ import numpy as np
 __all__ = ["TOLERANCES", "RAY_DENSITY", "RAY_PASSES", "RayDensity", "ray_cylinders", "ray_cylinder",
            "worst_in_cylinder", "certify_design", "certified_program", "design_margins", "MARGIN_UNITS", "cycle_at",
            "grid_cylinder_bounds", "CERTIFIED_METRICS", "CYCLE_METRICS", "feasible_certified", "overlay",
-           "MAX_EXTRA_DOUBLINGS", "cycle_path"]
+           "MAX_EXTRA_DOUBLINGS", "cycle_path", "describe"]
 
 #: Stated accuracy of a certified figure: doubling the density moves it by no more than this.
 #: regular_volume: relative; joint margin: deg; clearance: m; utilisations: ratio (relative to 1).
@@ -203,6 +203,14 @@ def certify_design(pb, design, R_operating=None, *, density=None, task_samples=N
     out["cycle_samples"] = c
     out["R_operating"] = float(R_op)
     return out
+
+
+def describe(c: Mapping[str, Any]) -> str:
+    """One line of a :func:`certify_design` result: each figure with the change the last doubling made and its
+    tolerance, the density reached, and whether every figure settled."""
+    return (", ".join(f"{k} {c[k]:.5g} (doubling moved it {c[k + '_change']:.2g}, tolerance {c[k + '_tolerance']:g})"
+                      for k in TOLERANCES) + f"; density doubled {c['doublings']}x (cycle {c['cycle_samples']} samples)"
+            + ("" if c["converged"] else "; NOT within every tolerance"))
 
 
 def _change(k: str, x: float, y: float) -> float:
