@@ -3,6 +3,7 @@ grid scan and against the old sampled measure where a bad region slips between i
 density doubles, with one traced copy of the good test; the worst point of a task cylinder against a dense scan;
 the margins in units."""
 
+import dataclasses
 import math
 
 import jax
@@ -336,11 +337,11 @@ def _fake_programs(monkeypatch, volume_at):
     """certify_design with its jitted program replaced by figures that depend on the cycle samples only."""
     calls = []
 
-    def program(pb, density, task_samples, cycle_samples):
+    def program(pb, density, task_samples, cycle_samples, rays=True):
         def run(design, R):
-            calls.append(cycle_samples)
+            calls.append(cycle_samples if rays else -cycle_samples)     # negative: without the ray searches
             out = {k: 0.5 for k in CE.CERTIFIED_METRICS}
-            out["regular_volume"] = volume_at(cycle_samples)
+            out["regular_volume"] = volume_at(cycle_samples) if rays else float("nan")
             return out
         return run
 
@@ -372,6 +373,59 @@ def test_certify_design_doubles_the_density_again_until_every_figure_settles(mon
     with pytest.raises(ValueError, match="max_extra_doublings"):
         CE.certify_design(None, _Design(), 0.2, density=dens, task_samples=task, cycle_samples=9,
                           max_extra_doublings=-1)
+
+
+class _Problem:
+    rw_rays = tuple(CE.RAY_DENSITY)
+
+
+def test_certify_design_takes_the_first_densitys_regular_workspace_from_the_verification(monkeypatch):
+    # the verification searched the same rays at the first density: its figures are used, the first program runs
+    # without the ray searches, and the doublings run with them
+    calls = _fake_programs(monkeypatch, {9: 1.0, 17: 1.02, 33: 1.021}.get)
+    first = {k: 0.25 for k in CE.REGULAR_FIGURES}
+    first["regular_volume"] = 1.0
+    out = CE.certify_design(_Problem(), _Design(), 0.2, task_samples=(3, 5, 7), cycle_samples=9, regular_first=first)
+    assert calls == [-9, 17, 33] and out["doublings"] == 2
+    assert out["regular_volume_first"] == 1.0 and out["regular_volume"] == 1.021
+    with pytest.raises(ValueError, match="regular_first lacks regular_diameter, .*regular_diameter_fixed"):
+        CE.certify_design(_Problem(), _Design(), 0.2, regular_first={"regular_volume": 1.0}, cycle_samples=9,
+                          task_samples=(3, 5, 7))
+    with pytest.raises(ValueError, match="the problem's own rays"):   # another first density: not the same search
+        CE.certify_design(_Problem(), _Design(), 0.2, density=CE.RAY_DENSITY, regular_first=first, cycle_samples=9,
+                          task_samples=(3, 5, 7))
+
+
+@pytest.mark.slow   # compiles the certify program with its ray searches at the toy density (~10 CPU-s)
+def test_the_verifications_regular_workspace_is_the_certify_programs_at_the_first_density(toy_run):
+    # what the certify stage relies on when it takes the first density's figures from the verification: the
+    # certify program's own ray searches give the same figures bit for bit, and leaving them out changes no other
+    # figure
+    from _config_helpers import compose
+    from toy_jobs import TOY
+
+    from deltajax.config import ga_reconfig_build, robot_from_config
+    from deltajax.io import load
+    from deltajax.optimize.workflow import designer_problem
+
+    data = load(toy_run("ga_reconfig"))
+    V, Cg = data["verify"], data["certify"]
+    cfg = compose("ga_reconfig", *TOY["ga_reconfig"])
+    robot, recon = robot_from_config(cfg.robot)
+    s, space, _, _ = ga_reconfig_build(cfg.experiment, robot, recon)
+    pb = designer_problem(s, fine=True)
+    space = dataclasses.replace(space, n_R=s.verify.n_R)
+    i = int(np.asarray(Cg["row"]).reshape(-1)[-1])                     # the last design certified
+    design = space.decode(jnp.asarray(np.asarray(V["genes"], float)[i]))
+    R_op = jnp.asarray(float(np.asarray(V["R_operating"]).reshape(-1)[i]))
+    d, t, c = CE._densities(pb, None, None, None)
+    full = CE.certified_program(pb, d, t, c)(design, R_op)
+    rest = CE.certified_program(pb, d, t, c, rays=False)(design, R_op)
+    for k in CE.REGULAR_FIGURES:
+        assert float(full[k]) == float(np.asarray(V[k]).reshape(-1)[i]), k
+        assert math.isnan(float(rest[k])), k
+    for k in set(full) - set(CE.REGULAR_FIGURES):
+        np.testing.assert_array_equal(rest[k], full[k], err_msg=k)
 
 
 @pytest.mark.slow   # ~5 s: each shape compiles both programs

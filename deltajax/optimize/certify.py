@@ -49,7 +49,7 @@ import numpy as np
 __all__ = ["TOLERANCES", "RAY_DENSITY", "RAY_PASSES", "RayDensity", "ray_cylinders", "ray_cylinder",
            "worst_in_cylinder", "certify_design", "certified_program", "design_margins", "MARGIN_UNITS", "cycle_at",
            "grid_cylinder_bounds", "CERTIFIED_METRICS", "CYCLE_METRICS", "feasible_certified", "overlay",
-           "MAX_EXTRA_DOUBLINGS", "cycle_path", "describe"]
+           "MAX_EXTRA_DOUBLINGS", "cycle_path", "describe", "REGULAR_FIGURES"]
 
 #: Stated accuracy of a certified figure: doubling the density moves it by no more than this.
 #: regular_volume: relative; joint margin: deg; clearance: m; utilisations: ratio (relative to 1).
@@ -83,8 +83,14 @@ def cycle_path(pb) -> Callable:
     return lambda u: adept_path(u, centre, law=law)
 
 
-def _certified_once(pb, design, R_op, density: RayDensity, task_n, cycle_n: int):
-    """Every certified figure at one density (traced; ``R_op``: the operating R)."""
+#: The regular-workspace figures of :func:`certify_design` (the ray searches; the rest is the task and the cycle).
+REGULAR_FIGURES = ("regular_volume", "regular_diameter", "regular_height", "regular_z_top", "regular_volume_fixed",
+                   "regular_diameter_fixed")
+
+
+def _certified_once(pb, design, R_op, density: RayDensity, task_n, cycle_n: int, rays: bool = True):
+    """Every certified figure at one density (traced; ``R_op``: the operating R); ``rays=False``: the task and
+    cycle figures only (the regular-workspace figures NaN: no ray search)."""
     from .. import constraints as C
     from ..geometry import ReconfigurableDelta
 
@@ -103,10 +109,15 @@ def _certified_once(pb, design, R_op, density: RayDensity, task_n, cycle_n: int)
 
     reg_s = pb.settings["regular"]
     sets = [Rs, jnp.asarray(R_op, dt)[None]] if recon else [Rs]
-    cyl = ray_cylinders(lambda R, p: chk(R, p).good, sets, float(reg_s["r_max"]), float(reg_s["z_min"]),
-                        float(reg_s["z_max"]), pb.hd_ratio, density, dt,
-                        possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate))
-    reg, regf = cyl[0], cyl[-1]
+    if rays:
+        cyl = ray_cylinders(lambda R, p: chk(R, p).good, sets, float(reg_s["r_max"]), float(reg_s["z_min"]),
+                            float(reg_s["z_max"]), pb.hd_ratio, density, dt,
+                            possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate))
+        reg = {"regular_volume": cyl[0].volume, "regular_diameter": cyl[0].diameter, "regular_height": cyl[0].height,
+               "regular_z_top": cyl[0].z_top, "regular_volume_fixed": cyl[-1].volume,
+               "regular_diameter_fixed": cyl[-1].diameter}
+    else:
+        reg = {k: jnp.asarray(jnp.nan, dt) for k in REGULAR_FIGURES}
     t = pb.settings["task"]
     task = (float(t["diameter"]), float(t["height"]), float(t["z_top"])) + tuple(task_n)
     worst, _ = worst_in_cylinder(lambda p: jnp.stack([(c := chk(R_op, p)).index, c.joint_margin,
@@ -116,9 +127,7 @@ def _certified_once(pb, design, R_op, density: RayDensity, task_n, cycle_n: int)
                      lambda p: ((c := chk(R_op, p.astype(dt))).joint_margin, c.interference_margin), pb.motor,
                      robot0.mass.gear_ratio, dwell=pb.dwell, payload_mass=pb.payload)
     rate = cw.rate
-    return {"regular_volume": reg.volume, "regular_diameter": reg.diameter, "regular_height": reg.height,
-            "regular_z_top": reg.z_top, "regular_volume_fixed": regf.volume, "regular_diameter_fixed": regf.diameter,
-            "task_index_min": idx,
+    return {**reg, "task_index_min": idx,
             "joint_margin_deg": jnp.rad2deg(jnp.minimum(jm_t, cw.joint_margin)),
             "interference_margin": jnp.minimum(im_t, cw.interference_margin),
             "picks_per_min": rate.picks_per_min, "cycle_time": rate.cycle_time,
@@ -138,22 +147,25 @@ def _densities(pb, density, task_samples, cycle_samples):
     return RayDensity(*density), tuple(int(n) for n in task_samples), int(cycle_samples)
 
 
-def certified_program(pb, density: RayDensity, task_samples: tuple, cycle_samples: int) -> Callable:
+def certified_program(pb, density: RayDensity, task_samples: tuple, cycle_samples: int, *,
+                      rays: bool = True) -> Callable:
     """``(design, R_operating) -> {figure: ()}`` at one density, jitted, one program per (content of ``pb``,
     densities) in this process (:func:`deltajax.tracing.shared_program`): the baseline and the
-    recommendation (and any design re-derived later) share one compilation."""
+    recommendation (and any design re-derived later) share one compilation. ``rays=False``: without the ray
+    searches (the regular-workspace figures NaN)."""
     from ..tracing import shared_program
 
-    key = (tuple(density), tuple(task_samples), int(cycle_samples))
+    key = (tuple(density), tuple(task_samples), int(cycle_samples)) + (() if rays else ("no_rays",))
 
     def build():
-        return jax.jit(lambda d, R: _certified_once(pb, d, R, RayDensity(*key[0]), key[1], key[2]))
+        return jax.jit(lambda d, R: _certified_once(pb, d, R, RayDensity(*key[0]), key[1], key[2], rays))
 
     return shared_program("certified", pb, None, key, build, persist=True)
 
 
 def certify_design(pb, design, R_operating=None, *, density=None, task_samples=None,
                    cycle_samples=None, reference: Mapping[str, float] = None,
+                   regular_first: Mapping[str, float] = None,
                    max_extra_doublings: int = MAX_EXTRA_DOUBLINGS) -> dict:
     """Certified figures of one design (a :class:`deltajax.Delta` or :class:`deltajax.ReconfigurableDelta`) on
     the designer's problem ``pb`` (:class:`deltajax.optimize.designer.DesignerProblem`) at its operating R
@@ -172,8 +184,12 @@ def certify_design(pb, design, R_operating=None, *, density=None, task_samples=N
     settled every figure), ``cycle_samples`` (the cycle samples reached) and ``converged`` (every change of the
     last doubling within :data:`TOLERANCES`; False only when even the last allowed doubling moved a figure more).
     The cycle is evaluated at its fastest feasible duration at each density. ``reference``: the figures already
-    evaluated at the first density (e.g. by an earlier call): then only the doubled evaluations run. Host function
-    (numpy floats); jitted inside, one program per density."""
+    evaluated at the first density (e.g. by an earlier call): then only the doubled evaluations run.
+    ``regular_first``: the regular-workspace figures (:data:`REGULAR_FIGURES`) already found by the same ray search
+    at the first density and the same operating R (the verification's, :func:`deltajax.optimize.designer.
+    evaluate_designer` on the same problem: its ``rw_rays`` are the first density): then the first evaluation
+    runs without the ray searches and takes them from it. Host function (numpy floats); jitted inside, one
+    program per density."""
     if not (isinstance(max_extra_doublings, int) and max_extra_doublings >= 0):
         raise ValueError(f"max_extra_doublings must be an integer >= 0, got {max_extra_doublings!r}")
     dt = (design.robot if hasattr(design, "robot") else design).upper_arm.dtype
@@ -182,8 +198,19 @@ def certify_design(pb, design, R_operating=None, *, density=None, task_samples=N
         R_operating = jax.jit(lambda d: evaluate_designer(pb, d, regular=False)["R_operating"])(design)
     R_op = jnp.asarray(R_operating, dt)
     d, t, c = _densities(pb, density, task_samples, cycle_samples)
-    a = (dict(reference) if reference is not None
-         else {k: float(v) for k, v in certified_program(pb, d, t, c)(design, R_op).items()})
+    if reference is not None:
+        a = dict(reference)
+    elif regular_first is not None:
+        if density is not None or pb.rw_rays is None:
+            raise ValueError("regular_first: the first density must be the problem's own rays (pb.rw_rays), as "
+                             "the verification searched them")
+        missing = [k for k in REGULAR_FIGURES if k not in regular_first]
+        if missing:
+            raise ValueError(f"regular_first lacks {', '.join(missing)}")
+        a = {k: float(v) for k, v in certified_program(pb, d, t, c, rays=False)(design, R_op).items()}
+        a.update({k: float(regular_first[k]) for k in REGULAR_FIGURES})
+    else:
+        a = {k: float(v) for k, v in certified_program(pb, d, t, c)(design, R_op).items()}
     first = {k: float(a[k]) for k in TOLERANCES}
     for doublings in range(1, 2 + max_extra_doublings):
         d, t, c = d.doubled(), tuple(2 * n - 1 for n in t), 2 * c - 1
