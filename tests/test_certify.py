@@ -57,7 +57,73 @@ def synthetic():
 
 
 def _samples(d):
-    return len(CE.RAY_PASSES) * d.n_phi * d.n_z * d.n_along * d.n_levels
+    return len(CE.RAY_PASSES) * d.n_phi * d.n_z * (d.n_along + (d.n_levels - 1) * d.refine)
+
+
+def test_doubling_the_ray_density_halves_every_spacing():
+    d = CE.RAY_DENSITY
+    res = lambda d: (d.n_along - 1) * (d.refine - 1) ** (d.n_levels - 1)  # noqa: E731  (intervals at the end)
+    for _ in range(2):
+        e = d.doubled()
+        assert (e.n_phi - 1, e.n_z - 1, e.n_along - 1) == (2 * (d.n_phi - 1), 2 * (d.n_z - 1), 2 * (d.n_along - 1))
+        assert res(e) == 2 * res(d) and e.refine == d.refine == CE.RAY_DENSITY.n_along and e.n_levels == d.n_levels
+        d = e
+    assert CE.RayDensity(n_along=5).refine == 5 and CE.RayDensity(n_along=5, n_refine=3).refine == 3
+
+
+def _nested_first_bad(good, r_hi, n0, n1, levels):
+    """The first bad radius along one ray by the nested search, in numpy (the reference of rays._first_bad)."""
+    lo, hi, done, axis_bad = 0.0, r_hi, False, False
+    for level in range(levels):
+        s = lo + np.linspace(0.0, 1.0, n0 if level == 0 else n1) * (hi - lo)
+        g = good(s)
+        axis_bad |= level == 0 and not g[0]
+        if done:
+            continue
+        if g.all():
+            lo, done = hi, True
+        else:
+            jb = int(np.argmin(g))
+            lo, hi = s[max(jb - 1, 0)], s[jb]
+    return 0.0 if axis_bad else lo
+
+
+@settings(max_examples=25, deadline=None)
+@given(st.floats(0.02, 0.4), st.lists(st.tuples(st.floats(0.0, 0.4), st.floats(1e-4, 0.05)), min_size=3, max_size=3),
+       st.booleans())
+def test_first_bad_with_nested_searches_of_their_own_size_is_the_nested_search(edge, islands, possible):
+    # a first level of 17 samples, then two nested searches of 5 (the doubled density's shape): every ray's first
+    # bad radius is the reference's, through the full test or the necessary-condition path
+    isl = np.asarray([(a, a + w) for a, w in islands])
+
+    def good_np(r):
+        return (r <= edge) & ~np.any((r[:, None] >= isl[:, 0]) & (r[:, None] <= isl[:, 1]), axis=1)
+
+    out = _first_bad_program(possible)(edge, jnp.asarray(isl))
+    ref = _nested_first_bad(good_np, R_MAX, 17, 5, 3)
+    np.testing.assert_allclose(np.asarray(out), ref, rtol=1e-12, atol=1e-15)
+
+
+_FIRST_BAD = {}
+
+
+def _first_bad_program(possible):
+    if possible not in _FIRST_BAD:
+        from deltajax.optimize import rays as RY
+
+        def good(p, edge, isl):
+            r = jnp.hypot(p[0], p[1])
+            return (r <= edge) & ~jnp.any((r >= isl[:, 0]) & (r <= isl[:, 1]))
+
+        phi, z = jnp.asarray([0.1, 0.7, 1.0]), jnp.full((3,), 0.4)
+
+        def run(edge, isl):
+            g = lambda R, p: good(p, edge, isl)  # noqa: E731
+            pos = (lambda R, p: jnp.hypot(p[0], p[1]) <= edge) if possible else None
+            return RY._first_bad(g, [jnp.zeros((2,))], [phi], [z], [R_MAX], 17, 3, pos, 5)[0]
+
+        _FIRST_BAD[possible] = jax.jit(run)
+    return _FIRST_BAD[possible]
 
 
 def test_ray_cylinder_agrees_with_a_brute_force_grid_scan_at_more_than_10x_the_density(synthetic):
@@ -108,6 +174,9 @@ def test_one_traced_good_test_serves_every_pass_and_both_good_sets():
                                          HD, dens))
     both = f()
     assert len(calls) == 1
+    # a doubled density's first samples along a ray outnumber its nested searches': a second traced copy, no more
+    jax.jit(lambda: CE.ray_cylinders(good_R, [jnp.asarray([0.0, 0.05])], R_MAX, Z0, Z1, HD, dens.doubled()))()
+    assert len(calls) == 3
     # each set as if alone: R per point (any of 0 and 0.05: the larger) and the single R
     alone = [_rays(lambda p, R=R: good_R(jnp.asarray(R), p), dens) for R in (0.05, 0.02)]
     for a, b in zip(both, alone):

@@ -47,7 +47,7 @@ TOY = {
         "experiment.verify.task_n_z=2", "experiment.verify.cycle_samples=13", "experiment.verify.rw_n_r=7",
         "experiment.verify.rw_n_phi=3", "experiment.verify.rw_n_z=7", "experiment.screen.log2_size=6",
         "experiment.refine.steps=3", "experiment.tolerance.samples=200",
-        # certify: the first doubling only (a toy grid does not settle; each further doubling is ~8x the rays)
+        # certify: the first doubling only (a toy grid does not settle; each further doubling is ~5x the rays' work)
         "experiment.verify.certify_doublings=0"],
 }
 

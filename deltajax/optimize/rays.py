@@ -5,11 +5,13 @@ verification (:mod:`deltajax.optimize.designer`) and by :mod:`deltajax.optimize.
 * :func:`ray_cylinders` / :func:`ray_cylinder`: the largest axis-centred cylinder with a given H/D inside a good
   set, from *rays*: a ray (phi, z) of the 60 deg wedge (the Delta's three-fold + mirror symmetry) gives the first
   bad radius rho*(phi, z) (dense samples along the ray, then the first bad interval searched again, ``n_levels``
-  times: a bad island between the old grid's rings, e.g. where a forearm passes through the base plate, is found,
-  not skipped). The profile rho(z) = min over phi of rho* is refined in the passes of :data:`RAY_PASSES`, each
+  times in all: a bad island between the old grid's rings, e.g. where a forearm passes through the base plate, is
+  found, not skipped; :meth:`RayDensity.doubled` halves every spacing, the final resolution's too). The profile
+  rho(z) = min over phi of rho* is refined in the passes of :data:`RAY_PASSES`, each
   placed where the previous one left the answer uncertain (coarse; levels zoomed onto the cylinder found so far;
   phi rays zoomed onto each level's smallest radius; a final check of the winning cylinder that can only shrink
-  it). All passes run in one loop with one call of the good test: one traced copy per compiled program.
+  it). All passes run in one loop with one call of the good test: one traced copy per compiled program (two when
+  the first samples along a ray and the nested searches differ in size, as at a doubled density).
 * :func:`worst_in_cylinder`: the minimum of a scalar field over a task cylinder: dense samples, then a
   coordinate-wise golden section in (rho, phi, z) from the worst samples.
 
@@ -39,17 +41,25 @@ RAY_PASSES = ("coarse", "zoom_z", "zoom_z", "zoom_z") + ("zoom_phi",) * 6 + ("ch
 
 class RayDensity(NamedTuple):
     """Density of :func:`ray_cylinders`: per pass ``n_z`` levels x ``n_phi`` rays (over the 60 deg wedge, both
-    ends), ``n_along`` samples along a ray in each of ``n_levels`` nested searches (resolution
-    r_max / (n_along - 1)^n_levels)."""
+    ends), ``n_along`` samples along a ray, then ``n_levels - 1`` nested searches of the first bad interval with
+    ``n_refine`` samples each (0: ``n_along``): resolution r_max / ((n_along - 1) (n_refine - 1)^(n_levels - 1))."""
 
     n_phi: int = 7
     n_z: int = 16
     n_along: int = 9
     n_levels: int = 4
+    n_refine: int = 0
+
+    @property
+    def refine(self) -> int:
+        """Samples of each nested search."""
+        return self.n_refine or self.n_along
 
     def doubled(self) -> "RayDensity":
-        """Twice the density in phi, z and along the rays (same end points: 2 n - 1 samples)."""
-        return self._replace(n_phi=2 * self.n_phi - 1, n_z=2 * self.n_z - 1, n_along=2 * self.n_along - 1)
+        """Twice the density: half the spacing of the rays in phi and z, of the samples along a ray (same end points:
+        2 n - 1 samples) and of the final resolution (the nested searches as they were)."""
+        return self._replace(n_phi=2 * self.n_phi - 1, n_z=2 * self.n_z - 1, n_along=2 * self.n_along - 1,
+                             n_refine=self.refine)
 
 
 #: The verification's density (the fine evaluator, :func:`deltajax.optimize.designer.evaluate_designer`).
@@ -87,7 +97,7 @@ def golden_min(f, a, b, n):
 
 #: (R, point) pairs per evaluation of the good test in a ray pass: a pass with more evaluates them in batches of
 #: this many (``jax.lax.map``), so its memory is bounded. The certify stage's second further doubling reaches
-#: ~8e5 pairs per pass (the design's 16 R samples x 25 x 61 rays x 33 samples along each), whose unbatched
+#: ~8e5 pairs per pass (the design's 16 R samples x 25 x 61 rays x 33 first samples along each), whose unbatched
 #: intermediates (~3.5 kB a pair) took the main job from 1.9 to 4.45 GiB.
 RAY_BATCH = 1 << 16
 
@@ -227,20 +237,36 @@ def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets
     return sat
 
 
-def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: int, possible_R=None):
+def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: int, possible_R=None,
+               n_refine: int = 0):
     """First bad radius along each ray, for each good set j (a point is good for set j when ``good_R(R, p)`` holds
     at any R of ``R_sets[j]``): ``phi[j]``, ``z[j]``, ``r_hi[j]`` (N,) per set; returns a list of (N,). ``n_along``
-    samples in [0, r_hi], then the first bad interval searched again with ``n_along`` samples, ``n_levels`` times
-    in all (every level a dense search, so an island inside the interval is found too). The value is the last good
+    samples in [0, r_hi], then the first bad interval searched again with ``n_refine`` samples (0: ``n_along``),
+    ``n_levels`` times in all (every level a dense search, so an island inside the interval is found too; a first
+    level of its own size is a second traced copy of the search). The value is the last good
     sample before the first bad one (never over-stated by the search), ``r_hi`` when every sample is good and 0
     when the axis point is bad. Every (R, point) pair of every set goes through one vmapped call of ``good_R``
     (in batches of :data:`RAY_BATCH` pairs); with ``possible_R`` (a necessary condition of ``good_R``) only the
     pairs where it holds and whose point has no good R yet do (:func:`any_good_where_possible`: the same
     answers)."""
     dt = jnp.result_type(z[0])
-    u = jnp.linspace(0.0, 1.0, n_along, dtype=dt)
     cs = [(jnp.cos(ph), jnp.sin(ph)) for ph in phi]
+    n_refine = n_refine or n_along
+    init = [(jnp.zeros_like(zj), jnp.asarray(rh, dt) * jnp.ones_like(zj), jnp.zeros(zj.shape, bool),
+             jnp.zeros(zj.shape, bool)) for zj, rh in zip(z, r_hi)]
+    if n_refine == n_along:
+        st = jax.lax.fori_loop(0, n_levels, _level(good_R, R_sets, phi, z, cs, n_along, dt, possible_R), init)
+    else:
+        st = _level(good_R, R_sets, phi, z, cs, n_along, dt, possible_R)(0, init)
+        st = jax.lax.fori_loop(1, n_levels, _level(good_R, R_sets, phi, z, cs, n_refine, dt, possible_R), st)
+    return [jnp.where(axis_bad, 0.0, lo) for lo, _, _, axis_bad in st]
+
+
+def _level(good_R, R_sets, phi, z, cs, n_along: int, dt, possible_R):
+    """One level of :func:`_first_bad`'s search with ``n_along`` samples per interval: ``(i, state) -> state``."""
+    u = jnp.linspace(0.0, 1.0, n_along, dtype=dt)
     sizes = [ph.shape[0] * n_along * Rj.shape[0] for ph, Rj in zip(phi, R_sets)]
+
     def level(i, st):
         rows = []
         for j, (lo, hi, _, _) in enumerate(st):
@@ -283,10 +309,7 @@ def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: i
             out.append((jnp.where(done, lo, new_lo), jnp.where(done, hi, new_hi), done | all_good, axis_bad))
         return out
 
-    init = [(jnp.zeros_like(zj), jnp.asarray(rh, dt) * jnp.ones_like(zj), jnp.zeros(zj.shape, bool),
-             jnp.zeros(zj.shape, bool)) for zj, rh in zip(z, r_hi)]
-    st = jax.lax.fori_loop(0, n_levels, level, init)
-    return [jnp.where(axis_bad, 0.0, lo) for lo, _, _, axis_bad in st]
+    return level
 
 
 def _window_min(pz, pr, lo, hi):
@@ -421,7 +444,8 @@ def ray_cylinders(good_R: Callable, R_sets: Sequence, r_max: float, z_min: float
     def one_pass(i, sts):
         lay = [layout(i, st) for st in sts]
         radii = _first_bad(good_R, R_sets, [a[1].reshape(-1) for a in lay], [a[0].reshape(-1) for a in lay],
-                           [jnp.broadcast_to(a[2], (nz * nphi,)) for a in lay], n.n_along, n.n_levels, possible_R)
+                           [jnp.broadcast_to(a[2], (nz * nphi,)) for a in lay], n.n_along, n.n_levels, possible_R,
+                           n.refine)
         return [update(i, st, *a[:2], *a[3:], r.reshape(nz, nphi)) for st, a, r in zip(sts, lay, radii)]
 
     st0 = dict(z=jnp.full((T,), inf), r=jnp.full((T,), inf), phi=jnp.zeros((T,), dt), span=jnp.full((T,), dphi0, dt),
