@@ -19,11 +19,13 @@ The designer's other constraints (passive joints, link interference, the good an
 
 from __future__ import annotations
 
+import functools
 from typing import Callable, NamedTuple
 
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Bool, Float
 
 from .cycle import cycle_profile, log_bisect
@@ -236,26 +238,49 @@ def _implicit_time(T, a, g, thd, motor, n, dwell, T_low):
 
     Bisection is piecewise constant in the design, so its derivative is zero. At an interior T_min the binding
     limit h(T, design) = max(peak utilisation, RMS utilisation) - 1 is 0, hence dT/d(design) = -h_design / h_T
-    (implicit function theorem). The value stays the bisection's exactly (the correction term is
-    h - stop_gradient(h) = 0); where T is not interior (inf, NaN, at T_low) or h_T is not negative the
-    derivative is zero. Checked against central differences of the bisection (tests/test_constraints.py).
+    (implicit function theorem). A custom JVP: the value is the bisection's exactly and costs nothing where nothing
+    is differentiated (the search, the verification, the Monte Carlo); where T is not interior (inf, NaN, at T_low)
+    or h_T is not negative the derivative is zero. Checked against central differences of the bisection
+    (tests/test_constraints.py).
     """
-    sg = jax.lax.stop_gradient
-    T0 = sg(T)
+    return _implicit(float(T_low), T, a, g, thd, motor, n, dwell)
 
-    def h(T_, a_, g_, thd_, n_, dw_):
-        L = _loads_from_unit(a_, g_, thd_, T_, dw_, motor, n_, jnp.asarray(True))
+
+@functools.partial(jax.custom_jvp, nondiff_argnums=(0,))
+def _implicit(T_low, T, a, g, thd, motor, n, dwell):
+    return T
+
+
+def _implicit_jvp(T_low, primals, tangents):
+    T, *args = primals
+
+    def h(T_, a_, g_, thd_, motor_, n_, dw_):
+        L = _loads_from_unit(a_, g_, thd_, T_, dw_, motor_, n_, jnp.asarray(True))
         return jnp.maximum(L.peak_utilisation, L.rms_utilisation) - 1.0
 
-    interior = jnp.isfinite(T0) & (T0 > T_low * (1.0 + 1e-9))
-    Ts = jnp.where(interior, T0, 1.0)
-    args = (a, g, thd, n, dwell)
-    hT = jax.grad(h)(Ts, *(sg(x) for x in args))
+    interior = jnp.isfinite(T) & (T > T_low * (1.0 + 1e-9))
+    Ts = jnp.where(interior, T, 1.0)
+    hT = jax.grad(h)(Ts, *args)
     use = interior & jnp.isfinite(hT) & (hT < 0)
-    # where not used, the design enters only through stop_gradient: no 0 x inf in the backward pass
-    hv = h(Ts, *(jnp.where(use, x, sg(x)) for x in args))
-    corr = (hv - sg(hv)) / jnp.where(use, hT, -1.0)
-    return T0 - jnp.where(use, corr, 0.0)
+    # h differentiated in the inputs that carry a tangent (symbolic zeros stay constants, as a closure would keep
+    # them), their tangents masked where not used (a select: no 0 x inf where h's derivative is not finite)
+    leaves, tree = jax.tree_util.tree_flatten(tuple(args))
+    tl = jax.tree_util.tree_leaves(tuple(tangents[1:]), is_leaf=lambda t: isinstance(t, SymbolicZero))
+    live = [i for i, t in enumerate(tl) if not isinstance(t, SymbolicZero)]
+    if not live:
+        return T, jnp.zeros_like(T)
+
+    def h_live(*xs):
+        full = list(leaves)
+        for i, x in zip(live, xs):
+            full[i] = x
+        return h(Ts, *jax.tree_util.tree_unflatten(tree, full))
+
+    _, dh = jax.jvp(h_live, tuple(leaves[i] for i in live), tuple(jnp.where(use, tl[i], 0.0) for i in live))
+    return T, jnp.where(use, -(dh / jnp.where(use, hT, -1.0)), 0.0)
+
+
+_implicit.defjvp(_implicit_jvp, symbolic_zeros=True)
 
 
 class CycleRate(NamedTuple):
