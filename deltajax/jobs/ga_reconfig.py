@@ -413,8 +413,6 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
           if k in V}
     feas = np.asarray(V["feasible"]).astype(bool).reshape(-1).copy()
     rec0 = int(V["attrs"]["recommended"])
-    # the first density's ray searches are the verification's (same problem, rays, operating R): not run again
-    reg_v = [{k: float(np.asarray(V[k], float).reshape(-1)[i]) for k in CE.REGULAR_FIGURES} for i in range(len(names))]
     cert: dict = {}
     path = s.reconfig.get("mode", "per_task") == "path"
     bar = ctx.progress(total=2, desc="certify (worst cases, doubled density)")
@@ -423,7 +421,9 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
         if i in cert or i < 0:
             return
         resize_bar(bar, max(bar.total, len(cert) + 1))   # the rule may move on to more designs than planned
-        c = CE.certify_design(pb, space_v.decode(jnp.asarray(genes[i])), R_op[i], regular_first=reg_v[i],
+        # the first density's rays: the verification's (same problem, rays, operating R; in mv until certified)
+        c = CE.certify_design(pb, space_v.decode(jnp.asarray(genes[i])), R_op[i],
+                              regular_first={k: mv[k][i] for k in CE.REGULAR_FIGURES},
                               max_extra_doublings=int(s.verify.certify_doublings))
         release_memory()                 # each design's densest programs free ~1 GiB that glibc would keep
         cert[i] = c

@@ -316,9 +316,8 @@ CYCLE_METRICS = ("picks_per_min", "cycle_time", "peak_utilisation", "rms_utilisa
                  "joint_margin_deg", "interference_margin")
 
 #: Metrics :func:`certify_design` returns that replace the verification's values of a certified design.
-CERTIFIED_METRICS = ("regular_volume", "regular_diameter", "regular_height", "regular_z_top", "regular_volume_fixed",
-                     "regular_diameter_fixed", "task_index_min", "joint_margin_deg", "interference_margin",
-                     "picks_per_min", "cycle_time", "peak_utilisation", "rms_utilisation", "speed_utilisation")
+CERTIFIED_METRICS = REGULAR_FIGURES + ("task_index_min", "joint_margin_deg", "interference_margin", "picks_per_min",
+                                       "cycle_time", "peak_utilisation", "rms_utilisation", "speed_utilisation")
 
 
 def feasible_certified(m: Mapping[str, np.ndarray], pb) -> np.ndarray:
