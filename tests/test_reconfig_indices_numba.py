@@ -51,7 +51,7 @@ def test_trim_window_equals_scalar_search():
     pts = np.stack([rng.uniform(-0.45, 0.45, 3000), np.abs(rng.uniform(-0.45, 0.45, 3000)),
                     rng.uniform(0.0, 0.62, 3000)], -1)
     k_lo, k_stop = ws.reach_k_range_host(REC, pts)
-    tb = np.empty(numba_screen.TRIM_BLOCK, np.bool_)
+    tb = np.empty(numba_screen.TRIM_BLOCK, np.uint8)
     a = (Q["R_min"], Q["R_step"], Q["r"], Q["L1"], Q["L2"], Q["lim"])
     hit = 0
     for j in range(len(pts)):
