@@ -44,6 +44,21 @@ def test_grid_points_order_and_mirror_index():
     np.testing.assert_array_equal(p[m], p * np.array([1.0, -1.0, 1.0]))
 
 
+@settings(max_examples=40, deadline=None)
+@given(st.integers(0, 5 * 3 * 4 - 1), st.integers(1, 60))
+def test_chunk_points_are_the_grid_points_in_order(start, length):
+    # the chunk engine's coordinates (numba_fields.grid_points: indices counted, not divided) against the grid's
+    # own points, on the whole grid and on its mirror half (y >= 0), across row and plane boundaries
+    g = ws.make_grid((-0.1, 0.1), (-0.1, 0.1), (0.2, 0.35), 0.05)  # 5 x 5 x 4
+    full = g.points().reshape(g.shape + (3,))
+    for j0 in (0, 2):
+        half = full[:, j0:, :].reshape(-1, 3)
+        n = min(length, half.shape[0] - start) if start < half.shape[0] else 0
+        x, y, z = (np.full(n, np.nan) for _ in range(3))
+        numba_fields.grid_points(g.x, g.y, g.z, j0, 5 - j0, start, x, y, z)
+        np.testing.assert_array_equal(np.stack([x, y, z], -1), half[start:start + n])
+
+
 def test_grid_rejects_bad_ranges():
     with pytest.raises(ValueError, match="whole number"):
         ws.make_grid((0, 0.105), (0, 0.1), (0, 0.1), 0.01)

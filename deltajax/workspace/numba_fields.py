@@ -251,16 +251,23 @@ def parallel(block_fn, n: int, n_threads: int | None = None) -> None:
 @nb.njit(**OPTS)
 def grid_points(gx, gy, gz, j0, nyh, start, x, y, z):
     """Points start, start + 1, ... (len(x) of them) of the grid gx x gy[j0:j0 + nyh] x gz in x-major
-    (i, j, k) order, written into x, y, z."""
+    (i, j, k) order, written into x, y, z (the first item's indices by division, the others by counting)."""
     nz = gz.shape[0]
+    i = start // (nyh * nz)
+    rem = start - i * (nyh * nz)
+    j = rem // nz
+    k = rem - j * nz
     for t in range(x.shape[0]):
-        q = start + t
-        i = q // (nyh * nz)
-        rem = q - i * (nyh * nz)
-        j = rem // nz
         x[t] = gx[i]
         y[t] = gy[j0 + j]
-        z[t] = gz[rem - j * nz]
+        z[t] = gz[k]
+        k += 1
+        if k == nz:
+            k = 0
+            j += 1
+            if j == nyh:
+                j = 0
+                i += 1
 
 
 @nb.njit(**OPTS)
