@@ -211,12 +211,19 @@ class LinkModel(eqx.Module):
                     error=ConstraintError)
 
 
+def _dot3(u, v):
+    """u . v of 3-vectors (last axis) as three products and two sums: elementwise, so that XLA fuses it with the
+    arithmetic around it. (``jnp.dot`` of 3-vectors under vmap is a dot_general, which XLA:CPU runs as a library
+    call of its own per dot: 36 of the 116 kernels of the batched good-point test, measured.)"""
+    return u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1] + u[..., 2] * v[..., 2]
+
+
 def segment_distance(p0, p1, q0, q1) -> Float[Array, ""]:
     """Minimum distance between segments [p0, p1] and [q0, q1] (3-vectors), exact (Ericson's clamped
     closest points, branch-free; degenerate segments handled)."""
     d1, d2, r = p1 - p0, q1 - q0, p0 - q0
-    a, e, f = jnp.dot(d1, d1), jnp.dot(d2, d2), jnp.dot(d2, r)
-    c, b = jnp.dot(d1, r), jnp.dot(d1, d2)
+    a, e, f = _dot3(d1, d1), _dot3(d2, d2), _dot3(d2, r)
+    c, b = _dot3(d1, r), _dot3(d1, d2)
     tiny = 1e-30
     denom = a * e - b * b
     s = jnp.where(denom > tiny * jnp.maximum(a * e, tiny), jnp.clip((b * f - c * e) / jnp.where(denom > 0, denom, 1.0),
@@ -227,7 +234,7 @@ def segment_distance(p0, p1, q0, q1) -> Float[Array, ""]:
     t_c = jnp.clip(t, 0.0, 1.0)
     s = jnp.where((t != t_c) & (a > tiny), jnp.clip((t_c * b - c) / jnp.where(a > tiny, a, 1.0), 0.0, 1.0), s)
     d = (p0 + s * d1) - (q0 + t_c * d2)
-    return jnp.sqrt(jnp.dot(d, d))
+    return jnp.sqrt(_dot3(d, d))
 
 
 class Interference(NamedTuple):
