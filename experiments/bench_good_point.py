@@ -10,11 +10,13 @@ process, interleaved with the measured programs, do not. Programs measured (each
   grid, task cylinder and cycle samples at every R of the baseline design: the same (R, point) pairs the search
   evaluator tests;
 * ``good_point``: :func:`deltajax.constraints.good_point` over the same pairs (IK, index, passive joints, links);
+* ``good_decided``: :func:`deltajax.constraints.good_point_decided` (the ray searches' test) over the same pairs;
 * ``evaluator`` / ``evaluator_cheap``: the search evaluator (:func:`deltajax.optimize.workflow.batch_evaluator`)
   on ``--designs`` Sobol designs, with and without the regular workspace (the NSGA-II stage and the screen).
 
 For each: CPU-seconds and wall per call (median over ``--reps`` interleaved rounds), and the ratio to ``kernel``;
-plus the number of HLO instructions of the optimised good-point program (one point) as a size figure. Runs at
+plus the number of HLO instructions of the optimised good-point program (one point) as a size figure, and the
+kernels (fusions) of the two batched good-test programs with how many of them XLA:CPU runs as library calls. Runs at
 any commit that has these functions (it was used to compare the main job before and after the exact plate
 clearance; docs/BENCHMARKS.md).
 """
@@ -79,7 +81,9 @@ def main(argv=None):
 
     kernel = over_pairs(lambda r, p: point_indices(r, p, beta=pb.good.beta)[1].k_tilde)
     good = over_pairs(lambda r, p: C.good_point(r, p, pb.good, plate_radius=plate))
-    progs = {"kernel": (kernel, (design, pts)), "good_point": (good, (design, pts))}
+    decided = over_pairs(lambda r, p: C.good_point_decided(r, p, pb.good, plate_radius=plate))
+    progs = {"kernel": (kernel, (design, pts)), "good_point": (good, (design, pts)),
+             "good_decided": (decided, (design, pts))}
     if not args.no_evaluator:
         X = qmc.Sobol(d=space.dim, scramble=True, seed=7).random(args.designs)
         progs["evaluator"] = (batch_evaluator(pb, space, args.designs), (X,))
@@ -91,6 +95,10 @@ def main(argv=None):
     one = jax.jit(lambda p: C.good_point(design.at(Rs[0]), p, pb.good, plate_radius=plate))
     hlo = one.lower(pts[0]).compile().as_text()
     n_hlo = sum(1 for line in hlo.splitlines() if " = " in line and not line.lstrip().startswith("//"))
+    kernels = {}  # the batched programs' kernels (fusions), and how many of them are library calls (YNNPACK)
+    for name in ("good_point", "good_decided"):
+        text = progs[name][0].lower(*progs[name][1]).compile().as_text()
+        kernels[name] = (text.count(" fusion("), text.count('"__ynn_fusion"'))
 
     rows = {k: [] for k in progs}
     for _ in range(args.reps):
@@ -102,10 +110,12 @@ def main(argv=None):
     print(f"{'program':18s} {'CPU-s':>9s} {'wall s':>9s} {'x kernel CPU':>13s} {'x kernel wall':>14s}  first call")
     kc, kw = med["kernel"]
     for name, (c, w) in med.items():
-        per = f"  ({c / n_pairs * 1e9:.0f} CPU-ns/pair)" if name in ("kernel", "good_point") else \
+        per = f"  ({c / n_pairs * 1e9:.0f} CPU-ns/pair)" if name in ("kernel", "good_point", "good_decided") else \
             f"  ({c / args.designs * 1e3:.1f} CPU-ms/design)"
         print(f"{name:18s} {c:9.4f} {w:9.4f} {c / kc:13.2f} {w / kw:14.2f}  {compile_cost[name][0]:.1f} CPU-s{per}")
     print(f"good_point optimised HLO instructions (one point): {n_hlo}")
+    for name, (nk, ny) in kernels.items():
+        print(f"{name} batched program: {nk} kernels (fusions), {ny} of them library calls (YNNPACK)")
     print(f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 2 ** 20:.2f} GB")
 
 
