@@ -103,6 +103,13 @@ class JointAngles(NamedTuple):
     platform: Float[Array, "3"]
 
 
+def _dot3(u, v):
+    """u . v of 3-vectors (last axis) as three products and two sums: elementwise, so that XLA fuses it with the
+    arithmetic around it. (``jnp.dot`` of 3-vectors under vmap is a dot_general, which XLA:CPU runs as a library
+    call of its own per dot: 36 of the 116 kernels of the batched good-point test, measured.)"""
+    return u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1] + u[..., 2] * v[..., 2]
+
+
 def _angle_between(a, b):
     """Angle between unit vectors (rows), robust near 0 and pi (atan2 of |a x b| and a . b)."""
     c = jnp.sum(a * b, axis=-1)
@@ -177,8 +184,11 @@ def _ball_joints_decided(robot: Delta, p, cos, sin, joints: JointModel):
     n_p = jnp.stack([sp + z, z, -cp + z], axis=-1)
     cL, sL = jnp.cos(joints.limit), jnp.sin(joints.limit)
 
-    def side(a, b):
-        return jnp.linalg.norm(jnp.cross(a, b), axis=-1) * cL - jnp.sum(a * b, axis=-1) * sL
+    def side(a, b):   # |a x b| cos L - (a . b) sin L per row, in components (fused by XLA, see _dot3)
+        cx = a[..., 1] * b[..., 2] - a[..., 2] * b[..., 1]
+        cy = a[..., 2] * b[..., 0] - a[..., 0] * b[..., 2]
+        cz = a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0]
+        return jnp.sqrt(cx * cx + cy * cy + cz * cz) * cL - _dot3(a, b) * sL
 
     d = jnp.concatenate([side(u, n_e), side(-u, n_p)])
     within = jnp.all(d < -JOINT_BAND)
@@ -209,13 +219,6 @@ class LinkModel(eqx.Module):
             check_range("LinkModel", n, getattr(self, n), lo=0.0, strict=False, hi=10.0, error=ConstraintError)
         check_range("LinkModel", "plate_overhang", self.plate_overhang, lo=-10.0, strict=False, hi=10.0,
                     error=ConstraintError)
-
-
-def _dot3(u, v):
-    """u . v of 3-vectors (last axis) as three products and two sums: elementwise, so that XLA fuses it with the
-    arithmetic around it. (``jnp.dot`` of 3-vectors under vmap is a dot_general, which XLA:CPU runs as a library
-    call of its own per dot: 36 of the 116 kernels of the batched good-point test, measured.)"""
-    return u[..., 0] * v[..., 0] + u[..., 1] * v[..., 1] + u[..., 2] * v[..., 2]
 
 
 def segment_distance(p0, p1, q0, q1) -> Float[Array, ""]:
