@@ -237,21 +237,19 @@ def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets
     return sat
 
 
-def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: int, possible_R=None,
-               n_refine: int = 0):
+def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: int, possible_R, n_refine: int):
     """First bad radius along each ray, for each good set j (a point is good for set j when ``good_R(R, p)`` holds
     at any R of ``R_sets[j]``): ``phi[j]``, ``z[j]``, ``r_hi[j]`` (N,) per set; returns a list of (N,). ``n_along``
-    samples in [0, r_hi], then the first bad interval searched again with ``n_refine`` samples (0: ``n_along``),
-    ``n_levels`` times in all (every level a dense search, so an island inside the interval is found too; a first
-    level of its own size is a second traced copy of the search). The value is the last good
-    sample before the first bad one (never over-stated by the search), ``r_hi`` when every sample is good and 0
+    samples in [0, r_hi], then the first bad interval searched again with ``n_refine`` samples
+    (:attr:`RayDensity.refine`), ``n_levels`` times in all (every level a dense search, so an island inside the
+    interval is found too; a first level of its own size is a second traced copy of the search). The value is the
+    last good sample before the first bad one (never over-stated by the search), ``r_hi`` when every sample is good and 0
     when the axis point is bad. Every (R, point) pair of every set goes through one vmapped call of ``good_R``
     (in batches of :data:`RAY_BATCH` pairs); with ``possible_R`` (a necessary condition of ``good_R``) only the
     pairs where it holds and whose point has no good R yet do (:func:`any_good_where_possible`: the same
     answers)."""
     dt = jnp.result_type(z[0])
     cs = [(jnp.cos(ph), jnp.sin(ph)) for ph in phi]
-    n_refine = n_refine or n_along
     init = [(jnp.zeros_like(zj), jnp.asarray(rh, dt) * jnp.ones_like(zj), jnp.zeros(zj.shape, bool),
              jnp.zeros(zj.shape, bool)) for zj, rh in zip(z, r_hi)]
     if n_refine == n_along:
