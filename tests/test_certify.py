@@ -104,6 +104,36 @@ def test_first_bad_with_nested_searches_of_their_own_size_is_the_nested_search(e
     np.testing.assert_allclose(np.asarray(out), ref, rtol=1e-12, atol=1e-15)
 
 
+def test_nested_searches_test_neither_a_brackets_ends_nor_a_finished_ray():
+    # three rays: one with its first bad radius at 0.23, one good to r_hi (finished after the first level), one
+    # whose axis point is bad (finished too); good at R = 1 only, so every point is asked at both R (R = 0 first).
+    # The reference's answers, and after the first level only the inside samples of the bracket are asked
+    from deltajax.optimize import rays as RY
+
+    edges = {0.4: 0.23, 0.5: 1.0, 0.6: -1.0}
+    asked = []
+
+    def good(R, p):
+        jax.debug.callback(lambda q, r: asked.append((round(float(q[2]), 6), round(float(np.hypot(q[0], q[1])), 9),
+                                                      float(r))), p, R)
+        edge = jnp.select([p[2] < 0.45, p[2] < 0.55], [edges[0.4], edges[0.5]], edges[0.6])
+        return (jnp.hypot(p[0], p[1]) <= edge) & (R > 0.5)
+
+    z = jnp.asarray(list(edges))
+    out = RY._first_bad(good, [jnp.asarray([0.0, 1.0])], [jnp.full((3,), 0.3)], [z], [R_MAX], 17, 3,
+                        lambda R, p: jnp.bool_(True), 5)[0]
+    jax.effects_barrier()
+    ref = [_nested_first_bad(lambda r, e=e: r <= e, R_MAX, 17, 5, 3) for e in edges.values()]
+    np.testing.assert_allclose(np.asarray(out), ref, rtol=1e-12)
+    by_z = {zz: [(r, R) for q, r, R in asked if q == zz] for zz in edges}
+    assert len(by_z[0.5]) == 2 * 17 and len(by_z[0.6]) == 2 * 17            # the first level only
+    s0 = np.linspace(0.0, R_MAX, 17)
+    lo, hi = s0[int(np.argmin(s0 <= 0.23)) - 1], s0[int(np.argmin(s0 <= 0.23))]
+    at_1 = [r for r, R in by_z[0.4] if R == 1.0]           # (a padding lane repeats the first pair, at R = 0)
+    later = [r for r in at_1 if r not in np.round(s0, 9)]
+    assert len(at_1) == 17 + 2 * 3 and len(later) == 2 * 3 and all(lo < r < hi for r in later)
+
+
 _FIRST_BAD = {}
 
 

@@ -191,10 +191,13 @@ def good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, chunk: i
     return out
 
 
-def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets: Sequence[tuple], chunk: int):
+def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets: Sequence[tuple], chunk: int,
+                            skip=None):
     """For every point of every set, whether ``good_R`` holds at any of its R: ``sets`` = ((n_points, n_R), ...)
     and the pairs (``Rf`` (M,), ``Pf`` (M, 3)) laid out set after set, each R-major (its first R at every point,
     then its second R at every point, ...); returns (sum of n_points,) bools, the sets' points in order.
+    ``skip`` (sum of n_points,) bools: points whose answer the caller does not need (none of their pairs is tested;
+    True is returned for them).
 
     The full test runs only at pairs where ``possible_R`` holds (a necessary condition of ``good_R``) and whose
     point has no good R yet: rounds of ``chunk`` pairs taken in layout order from the pairs still open, until none
@@ -233,7 +236,8 @@ def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets
         return c + 1, tested, sat
 
     _, _, sat = jax.lax.while_loop(lambda st: jnp.any(remaining(st[1], st[2])), body,
-                                   (jnp.int32(0), jnp.zeros((M,), bool), jnp.zeros((n_all,), bool)))
+                                   (jnp.int32(0), jnp.zeros((M,), bool),
+                                    jnp.zeros((n_all,), bool) if skip is None else skip))
     return sat
 
 
@@ -247,7 +251,8 @@ def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: i
     when the axis point is bad. Every (R, point) pair of every set goes through one vmapped call of ``good_R``
     (in batches of :data:`RAY_BATCH` pairs); with ``possible_R`` (a necessary condition of ``good_R``) only the
     pairs where it holds and whose point has no good R yet do (:func:`any_good_where_possible`: the same
-    answers)."""
+    answers), and after the first level neither end of a ray's interval (its last good and first bad sample) nor
+    a finished ray's samples are tested again."""
     dt = jnp.result_type(z[0])
     cs = [(jnp.cos(ph), jnp.sin(ph)) for ph in phi]
     init = [(jnp.zeros_like(zj), jnp.asarray(rh, dt) * jnp.ones_like(zj), jnp.zeros(zj.shape, bool),
@@ -263,6 +268,8 @@ def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: i
 def _level(good_R, R_sets, phi, z, cs, n_along: int, dt, possible_R):
     """One level of :func:`_first_bad`'s search with ``n_along`` samples per interval: ``(i, state) -> state``."""
     u = jnp.linspace(0.0, 1.0, n_along, dtype=dt)
+    ends = (jnp.arange(n_along) == 0) | (jnp.arange(n_along) == n_along - 1)
+    known = jnp.arange(n_along) < n_along - 1           # a known sample's answer: only the last one is bad
     sizes = [ph.shape[0] * n_along * Rj.shape[0] for ph, Rj in zip(phi, R_sets)]
 
     def level(i, st):
@@ -281,10 +288,16 @@ def _level(good_R, R_sets, phi, z, cs, n_along: int, dt, possible_R):
         Rf = jnp.concatenate([r for r, _ in rows])
         Pf = jnp.concatenate([p for _, p in rows])
         M = Rf.shape[0]
+        # after the first level a sample's answer is known or not needed: a ray's first sample is its last good
+        # one, its last the first bad one, and a finished ray (every sample good, or its axis point bad) keeps its
+        # answer whatever the samples say
+        later = i > 0
+        skips = [later & ((done | axis_bad)[:, None] | ends[None, :]) for _, _, done, axis_bad in st]
         if possible_R is not None:    # the one call, where the pair may be good and its point has no good R yet
             anyg = any_good_where_possible(good_R, possible_R, Rf, Pf,
                                            [(ph.shape[0] * n_along, Rj.shape[0]) for ph, Rj in zip(phi, R_sets)],
-                                           min(-(-M // POSSIBLE_CHUNKS), RAY_BATCH))
+                                           min(-(-M // POSSIBLE_CHUNKS), RAY_BATCH),
+                                           skip=jnp.concatenate([sk.reshape(-1) for sk in skips]))
         else:
             gf = (jax.vmap(good_R)(Rf, Pf) if M <= RAY_BATCH else                       # the one call,
                   jax.lax.map(lambda a: good_R(*a), (Rf, Pf), batch_size=RAY_BATCH))    # in batches
@@ -295,6 +308,7 @@ def _level(good_R, R_sets, phi, z, cs, n_along: int, dt, possible_R):
                 g = anyg[kp:kp + npts].reshape(lo.shape[0], n_along)                   # (N, n_along)
             else:
                 g = jnp.any(gf[k:k + sizes[j]].reshape(lo.shape[0], n_along, -1), axis=2)
+            g = jnp.where(skips[j], known, g)
             k += sizes[j]
             kp += npts
             s = lo[:, None] + u[None, :] * (hi - lo)[:, None]
