@@ -242,7 +242,7 @@ def _clopper_pearson_lower(k: np.ndarray, n: int, conf: float = 0.95) -> np.ndar
 
 
 def analyse(pb, space, genes, tolerances: Optional[Tolerances] = None, *, samples: int = DEFAULT_SAMPLES,
-            seed: int = 0, chunk: int = 64, operating_R: str = "chosen",
+            seed: int = 0, chunk: int = 8, operating_R: str = "chosen",
             progress: Optional[Callable[[int], Any]] = None) -> dict:
     """Monte Carlo tolerance analysis of designs of the designer's problem.
 
@@ -253,8 +253,9 @@ def analyse(pb, space, genes, tolerances: Optional[Tolerances] = None, *, sample
         tolerances: :class:`Tolerances` (default: the stated ones).
         samples: Monte Carlo samples per design (the same deviations for every design: common random numbers).
         seed: seed of the deviations (:func:`deviations`).
-        chunk: samples evaluated at once (memory is bounded by one chunk; on the default verification problem 64
-            samples peak at 0.94 GiB and 256 at 1.51 GiB in a fresh process, and 64 cost fewer CPU-seconds).
+        chunk: samples evaluated at once (memory is bounded by one chunk; the answers do not depend on it). On the
+            default verification problem 8 cost the fewest CPU-seconds (a chunk's ~60 MB of intermediates stay
+            in cache; 64 samples, ~0.5 GB, cost a third more, and 256 more still; docs/BENCHMARKS.md).
         operating_R: ``"chosen"``: each sample's operating R chosen by the problem's rule (the built robot set up
             for its task); ``"nominal"``: held at the nominal design's operating R (plus the R actuator's deviation,
             that of R_min), as a robot run at its datasheet's R. The same for a fixed design.

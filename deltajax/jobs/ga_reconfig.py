@@ -86,7 +86,7 @@ def _prepare(st: State) -> None:
 
     ctx, s, space, pb, objs = st.ctx, st.s, st.space, st.pb, st.objs
     st.ev = W.batch_evaluator(pb, space, max(s.pareto.population_size, 2))
-    st.ev_cheap = W.batch_evaluator(pb, space, 256, regular=False)  # screen and refinement (no regular workspace)
+    st.ev_cheap = W.batch_evaluator(pb, space, 64, regular=False)   # screen, refinement (no regular workspace)
     if st.earlier is not None:
         ctx.log(f"continuing {st.earlier.path}: its {len(st.carried)} verified front designs seed the GA and NSGA-II "
                 "and join the verified candidates with their verified metrics (so this run's recommendation is "
