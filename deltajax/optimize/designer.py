@@ -349,7 +349,7 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
     nan = jnp.asarray(jnp.nan, dt)
 
     def decided(R, p):   # the good test's flag where its closed-form plate and joint tests settle it (the search
-        return C.good_point_decided(at(R), p, pb.good, plate_radius=plate)   # grid and its refinement)
+        return C.good_point_decided(at(R), p, pb.good, plate_radius=plate)   # grid, its refinement, the rays)
 
     if rays:   # every ray search of both good sets (R per point; the operating R) in one call of the good test
         from .rays import RayDensity, ray_cylinders
@@ -358,7 +358,8 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         cyl = ray_cylinders(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good, sets,
                             float(pb.rw_r[-1]), float(pb.rw_z[0]), float(pb.rw_z[-1]), pb.hd_ratio,
                             RayDensity(*pb.rw_rays), dt,
-                            possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate))
+                            possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate),
+                            decided_R=decided)
         reg, regf = cyl[0], cyl[-1]
         out.update(regular_volume=reg.volume, regular_diameter=reg.diameter, regular_height=reg.height,
                    regular_z_top=reg.z_top, regular_volume_fixed=regf.volume, regular_diameter_fixed=regf.diameter)

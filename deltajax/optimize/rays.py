@@ -192,7 +192,7 @@ def good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, chunk: i
 
 
 def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets: Sequence[tuple], chunk: int,
-                            skip=None):
+                            skip=None, decided_R: Optional[Callable] = None):
     """For every point of every set, whether ``good_R`` holds at any of its R: ``sets`` = ((n_points, n_R), ...)
     and the pairs (``Rf`` (M,), ``Pf`` (M, 3)) laid out set after set, each R-major (its first R at every point,
     then its second R at every point, ...); returns (sum of n_points,) bools, the sets' points in order.
@@ -203,11 +203,8 @@ def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets
     point has no good R yet: rounds of ``chunk`` pairs taken in layout order from the pairs still open, until none
     is. The answer does not depend on which pairs are tested or in what order (the test is pure), so it is the full
     any's, at the cost of fewer full tests. No array of M indices is built beyond the loop's own state (a constant
-    of that size bloated the certification's programs).
-
-    Unlike :func:`good_where_possible` it takes no ``decided_R``: the ray searches sample densely where the good set
-    ends, where the plate often binds, so a cheaper test leaves ~12 % of their pairs undecided and the packed full
-    tests after it cost what it saves (measured on the verification's evaluator)."""
+    of that size bloated the certification's programs). ``decided_R``: see :func:`settle_good` (a round's pairs get
+    the cheaper test, and the full test only where it does not decide)."""
     M = Rf.shape[0]
     maybe = _possible(possible_R, Rf, Pf)
     K = max(min(int(chunk), M), 1)
@@ -230,7 +227,7 @@ def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets
     def body(st):
         c, tested, sat = st
         pick, live = first_open(remaining(tested, sat), K)
-        g = jax.vmap(good_R)(Rf[pick], Pf[pick]) & live
+        g = settle_good(good_R, decided_R, Rf[pick], Pf[pick], live) & live
         tested = tested.at[jnp.where(live, pick, M)].set(True, mode="drop")
         sat = sat.at[jnp.where(g, point_of(pick), n_all)].set(True, mode="drop")
         return c + 1, tested, sat
@@ -241,7 +238,8 @@ def any_good_where_possible(good_R: Callable, possible_R: Callable, Rf, Pf, sets
     return sat
 
 
-def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: int, possible_R, n_refine: int):
+def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: int, possible_R, n_refine: int,
+               decided_R: Optional[Callable] = None):
     """First bad radius along each ray, for each good set j (a point is good for set j when ``good_R(R, p)`` holds
     at any R of ``R_sets[j]``): ``phi[j]``, ``z[j]``, ``r_hi[j]`` (N,) per set; returns a list of (N,). ``n_along``
     samples in [0, r_hi], then the first bad interval searched again with ``n_refine`` samples
@@ -258,14 +256,14 @@ def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: i
     init = [(jnp.zeros_like(zj), jnp.asarray(rh, dt) * jnp.ones_like(zj), jnp.zeros(zj.shape, bool),
              jnp.zeros(zj.shape, bool)) for zj, rh in zip(z, r_hi)]
     if n_refine == n_along:
-        st = jax.lax.fori_loop(0, n_levels, _level(good_R, R_sets, phi, z, cs, n_along, dt, possible_R), init)
+        st = jax.lax.fori_loop(0, n_levels, _level(good_R, R_sets, phi, z, cs, n_along, dt, possible_R, decided_R), init)
     else:
-        st = _level(good_R, R_sets, phi, z, cs, n_along, dt, possible_R)(0, init)
-        st = jax.lax.fori_loop(1, n_levels, _level(good_R, R_sets, phi, z, cs, n_refine, dt, possible_R), st)
+        st = _level(good_R, R_sets, phi, z, cs, n_along, dt, possible_R, decided_R)(0, init)
+        st = jax.lax.fori_loop(1, n_levels, _level(good_R, R_sets, phi, z, cs, n_refine, dt, possible_R, decided_R), st)
     return [jnp.where(axis_bad, 0.0, lo) for lo, _, _, axis_bad in st]
 
 
-def _level(good_R, R_sets, phi, z, cs, n_along: int, dt, possible_R):
+def _level(good_R, R_sets, phi, z, cs, n_along: int, dt, possible_R, decided_R=None):
     """One level of :func:`_first_bad`'s search with ``n_along`` samples per interval: ``(i, state) -> state``."""
     u = jnp.linspace(0.0, 1.0, n_along, dtype=dt)
     ends = (jnp.arange(n_along) == 0) | (jnp.arange(n_along) == n_along - 1)
@@ -297,7 +295,7 @@ def _level(good_R, R_sets, phi, z, cs, n_along: int, dt, possible_R):
             anyg = any_good_where_possible(good_R, possible_R, Rf, Pf,
                                            [(ph.shape[0] * n_along, Rj.shape[0]) for ph, Rj in zip(phi, R_sets)],
                                            min(-(-M // POSSIBLE_CHUNKS), RAY_BATCH),
-                                           skip=jnp.concatenate([sk.reshape(-1) for sk in skips]))
+                                           skip=jnp.concatenate([sk.reshape(-1) for sk in skips]), decided_R=decided_R)
         else:
             gf = (jax.vmap(good_R)(Rf, Pf) if M <= RAY_BATCH else                       # the one call,
                   jax.lax.map(lambda a: good_R(*a), (Rf, Pf), batch_size=RAY_BATCH))    # in batches
@@ -373,7 +371,8 @@ def _profile_cylinder(pz, pr, z_min, z_max, hd_ratio, d_max, n_c: int, n_golden:
 
 
 def ray_cylinders(good_R: Callable, R_sets: Sequence, r_max: float, z_min: float, z_max: float, hd_ratio: float,
-                  density: RayDensity = RAY_DENSITY, dtype=None, *, possible_R: Optional[Callable] = None) -> list:
+                  density: RayDensity = RAY_DENSITY, dtype=None, *, possible_R: Optional[Callable] = None,
+                  decided_R: Optional[Callable] = None) -> list:
     """The regular workspace from rays (module docstring) of each good set: a point is good for set j when
     ``good_R(R, p)`` (R scalar, p (3,) m, z down) holds at any R of ``R_sets[j]`` (an (n_j,) array: e.g. the
     design's R samples, R chosen per point; or the operating R alone). The largest cylinder on the z axis with
@@ -387,7 +386,9 @@ def ray_cylinders(good_R: Callable, R_sets: Sequence, r_max: float, z_min: float
 
     ``possible_R(R, p) -> bool``: a cheap necessary condition of ``good_R`` (False only where ``good_R`` is False,
     e.g. :func:`deltajax.constraints.good_point_possible`); the full test then runs only where it holds
-    (:func:`good_where_possible`), with the same answer."""
+    (:func:`any_good_where_possible`), with the same answer. ``decided_R(R, p) -> (good, decided)`` (with
+    ``possible_R``): a cheaper test whose answer is taken where it decides (:func:`settle_good`), e.g.
+    :func:`deltajax.constraints.good_point_decided`."""
     dt = jnp.result_type(float) if dtype is None else dtype
     n = density
     nz, nphi = n.n_z, n.n_phi
@@ -457,7 +458,7 @@ def ray_cylinders(good_R: Callable, R_sets: Sequence, r_max: float, z_min: float
         lay = [layout(i, st) for st in sts]
         radii = _first_bad(good_R, R_sets, [a[1].reshape(-1) for a in lay], [a[0].reshape(-1) for a in lay],
                            [jnp.broadcast_to(a[2], (nz * nphi,)) for a in lay], n.n_along, n.n_levels, possible_R,
-                           n.refine)
+                           n.refine, decided_R)
         return [update(i, st, *a[:2], *a[3:], r.reshape(nz, nphi)) for st, a, r in zip(sts, lay, radii)]
 
     st0 = dict(z=jnp.full((T,), inf), r=jnp.full((T,), inf), phi=jnp.zeros((T,), dt), span=jnp.full((T,), dphi0, dt),
