@@ -112,8 +112,7 @@ def _certified_once(pb, design, R_op, density: RayDensity, task_n, cycle_n: int,
     if rays:
         cyl = ray_cylinders(lambda R, p: chk(R, p).good, sets, float(reg_s["r_max"]), float(reg_s["z_min"]),
                             float(reg_s["z_max"]), pb.hd_ratio, density, dt,
-                            possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate),
-                            decided_R=lambda R, p: C.good_point_decided(at(R), p, pb.good, plate_radius=plate))
+                            possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate))
         reg = {"regular_volume": cyl[0].volume, "regular_diameter": cyl[0].diameter, "regular_height": cyl[0].height,
                "regular_z_top": cyl[0].z_top, "regular_volume_fixed": cyl[-1].volume,
                "regular_diameter_fixed": cyl[-1].diameter}
