@@ -245,8 +245,8 @@ def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: i
     samples in [0, r_hi], then the first bad interval searched again with ``n_refine`` samples
     (:attr:`RayDensity.refine`), ``n_levels`` times in all (every level a dense search, so an island inside the
     interval is found too; a first level of its own size is a second traced copy of the search). The value is the
-    last good sample before the first bad one (never over-stated by the search), ``r_hi`` when every sample is good and 0
-    when the axis point is bad. Every (R, point) pair of every set goes through one vmapped call of ``good_R``
+    last good sample before the first bad one (never over-stated by the search), ``r_hi`` when every sample is good
+    and 0 when the axis point is bad. Every (R, point) pair of every set goes through one vmapped call of ``good_R``
     (in batches of :data:`RAY_BATCH` pairs); with ``possible_R`` (a necessary condition of ``good_R``) only the
     pairs where it holds and whose point has no good R yet do (:func:`any_good_where_possible`: the same
     answers), and after the first level neither end of a ray's interval (its last good and first bad sample) nor
@@ -255,11 +255,15 @@ def _first_bad(good_R: Callable, R_sets, phi, z, r_hi, n_along: int, n_levels: i
     cs = [(jnp.cos(ph), jnp.sin(ph)) for ph in phi]
     init = [(jnp.zeros_like(zj), jnp.asarray(rh, dt) * jnp.ones_like(zj), jnp.zeros(zj.shape, bool),
              jnp.zeros(zj.shape, bool)) for zj, rh in zip(z, r_hi)]
+
+    def level(n):
+        return _level(good_R, R_sets, phi, z, cs, n, dt, possible_R, decided_R)
+
     if n_refine == n_along:
-        st = jax.lax.fori_loop(0, n_levels, _level(good_R, R_sets, phi, z, cs, n_along, dt, possible_R, decided_R), init)
+        st = jax.lax.fori_loop(0, n_levels, level(n_along), init)
     else:
-        st = _level(good_R, R_sets, phi, z, cs, n_along, dt, possible_R, decided_R)(0, init)
-        st = jax.lax.fori_loop(1, n_levels, _level(good_R, R_sets, phi, z, cs, n_refine, dt, possible_R, decided_R), st)
+        st = level(n_along)(0, init)
+        st = jax.lax.fori_loop(1, n_levels, level(n_refine), st)
     return [jnp.where(axis_bad, 0.0, lo) for lo, _, _, axis_bad in st]
 
 
@@ -295,7 +299,8 @@ def _level(good_R, R_sets, phi, z, cs, n_along: int, dt, possible_R, decided_R=N
             anyg = any_good_where_possible(good_R, possible_R, Rf, Pf,
                                            [(ph.shape[0] * n_along, Rj.shape[0]) for ph, Rj in zip(phi, R_sets)],
                                            min(-(-M // POSSIBLE_CHUNKS), RAY_BATCH),
-                                           skip=jnp.concatenate([sk.reshape(-1) for sk in skips]), decided_R=decided_R)
+                                           skip=jnp.concatenate([sk.reshape(-1) for sk in skips]),
+                                           decided_R=decided_R)
         else:
             gf = (jax.vmap(good_R)(Rf, Pf) if M <= RAY_BATCH else                       # the one call,
                   jax.lax.map(lambda a: good_R(*a), (Rf, Pf), batch_size=RAY_BATCH))    # in batches
