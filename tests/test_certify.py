@@ -527,6 +527,38 @@ def test_the_verifications_regular_workspace_is_the_certify_programs_at_the_firs
         np.testing.assert_array_equal(rest[k], full[k], err_msg=k)
 
 
+_ALL_ANY = {}
+
+
+@settings(max_examples=20)
+@given(st.integers(0, 2 ** 31 - 1), st.sampled_from([(15, 1), (15, 8), (3, 4)]))
+def test_all_any_good_is_the_full_all_any_whatever_it_skips(seed, shape):
+    # the designer's cylinder test (every point good at some R) through the necessary condition, the decided test
+    # (wrong where it does not decide) and the early stops: the full test's all-any, on random tables, one R too
+    from deltajax.optimize.designer import _all_any_good
+
+    n_pts, n_R = shape
+    rng = np.random.default_rng(seed)
+    good = rng.random((n_pts, n_R)) < rng.choice([0.5, 0.9, 0.99])
+    possible = good | (rng.random((n_pts, n_R)) < 0.4)
+    decided = rng.random((n_pts, n_R)) < 0.8
+    if shape not in _ALL_ANY:
+        def run(G, Pm, D):
+            def at(R, p):
+                return p[0].astype(int), R.astype(int)
+
+            def decided_R(R, p):
+                i, j = at(R, p)
+                return jnp.where(D[i, j], G[i, j], ~G[i, j]), D[i, j]
+
+            return _all_any_good(lambda R, p: G[at(R, p)], lambda R, p: Pm[at(R, p)], jnp.arange(n_R, dtype=float),
+                                 jnp.arange(n_pts, dtype=float)[:, None] * jnp.ones((1, 3)), decided_R)
+
+        _ALL_ANY[shape] = jax.jit(run)
+    out = _ALL_ANY[shape](jnp.asarray(good), jnp.asarray(possible), jnp.asarray(decided))
+    assert bool(out) == bool(good.any(axis=1).all())
+
+
 @pytest.mark.slow   # ~5 s: each shape compiles both programs
 @settings(max_examples=8)
 @given(st.integers(0, 2 ** 31 - 1), st.sampled_from([(1, 4, 4), (7, 3, 5), (40, 5, 64), (13, 1, 2)]))

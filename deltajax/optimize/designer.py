@@ -400,7 +400,10 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
             reg = C.refine_cylinder(good_any, reg, r, z, pb.hd_ratio, unit=unit, n_bisect=nb, n_golden=ng,
                                     all_good=all_any)
             regf = C.refine_cylinder(lambda p: good_at(Rc[k], p), regf, r, z, pb.hd_ratio, unit=unit, n_bisect=nb,
-                                     n_golden=ng)
+                                     n_golden=ng, all_good=lambda P: _all_any_good(
+                                         good_at, lambda R, p: C.good_point_possible(at(R), p, pb.good,
+                                                                                     plate_radius=plate),
+                                         Rc[k][None], P, decided))
         out.update(regular_volume=reg.volume, regular_diameter=reg.diameter, regular_height=reg.height,
                    regular_z_top=reg.z_top, regular_volume_fixed=regf.volume, regular_diameter_fixed=regf.diameter)
     else:
