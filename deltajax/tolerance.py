@@ -254,8 +254,8 @@ def analyse(pb, space, genes, tolerances: Optional[Tolerances] = None, *, sample
         samples: Monte Carlo samples per design (the same deviations for every design: common random numbers).
         seed: seed of the deviations (:func:`deviations`).
         chunk: samples evaluated at once (memory is bounded by one chunk; the answers do not depend on it). On the
-            default verification problem 8 cost the fewest CPU-seconds (a chunk's ~60 MB of intermediates stay
-            in cache; 64 samples, ~0.5 GB, cost a third more, and 256 more still; docs/BENCHMARKS.md).
+            default verification problem 8 cost the fewest CPU-seconds, a quarter fewer than 16 or 64
+            (docs/BENCHMARKS.md).
         operating_R: ``"chosen"``: each sample's operating R chosen by the problem's rule (the built robot set up
             for its task); ``"nominal"``: held at the nominal design's operating R (plus the R actuator's deviation,
             that of R_min), as a robot run at its datasheet's R. The same for a fixed design.
