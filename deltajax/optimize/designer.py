@@ -351,6 +351,9 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
     def decided(R, p):   # the good test's flag where its closed-form plate and joint tests settle it (the search
         return C.good_point_decided(at(R), p, pb.good, plate_radius=plate)   # grid, its refinement, the rays)
 
+    def possible(R, p):  # its cheap necessary condition (every user of the good test skips pairs where it fails)
+        return C.good_point_possible(at(R), p, pb.good, plate_radius=plate)
+
     if rays:   # every ray search of both good sets (R per point; the operating R) in one call of the good test
         from .rays import RayDensity, ray_cylinders
 
@@ -358,8 +361,7 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         cyl = ray_cylinders(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good, sets,
                             float(pb.rw_r[-1]), float(pb.rw_z[0]), float(pb.rw_z[-1]), pb.hd_ratio,
                             RayDensity(*pb.rw_rays), dt,
-                            possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate),
-                            decided_R=decided)
+                            possible_R=possible, decided_R=decided)
         reg, regf = cyl[0], cyl[-1]
         out.update(regular_volume=reg.volume, regular_diameter=reg.diameter, regular_height=reg.height,
                    regular_z_top=reg.z_top, regular_volume_fixed=regf.volume, regular_diameter_fixed=regf.diameter)
@@ -371,7 +373,7 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         # good tests only where the cheap necessary condition holds (reach, index, plate), mostly decided cheaply
         def good_grid(R_set):
             return _good_where_possible(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good,
-                                        lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate),
+                                        possible,
                                         R_set, rw, decided)
 
         if recon:   # the R samples and the operating R in one call (one compiled copy of the test)
@@ -393,17 +395,14 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
             if recon:   # R samples tried in the order of their good grid points, most first
                 rank = jnp.argsort(-jnp.sum(g_s, axis=1), stable=True)
                 all_any = lambda P: _all_any_good(  # noqa: E731
-                    good_at, lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate), Rs[rank], P,
-                    decided)
+                    good_at, possible, Rs[rank], P, decided)
             nb, ng = pb.rw_refine_steps
             unit = C.cylinder_samples(pb.hd_ratio, *pb.rw_refine_samples)
             reg = C.refine_cylinder(good_any, reg, r, z, pb.hd_ratio, unit=unit, n_bisect=nb, n_golden=ng,
                                     all_good=all_any)
             regf = C.refine_cylinder(lambda p: good_at(Rc[k], p), regf, r, z, pb.hd_ratio, unit=unit, n_bisect=nb,
-                                     n_golden=ng, all_good=lambda P: _all_any_good(
-                                         good_at, lambda R, p: C.good_point_possible(at(R), p, pb.good,
-                                                                                     plate_radius=plate),
-                                         Rc[k][None], P, decided))
+                                     n_golden=ng,
+                                     all_good=lambda P: _all_any_good(good_at, possible, Rc[k][None], P, decided))
         out.update(regular_volume=reg.volume, regular_diameter=reg.diameter, regular_height=reg.height,
                    regular_z_top=reg.z_top, regular_volume_fixed=regf.volume, regular_diameter_fixed=regf.diameter)
     else:
