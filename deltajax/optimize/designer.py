@@ -348,6 +348,9 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
     out["arm_sum"] = arm_sum
     nan = jnp.asarray(jnp.nan, dt)
 
+    def good_at(R, p):   # the good test's flag (every regular-workspace measure below)
+        return C.good_point(at(R), p, pb.good, plate_radius=plate).good
+
     def decided(R, p):   # the good test's flag where its closed-form plate and joint tests settle it (the search
         return C.good_point_decided(at(R), p, pb.good, plate_radius=plate)   # grid, its refinement, the rays)
 
@@ -358,7 +361,7 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         from .rays import RayDensity, ray_cylinders
 
         sets = [Rs, Rc[k][None]] if recon else [Rc[k][None]]
-        cyl = ray_cylinders(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good, sets,
+        cyl = ray_cylinders(good_at, sets,
                             float(pb.rw_r[-1]), float(pb.rw_z[0]), float(pb.rw_z[-1]), pb.hd_ratio,
                             RayDensity(*pb.rw_rays), dt,
                             possible_R=possible, decided_R=decided)
@@ -372,9 +375,7 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
 
         # good tests only where the cheap necessary condition holds (reach, index, plate), mostly decided cheaply
         def good_grid(R_set):
-            return _good_where_possible(lambda R, p: C.good_point(at(R), p, pb.good, plate_radius=plate).good,
-                                        possible,
-                                        R_set, rw, decided)
+            return _good_where_possible(good_at, possible, R_set, rw, decided)
 
         if recon:   # the R samples and the operating R in one call (one compiled copy of the test)
             g_all = good_grid(jnp.concatenate([Rs, Rc[k][None]]))
@@ -386,9 +387,6 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         reg = C.largest_cylinder(jnp.all(g_any, axis=2), r, z, pb.hd_ratio)
         regf = C.largest_cylinder(jnp.all(g_k, axis=2), r, z, pb.hd_ratio)
         if pb.rw_refine:   # continuous measure, bracketed by the grid's answer (same good test, same R samples)
-            def good_at(R, p):
-                return C.good_point(at(R), p, pb.good, plate_radius=plate).good
-
             good_any = ((lambda p: jnp.any(jax.vmap(lambda R: good_at(R, p))(Rs))) if recon
                         else (lambda p: good_at(Rc[k], p)))
             all_any = None
