@@ -1,7 +1,7 @@
 """Strict, fast test settings shared by every test file (STYLE §9), and the session's shared toy job runs.
 
 Tiers: ``python -m pytest`` runs everything; ``python -m pytest -m "not slow"`` skips tests marked
-``@pytest.mark.slow`` (each over ~3 s on 2 cores).
+``@pytest.mark.slow`` (each over ~1 s on 2 cores).
 """
 
 import contextlib
@@ -286,7 +286,7 @@ def pytest_collection_modifyitems(config, items):
             item.add_marker(pytest.mark.xdist_group(groups[item.nodeid]))
 
     def rank(item):
-        slow = item.get_closest_marker("slow") is None  # within a rank, the slow tests (over ~3 s) first
+        slow = item.get_closest_marker("slow") is None  # within a rank, the slow tests (over ~1 s) first
         for i, prefix in enumerate(LONG_FIRST):
             if item.nodeid.startswith(prefix):
                 return i, slow

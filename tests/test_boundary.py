@@ -89,6 +89,7 @@ def test_bracket_is_a_boundary_crossing(reach, searches):
         assert not np.any(beyond[star])
 
 
+@pytest.mark.slow
 def test_methods_agree_on_star_rays(searches):
     conti, cont, prof = searches
     star = np.asarray(prof.n_exits) == 1

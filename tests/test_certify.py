@@ -104,6 +104,7 @@ def test_first_bad_with_nested_searches_of_their_own_size_is_the_nested_search(e
     np.testing.assert_allclose(np.asarray(out), ref, rtol=1e-12, atol=1e-15)
 
 
+@pytest.mark.slow
 def test_nested_searches_test_neither_a_brackets_ends_nor_a_finished_ray():
     # three rays: one with its first bad radius at 0.23, one good to r_hi (finished after the first level), one
     # whose axis point is bad (finished too); good at R = 1 only, so every point is asked at both R (R = 0 first).
@@ -156,6 +157,7 @@ def _first_bad_program(possible):
     return _FIRST_BAD[possible]
 
 
+@pytest.mark.slow
 def test_ray_cylinder_agrees_with_a_brute_force_grid_scan_at_more_than_10x_the_density(synthetic):
     dens, one, two = synthetic
     n = (241, 31, 253)                      # 1.9 M points
@@ -169,6 +171,7 @@ def test_ray_cylinder_agrees_with_a_brute_force_grid_scan_at_more_than_10x_the_d
     assert float(one.diameter) / 2.0 <= 0.15 + 1e-3
 
 
+@pytest.mark.slow
 def test_a_limiting_dip_that_moves_in_phi_with_z_is_found_and_converges():
     dens = CE.RAY_DENSITY
     one, two = _rays(_sweep, dens), _rays(_sweep, dens.doubled())
@@ -192,6 +195,7 @@ def test_ray_cylinder_is_zero_when_the_axis_is_bad():
     assert float(out.volume) == 0.0
 
 
+@pytest.mark.slow
 def test_one_traced_good_test_serves_every_pass_and_both_good_sets():
     calls = []
 
@@ -616,6 +620,7 @@ def test_good_only_where_possible_is_the_full_test_and_skips_what_cannot_be_good
     assert set(asked) <= und                  # padding lanes repeat an undecided pair
 
 
+@pytest.mark.slow
 def test_ray_cylinders_with_a_necessary_condition_or_a_cheaper_test_give_the_same_cylinders():
     def good_R(R, p):
         return jnp.hypot(p[0], p[1]) <= 0.15 + R - 0.4 * (p[2] - 0.45) ** 2

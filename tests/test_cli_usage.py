@@ -39,6 +39,7 @@ def test_user_error_is_one_line_exit_2_and_logged(tmp_path):
     assert full.returncode != 0 and "Traceback" in full.stderr and "forearm must be > 0 m, got -0.4" in full.stderr
 
 
+@pytest.mark.slow
 def test_unknown_experiment_lists_the_choices():
     out = _cli("experiment=ga_reconfg")
     assert out.returncode == 2
@@ -252,6 +253,7 @@ def test_one_reach_bound_for_volume_and_grid_jobs():
     assert not dj.workspace.volume(crossing, h=0.05).truncated
 
 
+@pytest.mark.slow
 def test_float32_warning_points_at_the_users_line(tmp_path):
     """The warning names the line that built the robot, not equinox's __check_init__ machinery."""
     script = tmp_path / "user_script.py"

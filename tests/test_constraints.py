@@ -237,6 +237,7 @@ def test_good_point_combines_the_margins():
         assert bool(out.good[i]) == (k >= 0.3 and jm >= 0 and im >= 0)
 
 
+@pytest.mark.slow
 def test_cycle_rate_gradient_is_the_implicit_derivative_of_the_bisection():
     """d T_min / d(gear ratio, payload, upper arm) by autodiff (implicit function theorem at the binding limit)
     against central differences of the bisection itself (value unchanged by the gradient path)."""
@@ -367,6 +368,7 @@ def test_good_point_possible_is_necessary():
     assert int(np.sum(maybe)) < int(np.sum(reach))     # the plate test ruled out points that reach and index allow
 
 
+@pytest.mark.slow
 def test_good_point_decided_is_the_full_test_wherever_it_decides():
     # the closed-form plate tests settle all but the forearms that pass near the rim at the required clearance;
     # plate radii swept so that some do (those must come back undecided), and wherever it decides, the flag is

@@ -36,6 +36,7 @@ def test_derivatives_are_the_analytic_ones_and_finite_at_zero():
     assert float(jax.grad(sqrt0)(0.0)) == 0.0 and float(jax.grad(sqrt0)(-1.0)) == 0.0
 
 
+@pytest.mark.slow
 def test_fuse_outputs_is_the_identity_with_identity_tangents():
     def f(x):
         return fuse_outputs({"a": x * 2.0, "ok": x > 0, "n": jnp.int32(3), "v": jnp.stack([x, -x])})

@@ -91,6 +91,7 @@ def _partial(tmp_path, partial_grid):
 
 
 # -- 1. run directories are owned ---------------------------------------------------------------------------
+@pytest.mark.slow
 def test_rerun_with_other_settings_is_refused_naming_them_and_touches_nothing(tmp_path, reference_grid):
     d = reference_grid.parent
     before = {p.name: p.read_bytes() for p in d.iterdir() if p.is_file() and p.name != ".deltajax.lock"}
@@ -107,6 +108,7 @@ def test_rerun_with_other_settings_is_refused_naming_them_and_touches_nothing(tm
     assert {p.name: p.read_bytes() for p in d.iterdir() if p.is_file() and p.name != ".deltajax.lock"} == before
 
 
+@pytest.mark.slow
 def test_fresh_true_is_the_explicit_way_to_start_over(tmp_path):
     d = tmp_path / "run"
     run_experiment("workspace_grid", WG, run_dir=d)
@@ -215,6 +217,7 @@ def test_driver_checkpoint_damage_is_refused(tmp_path):
 
 
 # -- 3. a full disk ends the run cleanly --------------------------------------------------------------------------
+@pytest.mark.slow
 def test_enospc_at_a_checkpoint_keeps_the_last_one_and_resume_finishes(tmp_path, monkeypatch, reference_grid):
     real = dio._write_all
     calls = {"n": 0}
@@ -239,6 +242,7 @@ def test_enospc_at_a_checkpoint_keeps_the_last_one_and_resume_finishes(tmp_path,
     _assert_same_results(run_experiment("workspace_grid", WG, run_dir=d), reference_grid)
 
 
+@pytest.mark.slow
 def test_results_are_written_before_plots(tmp_path, monkeypatch, reference_grid):
     """The disk fills while the figures are written: results.h5 is already final; a rerun writes the plots."""
     real = dio._write_all
@@ -500,6 +504,7 @@ def test_reconfigurable_at_rejects_invalid_concrete_R():
 
 
 # -- 6. truncated results ------------------------------------------------------------------------------------
+@pytest.mark.slow
 def test_grid_touching_the_box_is_flagged_and_the_reach_box_holds_everything(tmp_path):
     cut = run_experiment("workspace_grid", [*WG, "robot.forearm=0.5", "experiment.grid.h=0.05"],
                          run_dir=tmp_path / "cut")

@@ -98,6 +98,7 @@ _sv_pair = jax.jit(jax.vmap(lambda R, p: (
     dj.indices(REC.at(R), p, dj.ik(REC.at(R), p).theta, sv_method="svd"))))
 
 
+@pytest.mark.slow
 def test_closed_form_singular_values_match_svd():
     key = jax.random.PRNGKey(0)
     k1, k2 = jax.random.split(key)

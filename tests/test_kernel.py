@@ -49,6 +49,7 @@ def test_fast_and_exact_singular_values_match_lapack_reference(R):
             assert np.isnan(np.asarray(getattr(ind, name))[~ok]).all()
 
 
+@pytest.mark.slow
 def test_indices_of_invalid_inputs_are_nan():
     th = dj.ik(ROBOT, jnp.array([0.02, 0.01, 0.35])).theta
     for p, theta in ((jnp.array([0.02, 0.01, 0.35]), th.at[1].set(jnp.nan)),
@@ -91,6 +92,7 @@ def test_fk_flags_joint_limit_violations():
     np.testing.assert_allclose(np.asarray(f.p), np.asarray(p), atol=1e-12)  # the pose is still reported
 
 
+@pytest.mark.slow
 def test_stretched_and_folded_chains_detected_through_ik():
     # chain 0 exactly stretched (|C - A| = L1 + L2) or folded (L2 - L1, against the arm) in its plane, over R
     pts, Rs = [], []

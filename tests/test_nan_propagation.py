@@ -138,6 +138,7 @@ def _compiled_min_max():
     return jax.jit(_per_row(EAGER_FAST, jnp.float64))
 
 
+@pytest.mark.slow
 def test_min_max_functions_are_nan_at_4096_jitted():
     """The fast tier's share of the property below: the functions whose NaN was lost at 4096 rows."""
     x, p, t, valid = _batch(BIG, jnp.float64)

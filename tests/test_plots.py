@@ -1,6 +1,7 @@
 """Plots a reader can use: robust colour limits, shared scales, the benchmark figure."""
 
 import numpy as np
+import pytest
 
 from deltajax import plots
 
@@ -141,6 +142,7 @@ def test_reconfig_motion_landscape_legend_shows_the_white_fixed_line():
     matplotlib.pyplot.close(figs[0])
 
 
+@pytest.mark.slow
 def test_only_run_selects_a_matplotlib_backend():
     """One plotting home, one backend choice: no module of the package but run.py (the CLI, before any job runs)
     calls matplotlib.use, and importing deltajax.plots (every figure module) leaves the user's backend alone."""

@@ -4,6 +4,7 @@ or to a tolerance, NaN equal to NaN), run bookkeeping (time, commit, wall time) 
 import time
 
 import numpy as np
+import pytest
 
 from deltajax import io as dio
 
@@ -23,6 +24,7 @@ def _write(path, *, scale=1.0, extra=False, attr="a", nan=False):
     return path
 
 
+@pytest.mark.slow
 def test_the_same_results_compare_clean_whatever_their_run_bookkeeping(tmp_path):
     a = _write(tmp_path / "a.h5", nan=True)
     time.sleep(1.1)                                   # another start/end time and wall time

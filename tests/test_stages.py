@@ -66,6 +66,7 @@ def _job(path, fp="run-a", stop_at=None, resume="auto"):
     return ok, runner
 
 
+@pytest.mark.slow
 def test_a_resume_reads_the_checkpoint_once(tmp_path, monkeypatch):
     # resume=must asks the checkpoint whether there is something to resume (Runner.open), then the stage loads it:
     # the verified read of the group (the GA's: its whole population and history) happens once
@@ -78,6 +79,7 @@ def test_a_resume_reads_the_checkpoint_once(tmp_path, monkeypatch):
     assert ok and reads.count("walk/checkpoint") == 1
 
 
+@pytest.mark.slow
 def test_stage_stopped_mid_way_resumes_from_its_checkpoint_bit_identically(tmp_path):
     ref = tmp_path / "ref.h5"
     assert _job(ref)[0]

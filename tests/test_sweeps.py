@@ -176,6 +176,7 @@ def test_worker_cpus_sources():
     assert resolve_worker_cpus(None, environ={}, available=6) == (6, "all CPUs of the process")
 
 
+@pytest.mark.slow
 def test_worker_keeps_freed_memory_only_before_jax_starts():
     """The worker tells glibc to keep freed memory for reuse before XLA's threads exist (a fresh process: mallopt
     accepts every parameter, and JAX runs after it); in a process whose backend already runs (this one) it changes

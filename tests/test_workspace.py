@@ -140,6 +140,7 @@ def test_grid_jobs_fast_equal_exact(fixed20):
     assert st["sigma_min_v"]["mean"] == pytest.approx(table6["sigma_min_v"][2], abs=3e-3)
 
 
+@pytest.mark.slow
 def test_jax_exact_equals_host_and_is_jittable():
     rng = np.random.default_rng(1)
     pts = np.stack([rng.uniform(-0.35, 0.35, 300), rng.uniform(-0.35, 0.35, 300), rng.uniform(0.05, 0.58, 300)], -1)
