@@ -151,8 +151,14 @@ class DriveLoads(NamedTuple):
     ok: Bool[Array, ""]
 
 
-def _trap_weights(K, dtype):
-    return jnp.ones((K,), dtype).at[0].set(0.5).at[-1].set(0.5) / (K - 1)
+def _trap_weights(K, dtype, n_valid=None):
+    """Trapezoidal weights of K uniform samples over [0, 1]; ``n_valid`` (traced): the first n_valid of them (the
+    rest padding, weight 0)."""
+    if n_valid is None:
+        return jnp.ones((K,), dtype).at[0].set(0.5).at[-1].set(0.5) / (K - 1)
+    k = jnp.arange(K)
+    w = jnp.where((k == 0) | (k == n_valid - 1), 0.5, jnp.where(k < n_valid, 1.0, 0.0)).astype(dtype)
+    return w / (n_valid - 1).astype(dtype)
 
 
 def motor_side(tau_arm, theta_dot, motor: Motor, gear_ratio):
@@ -170,13 +176,15 @@ def _peak_ratio(a, g, thd_unit, T, motor: Motor, n):
     return tau_m, om, jnp.where(env > 0, ratio, jnp.where(jnp.abs(tau_m) > 0, jnp.inf, 0.0))
 
 
-def _loads_from_unit(a, g, thd_unit, T, dwell, motor: Motor, n, ok):
-    """Motor loads at duration T from the T = 1 profile split (a / T^2 + g arm torque, thd_unit / T speed)."""
+def _loads_from_unit(a, g, thd_unit, T, dwell, motor: Motor, n, ok, n_valid=None):
+    """Motor loads at duration T from the T = 1 profile split (a / T^2 + g arm torque, thd_unit / T speed);
+    ``n_valid`` (traced): the profile's first n_valid samples are the cycle's, the rest copies of its last."""
     scale = 1.0 / (n * motor.efficiency)
     tau_m, om, ratio = _peak_ratio(a, g, thd_unit, T, motor, n)
     K = a.shape[0]
-    move = jnp.tensordot(_trap_weights(K, a.dtype), tau_m * tau_m, axes=1) * T   # int tau^2 dt over the motion
-    hold = (g[0] * scale) ** 2 + (g[K // 2] * scale) ** 2                       # pick and place dwells
+    move = jnp.tensordot(_trap_weights(K, a.dtype, n_valid), tau_m * tau_m, axes=1) * T  # int tau^2 dt (motion)
+    mid = K // 2 if n_valid is None else n_valid // 2                           # the place point
+    hold = (g[0] * scale) ** 2 + (g[mid] * scale) ** 2                          # pick and place dwells
     rms = jnp.sqrt((move + dwell * hold) / (T + 2 * dwell))
     nan = jnp.asarray(jnp.nan, a.dtype)
     f = lambda x: jnp.where(ok, x, nan)  # noqa: E731
@@ -225,9 +233,9 @@ def drive_loads(robot: Delta, cycle, motor: Motor, gear_ratio, *, duration=None,
     return _loads_from_unit(a, g, thd, T, dw, motor, n, ok)
 
 
-def _bisect_time(a, g, thd, motor, n, dwell, T_low, T_high, n_iter):
+def _bisect_time(a, g, thd, motor, n, dwell, T_low, T_high, n_iter, n_valid=None):
     def feasible(T):
-        L = _loads_from_unit(a, g, thd, T, dwell, motor, n, jnp.asarray(True))
+        L = _loads_from_unit(a, g, thd, T, dwell, motor, n, jnp.asarray(True), n_valid)
         return (L.peak_utilisation <= 1.0) & (L.rms_utilisation <= 1.0)
 
     return log_bisect(feasible, T_low, T_high, a.dtype, n_iter)
@@ -328,7 +336,7 @@ def picks_per_minute(robot: Delta, cycle, motor: Motor, gear_ratio, *, dwell=0.0
 
 def cycle_rate_refined(robot: Delta, cycle, path: Callable, refine: Callable, motor: Motor, gear_ratio, *,
                        dwell=0.0, payload_mass=None, T_low: float = 1e-3, T_high: float = 60.0,
-                       n_iter: int = 60) -> tuple:
+                       n_iter: int = 60, n_valid=None) -> tuple:
     """:func:`cycle_rate` with the peak utilisation searched between the samples of ``cycle``.
 
     At the samples' fastest time T0 (exactly :func:`cycle_rate`'s) ``refine(f, u, V) -> t`` finds the worst point
@@ -337,12 +345,14 @@ def cycle_rate_refined(robot: Delta, cycle, path: Callable, refine: Callable, mo
     x'')`` (the one ``cycle`` samples). The cycle time is then the smallest T at which the samples (peak and RMS)
     and that point (peak) all hold, never below T0; the loads there carry the peak over both (RMS and speed: the
     samples'; the RMS is an integral, the samples' trapezoidal rule). NaN everywhere where a sample or the point
-    is unreachable. Returns (the refined :class:`CycleRate`, the samples' T0, the samples' peak utilisation at T0).
+    is unreachable. ``n_valid`` (traced, optional): only the first n_valid samples of ``cycle`` are its samples,
+    the rest copies of the last (one compiled program for several densities; ``refine`` must skip them too).
+    Returns (the refined :class:`CycleRate`, the samples' T0, the samples' peak utilisation at T0).
     """
     from .trajectory import Cycle
 
     motor, r, a, g, thd, ok, n, dw = _drive_profile(robot, cycle, motor, gear_ratio, dwell, payload_mass)
-    T0 = jnp.where(ok, _bisect_time(a, g, thd, motor, n, dw, T_low, T_high, n_iter), jnp.nan)
+    T0 = jnp.where(ok, _bisect_time(a, g, thd, motor, n, dw, T_low, T_high, n_iter, n_valid), jnp.nan)
     T0l = jnp.where(jnp.isfinite(T0), T0, cycle.duration)
 
     def unit_at(t):
@@ -361,19 +371,19 @@ def cycle_rate_refined(robot: Delta, cycle, path: Callable, refine: Callable, mo
     ok = ok & ok1
 
     def feasible(T):
-        L = _loads_from_unit(a, g, thd, T, dw, motor, n, jnp.asarray(True))
+        L = _loads_from_unit(a, g, thd, T, dw, motor, n, jnp.asarray(True), n_valid)
         pk = jnp.max(_peak_ratio(a1, g1, thd1, T, motor, n)[2])
         return (L.peak_utilisation <= 1.0) & (L.rms_utilisation <= 1.0) & (pk <= 1.0)
 
     T = jnp.where(ok, jnp.maximum(T0, log_bisect(feasible, T_low, T_high, a.dtype, n_iter)), jnp.nan)
     ppm = jnp.where(jnp.isfinite(T), 60.0 / (T + 2.0 * dw), jnp.where(jnp.isnan(T), jnp.nan, 0.0))
     Tl = jnp.where(jnp.isfinite(T), T, cycle.duration)
-    L = _loads_from_unit(a, g, thd, Tl, dw, motor, n, ok)
+    L = _loads_from_unit(a, g, thd, Tl, dw, motor, n, ok, n_valid)
     tau1, _, ratio1 = _peak_ratio(a1, g1, thd1, Tl, motor, n)
     nan = jnp.asarray(jnp.nan, a.dtype)
     L = L._replace(peak_torque=jnp.where(ok, jnp.maximum(L.peak_torque, jnp.abs(tau1[0])), nan),
                    peak_utilisation=jnp.where(ok, jnp.maximum(L.peak_utilisation, jnp.max(ratio1)), nan))
-    peak0 = _loads_from_unit(a, g, thd, T0l, dw, motor, n, ok).peak_utilisation
+    peak0 = _loads_from_unit(a, g, thd, T0l, dw, motor, n, ok, n_valid).peak_utilisation
     return CycleRate(cycle_time=T, picks_per_min=ppm, loads=L), T0, peak0
 
 

@@ -230,6 +230,23 @@ def test_worst_in_cylinder_finds_a_minimum_between_the_samples():
     assert float(best) < 1e-4 and float(jnp.linalg.norm(at - p0)) < 2e-3
 
 
+def test_worst_in_cylinder_at_traced_counts_is_the_search_at_those_counts_bit_for_bit():
+    # one program sized for the densest samples serves every sparser count (the certify stage's first density and
+    # its doubling): the same samples, the same worst starts, the same golden sections
+    p0 = jnp.asarray([0.06, 0.02, 0.43])
+
+    def f(p):
+        return jnp.stack([1.0 - jnp.exp(-jnp.sum((p - p0) ** 2) / 0.02 ** 2), jnp.cos(9.0 * p[0]) * p[2] + p[1]])
+
+    padded = jax.jit(lambda n: CE.worst_in_cylinder(f, 0.3, 0.1, 0.4, 7, 9, 9, counts=n))
+    for n in ((2, 2, 2), (3, 5, 5), (4, 9, 7), (7, 9, 9)):
+        want = jax.jit(lambda n=n: CE.worst_in_cylinder(f, 0.3, 0.1, 0.4, *n))()
+        got = padded(jnp.asarray(n))
+        for a, b in zip(want, got):
+            np.testing.assert_array_equal(np.asarray(b), np.asarray(a), err_msg=str(n))
+    assert padded._cache_size() == 1
+
+
 def test_worst_in_cylinder_reports_nan_where_a_point_is_unreachable():
     best, _ = jax.jit(lambda: CE.worst_in_cylinder(lambda p: jnp.where(p[2] > 0.49, jnp.nan, p[2]), 0.3, 0.1, 0.4,
                                                    2, 3, 3))()
@@ -391,6 +408,36 @@ def test_adept_path_is_the_cycle_at_its_samples_and_its_derivatives_are_the_path
 
 
 @pytest.mark.slow
+def test_cycle_worst_at_a_traced_sample_count_is_the_one_at_that_count(default_problem):
+    # the certify stage's first density and its doubling share one program sized for the doubling: the samples
+    # beyond the count repeat the last one, never chosen, never weighted (the RMS integral, the place dwell)
+    from deltajax.optimize.cycle_worst import cycle_worst
+
+    _, space, pb = default_problem
+    rob = space.decode(jnp.asarray(space.baseline_genes())).at(jnp.asarray(0.16))
+    p0 = jnp.asarray([0.1, -0.05, 0.42])
+
+    def fields(p):          # the joint margin and the clearance's stand-ins: one well on the path, one slope
+        return jnp.sum((p - p0) ** 2) - 1e-3, p[2] - 0.4 + 0.1 * p[0]
+
+    kw = dict(dwell=pb.dwell, payload_mass=pb.payload)
+    dur = float(pb.settings["cycle"]["duration"])
+    path, n = CE.cycle_path(pb), rob.mass.gear_ratio
+    K = 2 * (pb.cycle.n_samples - 1) + 1
+    padded = jax.jit(lambda k: cycle_worst(rob, path, K, dur, fields, pb.motor, n, n_valid=k, **kw))
+    for k in (pb.cycle.n_samples, K):
+        want = jax.jit(lambda k=k: cycle_worst(rob, path, k, dur, fields, pb.motor, n, **kw))()
+        got = padded(jnp.asarray(k))
+        for a, b in zip(jax.tree_util.tree_leaves(want), jax.tree_util.tree_leaves(got)):
+            # the RMS integral sums the same terms in another order (padding zeros): its last bit may move
+            np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-13, atol=0, err_msg=str(k))
+        for a, b in ((want.joint_margin, got.joint_margin), (want.interference_margin, got.interference_margin),
+                     (want.t_worst, got.t_worst), (want.sampled["joint_margin"], got.sampled["joint_margin"])):
+            np.testing.assert_array_equal(np.asarray(b), np.asarray(a), err_msg=str(k))    # the searches: exact
+    assert padded._cache_size() == 1
+
+
+@pytest.mark.slow
 def test_cycle_worst_agrees_with_a_64x_denser_scan_and_is_never_better_than_its_samples(default_problem):
     """The refined worst joint margin, clearance and peak utilisation of the baseline's cycle at the problem's own
     samples against a brute-force scan at 64x the density (cycle_rate on 64x the samples: a different method), with
@@ -436,13 +483,17 @@ def test_cycle_worst_agrees_with_a_64x_denser_scan_and_is_never_better_than_its_
     assert float(s["cycle_time"]) < T64
 
 
+SIZES = []          # the task-and-cycle program's size each fake evaluation asked for (padded_to)
+
+
 def _fake_programs(monkeypatch, volume_at):
     """certify_design with its jitted program replaced by figures that depend on the cycle samples only."""
     calls = []
 
-    def program(pb, density, task_samples, cycle_samples, rays=True):
+    def program(pb, density, task_samples, cycle_samples, rays=True, padded_to=None):
         def run(design, R):
             calls.append(cycle_samples if rays else -cycle_samples)     # negative: without the ray searches
+            SIZES.append(padded_to)
             out = {k: 0.5 for k in CE.CERTIFIED_METRICS}
             out["regular_volume"] = volume_at(cycle_samples) if rays else float("nan")
             return out
@@ -467,9 +518,12 @@ def test_certify_design_doubles_the_density_again_until_every_figure_settles(mon
     dens, task = CE.RAY_DENSITY, (3, 5, 7)
     seq = {c: v for c, v in zip((9, 17, 33, 65), volumes)}
     calls = _fake_programs(monkeypatch, lambda c: seq[c])
+    SIZES.clear()
     out = CE.certify_design(None, _Design(), 0.2, density=dens, task_samples=task, cycle_samples=9)
     assert out["doublings"] == doublings and out["converged"] is converged
     assert calls == [9, 17, 33, 65][:doublings + 1]
+    # the first density and its doubling share one task-and-cycle program (the doubling's size); later ones their own
+    assert SIZES == [((5, 9, 13), 17)] * 2 + [None] * (doublings - 1)
     assert out["cycle_samples"] == calls[-1]
     np.testing.assert_equal(out["regular_volume"], volumes[doublings])
     np.testing.assert_equal(out["regular_volume_first"], volumes[0])

@@ -88,15 +88,13 @@ REGULAR_FIGURES = ("regular_volume", "regular_diameter", "regular_height", "regu
                    "regular_diameter_fixed")
 
 
-def _certified_once(pb, design, R_op, density: RayDensity, task_n, cycle_n: int, rays: bool = True):
-    """Every certified figure at one density (traced; ``R_op``: the operating R); ``rays=False``: the task and
-    cycle figures only (the regular-workspace figures NaN: no ray search)."""
+def _good_test(pb, design):
+    """(at, R samples, chk(R, p) -> :class:`deltajax.constraints.GoodPoint`, dtype, robot) of one design."""
     from .. import constraints as C
     from ..geometry import ReconfigurableDelta
 
     recon = isinstance(design, ReconfigurableDelta)
     robot0 = design.robot if recon else design
-    dt = robot0.upper_arm.dtype
     if recon:
         plate = design.R_max + pb.links.plate_overhang
         at, Rs = design.at, design.R_samples()
@@ -107,27 +105,41 @@ def _certified_once(pb, design, R_op, density: RayDensity, task_n, cycle_n: int,
     def chk(R, p):
         return C.good_point(at(R), p, pb.good, plate_radius=plate)
 
+    def possible(R, p):
+        return C.good_point_possible(at(R), p, pb.good, plate_radius=plate)
+
+    return at, Rs, chk, possible, robot0.upper_arm.dtype, robot0, recon
+
+
+def _regular_once(pb, design, R_op, density: RayDensity) -> dict:
+    """The regular-workspace figures (:data:`REGULAR_FIGURES`) at one ray density (traced; ``R_op``: the operating
+    R): the ray searches of "any of the design's R samples" and, for a reconfigurable design, the operating R."""
+    at, Rs, chk, possible, dt, _, recon = _good_test(pb, design)
     reg_s = pb.settings["regular"]
     sets = [Rs, jnp.asarray(R_op, dt)[None]] if recon else [Rs]
-    if rays:
-        cyl = ray_cylinders(lambda R, p: chk(R, p).good, sets, float(reg_s["r_max"]), float(reg_s["z_min"]),
-                            float(reg_s["z_max"]), pb.hd_ratio, density, dt,
-                            possible_R=lambda R, p: C.good_point_possible(at(R), p, pb.good, plate_radius=plate))
-        reg = {"regular_volume": cyl[0].volume, "regular_diameter": cyl[0].diameter, "regular_height": cyl[0].height,
-               "regular_z_top": cyl[0].z_top, "regular_volume_fixed": cyl[-1].volume,
-               "regular_diameter_fixed": cyl[-1].diameter}
-    else:
-        reg = {k: jnp.asarray(jnp.nan, dt) for k in REGULAR_FIGURES}
+    cyl = ray_cylinders(lambda R, p: chk(R, p).good, sets, float(reg_s["r_max"]), float(reg_s["z_min"]),
+                        float(reg_s["z_max"]), pb.hd_ratio, density, dt, possible_R=possible)
+    return {"regular_volume": cyl[0].volume, "regular_diameter": cyl[0].diameter, "regular_height": cyl[0].height,
+            "regular_z_top": cyl[0].z_top, "regular_volume_fixed": cyl[-1].volume,
+            "regular_diameter_fixed": cyl[-1].diameter}
+
+
+def _task_cycle_once(pb, design, R_op, task_shape: tuple, cycle_shape: int, counts) -> dict:
+    """The task cylinder's and the cycle's certified figures (traced; ``R_op``: the operating R) at the sample
+    counts ``counts`` (4,) (task rings, angles, levels; cycle samples), each at most its array size
+    (``task_shape``, ``cycle_shape``): one compiled program serves every density up to those sizes."""
+    at, _, chk, _, dt, robot0, _ = _good_test(pb, design)
     t = pb.settings["task"]
-    task = (float(t["diameter"]), float(t["height"]), float(t["z_top"])) + tuple(task_n)
     worst, _ = worst_in_cylinder(lambda p: jnp.stack([(c := chk(R_op, p)).index, c.joint_margin,
-                                                      c.interference_margin]), *task)
+                                                      c.interference_margin]),
+                                 float(t["diameter"]), float(t["height"]), float(t["z_top"]), *task_shape,
+                                 counts=counts[:3])
     idx, jm_t, im_t = worst[0], worst[1], worst[2]
-    cw = cycle_worst(at(R_op), cycle_path(pb), int(cycle_n), float(pb.settings["cycle"]["duration"]),
+    cw = cycle_worst(at(R_op), cycle_path(pb), int(cycle_shape), float(pb.settings["cycle"]["duration"]),
                      lambda p: ((c := chk(R_op, p.astype(dt))).joint_margin, c.interference_margin), pb.motor,
-                     robot0.mass.gear_ratio, dwell=pb.dwell, payload_mass=pb.payload)
+                     robot0.mass.gear_ratio, dwell=pb.dwell, payload_mass=pb.payload, n_valid=counts[3])
     rate = cw.rate
-    return {**reg, "task_index_min": idx,
+    return {"task_index_min": idx,
             "joint_margin_deg": jnp.rad2deg(jnp.minimum(jm_t, cw.joint_margin)),
             "interference_margin": jnp.minimum(im_t, cw.interference_margin),
             "picks_per_min": rate.picks_per_min, "cycle_time": rate.cycle_time,
@@ -148,19 +160,42 @@ def _densities(pb, density, task_samples, cycle_samples):
 
 
 def certified_program(pb, density: RayDensity, task_samples: tuple, cycle_samples: int, *,
-                      rays: bool = True) -> Callable:
-    """``(design, R_operating) -> {figure: ()}`` at one density, jitted, one program per (content of ``pb``,
-    densities) in this process (:func:`deltajax.tracing.shared_program`): the baseline and the
-    recommendation (and any design re-derived later) share one compilation. ``rays=False``: without the ray
-    searches (the regular-workspace figures NaN)."""
+                      rays: bool = True, padded_to: tuple = None) -> Callable:
+    """``(design, R_operating) -> {figure: ()}`` at one density: the ray searches (one jitted program per
+    density) and the task cylinder's and cycle's searches (one jitted program per array size ``padded_to`` =
+    (task samples, cycle samples), default the density's own, that serves every density up to it: the certify
+    stage's doublings share one). One program per (content of ``pb``, density or size) in this process
+    (:func:`deltajax.tracing.shared_program`), kept across processes: the baseline and the recommendation (and
+    any design re-derived later) share each compilation. ``rays=False``: without the ray searches (the
+    regular-workspace figures NaN)."""
     from ..tracing import shared_program
 
-    key = (tuple(density), tuple(task_samples), int(cycle_samples)) + (() if rays else ("no_rays",))
+    task, cycle = tuple(int(n) for n in task_samples), int(cycle_samples)
+    shape_t, shape_c = (task, cycle) if padded_to is None else (tuple(int(n) for n in padded_to[0]),
+                                                                   int(padded_to[1]))
+    if len(task) != 3 or len(shape_t) != 3 or any(not 2 <= n <= m for n, m in zip(task + (cycle,),
+                                                                                 shape_t + (shape_c,))):
+        raise ValueError(f"sample counts {task + (cycle,)} must be >= 2 and within the program's size "
+                         f"{shape_t + (shape_c,)}")
+    tkey = ("task_cycle", shape_t, shape_c)
+    tc = shared_program("certified", pb, None, tkey, lambda: jax.jit(
+        lambda d, R, n: _task_cycle_once(pb, d, R, tkey[1], tkey[2], n)), persist=True)
+    counts = np.asarray(task + (cycle,), np.int32)
+    if rays:
+        rkey = ("rays", tuple(int(n) for n in density))
+        rp = shared_program("certified", pb, None, rkey, lambda: jax.jit(
+            lambda d, R: _regular_once(pb, d, R, RayDensity(*rkey[1]))), persist=True)
 
-    def build():
-        return jax.jit(lambda d, R: _certified_once(pb, d, R, RayDensity(*key[0]), key[1], key[2], rays))
+    def run(design, R_operating):
+        if rays:
+            out = dict(rp(design, R_operating))
+        else:
+            nan = jnp.asarray(jnp.nan, (design.robot if hasattr(design, "robot") else design).upper_arm.dtype)
+            out = {k: nan for k in REGULAR_FIGURES}
+        out.update(tc(design, R_operating, counts))
+        return out
 
-    return shared_program("certified", pb, None, key, build, persist=True)
+    return run
 
 
 def certify_design(pb, design, R_operating=None, *, density=None, task_samples=None,
@@ -188,8 +223,9 @@ def certify_design(pb, design, R_operating=None, *, density=None, task_samples=N
     ``regular_first``: the regular-workspace figures (:data:`REGULAR_FIGURES`) already found by the same ray search
     at the first density and the same operating R (the verification's, :func:`deltajax.optimize.designer.
     evaluate_designer` on the same problem: its ``rw_rays`` are the first density): then the first evaluation
-    runs without the ray searches and takes them from it. Host function (numpy floats); jitted inside, one
-    program per density."""
+    runs without the ray searches and takes them from it. Host function (numpy floats); jitted inside: the ray
+    searches one program per density, the task cylinder and the cycle one program for the first density and its
+    doubling (the first uses its first samples), one per further doubling."""
     if not (isinstance(max_extra_doublings, int) and max_extra_doublings >= 0):
         raise ValueError(f"max_extra_doublings must be an integer >= 0, got {max_extra_doublings!r}")
     dt = (design.robot if hasattr(design, "robot") else design).upper_arm.dtype
@@ -198,6 +234,7 @@ def certify_design(pb, design, R_operating=None, *, density=None, task_samples=N
         R_operating = jax.jit(lambda d: evaluate_designer(pb, d, regular=False)["R_operating"])(design)
     R_op = jnp.asarray(R_operating, dt)
     d, t, c = _densities(pb, density, task_samples, cycle_samples)
+    size = (tuple(2 * n - 1 for n in t), 2 * c - 1)     # the first doubling's task and cycle samples: one program
     if reference is not None:
         a = dict(reference)
     elif regular_first is not None:
@@ -207,14 +244,16 @@ def certify_design(pb, design, R_operating=None, *, density=None, task_samples=N
         missing = [k for k in REGULAR_FIGURES if k not in regular_first]
         if missing:
             raise ValueError(f"regular_first lacks {', '.join(missing)}")
-        a = {k: float(v) for k, v in certified_program(pb, d, t, c, rays=False)(design, R_op).items()}
+        a = certified_program(pb, d, t, c, rays=False, padded_to=size)(design, R_op)
+        a = {k: float(v) for k, v in a.items()}
         a.update({k: float(regular_first[k]) for k in REGULAR_FIGURES})
     else:
-        a = {k: float(v) for k, v in certified_program(pb, d, t, c)(design, R_op).items()}
+        a = {k: float(v) for k, v in certified_program(pb, d, t, c, padded_to=size)(design, R_op).items()}
     first = {k: float(a[k]) for k in TOLERANCES}
     for doublings in range(1, 2 + max_extra_doublings):
         d, t, c = d.doubled(), tuple(2 * n - 1 for n in t), 2 * c - 1
-        b = {k: float(v) for k, v in certified_program(pb, d, t, c)(design, R_op).items()}
+        b = certified_program(pb, d, t, c, padded_to=size if doublings == 1 else None)(design, R_op)
+        b = {k: float(v) for k, v in b.items()}
         change = {k: _change(k, float(a[k]), b[k]) for k in TOLERANCES}
         ok = all(change[k] <= tol for k, tol in TOLERANCES.items())
         if ok or all(change[k] <= tol or (math.isnan(a[k]) and math.isnan(b[k])) for k, tol in TOLERANCES.items()):

@@ -27,15 +27,18 @@ from .rays import golden_min
 __all__ = ["worst_along", "CycleWorst", "cycle_worst"]
 
 
-def worst_along(f: Callable, u, V, *, n_start: int = 3, n_golden: int = 14):
+def worst_along(f: Callable, u, V, *, n_start: int = 3, n_golden: int = 14, n_valid=None):
     """Minimum of each of the fields ``f(t) -> (m,)`` over t in [0, 1] from their values ``V`` (K, m) at the
     uniform samples ``u`` (K,): from the ``n_start`` worst samples of each field a golden section (``n_golden``
     steps) on [u_k - h, u_k + h] (h: the sample spacing, clipped to [0, 1]). NaN (e.g. unreachable) is the worst;
     a NaN sample or a NaN point found gives NaN. Returns (minimum (m,), its t (m,)); the minimum is never above the
-    samples' (the search can only find worse points)."""
+    samples' (the search can only find worse points). ``n_valid`` (traced, optional): only the first n_valid
+    samples count (the rest padding, never chosen; the spacing 1 / (n_valid - 1))."""
     K = u.shape[0]
-    h = 1.0 / (K - 1)
+    h = 1.0 / (K - 1) if n_valid is None else 1.0 / (n_valid - 1).astype(u.dtype)
     Vw = jnp.where(jnp.isnan(V), -jnp.inf, V)
+    if n_valid is not None:
+        Vw = jnp.where((jnp.arange(K) < n_valid)[:, None], Vw, jnp.inf)
     ns = min(int(n_start), K)
 
     def field(v, c):
@@ -76,7 +79,7 @@ class CycleWorst(NamedTuple):
 
 def cycle_worst(robot, path: Callable, n_samples: int, duration, point_fields: Callable, motor, gear_ratio, *,
                 dwell=0.0, payload_mass=None, n_start: int = 3, n_golden: int = 14, T_low: float = 1e-3,
-                T_high: float = 60.0, n_iter: int = 60) -> CycleWorst:
+                T_high: float = 60.0, n_iter: int = 60, n_valid=None) -> CycleWorst:
     """The worst joint margin, clearance and peak utilisation along a cycle, found by :func:`worst_along` from
     ``n_samples`` uniform samples, and the cycle rate that the refined peak allows.
 
@@ -87,6 +90,8 @@ def cycle_worst(robot, path: Callable, n_samples: int, duration, point_fields: C
         duration: the cycle's nominal duration (s; loads where no duration meets the limits).
         point_fields: ``p (3,) -> (joint margin, interference margin)`` at a point of the path (NaN: unreachable).
         motor, gear_ratio, dwell, payload_mass, T_low, T_high, n_iter: as :func:`deltajax.constraints.cycle_rate`.
+        n_valid: (traced, optional) the samples' count, at most ``n_samples`` (then the array size): the same
+            figures as with ``n_samples=n_valid``, one compiled program for every count up to the size.
 
     The peak (:func:`deltajax.constraints.cycle_rate_refined`): at the dense samples' fastest time T0 (exactly
     :func:`deltajax.constraints.cycle_rate` on the samples) the peak utilisation max over actuators of |tau_m| /
@@ -95,7 +100,11 @@ def cycle_worst(robot, path: Callable, n_samples: int, duration, point_fields: C
     the time it moves T by is far below the doubling check's tolerance, so it is not searched again at the new T.
     NaN everywhere (as ``cycle_rate``) where a sample or the refined point is unreachable.
     """
-    u = jnp.arange(n_samples, dtype=jnp.result_type(float)) / (n_samples - 1)
+    if n_valid is None:
+        u = jnp.arange(n_samples, dtype=jnp.result_type(float)) / (n_samples - 1)
+    else:       # the padding repeats the last sample (u = 1)
+        k = jnp.minimum(jnp.arange(n_samples), n_valid - 1)
+        u = k.astype(jnp.result_type(float)) / (n_valid - 1).astype(jnp.result_type(float))
     x, dx, ddx = path(u)
     dt = x.dtype
     u = u.astype(dt)
@@ -108,13 +117,15 @@ def cycle_worst(robot, path: Callable, n_samples: int, duration, point_fields: C
         return jnp.where(jnp.any(jnp.isnan(a)), jnp.nan, jnp.min(a))
 
     Vm = jax.vmap(lambda p: jnp.stack(point_fields(p)))(x)                              # (K, 2)
-    margins, t_m = worst_along(fields_at, u, Vm, n_start=n_start, n_golden=n_golden)
+    margins, t_m = worst_along(fields_at, u, Vm, n_start=n_start, n_golden=n_golden, n_valid=n_valid)
     any_nan = jnp.any(jnp.isnan(Vm), axis=0)
     margins = jnp.where(any_nan, jnp.nan, margins)
 
     rate, T0, peak0 = C.cycle_rate_refined(
-        robot, cyc, path, lambda f, uu, V: worst_along(f, uu, V, n_start=n_start, n_golden=n_golden)[1][0], motor,
-        gear_ratio, dwell=dwell, payload_mass=payload_mass, T_low=T_low, T_high=T_high, n_iter=n_iter)
+        robot, cyc, path,
+        lambda f, uu, V: worst_along(f, uu, V, n_start=n_start, n_golden=n_golden, n_valid=n_valid)[1][0], motor,
+        gear_ratio, dwell=dwell, payload_mass=payload_mass, T_low=T_low, T_high=T_high, n_iter=n_iter,
+        n_valid=n_valid)
     sampled = {"joint_margin": nanmin(Vm[:, 0]), "interference_margin": nanmin(Vm[:, 1]),
                "cycle_time": T0, "peak_utilisation": peak0}
     return CycleWorst(joint_margin=margins[0], interference_margin=margins[1], rate=rate, sampled=sampled,

@@ -489,19 +489,39 @@ def ray_cylinder(good_fn: Callable, r_max: float, z_min: float, z_max: float, hd
 # -- worst points of a task cylinder ------------------------------------------------------------------------------
 
 def worst_in_cylinder(f: Callable, diameter: float, height: float, z_top: float, n_r: int, n_phi: int, n_z: int,
-                      *, n_golden: int = 10, n_start: int = 2, sweeps: int = 2):
+                      *, n_golden: int = 10, n_start: int = 2, sweeps: int = 2, counts=None):
     """Minimum of the field ``f(p)`` (a scalar or an (m,) vector of fields, each minimised on its own; NaN:
     unreachable, the worst) over the cylinder of ``diameter`` and ``height`` on the z axis from ``z_top`` (z down),
     using the 60 deg wedge (the Delta's symmetry): samples rho in [0, D/2] (``n_r``) x phi in [0, 60 deg]
     (``n_phi``) x z (``n_z``), then from the ``n_start`` worst samples of each field a coordinate-wise golden
     section (``sweeps`` sweeps over rho, phi, z, each in +-1 sample spacing, clipped to the cylinder). Returns
     (minimum, point (3,)), each with a leading (m,) axis for a vector field. Two call sites of ``f`` (the samples
-    and the search), so it is traced twice."""
-    rr = jnp.linspace(0.0, diameter / 2.0, n_r)
-    pp = jnp.linspace(0.0, math.pi / 3.0, n_phi)
-    zz = jnp.linspace(z_top, z_top + height, n_z)
+    and the search), so it is traced twice.
+
+    ``counts``: (3,) traced sample counts (rings, angles, levels), each >= 2 and at most ``n_r``, ``n_phi``, ``n_z``
+    (the array shapes): the same samples and search as with those counts as ``n_*``, in one compiled program for
+    every count up to the shapes (the samples beyond a count repeat its last one and are never chosen)."""
+    if counts is None:
+        m = (n_r, n_phi, n_z)
+    else:
+        m = tuple(jnp.asarray(counts)[i] for i in range(3))
+
+    def grid(a, b, n, size):      # jnp.linspace(a, b, n) at a traced n, padded to size with b
+        if isinstance(n, int):
+            return jnp.linspace(a, b, n)
+        s = jnp.minimum(jnp.arange(size), n - 1) / jnp.asarray(n - 1, jnp.result_type(float))
+        return a * (1 - s) + b * s
+
+    rr = grid(0.0, diameter / 2.0, m[0], n_r)
+    pp = grid(0.0, math.pi / 3.0, m[1], n_phi)
+    zz = grid(z_top, z_top + height, m[2], n_z)
     Z, Rr, P = jnp.meshgrid(zz, rr, pp, indexing="ij")
     q = jnp.stack([Rr.reshape(-1), P.reshape(-1), Z.reshape(-1)], axis=1)     # (rho, phi, z)
+    if counts is None:
+        pad = None
+    else:
+        iz, ir, ip = jnp.meshgrid(jnp.arange(n_z), jnp.arange(n_r), jnp.arange(n_phi), indexing="ij")
+        pad = ((ir >= m[0]) | (ip >= m[1]) | (iz >= m[2])).reshape(-1)
 
     def at(x):
         return jnp.stack([x[0] * jnp.cos(x[1]), x[0] * jnp.sin(x[1]), x[2]])
@@ -511,10 +531,16 @@ def worst_in_cylinder(f: Callable, diameter: float, height: float, z_top: float,
 
     V = jax.vmap(lambda x: fv(at(x)))(q)                                      # (n, m)
     V = jnp.where(jnp.isnan(V), -jnp.inf, V)
+    if pad is not None:
+        V = jnp.where(pad[:, None], jnp.inf, V)
     lo = jnp.asarray([0.0, 0.0, z_top])
     hi = jnp.asarray([diameter / 2.0, math.pi / 3.0, z_top + height])
-    step = jnp.asarray([diameter / 2.0 / max(n_r - 1, 1), math.pi / 3.0 / max(n_phi - 1, 1),
-                        height / max(n_z - 1, 1)])
+    if counts is None:
+        step = jnp.asarray([diameter / 2.0 / max(n_r - 1, 1), math.pi / 3.0 / max(n_phi - 1, 1),
+                            height / max(n_z - 1, 1)])
+    else:
+        step = jnp.stack([diameter / 2.0 / jnp.maximum(m[0] - 1, 1), math.pi / 3.0 / jnp.maximum(m[1] - 1, 1),
+                          height / jnp.maximum(m[2] - 1, 1)]).astype(q.dtype)
     ns = min(n_start, q.shape[0])
 
     def field(v, c):
