@@ -234,9 +234,17 @@ def test_worst_in_cylinder_at_traced_counts_is_the_search_at_those_counts_bit_fo
     # one program sized for the densest samples serves every sparser count (the certify stage's first density and
     # its doubling): the same samples, the same worst starts, the same golden sections
     p0 = jnp.asarray([0.06, 0.02, 0.43])
+    corner = jnp.asarray([0.15 * math.cos(math.pi / 3), 0.15 * math.sin(math.pi / 3), 0.5])   # the last sample
+    well = math.radians(37.5)       # at 3 x 5 x 5 samples: between the 2nd and 3rd angle from 60 deg
 
     def f(p):
-        return jnp.stack([1.0 - jnp.exp(-jnp.sum((p - p0) ** 2) / 0.02 ** 2), jnp.cos(9.0 * p[0]) * p[2] + p[1]])
+        # third field: a sharp dip at the grid's last sample (its copies in the padding tie with it) and a valley
+        # in phi between two sample angles, deeper than the dip: found only from a start next to the valley
+        phi = jnp.arctan2(p[1], p[0])
+        third = (-0.5 * jnp.exp(-jnp.sum((p - corner) ** 2) / 1e-3 ** 2)
+                 - jnp.exp(-((phi - well) / math.radians(6.0)) ** 2))
+        return jnp.stack([1.0 - jnp.exp(-jnp.sum((p - p0) ** 2) / 0.02 ** 2), jnp.cos(9.0 * p[0]) * p[2] + p[1],
+                          third])
 
     padded = jax.jit(lambda n: CE.worst_in_cylinder(f, 0.3, 0.1, 0.4, 7, 9, 9, counts=n))
     for n in ((2, 2, 2), (3, 5, 5), (4, 9, 7), (7, 9, 9)):
@@ -244,6 +252,8 @@ def test_worst_in_cylinder_at_traced_counts_is_the_search_at_those_counts_bit_fo
         got = padded(jnp.asarray(n))
         for a, b in zip(want, got):
             np.testing.assert_array_equal(np.asarray(b), np.asarray(a), err_msg=str(n))
+        if n == (3, 5, 5):
+            assert float(want[0][2]) < -0.9          # the valley, from the second start (not the dip's copies)
     assert padded._cache_size() == 1
 
 
@@ -377,6 +387,26 @@ def test_worst_along_finds_a_minimum_between_the_samples_and_is_never_above_the_
     assert float(np.min(np.asarray(V)[:, 1])) > -1.0 + 1e-2               # the samples alone miss it
 
 
+def test_worst_along_skips_the_padding_beyond_its_sample_count():
+    # samples padded with copies of the last one (the worst): the copies must not crowd out the second and third
+    # worst samples as search starts, or the well between them (deeper than every sample) is missed
+    from deltajax.optimize.cycle_worst import worst_along
+
+    n, h = 11, 0.1
+    tw = 1.0 - 1.5 * h                                 # between the second and third worst samples
+
+    def f(t):
+        return (jnp.where(t > 1.0 - h / 2, 0.0, 0.1 + (1.0 - t)) - 1.1 * jnp.exp(-((t - tw) / (h / 20)) ** 2))[None]
+
+    u = jnp.linspace(0.0, 1.0, n)
+    want = jax.jit(lambda: worst_along(f, u, jax.vmap(f)(u)))()
+    up = jnp.concatenate([u, jnp.ones(n - 1)])         # padded to 2 n - 1 with the last sample
+    got = jax.jit(lambda k: worst_along(f, up, jax.vmap(f)(up), n_valid=k))(jnp.asarray(n))
+    assert float(want[0][0]) < -0.5                     # the well is found from the second or third start
+    for a, b in zip(want, got):
+        np.testing.assert_array_equal(np.asarray(b), np.asarray(a))
+
+
 def test_worst_along_reports_nan_where_a_point_between_the_samples_is_unreachable():
     from deltajax.optimize.cycle_worst import worst_along
 
@@ -420,21 +450,19 @@ def test_cycle_worst_at_a_traced_sample_count_is_the_one_at_that_count(default_p
     def fields(p):          # the joint margin and the clearance's stand-ins: one well on the path, one slope
         return jnp.sum((p - p0) ** 2) - 1e-3, p[2] - 0.4 + 0.1 * p[0]
 
-    kw = dict(dwell=pb.dwell, payload_mass=pb.payload)
+    kw = dict(dwell=0.1, payload_mass=pb.payload)      # a dwell: the place point's static load enters the RMS
     dur = float(pb.settings["cycle"]["duration"])
     path, n = CE.cycle_path(pb), rob.mass.gear_ratio
     K = 2 * (pb.cycle.n_samples - 1) + 1
-    padded = jax.jit(lambda k: cycle_worst(rob, path, K, dur, fields, pb.motor, n, n_valid=k, **kw))
-    for k in (pb.cycle.n_samples, K):
-        want = jax.jit(lambda k=k: cycle_worst(rob, path, k, dur, fields, pb.motor, n, **kw))()
-        got = padded(jnp.asarray(k))
-        for a, b in zip(jax.tree_util.tree_leaves(want), jax.tree_util.tree_leaves(got)):
-            # the RMS integral sums the same terms in another order (padding zeros): its last bit may move
-            np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-13, atol=0, err_msg=str(k))
-        for a, b in ((want.joint_margin, got.joint_margin), (want.interference_margin, got.interference_margin),
-                     (want.t_worst, got.t_worst), (want.sampled["joint_margin"], got.sampled["joint_margin"])):
-            np.testing.assert_array_equal(np.asarray(b), np.asarray(a), err_msg=str(k))    # the searches: exact
-    assert padded._cache_size() == 1
+    k = pb.cycle.n_samples           # the first density's count in the doubling's size
+    want = jax.jit(lambda: cycle_worst(rob, path, k, dur, fields, pb.motor, n, **kw))()
+    got = jax.jit(lambda k: cycle_worst(rob, path, K, dur, fields, pb.motor, n, n_valid=k, **kw))(jnp.asarray(k))
+    for a, b in zip(jax.tree_util.tree_leaves(want), jax.tree_util.tree_leaves(got)):
+        # the RMS integral sums the same terms in another order (padding zeros): its last bit may move
+        np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-13, atol=0)
+    for a, b in ((want.joint_margin, got.joint_margin), (want.interference_margin, got.interference_margin),
+                 (want.t_worst, got.t_worst), (want.sampled["joint_margin"], got.sampled["joint_margin"])):
+        np.testing.assert_array_equal(np.asarray(b), np.asarray(a))      # the searches: exact
 
 
 @pytest.mark.slow
