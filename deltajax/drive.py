@@ -158,7 +158,7 @@ def _trap_weights(K, dtype, n_valid=None):
         return jnp.ones((K,), dtype).at[0].set(0.5).at[-1].set(0.5) / (K - 1)
     k = jnp.arange(K)
     w = jnp.where((k == 0) | (k == n_valid - 1), 0.5, jnp.where(k < n_valid, 1.0, 0.0)).astype(dtype)
-    return w / (n_valid - 1).astype(dtype)
+    return w / jnp.asarray(n_valid - 1, dtype)
 
 
 def motor_side(tau_arm, theta_dot, motor: Motor, gear_ratio):

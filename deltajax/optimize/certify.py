@@ -89,7 +89,9 @@ REGULAR_FIGURES = ("regular_volume", "regular_diameter", "regular_height", "regu
 
 
 def _good_test(pb, design):
-    """(at, R samples, chk(R, p) -> :class:`deltajax.constraints.GoodPoint`, dtype, robot) of one design."""
+    """One design's good test: (``at(R)`` the robot at base radius R, its R samples, ``chk(R, p)`` ->
+    :class:`deltajax.constraints.GoodPoint`, ``possible(R, p)`` its necessary condition, the dtype, the robot,
+    whether it is reconfigurable)."""
     from .. import constraints as C
     from ..geometry import ReconfigurableDelta
 

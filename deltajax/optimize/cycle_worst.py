@@ -35,7 +35,7 @@ def worst_along(f: Callable, u, V, *, n_start: int = 3, n_golden: int = 14, n_va
     samples' (the search can only find worse points). ``n_valid`` (traced, optional): only the first n_valid
     samples count (the rest padding, never chosen; the spacing 1 / (n_valid - 1))."""
     K = u.shape[0]
-    h = 1.0 / (K - 1) if n_valid is None else 1.0 / (n_valid - 1).astype(u.dtype)
+    h = 1.0 / (K - 1) if n_valid is None else 1.0 / jnp.asarray(n_valid - 1, u.dtype)
     Vw = jnp.where(jnp.isnan(V), -jnp.inf, V)
     if n_valid is not None:
         Vw = jnp.where((jnp.arange(K) < n_valid)[:, None], Vw, jnp.inf)
@@ -104,7 +104,7 @@ def cycle_worst(robot, path: Callable, n_samples: int, duration, point_fields: C
         u = jnp.arange(n_samples, dtype=jnp.result_type(float)) / (n_samples - 1)
     else:       # the padding repeats the last sample (u = 1)
         k = jnp.minimum(jnp.arange(n_samples), n_valid - 1)
-        u = k.astype(jnp.result_type(float)) / (n_valid - 1).astype(jnp.result_type(float))
+        u = k.astype(jnp.result_type(float)) / jnp.asarray(n_valid - 1, jnp.result_type(float))
     x, dx, ddx = path(u)
     dt = x.dtype
     u = u.astype(dt)
