@@ -511,17 +511,16 @@ def test_cycle_worst_agrees_with_a_64x_denser_scan_and_is_never_better_than_its_
     assert float(s["cycle_time"]) < T64
 
 
-SIZES = []          # the task-and-cycle program's size each fake evaluation asked for (padded_to)
-
-
-def _fake_programs(monkeypatch, volume_at):
-    """certify_design with its jitted program replaced by figures that depend on the cycle samples only."""
+def _fake_programs(monkeypatch, volume_at, sizes=None):
+    """certify_design with its jitted program replaced by figures that depend on the cycle samples only; ``sizes``
+    (a list): each evaluation's task-and-cycle program size (``padded_to``) appended."""
     calls = []
 
     def program(pb, density, task_samples, cycle_samples, rays=True, padded_to=None):
         def run(design, R):
             calls.append(cycle_samples if rays else -cycle_samples)     # negative: without the ray searches
-            SIZES.append(padded_to)
+            if sizes is not None:
+                sizes.append(padded_to)
             out = {k: 0.5 for k in CE.CERTIFIED_METRICS}
             out["regular_volume"] = volume_at(cycle_samples) if rays else float("nan")
             return out
@@ -545,13 +544,13 @@ def test_certify_design_doubles_the_density_again_until_every_figure_settles(mon
                                                                             converged):
     dens, task = CE.RAY_DENSITY, (3, 5, 7)
     seq = {c: v for c, v in zip((9, 17, 33, 65), volumes)}
-    calls = _fake_programs(monkeypatch, lambda c: seq[c])
-    SIZES.clear()
+    sizes = []
+    calls = _fake_programs(monkeypatch, lambda c: seq[c], sizes)
     out = CE.certify_design(None, _Design(), 0.2, density=dens, task_samples=task, cycle_samples=9)
     assert out["doublings"] == doublings and out["converged"] is converged
     assert calls == [9, 17, 33, 65][:doublings + 1]
     # the first density and its doubling share one task-and-cycle program (the doubling's size); later ones their own
-    assert SIZES == [((5, 9, 13), 17)] * 2 + [None] * (doublings - 1)
+    assert sizes == [((5, 9, 13), 17)] * 2 + [None] * (doublings - 1)
     assert out["cycle_samples"] == calls[-1]
     np.testing.assert_equal(out["regular_volume"], volumes[doublings])
     np.testing.assert_equal(out["regular_volume_first"], volumes[0])

@@ -22,7 +22,7 @@ import jax.numpy as jnp
 
 from .. import constraints as C
 from ..trajectory import Cycle
-from .rays import golden_min
+from .rays import golden_min, padded_linspace
 
 __all__ = ["worst_along", "CycleWorst", "cycle_worst"]
 
@@ -103,8 +103,7 @@ def cycle_worst(robot, path: Callable, n_samples: int, duration, point_fields: C
     if n_valid is None:
         u = jnp.arange(n_samples, dtype=jnp.result_type(float)) / (n_samples - 1)
     else:       # the padding repeats the last sample (u = 1)
-        k = jnp.minimum(jnp.arange(n_samples), n_valid - 1)
-        u = k.astype(jnp.result_type(float)) / jnp.asarray(n_valid - 1, jnp.result_type(float))
+        u = padded_linspace(0.0, 1.0, n_valid, n_samples)
     x, dx, ddx = path(u)
     dt = x.dtype
     u = u.astype(dt)

@@ -30,7 +30,7 @@ import numpy as np
 from ..regular import RegularWorkspace
 
 __all__ = ["RAY_DENSITY", "RAY_PASSES", "RAY_BATCH", "POSSIBLE_CHUNKS", "RayDensity", "ray_cylinders", "ray_cylinder",
-           "worst_in_cylinder", "golden_min", "good_where_possible", "any_good_where_possible",
+           "worst_in_cylinder", "padded_linspace", "golden_min", "good_where_possible", "any_good_where_possible",
            "UNDECIDED_CHUNKS", "settle_good", "first_open"]
 
 _GOLD = (math.sqrt(5.0) - 1.0) / 2.0
@@ -64,6 +64,14 @@ class RayDensity(NamedTuple):
 
 #: The verification's density (the fine evaluator, :func:`deltajax.optimize.designer.evaluate_designer`).
 RAY_DENSITY = RayDensity()
+
+
+def padded_linspace(a, b, n, size: int):
+    """``jnp.linspace(a, b, n)`` at a traced count ``n`` (2 <= n <= ``size``), padded to ``size`` samples with
+    copies of ``b``: the same values as the static linspace in its first n entries (one compiled program serves
+    every count up to ``size``; the callers keep the padding out of their searches)."""
+    s = jnp.minimum(jnp.arange(size), n - 1) / jnp.asarray(n - 1, jnp.result_type(float))
+    return a * (1 - s) + b * s
 
 
 def golden_min(f, a, b, n):
@@ -506,11 +514,8 @@ def worst_in_cylinder(f: Callable, diameter: float, height: float, z_top: float,
     else:
         m = tuple(jnp.asarray(counts)[i] for i in range(3))
 
-    def grid(a, b, n, size):      # jnp.linspace(a, b, n) at a traced n, padded to size with b
-        if isinstance(n, int):
-            return jnp.linspace(a, b, n)
-        s = jnp.minimum(jnp.arange(size), n - 1) / jnp.asarray(n - 1, jnp.result_type(float))
-        return a * (1 - s) + b * s
+    def grid(a, b, n, size):
+        return jnp.linspace(a, b, n) if isinstance(n, int) else padded_linspace(a, b, n, size)
 
     rr = grid(0.0, diameter / 2.0, m[0], n_r)
     pp = grid(0.0, math.pi / 3.0, m[1], n_phi)
