@@ -29,8 +29,10 @@ REPO = Path(__file__).resolve().parent.parent
 DEFAULT_CONF = Path(os.environ.get("DELTAJAX_SLURM_DIR", "/tmp/deltajax-slurm")) / "slurm.conf"
 TINY = ["experiment=workspace_grid", "plots=false", "progress=false", "experiment.grid.h=0.1",
         "experiment.grid.z=[0.0,0.6]", "experiment.chunk_points=100"]
-SLURM = ["hydra/launcher=slurm", "hydra.launcher.timeout_min=15"]
-TIMEOUT = 600  # s per CLI call (jobs share the machine's 2 cores with the rest of CI)
+# a job's limit and a CLI call's wait: generous for a machine whose XLA cache is empty (every job compiles its
+# programs on one CPU beside the rest of the suite: the uninterrupted GA job outran a 15-min limit, 2026-12-05)
+SLURM = ["hydra/launcher=slurm", "hydra.launcher.timeout_min=45"]
+TIMEOUT = 1800  # s per CLI call (jobs share the machine's 2 cores with the rest of CI)
 
 def _cluster_problem(env) -> str:
     """'' if the cluster answers with an idle (or busy) node, else why not."""

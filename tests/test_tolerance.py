@@ -104,6 +104,74 @@ def test_unreachable_counts_as_violated_and_never_as_a_number(toy):
     assert np.all(a["g_percentiles"][0, names.index("passive_joints")] == 1.0)     # a full violation
 
 
+def _samples(pb, space, genes, n, **kw):
+    """``evaluate_designer(regular=False, **kw)`` of ``n`` tolerance samples of each design (host arrays)."""
+    import jax
+
+    from deltajax.optimize.designer import evaluate_designer
+
+    rows = np.repeat(genes, n, axis=0)
+    dev = np.tile(dj.tolerance.deviations(Tolerances(), n, 0), (len(genes), 1))
+
+    def one(g, d):
+        p, des = dj.tolerance.perturb(pb, space.decode(g), d)
+        return evaluate_designer(p, des, regular=False, **kw)
+
+    return {k: np.asarray(v) for k, v in jax.jit(jax.vmap(one))(rows, dev).items()}
+
+
+@pytest.mark.slow   # compiles the designer's program twice (~20 CPU-s)
+def test_the_rules_first_candidates_give_the_full_answer_where_one_is_feasible(toy, monkeypatch):
+    # the toy problem has two operating-R candidates: candidates=1 tests the rule's first (the faster) alone
+    pb, space, genes = toy
+    full = _samples(pb, space, genes, 12)
+    first = _samples(pb, space, genes, 12, candidates=1)
+    ok = first["resolved"]
+    assert ok.any() and not ok.all()                       # both outcomes exercised
+    assert np.all(full["feasible"][ok])                     # settled only where a feasible candidate was found
+    # the same choice; the values of the same functions at the same inputs, compiled into another program (XLA may
+    # fuse and round differently: the last bit)
+    np.testing.assert_array_equal(first["R_operating"][ok], full["R_operating"][ok])
+    for k, v in full.items():
+        np.testing.assert_allclose(first[k][ok], v[ok], rtol=1e-13, atol=1e-15, err_msg=k)
+    # the Monte Carlo settles what it can on the rule's first candidate and evaluates the rest in full: its answer is
+    # that of every candidate tested at once
+    monkeypatch.setattr(dj.tolerance, "FIRST_CANDIDATES", 1)
+    a = dj.tolerance.analyse(pb, space, genes, samples=12, seed=0)
+    monkeypatch.setattr(dj.tolerance, "FIRST_CANDIDATES", 0)
+    b = dj.tolerance.analyse(pb, space, genes, samples=12, seed=0)
+    for k, v in b.items():
+        if isinstance(v, np.ndarray):
+            np.testing.assert_allclose(a[k], v, rtol=1e-13, atol=1e-15, err_msg=k)
+    for k in ("p_all", "p_holds", "picks_nan"):                # the verdicts exactly
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+
+
+@pytest.mark.slow   # compiles the designer's program three times (~30 CPU-s)
+def test_a_built_robot_is_judged_by_the_size_budget_of_its_drawing(toy):
+    """The rule that chooses a sample's operating R sees the size budget of the nominal (drawn) lengths: a built
+    robot whose arms came out longer than a budget its drawing meets is not infeasible (every candidate was, and the
+    rule fell back to the least violation: the first candidate without another violation, not the fastest)."""
+    pb, space, genes = toy
+    d = space.decode(genes[2]).robot
+    arms = float(d.upper_arm + d.forearm)
+    # a budget 1 mm under the nominal arms: every built robot exceeds it (each length within +- 0.2 mm)
+    tight = dataclasses.replace(pb, max_arm_sum=arms - 1e-3)
+    off = dataclasses.replace(pb, max_arm_sum=None, enabled=tuple(c for c in pb.enabled if c != "size_budget"))
+    drawn = arms - 2e-3                                                        # a drawing that meets it
+    built = _samples(tight, space, genes[2:3], 12)
+    judged = _samples(tight, space, genes[2:3], 12, drawn_arm_sum=drawn)
+    free = _samples(off, space, genes[2:3], 12)
+    j = list(dj.optimize.designer.CONSTRAINT_NAMES).index("size_budget")
+    assert np.all(built["g"][:, j] > 0) and np.all(judged["g"][:, j] < 0)
+    np.testing.assert_array_equal(judged["R_operating"], free["R_operating"])
+    np.testing.assert_array_equal(judged["picks_per_min"], free["picks_per_min"])
+    # judged on the built arms every sample is infeasible, whatever its operating R (the rule's fallback branch);
+    # judged on the drawing, as feasible as without the budget
+    assert not built["feasible"].any() and free["feasible"].any()
+    np.testing.assert_array_equal(judged["feasible"], free["feasible"])
+
+
 def test_percentiles_rank_nan_as_the_worst_value():
     from deltajax.tolerance import _ranked_percentiles
 

@@ -279,13 +279,22 @@ def _all_any_good(good, possible, Rs, pts, decided=None):
     return jnp.all(sat)
 
 
-def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> dict[str, jax.Array]:
+def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True, drawn_arm_sum=None,
+                      candidates: int = 0) -> dict[str, jax.Array]:
     """Every metric of one design plus ``g`` (constraint values, (5,)), ``violation`` (sum of positive parts)
     and ``feasible``; pure and vmappable. ``regular=False`` skips the regular workspace (NaN).
 
     One good-point evaluation (:func:`deltajax.constraints.good_point`) covers every R (the design's R samples
     and the operating-R candidates) at every sample (regular-workspace grid, task cylinder, cycle path): a
     single compiled kernel instead of one per use.
+
+    ``drawn_arm_sum``: the L1 + L2 that the size budget judges (default: the design's own). The tolerance Monte
+    Carlo passes the nominal design's: the budget limits the drawing, not each built robot.
+
+    ``candidates`` (with ``regular=False``): only the first ``candidates`` operating-R candidates in the order of
+    the rule that chooses among them (most picks per minute first, then the smaller R) are tested, and ``resolved``
+    says whether one of them is feasible: then the rule's choice, and every value, are the full evaluation's (the
+    rule takes the first feasible candidate in that order). Where none is, evaluate again without ``candidates``.
     """
     recon = isinstance(design, ReconfigurableDelta)
     robot0 = design.robot if recon else design
@@ -302,8 +311,18 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         Rs = jnp.zeros((0,), dt)
         plate = robot0.base_radius + pb.links.plate_overhang
         at = robot0.with_base_radius
+
+    def rates(Rs):   # the cycle's rate at each of the operating-R candidates ``Rs``
+        return jax.vmap(lambda R: C.cycle_rate(at(R), pb.cycle, pb.motor, gear, dwell=pb.dwell,
+                                               payload_mass=pb.payload))(Rs)
+
+    sel = None
+    if candidates and not regular and candidates < Rc.shape[0]:   # the rule's order: its first candidates only
+        rate_all = rates(Rc)
+        sel = jnp.argsort(-jnp.nan_to_num(rate_all.picks_per_min, nan=-1.0), stable=True)[:candidates]
+        Rc = Rc[sel]
     nc, ns = Rc.shape[0], Rs.shape[0]
-    arm_sum = robot0.upper_arm + robot0.forearm
+    arm_sum = robot0.upper_arm + robot0.forearm if drawn_arm_sum is None else jnp.asarray(drawn_arm_sum, dt)
     rays = regular and pb.rw_rays is not None        # the regular workspace found by rays: no point grid
     tp = jnp.asarray(pb.task_points, dt)
     cp = pb.cycle.x.astype(dt)
@@ -322,8 +341,7 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
         cand = jax.vmap(lambda R: jax.vmap(lambda p: C.good_point(at(R), p, pb.good, plate_radius=plate))(
             jnp.concatenate([tp, cp])))(Rc)                                     # (nc, P)
     t_sl, c_sl = slice(0, n_t), slice(n_t, None)
-    rate = jax.vmap(lambda R: C.cycle_rate(at(R), pb.cycle, pb.motor, gear, dwell=pb.dwell,
-                                           payload_mass=pb.payload))(Rc)
+    rate = rates(Rc) if sel is None else jax.tree_util.tree_map(lambda x: x[sel], rate_all)
     cands = {
         "task_good_fraction": jnp.mean(cand.good[:, t_sl].astype(dt), axis=1),
         "task_index_min": _nanmin(cand.index[:, t_sl]),
@@ -344,6 +362,8 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True) -> d
     k = jnp.argmax(score)
     out = {n: v[k] for n, v in cands.items()}
     out["R_operating"] = Rc[k]
+    if candidates:
+        out["resolved"] = jnp.any(viol_c <= 0) if sel is not None else jnp.asarray(True)
     out["gear_ratio"] = gear * jnp.ones((), dt)
     out["arm_sum"] = arm_sum
     nan = jnp.asarray(jnp.nan, dt)
