@@ -293,8 +293,9 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True, draw
 
     ``candidates`` (with ``regular=False``): only the first ``candidates`` operating-R candidates in the order of
     the rule that chooses among them (most picks per minute first, then the smaller R) are tested, and ``resolved``
-    says whether one of them is feasible: then the rule's choice, and every value, are the full evaluation's (the
-    rule takes the first feasible candidate in that order). Where none is, evaluate again without ``candidates``.
+    says whether one of them is feasible: then the rule's choice is the full evaluation's (it takes the first
+    feasible candidate in that order) and so are the values (the same functions at the same inputs, in another
+    compiled program: XLA may round the last bit differently). Where none is, evaluate again without ``candidates``.
     """
     recon = isinstance(design, ReconfigurableDelta)
     robot0 = design.robot if recon else design
