@@ -41,6 +41,7 @@ from .geometry import Delta, ReconfigurableDelta
 from .kinematics import ik
 from .mass import STANDARD_GRAVITY
 from .regular import polar_grid, regular_workspace
+from .tracing import shared_program
 from .trajectory import adept_cycle
 from .workspace.measure import reach_box, volume
 
@@ -168,8 +169,16 @@ def _positive(name: str, value, unit: str) -> float:
     return v
 
 
-@jax.jit
 def _rate(robot, cycle, motor, gear_ratio, dwell, payload):
+    """:func:`deltajax.cycle_rate` as one program, kept across processes (:func:`deltajax.tracing.shared_program`:
+    a new process reads it back instead of tracing the inverse dynamics again); ``gear_ratio``, ``dwell`` and
+    ``payload`` are passed as arrays of the robot's dtype."""
+    dt = robot.upper_arm.dtype
+    prog = shared_program("datasheet_rate", None, None, (), lambda: jax.jit(_rate_traced), persist=True)
+    return prog(robot, cycle, motor, *(jnp.asarray(v, dt) for v in (gear_ratio, dwell, payload)))
+
+
+def _rate_traced(robot, cycle, motor, gear_ratio, dwell, payload):
     return cycle_rate(robot, cycle, motor, gear_ratio, dwell=dwell, payload_mass=payload)
 
 
@@ -197,13 +206,15 @@ def regular_cylinder(robot: Delta, hd_ratio: float, *, n_r: int = 41, n_phi: int
     r_max = max(abs(x0), abs(x1), abs(y0), abs(y1))
     pts, r, z = polar_grid(r_max, max(z0, 0.0), z1, n_r, n_phi, n_z)
     dt = robot.upper_arm.dtype
-    return _regular_cylinder(robot, jnp.asarray(pts, dt), jnp.asarray(r), jnp.asarray(z), float(hd_ratio))
+    h = float(hd_ratio)
+    prog = shared_program("datasheet_cylinder", None, None, (h,),
+                          lambda: jax.jit(functools.partial(_regular_cylinder, hd_ratio=h)), persist=True)
+    return prog(robot, jnp.asarray(pts, dt), jnp.asarray(r), jnp.asarray(z))
 
 
-@functools.partial(jax.jit, static_argnums=4)
-def _regular_cylinder(robot: Delta, pts, r, z, hd_ratio: float):
+def _regular_cylinder(robot: Delta, pts, r, z, *, hd_ratio: float):
     """:func:`regular_cylinder`'s evaluation as one program (evaluated op by op it dispatched ~2 000 operations and
-    compiled ~90 small programs per design)."""
+    compiled ~90 small programs per design), kept across processes like :func:`_rate`'s."""
     return regular_workspace(lambda p: ik(robot, p).ok, pts, r, z, hd_ratio, refine=True)
 
 

@@ -31,7 +31,7 @@ from typing import Any, Mapping
 
 import numpy as np
 
-from .tracing import traced_once
+from .tracing import shared_program
 
 __all__ = ["ReportError", "write_report", "report_path", "WORKSPACE_POINTS", "JOB"]
 
@@ -96,9 +96,20 @@ def _good_workspace(design, reconfigurable: bool, pb, n_xy: int):
     return pts[good], h, len(pts)
 
 
-@traced_once   # one program for every design of every report in this process (a fresh closure traced each call)
 def _good_any(design, reconfigurable: bool, Rs, P, plate, good):
-    """Is each point of ``P`` good at any R of ``Rs``? (P,) bool."""
+    """Is each point of ``P`` good at any R of ``Rs``? (P,) bool. One program per process for every design of every
+    report, kept across processes (:func:`deltajax.tracing.shared_program`): a new process reads it back instead
+    of tracing the good test again."""
+    import functools
+
+    import jax
+
+    prog = shared_program("report_good_any", None, None, (bool(reconfigurable),),
+                          lambda: jax.jit(functools.partial(_good_any_traced, bool(reconfigurable))), persist=True)
+    return prog(design, Rs, P, plate, good)
+
+
+def _good_any_traced(reconfigurable: bool, design, Rs, P, plate, good):
     import jax
     import jax.numpy as jnp
 
@@ -125,8 +136,16 @@ def _motor_points(design, reconfigurable: bool, R_op: float, T: float, pb):
     return np.asarray(tau), np.asarray(om), bool(ok)
 
 
-@traced_once   # one program for the baseline's and the recommendation's cycles
 def _along(driven, cycle, motor, n, T):
+    """(motor torque, motor speed, every sample reachable) along ``cycle``: one program for the baseline's and the
+    recommendation's cycles, kept across processes like :func:`_good_any`'s."""
+    import jax
+
+    return shared_program("report_cycle", None, None, (), lambda: jax.jit(_along_traced), persist=True)(
+        driven, cycle, motor, n, T)
+
+
+def _along_traced(driven, cycle, motor, n, T):
     import jax.numpy as jnp
 
     from . import constraints as C

@@ -23,7 +23,7 @@ import jax
 import numpy as np
 
 __all__ = ["traced_once", "persistent", "program_cache_dir", "STATS", "PROGRAMS_KEPT", "content_key",
-           "stable_key", "shared_program", "PROGRAMS", "PROGRAMS_MAX", "forget"]
+           "stable_key", "shared_program", "PROGRAMS", "PROGRAMS_MAX", "forget", "kinds_in_use"]
 
 F = TypeVar("F", bound=Callable)
 
@@ -128,6 +128,11 @@ PROGRAMS_KEPT = 64
 _LOADED: dict = {}
 #: what :func:`persistent` did in this process (``exported``: traced and written, ``loaded``: read from disk)
 STATS = {"exported": 0, "loaded": 0}
+
+
+def kinds_in_use() -> list:
+    """The kinds of the programs :func:`persistent` exported or read back in this process, sorted."""
+    return sorted({kind for kind, _ in _LOADED})
 
 
 def persistent(fn: Callable, kind: str, key: str) -> Callable:

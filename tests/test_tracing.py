@@ -208,6 +208,7 @@ def test_a_second_process_of_the_main_job_builds_no_new_program(toy_run, tmp_pat
         print("RESULT", T.STATS["exported"], T.STATS["loaded"], events["/jax/compilation_cache/cache_misses"],
               events["/jax/compilation_cache/cache_hits"], events["/jax/compilation_cache/compile_requests_use_cache"],
               round(secs["/jax/core/compile/jaxpr_trace_duration"], 2))
+        print("KINDS", *T.kinds_in_use())
     """)
     env = {**os.environ, "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "1.0"}
     r = subprocess.run([sys.executable, "-c", script], env=env, capture_output=True, text=True, timeout=900)
@@ -218,3 +219,6 @@ def test_a_second_process_of_the_main_job_builds_no_new_program(toy_run, tmp_pat
           f"tracing {trace_s} s")
     assert exported == 0 and loaded > 0        # no program traced and exported anew: each was read back
     assert written == 0 and hits > 0           # no program of >= 1 s compiled anew
+    # the export and report stages' programs (datasheet, run report) are among those read back, not traced again
+    kinds = set([ln for ln in r.stdout.splitlines() if ln.startswith("KINDS")][0].split()[1:])
+    assert {"datasheet_rate", "datasheet_cylinder", "report_good_any", "report_cycle"} <= kinds, kinds
