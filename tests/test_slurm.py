@@ -150,7 +150,8 @@ def test_sharded_grid_merges_to_single_run_and_cpus_reach_the_worker(cluster):
     ref = _cli(cluster, [*TINY, f"hydra.run.dir={single}"])  # one local process, all CPUs
     sweep = tmp / "shards"
     _finish(_cli(cluster, ["-m", *TINY, "n_shards=3", "shard=0,1,2", *SLURM, "hydra.launcher.cpus_per_task=2",
-                           "hydra.launcher.mem_gb=2", f"hydra.sweep.dir={sweep}"]), "sharded sweep")
+                           "hydra.launcher.mem_gb=2", "hydra.callbacks.worker_env.host_devices=2",
+                           f"hydra.sweep.dir={sweep}"]), "sharded sweep")
     _finish(ref, "single run")
     merged = sweep / "merged" / "workspace_grid" / "results.h5"
     _assert_identical(merged, single / "results.h5")
@@ -164,7 +165,8 @@ def test_sharded_grid_merges_to_single_run_and_cpus_reach_the_worker(cluster):
         with h5py.File(sweep / s / "results.h5", "r") as f:
             env = json.loads(f.attrs["worker_env"])
             device = str(f.attrs["device"])
-        # SLURM_CPUS_PER_TASK=2 -> 2 XLA threads, 2 JAX host devices, 2 Numba threads in the job's process
+        # SLURM_CPUS_PER_TASK=2 -> 2 XLA threads and 2 Numba threads in the job's process; 2 JAX host devices as
+        # asked (the default is one: tests/test_sweeps.py), the merge bit-identical to the single run's one device
         assert env["cpus_from"] == "SLURM_CPUS_PER_TASK" and env["cpus"] == 2
         assert env["PJRT_NPROC"] == "2" and env["host_devices"] == 2 and env["numba_threads"] == 2
         assert device.endswith(" x2"), device

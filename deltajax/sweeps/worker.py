@@ -2,9 +2,14 @@
 
 :class:`WorkerEnv` is a Hydra callback (``configs/config.yaml``, ``hydra.callbacks.worker_env``) that sizes
 each job's process from its scheduler's allocation (:func:`resolve_worker_cpus`) and applies it
-(:func:`apply_worker_env`): one XLA thread pool per job sized to the job's CPUs (``PJRT_NPROC``), the job's
-CPUs exposed as that many JAX host devices (``jax_num_cpu_devices``) so that grid experiments can shard over
-them, and no GPU memory preallocation (``XLA_PYTHON_CLIENT_PREALLOCATE=false``) when several jobs share a GPU.
+(:func:`apply_worker_env`): one XLA thread pool per job sized to the job's CPUs (``PJRT_NPROC``), one JAX host
+device unless more are asked for (``jax_num_cpu_devices``, over which ``workspace_grid``'s JAX backend can shard),
+and no GPU memory preallocation (``XLA_PYTHON_CLIENT_PREALLOCATE=false``) when several jobs share a GPU.
+
+One host device by default, whatever the CPUs: XLA's persistent compilation cache keys every executable by the
+number of devices, so a process with another count (a SLURM task with other ``cpus_per_task``, a joblib worker,
+an in-process run of the library) would compile every program of the job again; the XLA thread pool already uses
+all the job's CPUs, and sharding a grid chunk over host devices measured no faster (docs/BENCHMARKS.md).
 """
 
 from __future__ import annotations
@@ -57,15 +62,15 @@ def resolve_worker_cpus(launcher_cfg: Optional[Mapping[str, Any]], environ: Mapp
     return max(1, avail), "all CPUs of the process"
 
 
-def apply_worker_env(cpus: int, host_devices: Optional[int] = None, gpu_preallocate: bool = False,
+def apply_worker_env(cpus: int, host_devices: Optional[int] = 1, gpu_preallocate: bool = False,
                      environ: Optional[dict] = None, malloc_reuse: bool = True) -> dict[str, Any]:
     """Set the environment of this process for ``cpus`` CPUs, before JAX creates its backend.
 
     * ``PJRT_NPROC=cpus``: XLA's CPU client sizes its thread pool from it (default: all cores of the node,
       which oversubscribes a node shared by several jobs);
     * ``OMP/MKL/OPENBLAS/NUMBA_NUM_THREADS=cpus`` for libraries loaded later;
-    * ``jax_num_cpu_devices=host_devices`` (only while no backend exists): the CPUs appear as that many JAX
-      devices, over which grid experiments shard their chunks;
+    * ``jax_num_cpu_devices=host_devices`` (only while no backend exists; ``None``: one per CPU): that many JAX
+      host devices, over which ``workspace_grid``'s JAX backend shards its chunks (default one: see the module);
     * ``XLA_PYTHON_CLIENT_PREALLOCATE=false`` unless ``gpu_preallocate``: several jobs can share one GPU;
     * with ``malloc_reuse``, glibc's allocator told to keep freed memory for reuse (:func:`keep_freed_memory`,
       before XLA's threads start): a batch program's outputs then land in memory already mapped instead of fresh
@@ -141,12 +146,12 @@ class WorkerEnv(Callback):
 
     Registered in ``configs/config.yaml`` under ``hydra.callbacks.worker_env``; its arguments are overrides:
     ``hydra.callbacks.worker_env.cpus=8`` (default: see :func:`resolve_worker_cpus`),
-    ``hydra.callbacks.worker_env.host_devices=1`` (default: one JAX host device per CPU),
+    ``hydra.callbacks.worker_env.host_devices=4`` (default 1; ``null``: one JAX host device per CPU),
     ``hydra.callbacks.worker_env.gpu_preallocate=true``, ``hydra.callbacks.worker_env.malloc_reuse=false``
     (glibc's defaults: freed buffers unmapped at once).
     """
 
-    def __init__(self, cpus: Optional[int] = None, host_devices: Optional[int] = None,
+    def __init__(self, cpus: Optional[int] = None, host_devices: Optional[int] = 1,
                  gpu_preallocate: bool = False, malloc_reuse: bool = True) -> None:
         self.cpus = cpus
         self.host_devices = host_devices
