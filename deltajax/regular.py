@@ -150,7 +150,9 @@ def refine_cylinder(good_fn: Callable[[Array], Array], start: RegularWorkspace, 
     Each distinct sample is tested once (the centre once per centre, the axis ring's repeats dropped:
     ``_distinct_offsets``), which changes the cost, not the answer.
     ``all_good(points (n, 3)) -> bool``: the same answer as ``all(good_fn(p) for p in points)``, computed
-    another way (e.g. stopping at the first bad point: :func:`deltajax.optimize.designer.evaluate_designer`).
+    another way (e.g. stopping at the first bad point: :func:`deltajax.optimize.designer.evaluate_designer`);
+    it is then the only test called: the centre joins every step's samples, so a compiled program holds one copy
+    of the good test (the centre's own call was a second one).
     Every step is a continuous function of the good set's boundary, so the measure moves continuously with
     the design (the grid's answer only places the brackets). Pure, vmappable; returns a
     :class:`RegularWorkspace`.
@@ -168,14 +170,22 @@ def refine_cylinder(good_fn: Callable[[Array], Array], start: RegularWorkspace, 
 
     def d_at(c):
         centre = jnp.stack([jnp.zeros((), dt), jnp.zeros((), dt), c])
-        # the centre itself (offset 0, the same point at every D) tested once per centre, not at every step:
-        # D = 0 when it is not good
-        centre_ok = good_fn(centre)
+        if all_good is None:
+            # the centre itself (offset 0, the same point at every D) tested once per centre, not at every step:
+            # D = 0 when it is not good
+            centre_ok = good_fn(centre)
+            samples = lambda mid: centre[None, :] + mid * unit  # noqa: E731
+        else:
+            # with ``all_good`` the centre joins every step's samples (the same answer: all of them good, or D = 0
+            # when the centre is not): one call of ``all_good`` at one shape, so the program holds one copy of the
+            # good test, not a second one for the centre
+            centre_ok = True
+            samples = lambda mid: jnp.concatenate([centre[None, :], centre[None, :] + mid * unit])  # noqa: E731
 
         def body(_, lh):
             lo, hi = lh
             mid = 0.5 * (lo + hi)
-            ok = centre_ok & test_all(centre[None, :] + mid * unit)
+            ok = centre_ok & test_all(samples(mid))
             return jnp.where(ok, mid, lo), jnp.where(ok, hi, mid)
 
         lo, _ = jax.lax.fori_loop(0, n_bisect, body, (0.0 * d_hi, d_hi))

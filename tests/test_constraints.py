@@ -333,19 +333,27 @@ def test_search_settings_of_the_refined_cylinder_against_closed_forms():
 def test_refine_cylinder_each_distinct_sample_once_and_all_good_give_the_same_answer():
     # refine_cylinder tests the centre once per centre and drops repeated samples (the axis ring repeats one point
     # per angle): the answer must be that of the samples as given, repeats and all; an ``all_good`` computing the
-    # same all() another way (here: the samples in reverse order) must not change it either
+    # same all() another way (here: the samples in reverse order) must not change it either, and is then the only
+    # test the refinement calls (the centre too: one copy of the good test in the program, not two)
     lam = 0.5
     pts, r, z = C.polar_grid(0.40, 0.15, 0.78, 16, 3, 22)
     unit = C.cylinder_samples(lam, 3, 2, 3)
-    def run(u, **kw):
+    def run(u, good_fn=None, **kw):
         good = _ball(0.45, 0.18)
         g = jax.vmap(good)(jnp.asarray(pts).reshape(-1, 3)).reshape(pts.shape[:3])
         start = C.largest_cylinder(jnp.all(g, axis=2), r, z, lam)
-        return C.refine_cylinder(good, start, r, z, lam, unit=u, n_bisect=10, n_golden=8, **kw)
+        return C.refine_cylinder(good_fn or good, start, r, z, lam, unit=u, n_bisect=10, n_golden=8, **kw)
 
     base = run(unit)
     doubled = run(np.concatenate([unit, unit, np.zeros((2, 3))]))       # repeats and extra centres
-    rev = run(unit, all_good=lambda P: jnp.all(jax.vmap(_ball(0.45, 0.18))(P[::-1])))
+    calls = []
+
+    def good_counted(p):
+        calls.append(p.shape)
+        return _ball(0.45, 0.18)(p)
+
+    rev = run(unit, good_fn=good_counted, all_good=lambda P: jnp.all(jax.vmap(_ball(0.45, 0.18))(P[::-1])))
+    assert calls == []
     for o in (doubled, rev):
         for a, b in zip(base, o):
             assert float(a) == float(b)
