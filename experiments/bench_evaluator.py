@@ -12,9 +12,10 @@ screen; ``--fine``: the verification's problem, its regular workspace found by r
 :func:`deltajax.optimize.programs.batch_evaluator` builds them, compiled before timing.
 
 Printed: CPU-ms (``resource.getrusage``, both cores) and wall ms per design, median over ``--reps`` interleaved
-rounds, the ratio old / new (on a shared machine absolute times drift with the load; ratios measured in one
-process, interleaved, do not), and for every output the largest absolute difference between the two (0 and
-"identical" when they agree bit for bit, NaN in the same places).
+rounds, what building each program cost (tracing and lowering, compiling: CPU-s) and its size (while loops in the
+lowered program, lines of the optimised HLO), the ratio old / new (on a shared machine absolute times drift with
+the load; ratios measured in one process, interleaved, do not), and for every output the largest absolute
+difference between the two (0 and "identical" when they agree bit for bit, NaN in the same places).
 """
 
 from __future__ import annotations
@@ -119,10 +120,17 @@ def main(argv=None):
     old_eval = load_old(args.old_ref)
     progs = {name: jax.jit(jax.vmap(lambda g, f=f: f(pb, space.decode(g), regular=True)))
              for name, f in (("old", old_eval), ("new", evaluate_designer))}
-    outs, first = {}, {}
-    for name, f in progs.items():
-        first[name] = _timed(f, X)[0]
-        outs[name] = {k: np.asarray(v) for k, v in f(X).items()}
+    outs, built = {}, {}
+    for name, f in progs.items():   # each program's size and what building it costs (tracing + lowering, compiling)
+        c0 = _cpu()
+        lowered = f.lower(X)
+        c1 = _cpu()
+        compiled = lowered.compile()
+        c2 = _cpu()
+        built[name] = (c1 - c0, c2 - c1, lowered.as_text().count("stablehlo.while"),
+                       len(compiled.as_text().splitlines()))
+        progs[name] = compiled
+        outs[name] = {k: np.asarray(v) for k, v in compiled(X).items()}
     rows = {k: [] for k in progs}
     for _ in range(args.reps):
         for name, f in progs.items():
@@ -134,8 +142,10 @@ def main(argv=None):
           f"{n} Sobol designs (seed {args.seed}) per call; median of {args.reps} interleaved rounds")
     for name in progs:
         c, w = med[name]
-        print(f"{name:4s} {c / n * 1e3:8.2f} CPU-ms/design {w / n * 1e3:8.2f} wall-ms/design  "
-              f"(first call, with compilation: {first[name]:.1f} CPU-s)")
+        lo, co, loops, lines = built[name]
+        print(f"{name:4s} {c / n * 1e3:8.2f} CPU-ms/design {w / n * 1e3:8.2f} wall-ms/design  (building: tracing and "
+              f"lowering {lo:.1f} CPU-s, {loops} while loops; compiling {co:.1f} CPU-s, {lines} lines of "
+              "optimised HLO)")
     print(f"ratio old/new: CPU {med['old'][0] / med['new'][0]:.2f}x, wall {med['old'][1] / med['new'][1]:.2f}x")
     same = True
     print(f"{'output':26s} {'max |old - new|':>16s}")
