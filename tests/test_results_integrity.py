@@ -85,6 +85,55 @@ def test_the_record_survives_many_groups_and_attributes_and_xarray_reads_the_fil
     assert int(dio.open_xarray(res.path, "group_7/nested_7").v[2]) == 2
 
 
+def _walked_record(path):
+    """The integrity record computed by walking the file as written (every attribute read back from HDF5)."""
+    from deltajax.io.integrity import integrity_record, stored_record
+
+    with h5py.File(path, "r") as f:
+        walked = json.loads(integrity_record(f)[len(dio.INTEGRITY_MAGIC):])["groups"]
+        return walked, stored_record(f)
+
+
+def test_the_writers_record_is_the_files_own_flush_after_flush(tmp_path):
+    """The writer remembers each dataset's record entry by what it wrote (it does not read the attributes back
+    on every flush): after flushes that change a dataset's data, its attributes, or only an attribute's type,
+    and add groups, the stored record is the one computed by walking the file."""
+    res = dio.ResultsFile(tmp_path / "r.h5", attrs={"experiment": "demo", "levels": [1, 2, 3], "none": None})
+    res.put_axis("g", "x", np.arange(3.0), units="m")
+    res.put("g", "v", np.ones(3), units="1", dims=("x",), attrs={"flag": True, "limits": [0.5, 2.0]})
+    res.put("g/sub", "names", np.asarray(["a", "bb"], dtype=object), units="1", attrs={"source": "here"})
+    res.set_attrs("h/only_attrs", note="a group with attributes and no dataset")
+    steps = [lambda: None,
+             lambda: res.put("g", "v", np.zeros(3), units="1", dims=("x",), attrs={"flag": True, "limits": [0.5, 2]}),
+             lambda: res.put("g", "v", np.zeros(3), units="1", dims=("x",), attrs={"flag": 1, "limits": [0.5, 2]}),
+             lambda: res.put("g", "v", np.zeros(3), units="m", dims=("x",), attrs={"flag": 1, "limits": [0.5, 3]}),
+             lambda: res.put("g/sub/deeper", "w", np.arange(4), units="1", long_name="another level")]
+    seen = []
+    for step in steps:
+        step()
+        res.flush()
+        walked, stored = _walked_record(res.path)
+        assert stored == walked
+        seen.append(stored["g"]["members"]["v"])
+        assert dio.load(res.path)["g"]["v"].sum() == (3.0 if len(seen) == 1 else 0.0)
+    assert len(set(seen[:4])) == 4        # data, an attribute's type, units and a value each change the entry
+    assert stored["g/sub"]["members"]["deeper"] == "group" and "h/only_attrs" in stored
+
+
+def test_load_groups_reads_the_groups_asked_for_as_load_does(tmp_path):
+    res = dio.ResultsFile(tmp_path / "r.h5", attrs={"experiment": "demo"})
+    res.put("a", "v", np.arange(3.0), units="m")
+    res.put("a/b", "w", np.ones(2), units="1")
+    res.put("c", "u", np.zeros(1), units="1")
+    res.flush()
+    whole = dio.load(res.path)
+    some = dio.load_groups(res.path, ("a", "missing"))
+    assert set(some) == {"a"}
+    assert np.array_equal(some["a"]["v"], whole["a"]["v"])
+    assert np.array_equal(some["a"]["b"]["w"], whole["a"]["b"]["w"])
+    assert some["a"]["units"] == whole["a"]["units"] and some["a"]["units"]["v"] == "m"
+
+
 def test_an_edited_shard_is_never_merged(tmp_path, monkeypatch):
     """The merge reads finished shards verified: an edited one would otherwise get fresh checksums in the merge."""
     from deltajax.sweeps import REDUCERS, ShardError, merge_shards

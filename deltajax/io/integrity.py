@@ -15,13 +15,14 @@ from __future__ import annotations
 
 import hashlib
 import json
-from typing import Any, Iterable
+from typing import Any, Iterable, Mapping, Optional
 
 import h5py
 import numpy as np
 
 __all__ = ["ChecksumError", "checksum", "read_checked", "verify_dataset", "INTEGRITY_MAGIC", "userblock_size",
-           "record_size_bound", "integrity_record", "stored_record", "verify_group", "to_python"]
+           "record_size_bound", "integrity_record", "dataset_hash", "recorded_attrs", "stored_record", "verify_group",
+           "to_python"]
 
 
 class ChecksumError(ValueError):
@@ -54,13 +55,14 @@ def read_checked(dset: "h5py.Dataset") -> np.ndarray:
     return data
 
 
-def verify_dataset(dset: "h5py.Dataset", data: Any) -> None:
-    """Check ``data`` (as read from ``dset``; ``None`` when not read) against the dataset's ``checksum`` attribute.
+def verify_dataset(dset: "h5py.Dataset", data: Any, attrs: Optional[Mapping[str, Any]] = None) -> None:
+    """Check ``data`` (as read from ``dset``; ``None`` when not read) against the dataset's ``checksum`` attribute
+    (``attrs``: the dataset's attributes, when the caller has read them already).
 
     Raises:
         ChecksumError: the attribute is missing or does not match (the message names file and dataset).
     """
-    want = dset.attrs.get("checksum")
+    want = (dset.attrs if attrs is None else attrs).get("checksum")
     want = want.decode() if isinstance(want, bytes) else want
     where = f"{dset.file.filename}:{dset.name}"
     if not want:
@@ -96,28 +98,51 @@ def _attr_hash(value: Any) -> str:
     return checksum(np.asarray(to_python(value)))[7:7 + _HASH_CHARS]
 
 
-def _member_hash(item) -> str:
-    """Checksum of a group's member: "group" for a subgroup; a dataset's attributes (units, checksum, ...; not
-    the dimension-scale wiring) for a dataset."""
-    if isinstance(item, h5py.Group):
-        return "group"
+def dataset_hash(attrs: Mapping[str, Any]) -> str:
+    """The record's checksum of a dataset from its attributes as read from the file (``{name: dset.attrs[name]}``,
+    every name; the dimension-scale wiring is left out): units, checksum and the others."""
     h = hashlib.sha256()
-    for k in sorted(item.attrs):
+    for k in sorted(attrs):
         if k not in _LAYOUT_ATTRS:
-            h.update(f"{k}={_attr_hash(item.attrs[k])}\0".encode())
+            h.update(f"{k}={_attr_hash(attrs[k])}\0".encode())
     return h.hexdigest()[:_HASH_CHARS]
 
 
-def _group_record(g: "h5py.Group") -> dict:
+def _member_hash(item) -> str:
+    """Checksum of a group's member: "group" for a subgroup; a dataset's attributes (units, checksum, ...; not
+    the dimension-scale wiring) for a dataset (:func:`dataset_hash`)."""
+    if isinstance(item, h5py.Group):
+        return "group"
+    return dataset_hash(recorded_attrs(item))
+
+
+def recorded_attrs(dset: "h5py.Dataset", keep: tuple = ()) -> dict:
+    """A dataset's attributes as read from the file, but the dimension-scale wiring (slow to read, and left out
+    of the record) other than the names in ``keep``."""
+    return {k: dset.attrs[k] for k in dset.attrs if k not in _LAYOUT_ATTRS or k in keep}
+
+
+def _group_record(g: "h5py.Group", known: Optional[Mapping[str, str]] = None) -> dict:
+    """A group's entry of the record; ``known``: member name -> :func:`dataset_hash` of datasets whose attributes
+    the caller has already read from this file (the others are read here)."""
+    known = known or {}
     return {"attrs": {k: _attr_hash(g.attrs[k]) for k in sorted(g.attrs)},
-            "members": {k: _member_hash(g[k]) for k in sorted(g)}}
+            "members": {k: known[k] if k in known else _member_hash(g[k]) for k in sorted(g)}}
 
 
-def integrity_record(f: "h5py.File") -> bytes:
-    """The integrity record of an open file: per group ("" for the root) its attributes' and members' checksums."""
-    groups = {"": _group_record(f)}
-    f.visititems(lambda name, item: groups.__setitem__(name, _group_record(item))
-                 if isinstance(item, h5py.Group) else None)
+def integrity_record(f: "h5py.File", known: Optional[Mapping[str, Mapping[str, str]]] = None,
+                     names: Optional[Iterable[str]] = None) -> bytes:
+    """The integrity record of an open file: per group ("" for the root) its attributes' and members' checksums.
+    ``known``: group name -> {member name: its checksum ("group" for a subgroup, :func:`dataset_hash` for a
+    dataset)} already known from what was written; ``names``: every group of the file, when the writer knows them
+    (else the file is walked)."""
+    known = known or {}
+    if names is not None:
+        groups = {n: _group_record(f[n] if n else f, known.get(n)) for n in names}
+    else:
+        groups = {"": _group_record(f, known.get(""))}
+        f.visititems(lambda name, item: groups.__setitem__(name, _group_record(item, known.get(name)))
+                     if isinstance(item, h5py.Group) else None)
     return INTEGRITY_MAGIC + json.dumps({"groups": groups}, sort_keys=True, separators=(",", ":")).encode() + b"\n"
 
 
@@ -137,13 +162,15 @@ def stored_record(f: "h5py.File") -> dict:
         raise ChecksumError(f"{f.filename}: its integrity record is damaged") from None
 
 
-def verify_group(f: "h5py.File", record: dict, name: str, g: "h5py.Group") -> None:
-    """Check a group's attributes and members against the file's integrity record (:class:`ChecksumError`)."""
+def verify_group(f: "h5py.File", record: dict, name: str, g: "h5py.Group",
+                 known: Optional[Mapping[str, str]] = None) -> None:
+    """Check a group's attributes and members against the file's integrity record (:class:`ChecksumError`).
+    ``known``: dataset name -> :func:`dataset_hash` of members whose attributes the caller has read already."""
     where = f"{f.filename}:/{name}" if name else f"{f.filename}:/ (root)"
     want = record.get(name)
     if not isinstance(want, dict):
         raise ChecksumError(f"{where} is not in the file's integrity record (a group added after it was written)")
-    have = _group_record(g)
+    have = _group_record(g, known)
     for kind, what in (("attrs", "attribute"), ("members", "member")):
         a, b = have[kind], want.get(kind, {})
         for k in sorted(set(a) | set(b)):

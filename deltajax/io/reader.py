@@ -19,10 +19,10 @@ from typing import Any, Mapping, Optional, Sequence
 import h5py
 import numpy as np
 
-from .integrity import stored_record, to_python, verify_dataset, verify_group
+from .integrity import dataset_hash, recorded_attrs, stored_record, to_python, verify_dataset, verify_group
 
-__all__ = ["Variable", "Contents", "ResultsGroupError", "read", "load", "groups", "open_xarray", "differences",
-           "RUN_ATTRS", "verify_file"]
+__all__ = ["Variable", "Contents", "ResultsGroupError", "read", "load", "load_groups", "groups", "open_xarray",
+           "differences", "RUN_ATTRS", "verify_file"]
 
 
 class ResultsGroupError(KeyError):
@@ -95,15 +95,19 @@ def read(path: os.PathLike, group: Optional[str] = None, *, max_elements: Option
         def walk(name: str, grp: h5py.Group) -> None:
             group_attrs[name] = {k: to_python(v) for k, v in grp.attrs.items()}
             own = variables.setdefault(name, {})
+            known = {}   # the record's checksums of the datasets read (their attributes are read once)
             for key, item in grp.items():
                 if isinstance(item, h5py.Group):
                     walk(f"{name}/{key}" if name else key, item)
                 elif max_elements is None or item.size <= max_elements:
-                    own[key] = _variable(key, item, verify)
+                    raw = recorded_attrs(item, keep=("CLASS",))
+                    own[key] = _variable(key, item, raw, verify)
+                    if verify:
+                        known[key] = dataset_hash(raw)
                 elif verify and "checksum" not in item.attrs:
                     verify_dataset(item, None)  # not read, but a dataset without its checksum is refused all the same
             if verify:  # after the datasets: a removed checksum attribute is named as such
-                verify_group(f, record, name, grp)
+                verify_group(f, record, name, grp, known)
 
         walk(top, g)
         if verify and top:
@@ -111,21 +115,22 @@ def read(path: os.PathLike, group: Optional[str] = None, *, max_elements: Option
     return Contents(attrs=root, group_attrs=group_attrs, variables=variables, top=top)
 
 
-def _variable(name: str, dset: "h5py.Dataset", verify: bool = False) -> Variable:
+def _variable(name: str, dset: "h5py.Dataset", raw: dict, verify: bool = False) -> Variable:
+    """A dataset as a :class:`Variable`; ``raw``: its attributes as read (:func:`recorded_attrs` and ``CLASS``)."""
     if dset.dtype.kind == "O" or h5py.check_string_dtype(dset.dtype) is not None:
         data = dset.asstr()[()]
     else:
         data = dset[()]
     if verify:
-        verify_dataset(dset, data)
-    is_axis = to_python(dset.attrs.get("CLASS", "")) == "DIMENSION_SCALE"
+        verify_dataset(dset, data, raw)
+    is_axis = to_python(raw.get("CLASS", "")) == "DIMENSION_SCALE"
     if is_axis:
         dims: tuple = (name,)
     else:
         dims = tuple((to_python(next(iter(d.keys()))) if len(d) else f"{name}_dim{i}")
                      for i, d in enumerate(dset.dims))
-    units = to_python(dset.attrs["units"]) if "units" in dset.attrs else None
-    attrs = {k: to_python(v) for k, v in dset.attrs.items() if k not in _WIRING_ATTRS}
+    units = to_python(raw["units"]) if "units" in raw else None
+    attrs = {k: to_python(v) for k, v in raw.items() if k not in _WIRING_ATTRS}
     return Variable(data=data, units=units, dims=dims, attrs=attrs, is_axis=is_axis)
 
 
@@ -189,6 +194,18 @@ def load(path: os.PathLike, group: Optional[str] = None, *, verify: bool = True)
             parent = name.rpartition("/")[0] if "/" in name else ""
             nested[parent][name.rpartition("/")[2]] = node
     return nested[top]
+
+
+def load_groups(path: os.PathLike, names: Sequence[str], *, verify: bool = True) -> dict[str, dict[str, Any]]:
+    """The groups ``names`` of a results file that it holds, each as :func:`load` returns it (a missing group is
+    left out): what a job's later stage reads back of its own file, without reading (and checking) the rest."""
+    out = {}
+    for name in names:
+        try:
+            out[name] = load(path, name, verify=verify)
+        except ResultsGroupError:
+            continue
+    return out
 
 
 def open_xarray(path: os.PathLike, group: str, *, verify: bool = True):

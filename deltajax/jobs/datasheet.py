@@ -30,7 +30,7 @@ def _designs_from_run(spec, ctx):
     """[(name, robot, motor, gear ratio, R)] of a ga_reconfig run's baseline and recommended designs."""
     from .. import io
 
-    S = io.load(os.path.join(spec.source, "results.h5")).get("summary") or {}
+    S = io.load_groups(os.path.join(spec.source, "results.h5"), ("summary",)).get("summary") or {}
     if "recommended_params" not in S:
         raise ConfigError(f"source={spec.source!r}: the run has no recommendation (group summary; unfinished run or "
                           "no feasible design)")

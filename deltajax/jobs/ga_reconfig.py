@@ -403,7 +403,7 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
     from ..tracing import forget
 
     ctx, res, s, space, objs, sense, jp = st.ctx, st.res, st.s, st.space, st.objs, st.sense, st.jp
-    V = load(st.path)["verify"]
+    V = load(st.path, "verify")
     space_v = dataclasses.replace(space, n_R=s.verify.n_R) if space.reconfigurable else space
     pb = W.designer_problem(s, fine=True)
     names = [str(n) for n in np.asarray(V["design_name"]).reshape(-1)]
@@ -468,7 +468,7 @@ def _tolerance(st: State) -> None:
     recommendation (group ``tolerance/robust``; ``verify``'s ``recommended`` becomes it, ``recommended_nominal``
     keeps the nominal one)."""
     from .. import tolerance as TL
-    from ..io import load
+    from ..io import load_groups
     from . import designer_report as R
     from . import designer_store as DS
     from ..optimize import robust as RB
@@ -476,7 +476,7 @@ def _tolerance(st: State) -> None:
     from ..optimize.certify import overlay
 
     ctx, res, s, space, sense, jp = st.ctx, st.res, st.s, st.space, st.sense, st.jp
-    V = overlay(load(st.path))                          # what verify and certify stored
+    V = overlay(load_groups(st.path, ("verify", "certify")))   # what verify and certify stored
     space_v = dataclasses.replace(space, n_R=s.verify.n_R) if space.reconfigurable else space
     pb_fine = W.designer_problem(s, fine=True, nominal=True)   # a built robot is judged by the stated constraints
     tol = R.tolerances_of(s)
@@ -551,11 +551,11 @@ def _export(st: State) -> None:
     import json
 
     from .. import export
-    from ..io import load, write_atomic
+    from ..io import load_groups, write_atomic
     from .datasheet import run_designs, write
 
     ctx = st.ctx
-    summary = load(st.path).get("summary") or {}
+    summary = load_groups(st.path, ("summary",)).get("summary") or {}
     if "metric_name" not in summary:     # the results stage found no feasible design: nothing to take out
         ctx.log("export: no recommended design (no feasible candidate on the fine grids), so no datasheets and no "
                 "model files")
