@@ -237,7 +237,9 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
         results = ResultsFile(run_dir / "results.h5", attrs=attrs)
         ctx = RunContext(cfg=cfg, run_dir=run_dir, results=results, robot=robot, recon=recon, settings=settings)
         t0 = time.perf_counter()
-        with console_through_tqdm():
+        from .jobs.stages import collecting_by_stage
+
+        with console_through_tqdm(), collecting_by_stage():   # one scope for all of the job's stage runners
             module.run(ctx)
             results.set_attrs(wall_time_s=time.perf_counter() - t0)
             path = results.flush(final=True)

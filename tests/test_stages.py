@@ -193,3 +193,36 @@ def test_resize_bar_ends_a_bar_full_when_a_stage_needs_more_or_less_than_planned
         bar.update(1)
         resize_bar(bar, 1)
         assert (bar.n, bar.total) == (1, 1)
+
+
+def test_stage_ends_collect_only_what_the_stage_made_and_the_run_leaves_nothing_frozen(tmp_path):
+    """Within a run each stage end collects the cycles made since the last one (what survived is frozen, not walked
+    again); a cycle dropped in a stage is collected at its end; after the run (finished or raising) nothing stays
+    frozen."""
+    import gc
+    import weakref
+
+    class Node:
+        pass
+
+    seen = {}
+
+    def make(st: State) -> None:            # a cycle that dies inside the stage: collected at its end
+        a, b = Node(), Node()
+        a.other, b.other = b, a
+        seen["ref"] = weakref.ref(a)
+
+    def check(st: State) -> None:
+        seen["collected"] = seen["ref"]() is None
+        seen["frozen"] = gc.get_freeze_count()
+
+    def fail(st: State) -> None:
+        raise RuntimeError("a stage fails")
+
+    assert gc.get_freeze_count() == 0
+    ctx = _ctx(tmp_path / "r.h5")
+    assert Runner(ctx, "toy").run((Stage("make", make), Stage("check", check)), State(ctx=ctx))
+    assert seen["collected"] and seen["frozen"] > 0 and gc.get_freeze_count() == 0
+    with pytest.raises(RuntimeError, match="a stage fails"):
+        Runner(ctx, "toy").run((Stage("make", make), Stage("fail", fail)), State(ctx=ctx))
+    assert gc.get_freeze_count() == 0
