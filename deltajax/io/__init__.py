@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import datetime as _dt
 import errno as _errno
+import hashlib
 import itertools
 import os
 import subprocess
@@ -333,7 +334,7 @@ _IMAGE_IDS = itertools.count()
 #: reading its attributes back through h5py to checksum them was most of a flush (~0.3 s of ~0.6 s per flush of
 #: the toy main job's file); the same written attributes read back the same, so each is read back once
 _DATASET_HASHES: dict = {}
-_DATASET_HASHES_MAX = 1 << 16
+_DATASET_HASHES_MAX = 1 << 14   # entries of ~0.2 kB (a run writes a few hundred datasets)
 
 
 def _written_key(x: Any) -> tuple:
@@ -347,8 +348,9 @@ def _written_key(x: Any) -> tuple:
 def _dataset_hash(dset: h5py.Dataset, v: _Var, cs: str) -> str:
     """:func:`~deltajax.io.integrity.dataset_hash` of a dataset just written from ``v`` (checksum ``cs``): read
     back from ``dset`` the first time these attributes are written, remembered after that."""
-    key = (cs, _written_key(v.units),
-           tuple((k, _written_key(_attr_value(a))) for k, a in v.attrs.items() if k != "index_axis"))
+    written = (cs, _written_key(v.units),
+               tuple((k, _written_key(_attr_value(a))) for k, a in v.attrs.items() if k != "index_axis"))
+    key = hashlib.sha256(repr(written).encode()).digest()
     h = _DATASET_HASHES.get(key)
     if h is None:
         h = dataset_hash(recorded_attrs(dset))
