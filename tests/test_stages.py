@@ -196,9 +196,9 @@ def test_resize_bar_ends_a_bar_full_when_a_stage_needs_more_or_less_than_planned
 
 
 def test_stage_ends_collect_only_what_the_stage_made_and_the_run_leaves_nothing_frozen(tmp_path):
-    """Within a run each stage end collects the cycles made since the last one (what survived is frozen, not walked
-    again); a cycle dropped in a stage is collected at its end; after the run (finished or raising) nothing stays
-    frozen."""
+    """Within a run each stage end collects the cycles made since the last one (what was alive before the run and
+    what survived a stage end is frozen, not walked again); a cycle dropped in a stage is collected at its end;
+    after the run (finished or raising) nothing stays frozen."""
     import gc
     import weakref
 
@@ -208,6 +208,7 @@ def test_stage_ends_collect_only_what_the_stage_made_and_the_run_leaves_nothing_
     seen = {}
 
     def make(st: State) -> None:            # a cycle that dies inside the stage: collected at its end
+        seen["frozen_at_start"] = gc.get_freeze_count()   # what was alive before the run is not walked again
         a, b = Node(), Node()
         a.other, b.other = b, a
         seen["ref"] = weakref.ref(a)
@@ -222,7 +223,7 @@ def test_stage_ends_collect_only_what_the_stage_made_and_the_run_leaves_nothing_
     assert gc.get_freeze_count() == 0
     ctx = _ctx(tmp_path / "r.h5")
     assert Runner(ctx, "toy").run((Stage("make", make), Stage("check", check)), State(ctx=ctx))
-    assert seen["collected"] and seen["frozen"] > 0 and gc.get_freeze_count() == 0
+    assert seen["frozen_at_start"] > 0 and seen["collected"] and seen["frozen"] > 0 and gc.get_freeze_count() == 0
     with pytest.raises(RuntimeError, match="a stage fails"):
         Runner(ctx, "toy").run((Stage("make", make), Stage("fail", fail)), State(ctx=ctx))
     assert gc.get_freeze_count() == 0

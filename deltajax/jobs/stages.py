@@ -63,9 +63,12 @@ def collecting_by_stage():
     """Within it, each :func:`release_memory` freezes what its collection found alive (``gc.freeze``), so the next
     one only walks the objects made since: a stage's tracing leaves millions of live objects (JAX's caches; a toy
     main-job run that traces its programs held 2.5 M) and a full collection walked them all at every stage end,
-    ~1.4 s each. On leaving the outermost scope everything is unfrozen (the next collection sees it all again)."""
+    ~1.4 s each. What is alive on entering the outermost scope (the imports, an earlier run's caches in the same
+    process) is frozen too. On leaving it everything is unfrozen (the next collection sees it all again)."""
     import gc
 
+    if not _SCOPES[0]:
+        gc.freeze()
     _SCOPES[0] += 1
     try:
         yield
