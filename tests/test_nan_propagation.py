@@ -1,9 +1,11 @@
 """Failure is data at every batch size: invalid designs, non-finite points/angles and failed IK give NaN (and
-``ok=False``) from every public per-configuration function, vmapped at batch 1, 8 and 4096, jitted and not, in
+``ok=False``) from every public per-configuration function, vmapped at batch 1, 8 and 4096 jitted (1 and 4096 not), in
 float32 and float64 (XLA:CPU's vectorised loops dropped NaN through ``jnp.minimum`` at 4096 but not at 1 or 8).
 
 One compiled function per (function, dtype), always called at 4096 rows (the small batches are the first rows of
-that batch, padded with the valid case); the un-jitted vmap runs at 1 and 8 rows.
+that batch, padded with the valid case). The un-jitted vmap runs at 1 row (XLA:CPU's scalar loops) and at 4096
+(its vectorised loops, where the NaN was lost); 8 rows run the same vectorised loops as 4096, and each size costs
+its own compilation of every primitive (~10 CPU-s per size un-jitted, 2026-12-06).
 """
 
 import functools
@@ -36,6 +38,8 @@ CASES = [
     (GOOD, (NAN, 0.05, 0.4), (0.3, 0.5, 0.7), False),            # non-finite point
 ]
 BIG = 4096
+#: the un-jitted batch sizes: XLA:CPU's scalar loops and its vectorised ones (module docstring)
+EAGER_ROWS = (1, BIG)
 
 
 def _cast(tree, dtype):
@@ -158,7 +162,7 @@ def test_invalid_input_is_nan_at_every_batch_size(dtype):
     if dtype == jnp.float64:  # un-jitted float64: every function (EAGER_FAST included), the test below
         return
     eager = _per_row(EAGER_FAST, dtype)
-    for n in (1, 8, BIG):                                                      # no jit
+    for n in EAGER_ROWS:                                                       # no jit
         _check_all(eager(x[:n], p[:n], t[:n]), valid, n)
 
 
@@ -168,7 +172,7 @@ def test_invalid_input_is_nan_unjitted_every_function():
     dtype = jnp.float64
     x, p, t, valid = _batch(BIG, dtype)
     eager = _per_row(tuple(FUNCS), dtype)
-    for n in (1, 8, BIG):
+    for n in EAGER_ROWS:
         _check_all(eager(x[:n], p[:n], t[:n]), valid, n)
 
 

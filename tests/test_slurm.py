@@ -237,14 +237,16 @@ def _ga_overrides():
     under load; one every 100 made the GA so quick on an idle machine with a warm cache that it finished before
     scancel landed, CI 2026-12-01); the screen, Pareto, refine and floor stages off (what is checked is the GA's
     cancel, resubmit and bit-identical finish; with the screen and refine on, each of the three SLURM processes
-    compiled them: ~33 s of each job on its one CPU); every other size is the suite's toy main job
+    compiled them: ~33 s of each job on its one CPU), and the tolerance stage (a Monte Carlo of the finished
+    recommendation: ~3.5 s of each finished job); every other size is the suite's toy main job
     (tests/toy_jobs.py: one source, so this job costs what the toy run costs -- its own copy of the sizes missed
     ``certify_doublings=0`` and the job outgrew its 3 GB, CI 2026-12-04)."""
     ga = ("experiment.ga.population_size=", "experiment.ga.generations=", "experiment.ga.checkpoint_every=")
     toy = [o for o in TOY["ga_reconfig"] if not o.startswith(ga) and not o.endswith(".enabled=true")]
     return ["experiment=ga_reconfig", "plots=false", "progress=false", "seed=0", *toy,
             "experiment.ga.population_size=8", "experiment.ga.generations=3000",  # ~5 ms each: time to cancel
-            "experiment.ga.checkpoint_every=10", "experiment.screen.enabled=false", *GA_STAGES_OFF]
+            "experiment.ga.checkpoint_every=10", "experiment.screen.enabled=false",
+            "experiment.tolerance.enabled=false", *GA_STAGES_OFF]
 
 
 def _generations_done(path):
