@@ -109,11 +109,13 @@ class RunContext:
         return tqdm(iterable, total=total, desc=desc, disable=not self.cfg.get("progress", True),
                     file=sys.stderr, mininterval=1.0)
 
-    def savefig(self, fig, name: str) -> Optional[Path]:
+    def savefig(self, fig, name: str, *, crop: bool = True) -> Optional[Path]:
         """Render a matplotlib figure for ``<run_dir>/<name>.png`` (if ``plots=true``) and close it.
 
         The PNG is rendered now and written after the final results.h5 (:meth:`write_figures`), so a failure
         while writing figures (a full disk) never costs results. Returns the path the figure will have.
+        ``crop``: cropped to what is drawn (``bbox_inches="tight"``, which lays the figure out twice); False for
+        a page of fixed size (a datasheet's A4), saved as laid out.
         """
         import io
 
@@ -123,7 +125,7 @@ class RunContext:
         if self.cfg.get("plots", True):
             path = self.run_dir / f"{name}.png"
             buf = io.BytesIO()
-            fig.savefig(buf, format="png", dpi=120, bbox_inches="tight")
+            fig.savefig(buf, format="png", dpi=120, bbox_inches="tight" if crop else None)
             self.figures.append((path, buf.getvalue()))
         plt.close(fig)
         return path

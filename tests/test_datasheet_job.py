@@ -1,6 +1,8 @@
 """experiment=datasheet: the table in results.h5 (units on every column) is dj.datasheet's, and its settings are
 checked before anything compiles."""
 
+import struct
+
 import numpy as np
 import pytest
 
@@ -72,4 +74,6 @@ def test_datasheet_of_a_ga_run_uses_its_designs_and_drive(toy_run, tmp_path):
         g = data["datasheet"][col]
         assert float(g["gear_ratio"]) == pytest.approx(float(S[f"{col}_params"][k]), rel=1e-12)
         assert np.all(np.isfinite(g["picks_per_min"])) and float(g["working_volume"]) > 0
-    assert (run_dir / "datasheet_recommended.png").read_bytes()[:4] == b"\x89PNG"
+    png = (run_dir / "datasheet_recommended.png").read_bytes()
+    # an A4 portrait page (8.27 x 11.69 in) at the runs' 120 dpi, not cropped to what is drawn on it
+    assert png[:4] == b"\x89PNG" and struct.unpack(">II", png[16:24]) == (992, 1402)

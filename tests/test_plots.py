@@ -232,3 +232,26 @@ def test_reconfig_motion_torque_methods_stay_distinguishable_where_they_agree():
         styles = {(str(ln.get_linestyle()), ln.get_linewidth()) for ln in ax.get_lines()}
         assert len(ax.get_lines()) == len(job.METHODS) == len(styles)
     matplotlib.pyplot.close(figs[0])
+
+
+def test_the_main_jobs_figures_are_not_drawn_with_plots_false(monkeypatch):
+    """``plots=false``: the main job's plots stage and its datasheets build no figure (an A4 page takes ~1 s to
+    lay out) -- not only write none."""
+    from types import SimpleNamespace
+
+    from deltajax.jobs import datasheet as DJ
+    from deltajax.jobs import designer_report as R
+
+    def drawn(*args, **kwargs):
+        raise AssertionError("a figure was built with plots=false")
+
+    for name in ("ga_convergence", "ga_pareto", "datasheet_page"):
+        monkeypatch.setattr(plots, name, drawn)
+    ctx = SimpleNamespace(plots=False, progress=lambda it, **kw: it, log=lambda msg: None, savefig=drawn,
+                          results=SimpleNamespace(flush=lambda: None))
+    R.plots(ctx, {}, ("picks_per_min",), None)
+    sheet = SimpleNamespace(working_diameter=0.5, working_height=0.1, reachable_volume=0.1, max_payload=1.0,
+                            rows=lambda: [])
+    monkeypatch.setattr(DJ, "datasheet", lambda *args, **kwargs: sheet)
+    monkeypatch.setattr(DJ, "save", lambda *args: None)
+    DJ.write(ctx, [("design", None, None, 20.0, None)])

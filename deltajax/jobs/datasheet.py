@@ -72,7 +72,8 @@ def write(ctx, designs, **kwargs) -> None:
             ctx.log(f"  {r['payload']:10.3g} {r['picks_per_min']:10.1f} {r['picks_per_min_vendor']:8.1f} "
                     f"{r['cycle_time']:8.4f} {r['peak_utilisation']:6.3f} {r['rms_utilisation']:6.3f} "
                     f"{r['peak_acceleration_g']:6.2f}")
-        ctx.savefig(plots.datasheet_page(ds, f"deltajax datasheet: {name}"), f"datasheet_{name}")
+        if ctx.plots:   # the A4 page is drawn only to be saved
+            ctx.savefig(plots.datasheet_page(ds, f"deltajax datasheet: {name}"), f"datasheet_{name}", crop=False)
 
 
 def _designs_from_preset(name: str, spec):

@@ -193,7 +193,10 @@ def print_summary(ctx, data) -> None:
 
 
 def plots(ctx, data, objs, s) -> None:
-    """Plots drawn from the staged results only (so a resumed run draws the same figures)."""
+    """Plots drawn from the staged results only (so a resumed run draws the same figures); none with
+    ``plots=false``."""
+    if not ctx.plots:
+        return
     from .. import plots as P
     from ..optimize.designer import DESIGN_UNITS
 
