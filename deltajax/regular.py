@@ -147,8 +147,8 @@ def refine_cylinder(good_fn: Callable[[Array], Array], start: RegularWorkspace, 
     the height binds: in all, <= ~0.1 % in D, <= ~0.3 % in volume. The samples (4 rings x 3 angles 0/30/60 deg x
     5 levels by default) are
     what is checked: like any sampled test, a bad region thinner than the sample spacing can slip between them.
-    Each distinct sample is tested once (the centre once per centre, the axis ring's repeats dropped:
-    ``_distinct_offsets``), which changes the cost, not the answer.
+    Each distinct sample is tested once per step (the axis ring's repeats dropped: ``_distinct_offsets``; without
+    ``all_good`` the centre once per centre), which changes the cost, not the answer.
     ``all_good(points (n, 3)) -> bool``: the same answer as ``all(good_fn(p) for p in points)``, computed
     another way (e.g. stopping at the first bad point: :func:`deltajax.optimize.designer.evaluate_designer`);
     it is then the only test called: the centre joins every step's samples, so a compiled program holds one copy
