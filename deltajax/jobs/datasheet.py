@@ -59,11 +59,12 @@ def run_designs(space, summary, motor_settings) -> list:
 
 def write(ctx, designs, **kwargs) -> None:
     """The datasheet of each of ``designs`` ([(name, robot, motor, gear ratio, R)]) into group ``datasheet/<name>``,
-    its log lines and its figure ``datasheet_<name>.png``; ``kwargs`` go to :func:`deltajax.datasheet`."""
+    its log lines and its figure ``datasheet_<name>.png`` (rendered; the results file is written once all are
+    computed, before any figure: :meth:`deltajax.run.RunContext.savefig`); ``kwargs`` go to
+    :func:`deltajax.datasheet`."""
     for name, robot, motor, n, R in ctx.progress(designs, total=len(designs), desc="datasheets"):
         ds = datasheet(robot, motor, n, name=name, R=R, **kwargs)
         save(ctx.results, f"datasheet/{name}", ds)
-        ctx.results.flush()
         ctx.log(f"{name}: working range {1000 * ds.working_diameter:.0f} x {1000 * ds.working_height:.0f} mm, "
                 f"reachable volume {ds.reachable_volume:.4g} m^3, max payload {ds.max_payload:.3g} kg")
         ctx.log(f"  {'payload kg':>10s} {'picks/min':>10s} {'vendor':>8s} {'T_min s':>8s} {'peak':>6s} {'RMS':>6s} "
@@ -74,6 +75,7 @@ def write(ctx, designs, **kwargs) -> None:
                     f"{r['peak_acceleration_g']:6.2f}")
         if ctx.plots:   # the A4 page is drawn only to be saved
             ctx.savefig(plots.datasheet_page(ds, f"deltajax datasheet: {name}"), f"datasheet_{name}", crop=False)
+    ctx.results.flush()
 
 
 def _designs_from_preset(name: str, spec):
