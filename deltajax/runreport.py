@@ -109,15 +109,27 @@ def _good_any(design, reconfigurable: bool, Rs, P, plate, good):
     return prog(design, Rs, P, plate, good)
 
 
+#: the full good tests of the report's workspace figure run in rounds of 1/GOOD_ANY_ROUNDS of its (R, point) pairs
+GOOD_ANY_ROUNDS = 16
+
+
 def _good_any_traced(reconfigurable: bool, design, Rs, P, plate, good):
-    import jax
+    """The good test at any R, as the designer's searches run it (:func:`deltajax.optimize.rays.
+    any_good_where_possible`): the full test only where its cheap necessary condition holds and the point has no
+    good R yet, mostly settled by the cheaper :func:`deltajax.constraints.good_point_decided`; the answer is the
+    full test's at every pair."""
     import jax.numpy as jnp
 
     from . import constraints as C
+    from .optimize.rays import any_good_where_possible
 
     at = design.at if reconfigurable else design.with_base_radius
-    chk = jax.vmap(lambda R: jax.vmap(lambda p: C.good_point(at(R), p, good, plate_radius=plate))(P))(Rs)
-    return jnp.any(chk.good, axis=0)
+    nR, nP = Rs.shape[0], P.shape[0]
+    return any_good_where_possible(
+        lambda R, p: C.good_point(at(R), p, good, plate_radius=plate).good,
+        lambda R, p: C.good_point_possible(at(R), p, good, plate_radius=plate),
+        jnp.repeat(Rs, nP), jnp.tile(P, (nR, 1)), ((nP, nR),), -(-nR * nP // GOOD_ANY_ROUNDS),
+        decided_R=lambda R, p: C.good_point_decided(at(R), p, good, plate_radius=plate))
 
 
 def _motor_points(design, reconfigurable: bool, R_op: float, T: float, pb):

@@ -203,3 +203,33 @@ def test_finished_run_from_before_the_report_stage_gets_only_its_report(tmp_path
     assert (d / "report.html").stat().st_size > 1_000_000
     assert not (d / "ga_pareto.png").exists()                          # no stage before it ran again
     np.testing.assert_array_equal(data["verify"]["picks_per_min"], before)
+
+
+@pytest.mark.slow   # compiles the good test twice per case (~10 s each)
+@pytest.mark.parametrize("reconfigurable", [True, False], ids=["R_per_point", "fixed_R"])
+def test_workspace_figure_marks_a_point_good_where_the_full_test_holds_at_some_R(reconfigurable):
+    """The figure's good points (the searches' skipping test: its necessary condition first, a point's R only until
+    one is good) are the full good test's any over R, point by point."""
+    import math
+
+    import jax
+    import jax.numpy as jnp
+
+    import deltajax as dj
+    from deltajax import constraints as C
+    from deltajax.runreport import _good_any
+
+    spec = C.GoodSpec(joints=C.JointModel(limit=math.radians(55), elbow_neutral=math.radians(90),
+                                          platform_neutral=math.radians(40)),
+                      links=C.LinkModel(forearm_radius=0.02, upper_arm_radius=0.025, clearance=0.005,
+                                        plate_overhang=0.03), threshold=0.3)
+    robot = dj.presets.franco2026(R_step=0.051) if reconfigurable else dj.presets.franco2026(fixed_R=0.2)
+    at = robot.at if reconfigurable else robot.with_base_radius
+    Rs = robot.R_samples() if reconfigurable else robot.base_radius[None]
+    plate = (robot.R_max if reconfigurable else robot.base_radius) + 0.03
+    g = np.linspace(-0.35, 0.35, 8)
+    P = jnp.asarray(np.stack(np.meshgrid(g, g, np.linspace(0.2, 0.65, 6), indexing="ij"), -1).reshape(-1, 3))
+    full = jax.vmap(lambda R: jax.vmap(lambda p: C.good_point(at(R), p, spec, plate_radius=plate).good)(P))(Rs)
+    got = np.asarray(_good_any(robot, reconfigurable, Rs, P, plate, spec))
+    np.testing.assert_array_equal(got, np.asarray(jnp.any(full, axis=0)))
+    assert 0 < got.sum() < len(got)
