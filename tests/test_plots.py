@@ -255,3 +255,29 @@ def test_the_main_jobs_figures_are_not_drawn_with_plots_false(monkeypatch):
     monkeypatch.setattr(DJ, "datasheet", lambda *args, **kwargs: sheet)
     monkeypatch.setattr(DJ, "save", lambda *args: None)
     DJ.write(ctx, [("design", None, None, 20.0, None)])
+
+
+@pytest.mark.slow   # the toy dynamics job in-process (~5 s warm)
+def test_the_dynamics_and_motion_jobs_draw_nothing_with_plots_false(monkeypatch, tmp_path):
+    """``plots=false``: no figure of experiment=dynamics_cycle is built (the toy run, every figure function
+    patched to fail), nor of experiment=reconfig_motion's plots stage."""
+    from types import SimpleNamespace
+
+    from toy_jobs import overrides
+
+    from deltajax.jobs import reconfig_motion
+    from deltajax.run import run_experiment
+
+    def drawn(*args, **kwargs):
+        raise AssertionError("a figure was built with plots=false")
+
+    for name in ("adept_profiles", "cycle_platform", "cycle_torques", "motion_landscape", "motion_profiles",
+                 "motion_torques"):
+        monkeypatch.setattr(plots, name, drawn)
+    path = run_experiment("dynamics_cycle", overrides("dynamics_cycle", "plots=false"), run_dir=tmp_path / "run")
+    assert path.exists() and not list(path.parent.glob("*.png"))
+    done = []
+    st = SimpleNamespace(s=None, cases={"adept": None}, ctx=SimpleNamespace(plots=False, savefig=drawn),
+                         bar=SimpleNamespace(update=done.append))
+    reconfig_motion._plot_case(st, "adept")
+    assert done == [1]

@@ -200,8 +200,9 @@ def _case(st: State, name: str, robot, s: dict, limits, case: str, cyc) -> None:
         prof_min = profile_jit(robot, cyc, m.cycle_time, method=method)
         _save_case(res, f"dynamics/{name}/adept_at_min_cycle_time", prof_min,
                    dict(duration=float(m.cycle_time), method=method))
-        ctx.savefig(plots.adept_profiles(name, prof, prof_min, float(m.cycle_time)), f"{name}_adept_profiles")
-    if case == "ga_motion" and bool(m.reachable):
+        if ctx.plots:
+            ctx.savefig(plots.adept_profiles(name, prof, prof_min, float(m.cycle_time)), f"{name}_adept_profiles")
+    if case == "ga_motion" and bool(m.reachable) and ctx.plots:
         ctx.savefig(plots.cycle_platform(prof, f"{name}: GA paper motion, platform (cf. its Fig. 5)"),
                     f"{name}_ga_motion_platform")
         ctx.savefig(plots.cycle_torques(prof, f"{name}: GA paper motion, actuator torques (cf. its Fig. 6)"),
@@ -229,7 +230,7 @@ def _moving_R(st: State) -> None:
     st.summary.append((cfg_name, "ga_motion_moving_R", m, gap_R))
     ctx.log(f"{cfg_name} GA motion with R = {R0} + {A} sin(2 pi t/T): peak R force {float(m.peak_force_R):.3f} N, "
             f"peak torque {np.array2string(np.asarray(m.peak_torque), precision=3)} N m")
-    if bool(m.reachable):
+    if bool(m.reachable) and ctx.plots:
         ctx.savefig(plots.cycle_torques(prof, f"{cfg_name}: GA motion with moving R"), f"{cfg_name}_ga_motion_moving_R")
 
 

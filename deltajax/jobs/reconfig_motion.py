@@ -170,8 +170,12 @@ def _store_case(st: State, case: str) -> None:
 
 
 def _plot_case(st: State, case: str) -> None:
-    """The case's figures: the index landscape over (t, R) with each R(t), the profiles and the arm torques."""
+    """The case's figures: the index landscape over (t, R) with each R(t), the profiles and the arm torques (none
+    with ``plots=false``)."""
     s, c, ctx = st.s, st.cases[case], st.ctx
+    if not ctx.plots:
+        st.bar.update(1)
+        return
     # a rejected refinement repeats the DP: draw it only when it differs
     shown = {m: d for m, d in c.data.items() if m != "path_refined" or (c.rf is not None and c.rf.accepted)}
     paths = {m: d["R"] for m, d in shown.items()}
