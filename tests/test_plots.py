@@ -234,6 +234,11 @@ def test_reconfig_motion_torque_methods_stay_distinguishable_where_they_agree():
     matplotlib.pyplot.close(figs[0])
 
 
+def _drawn(*args, **kwargs):
+    """A figure function or savefig patched in where ``plots=false`` must draw nothing."""
+    raise AssertionError("a figure was built with plots=false")
+
+
 def test_the_main_jobs_figures_are_not_drawn_with_plots_false(monkeypatch):
     """``plots=false``: the main job's plots stage and its datasheets build no figure (an A4 page takes ~1 s to
     lay out) -- not only write none."""
@@ -242,12 +247,9 @@ def test_the_main_jobs_figures_are_not_drawn_with_plots_false(monkeypatch):
     from deltajax.jobs import datasheet as DJ
     from deltajax.jobs import designer_report as R
 
-    def drawn(*args, **kwargs):
-        raise AssertionError("a figure was built with plots=false")
-
     for name in ("ga_convergence", "ga_pareto", "datasheet_page"):
-        monkeypatch.setattr(plots, name, drawn)
-    ctx = SimpleNamespace(plots=False, progress=lambda it, **kw: it, log=lambda msg: None, savefig=drawn,
+        monkeypatch.setattr(plots, name, _drawn)
+    ctx = SimpleNamespace(plots=False, progress=lambda it, **kw: it, log=lambda msg: None, savefig=_drawn,
                           results=SimpleNamespace(flush=lambda: None))
     R.plots(ctx, {}, ("picks_per_min",), None)
     sheet = SimpleNamespace(working_diameter=0.5, working_height=0.1, reachable_volume=0.1, max_payload=1.0,
@@ -268,16 +270,13 @@ def test_the_dynamics_and_motion_jobs_draw_nothing_with_plots_false(monkeypatch,
     from deltajax.jobs import reconfig_motion
     from deltajax.run import run_experiment
 
-    def drawn(*args, **kwargs):
-        raise AssertionError("a figure was built with plots=false")
-
     for name in ("adept_profiles", "cycle_platform", "cycle_torques", "motion_landscape", "motion_profiles",
                  "motion_torques"):
-        monkeypatch.setattr(plots, name, drawn)
+        monkeypatch.setattr(plots, name, _drawn)
     path = run_experiment("dynamics_cycle", overrides("dynamics_cycle", "plots=false"), run_dir=tmp_path / "run")
     assert path.exists() and not list(path.parent.glob("*.png"))
     done = []
-    st = SimpleNamespace(s=None, cases={"adept": None}, ctx=SimpleNamespace(plots=False, savefig=drawn),
+    st = SimpleNamespace(s=None, cases={"adept": None}, ctx=SimpleNamespace(plots=False, savefig=_drawn),
                          bar=SimpleNamespace(update=done.append))
     reconfig_motion._plot_case(st, "adept")
     assert done == [1]
