@@ -7,6 +7,12 @@ Per run: wall, CPU-s, and the totals of JAX's monitoring events (jaxpr tracing, 
 compilation, persistent-cache hits and retrieval time), then the programs whose tracing took longest
 (``jax_log_compiles``). The first run of a process with a warm persistent cache shows what every new process
 pays; the second, what a warm process still re-traces.
+
+``--reads N``: every executable read back from the persistent compilation cache, timed (wall, and the process's
+CPU-s, which also count what other threads do meanwhile; the reading itself runs on a PJRT thread, so the
+caller's thread time does not see it): the total per stage, and the N slowest reads with their stage,
+serialised size and number of compiled kernels (XLA:CPU rebuilds the optimised HLO module and its buffer
+assignment from the serialised proto and links each kernel's object code: the cost follows the program's size).
 """
 
 from __future__ import annotations
@@ -34,6 +40,7 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--runs", type=int, default=2)
     ap.add_argument("--defaults", action="store_true", help="the job's default size instead of the toy size")
+    ap.add_argument("--reads", type=int, default=0, metavar="N", help="list the N slowest executable reads")
     a = ap.parse_args(argv)
     sys.path.insert(0, str(ROOT / "tests"))
     from toy_jobs import COMMON, TOY
@@ -59,6 +66,7 @@ def main(argv=None) -> int:
             if m:
                 traces.append((m[1], float(m[2])))
 
+    reads = _time_reads() if a.reads else None
     jax.config.update("jax_log_compiles", True)
     lg = logging.getLogger("jax")
     lg.addHandler(Traces())
@@ -67,6 +75,8 @@ def main(argv=None) -> int:
     for i in range(a.runs):
         events.clear()
         traces.clear()
+        if reads is not None:
+            reads.clear()
         c0, t0 = resource.getrusage(resource.RUSAGE_SELF), time.perf_counter()
         with tempfile.TemporaryDirectory() as d:
             run_experiment("ga_reconfig", [*COMMON, "plots=false", *extra], run_dir=Path(d) / "run")
@@ -81,7 +91,59 @@ def main(argv=None) -> int:
             top[name][1] += s
         for name, (n, s) in sorted(top.items(), key=lambda kv: -kv[1][1])[:8]:
             print(f"  traced {name:30s} x{n:3d} {s:7.2f} s")
+        if reads is not None:
+            _print_reads(reads, a.reads)
     return 0
+
+
+def _time_reads() -> list:
+    """Records each persistent-cache read as [wall s, process CPU-s, serialised bytes, kernels, stage] (the stage
+    filled in when the stage engine marks it done)."""
+    from jax._src import compilation_cache as cc
+    from jax._src import compiler
+
+    from deltajax.jobs import stages
+
+    reads: list = []
+    last = {}
+    get, extract, mark = cc.get_executable_and_time, cc.extract_executable_and_time, stages.Runner.mark
+
+    def extract_sized(data):
+        out = extract(data)
+        last["size"], last["kernels"] = len(out[0]), out[0].count(b"\x7fELF")
+        return out
+
+    def timed_get(*args, **kwargs):
+        last.clear()
+        t0, c0 = time.perf_counter(), time.process_time()
+        out = get(*args, **kwargs)
+        if out[0] is not None:
+            reads.append([time.perf_counter() - t0, time.process_time() - c0, last.get("size", 0),
+                          last.get("kernels", 0), None])
+        return out
+
+    def marking(self, name, *args, **kwargs):
+        for r in reads:
+            r[4] = r[4] or name
+        return mark(self, name, *args, **kwargs)
+
+    cc.extract_executable_and_time = extract_sized
+    cc.get_executable_and_time = compiler.compilation_cache.get_executable_and_time = timed_get
+    stages.Runner.mark = marking
+    return reads
+
+
+def _print_reads(reads: list, n: int) -> None:
+    by_stage = collections.defaultdict(lambda: [0, 0.0])
+    for t, _, _, _, stage in reads:
+        by_stage[stage or "after the last stage"][0] += 1
+        by_stage[stage or "after the last stage"][1] += t
+    print(f"  executables read: {len(reads)}, {sum(r[0] for r in reads):.2f} s wall, "
+          f"{sum(r[1] for r in reads):.2f} CPU-s; wall by stage (reads): "
+          + ", ".join(f"{k} {s:.2f} ({c})" for k, (c, s) in by_stage.items()))
+    for t, c, size, kernels, stage in sorted(reads, key=lambda r: -r[0])[:n]:
+        where = stage or "after the last stage"
+        print(f"  read {t:6.2f} s {c:6.2f} CPU-s {size / 1e6:6.1f} MB {kernels:5d} kernels ({where})")
 
 
 if __name__ == "__main__":
