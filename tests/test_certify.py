@@ -439,7 +439,7 @@ def test_adept_path_is_the_cycle_at_its_samples_and_its_derivatives_are_the_path
 
 @pytest.mark.slow
 def test_cycle_worst_at_a_traced_sample_count_is_the_one_at_that_count(default_problem):
-    # the certify stage's first density and its doubling share one program sized for the doubling: the samples
+    # the certify stage's first density and its doublings share one program sized for a later density: the samples
     # beyond the count repeat the last one, never chosen, never weighted (the RMS integral, the place dwell)
     from deltajax.optimize.cycle_worst import cycle_worst
 
@@ -549,14 +549,19 @@ def test_certify_design_doubles_the_density_again_until_every_figure_settles(mon
     out = CE.certify_design(None, _Design(), 0.2, density=dens, task_samples=task, cycle_samples=9)
     assert out["doublings"] == doublings and out["converged"] is converged
     assert calls == [9, 17, 33, 65][:doublings + 1]
-    # the first density and its doubling share one task-and-cycle program (the doubling's size); later ones their own
-    assert sizes == [((5, 9, 13), 17)] * 2 + [None] * (doublings - 1)
+    # the first density and its first two doublings share one task-and-cycle program (the second doubling's size);
+    # later ones their own
+    assert CE.SHARED_DOUBLINGS == 2
+    assert sizes == [((9, 17, 25), 33)] * min(doublings + 1, 3) + [None] * max(doublings - 2, 0)
     assert out["cycle_samples"] == calls[-1]
     np.testing.assert_equal(out["regular_volume"], volumes[doublings])
     np.testing.assert_equal(out["regular_volume_first"], volumes[0])
     with pytest.raises(ValueError, match="max_extra_doublings"):
         CE.certify_design(None, _Design(), 0.2, density=dens, task_samples=task, cycle_samples=9,
                           max_extra_doublings=-1)
+    sizes.clear()       # no further doubling allowed: the program is sized for the first doubling only
+    CE.certify_design(None, _Design(), 0.2, density=dens, task_samples=task, cycle_samples=9, max_extra_doublings=0)
+    assert sizes == [((5, 9, 13), 17)] * 2
 
 
 class _Problem:
