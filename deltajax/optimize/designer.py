@@ -328,19 +328,10 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True, draw
     tp = jnp.asarray(pb.task_points, dt)
     cp = pb.cycle.x.astype(dt)
     n_t = tp.shape[0]
-    if rays or not regular:
-        # one good-point call over every R at the task and cycle samples (the rays search on its own below)
-        R_all = jnp.concatenate([Rs, Rc])
-        pts = jnp.concatenate([tp, cp])
-        chk = jax.vmap(lambda R: jax.vmap(lambda p: C.good_point(at(R), p, pb.good, plate_radius=plate))(pts))(R_all)
-        cand = jax.tree_util.tree_map(lambda x: x[ns:], chk)                   # (nc, P)
-    else:
-        # each good test where a consumer reads it: the operating-R candidates at the task and cycle samples
-        # (their constraints choose the operating R), the design's R samples on the regular-workspace grid, and
-        # the chosen operating R on the grid below (the other candidates' grid tests were never read). The same
-        # pure test at the same (R, point) pairs: the same answers, 3 of every 12 grid R fewer.
-        cand = jax.vmap(lambda R: jax.vmap(lambda p: C.good_point(at(R), p, pb.good, plate_radius=plate))(
-            jnp.concatenate([tp, cp])))(Rc)                                     # (nc, P)
+    # each good test where a consumer reads it: the operating-R candidates at the task and cycle samples (their
+    # constraints choose the operating R); the regular workspace (rays or grid, below) tests its own pairs
+    cand = jax.vmap(lambda R: jax.vmap(lambda p: C.good_point(at(R), p, pb.good, plate_radius=plate))(
+        jnp.concatenate([tp, cp])))(Rc)                                         # (nc, P)
     t_sl, c_sl = slice(0, n_t), slice(n_t, None)
     rate = rates(Rc) if sel is None else jax.tree_util.tree_map(lambda x: x[sel], rate_all)
     cands = {
