@@ -62,7 +62,7 @@ MAX_EXTRA_DOUBLINGS = 2
 
 #: Doublings whose task-cylinder and cycle searches :func:`certify_design` runs in the first density's program (one
 #: program sized for the last of them): a second doubling then reads and compiles no program of its own (~2 s read,
-#: ~60 CPU-s compiled on the default problem) for ~0.1 CPU-s more per evaluation below that size.
+#: ~70 CPU-s compiled on the default problem) for ~0.1 CPU-s more per evaluation below that size.
 SHARED_DOUBLINGS = 2
 
 from .cycle_worst import cycle_worst  # noqa: E402

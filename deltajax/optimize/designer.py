@@ -284,9 +284,11 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True, draw
     """Every metric of one design plus ``g`` (constraint values, (5,)), ``violation`` (sum of positive parts)
     and ``feasible``; pure and vmappable. ``regular=False`` skips the regular workspace (NaN).
 
-    One good-point evaluation (:func:`deltajax.constraints.good_point`) covers every R (the design's R samples
-    and the operating-R candidates) at every sample (regular-workspace grid, task cylinder, cycle path): a
-    single compiled kernel instead of one per use.
+    The good test (:func:`deltajax.constraints.good_point`) runs where a consumer reads it: at the operating-R
+    candidates at the task cylinder's and the cycle's samples (their constraints choose the operating R), and for
+    the regular workspace (rays, or the grid and its refinement) at the design's R samples and the chosen operating
+    R, there only where its cheap necessary condition holds (:func:`deltajax.constraints.good_point_possible`) and
+    mostly settled by :func:`deltajax.constraints.good_point_decided`.
 
     ``drawn_arm_sum``: the L1 + L2 that the size budget judges (default: the design's own). The tolerance Monte
     Carlo passes the nominal design's: the budget limits the drawing, not each built robot.
