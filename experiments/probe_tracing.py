@@ -100,7 +100,6 @@ def _time_reads() -> list:
     """Records each persistent-cache read as [wall s, process CPU-s, serialised bytes, kernels, stage] (the stage
     filled in when the stage engine marks it done)."""
     from jax._src import compilation_cache as cc
-    from jax._src import compiler
 
     from deltajax.jobs import stages
 
@@ -128,22 +127,22 @@ def _time_reads() -> list:
         return mark(self, name, *args, **kwargs)
 
     cc.extract_executable_and_time = extract_sized
-    cc.get_executable_and_time = compiler.compilation_cache.get_executable_and_time = timed_get
+    cc.get_executable_and_time = timed_get       # jax's compiler calls it through this module
     stages.Runner.mark = marking
     return reads
 
 
 def _print_reads(reads: list, n: int) -> None:
+    where = [stage or "after the last stage" for *_, stage in reads]
     by_stage = collections.defaultdict(lambda: [0, 0.0])
-    for t, _, _, _, stage in reads:
-        by_stage[stage or "after the last stage"][0] += 1
-        by_stage[stage or "after the last stage"][1] += t
+    for (t, *_), w in zip(reads, where):
+        by_stage[w][0] += 1
+        by_stage[w][1] += t
     print(f"  executables read: {len(reads)}, {sum(r[0] for r in reads):.2f} s wall, "
           f"{sum(r[1] for r in reads):.2f} CPU-s; wall by stage (reads): "
           + ", ".join(f"{k} {s:.2f} ({c})" for k, (c, s) in by_stage.items()))
-    for t, c, size, kernels, stage in sorted(reads, key=lambda r: -r[0])[:n]:
-        where = stage or "after the last stage"
-        print(f"  read {t:6.2f} s {c:6.2f} CPU-s {size / 1e6:6.1f} MB {kernels:5d} kernels ({where})")
+    for (t, c, size, kernels, _), w in sorted(zip(reads, where), key=lambda rw: -rw[0][0])[:n]:
+        print(f"  read {t:6.2f} s {c:6.2f} CPU-s {size / 1e6:6.1f} MB {kernels:5d} kernels ({w})")
 
 
 if __name__ == "__main__":
