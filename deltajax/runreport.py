@@ -78,6 +78,7 @@ def _good_workspace(design, reconfigurable: bool, pb, n_xy: int):
     """(good grid points (n, 3) m, spacing h m, grid size): the design's good workspace, R chosen per point."""
     import jax.numpy as jnp
 
+    from .optimize.good import design_good_test
     from .workspace import make_grid
 
     reg = pb.settings["regular"]
@@ -86,13 +87,11 @@ def _good_workspace(design, reconfigurable: bool, pb, n_xy: int):
     nz = max(int(math.ceil((float(reg["z_max"]) - z0) / h - 1e-9)), 1)
     grid = make_grid((-half, half), (-half, half), (z0, z0 + nz * h), h)
     pts = np.stack(np.meshgrid(grid.x, grid.y, grid.z, indexing="ij"), axis=-1).reshape(-1, 3)
-    # the base plate as evaluate_designer models it: the largest R plus the plate's overhang
-    if reconfigurable:
-        Rs, plate = design.R_samples(), design.R_max + pb.links.plate_overhang
-    else:
-        Rs, plate = design.base_radius[None], design.base_radius + pb.links.plate_overhang
+    gt = design_good_test(design, pb.good, pb.links.plate_overhang)    # the designer's good test, R samples, plate
+    Rs = gt.R_samples()
     dt = jnp.asarray(Rs).dtype
-    good = np.asarray(_good_any(design, reconfigurable, jnp.asarray(Rs, dt), jnp.asarray(pts, dt), plate, pb.good))
+    good = np.asarray(_good_any(design, reconfigurable, jnp.asarray(Rs, dt), jnp.asarray(pts, dt), gt.plate,
+                                pb.good))
     return pts[good], h, len(pts)
 
 
@@ -100,12 +99,10 @@ def _good_any(design, reconfigurable: bool, Rs, P, plate, good):
     """Is each point of ``P`` good at any R of ``Rs``? (P,) bool. One program per process for every design of every
     report, kept across processes (:func:`deltajax.tracing.shared_program`): a new process reads it back instead
     of tracing the good test again."""
-    import functools
-
     import jax
 
     prog = shared_program("report_good_any", None, None, (bool(reconfigurable),),
-                          lambda: jax.jit(functools.partial(_good_any_traced, bool(reconfigurable))), persist=True)
+                          lambda: jax.jit(_good_any_traced), persist=True)
     return prog(design, Rs, P, plate, good)
 
 
@@ -113,23 +110,20 @@ def _good_any(design, reconfigurable: bool, Rs, P, plate, good):
 GOOD_ANY_ROUNDS = 16
 
 
-def _good_any_traced(reconfigurable: bool, design, Rs, P, plate, good):
+def _good_any_traced(design, Rs, P, plate, good):
     """The good test at any R, as the designer's searches run it (:func:`deltajax.optimize.rays.
     any_good_where_possible`): the full test only where its cheap necessary condition holds and the point has no
     good R yet, mostly settled by the cheaper :func:`deltajax.constraints.good_point_decided`; the answer is the
     full test's at every pair."""
     import jax.numpy as jnp
 
-    from . import constraints as C
+    from .optimize.good import DesignGoodTest
     from .optimize.rays import any_good_where_possible
 
-    at = design.at if reconfigurable else design.with_base_radius
+    gt = DesignGoodTest(design, good, plate)
     nR, nP = Rs.shape[0], P.shape[0]
-    return any_good_where_possible(
-        lambda R, p: C.good_point(at(R), p, good, plate_radius=plate).good,
-        lambda R, p: C.good_point_possible(at(R), p, good, plate_radius=plate),
-        jnp.repeat(Rs, nP), jnp.tile(P, (nR, 1)), ((nP, nR),), -(-nR * nP // GOOD_ANY_ROUNDS),
-        decided_R=lambda R, p: C.good_point_decided(at(R), p, good, plate_radius=plate))
+    return any_good_where_possible(gt.good, gt.possible, jnp.repeat(Rs, nP), jnp.tile(P, (nR, 1)), ((nP, nR),),
+                                   -(-nR * nP // GOOD_ANY_ROUNDS), decided_R=gt.decided)
 
 
 def _motor_points(design, reconfigurable: bool, R_op: float, T: float, pb):

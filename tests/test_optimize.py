@@ -227,3 +227,35 @@ def designer_small():
     objs = ["picks_per_min", "regular_volume"]
     b = batch_evaluator(pb, space, 8)(space.baseline_genes()[None])  # the toy job's batch: one compiled program
     return pb, space, -1.0 / np.abs(np.asarray([b[o][0] for o in objs])), objs
+
+
+# -- a design's good test ------------------------------------------------------------------------------------------
+
+def test_design_good_test_is_the_constraints_good_test_of_the_robot_at_R_with_the_designs_plate():
+    # every consumer (evaluator, rays, certify, R(t) mode, report) builds the good test here: its robot at R, its R
+    # samples and its base plate (the largest R plus the overhang), and each of its four tests is the same traced
+    # computation as constraints' own called with that robot and plate
+    import jax
+
+    from deltajax import constraints as C
+    from deltajax.optimize.good import design_good_test
+
+    spec = C.GoodSpec(joints=C.JointModel(limit=np.radians(50), platform_neutral=np.radians(40)),
+                      links=C.LinkModel(), threshold=0.3)
+    recon = SPACE.decode(jnp.full((SPACE.dim,), 0.5))
+    fixed = recon.at(0.25)
+    p = jnp.asarray([0.1, 0.05, 0.6])
+    for design, top, Rs in ((recon, recon.R_max, recon.R_samples()), (fixed, 0.25, jnp.asarray([0.25]))):
+        gt = design_good_test(design, spec, 0.02)
+        assert gt.reconfigurable == (design is recon)
+        assert float(gt.plate) == float(top) + 0.02
+        np.testing.assert_array_equal(gt.R_samples(), Rs)
+        R = Rs[-1]
+        assert float(gt.at(R).base_radius) == float(R)
+        at = design.at if design is recon else design.with_base_radius
+        plate = gt.plate    # its value asserted above
+        for mine, theirs in ((gt.point, C.good_point), (gt.possible, C.good_point_possible),
+                             (gt.decided, C.good_point_decided),
+                             (gt.good, lambda *a, **k: C.good_point(*a, **k).good)):
+            assert str(jax.make_jaxpr(mine)(R, p)) == str(jax.make_jaxpr(
+                lambda R, p, f=theirs: f(at(R), p, spec, plate_radius=plate))(R, p))

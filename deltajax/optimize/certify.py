@@ -66,6 +66,7 @@ MAX_EXTRA_DOUBLINGS = 2
 SHARED_DOUBLINGS = 2
 
 from .cycle_worst import cycle_worst  # noqa: E402
+from .good import design_good_test  # noqa: E402
 from .rays import (RAY_DENSITY, RAY_PASSES, RayDensity, ray_cylinder, ray_cylinders,  # noqa: F401
                    worst_in_cylinder)
 
@@ -93,39 +94,15 @@ REGULAR_FIGURES = ("regular_volume", "regular_diameter", "regular_height", "regu
                    "regular_diameter_fixed")
 
 
-def _good_test(pb, design):
-    """One design's good test: (``at(R)`` the robot at base radius R, its R samples, ``chk(R, p)`` ->
-    :class:`deltajax.constraints.GoodPoint`, ``possible(R, p)`` its necessary condition, the dtype, the robot,
-    whether it is reconfigurable)."""
-    from .. import constraints as C
-    from ..geometry import ReconfigurableDelta
-
-    recon = isinstance(design, ReconfigurableDelta)
-    robot0 = design.robot if recon else design
-    if recon:
-        plate = design.R_max + pb.links.plate_overhang
-        at, Rs = design.at, design.R_samples()
-    else:
-        plate = robot0.base_radius + pb.links.plate_overhang
-        at, Rs = robot0.with_base_radius, robot0.base_radius[None]
-
-    def chk(R, p):
-        return C.good_point(at(R), p, pb.good, plate_radius=plate)
-
-    def possible(R, p):
-        return C.good_point_possible(at(R), p, pb.good, plate_radius=plate)
-
-    return at, Rs, chk, possible, robot0.upper_arm.dtype, robot0, recon
-
-
 def _regular_once(pb, design, R_op, density: RayDensity) -> dict:
     """The regular-workspace figures (:data:`REGULAR_FIGURES`) at one ray density (traced; ``R_op``: the operating
     R): the ray searches of "any of the design's R samples" and, for a reconfigurable design, the operating R."""
-    at, Rs, chk, possible, dt, _, recon = _good_test(pb, design)
+    gt = design_good_test(design, pb.good, pb.links.plate_overhang)
+    Rs, dt = gt.R_samples(), (design.robot if gt.reconfigurable else design).upper_arm.dtype
     reg_s = pb.settings["regular"]
-    sets = [Rs, jnp.asarray(R_op, dt)[None]] if recon else [Rs]
-    cyl = ray_cylinders(lambda R, p: chk(R, p).good, sets, float(reg_s["r_max"]), float(reg_s["z_min"]),
-                        float(reg_s["z_max"]), pb.hd_ratio, density, dt, possible_R=possible)
+    sets = [Rs, jnp.asarray(R_op, dt)[None]] if gt.reconfigurable else [Rs]
+    cyl = ray_cylinders(gt.good, sets, float(reg_s["r_max"]), float(reg_s["z_min"]),
+                        float(reg_s["z_max"]), pb.hd_ratio, density, dt, possible_R=gt.possible)
     return {"regular_volume": cyl[0].volume, "regular_diameter": cyl[0].diameter, "regular_height": cyl[0].height,
             "regular_z_top": cyl[0].z_top, "regular_volume_fixed": cyl[-1].volume,
             "regular_diameter_fixed": cyl[-1].diameter}
@@ -135,7 +112,9 @@ def _task_cycle_once(pb, design, R_op, task_shape: tuple, cycle_shape: int, coun
     """The task cylinder's and the cycle's certified figures (traced; ``R_op``: the operating R) at the sample
     counts ``counts`` (4,) (task rings, angles, levels; cycle samples), each at most its array size
     (``task_shape``, ``cycle_shape``): one compiled program serves every density up to those sizes."""
-    at, _, chk, _, dt, robot0, _ = _good_test(pb, design)
+    gt = design_good_test(design, pb.good, pb.links.plate_overhang)
+    robot0 = design.robot if gt.reconfigurable else design
+    at, chk, dt = gt.at, gt.point, robot0.upper_arm.dtype
     t = pb.settings["task"]
     worst, _ = worst_in_cylinder(lambda p: jnp.stack([(c := chk(R_op, p)).index, c.joint_margin,
                                                       c.interference_margin]),

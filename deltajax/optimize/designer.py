@@ -50,6 +50,7 @@ import numpy as np
 from .. import constraints as C
 from ..geometry import ReconfigurableDelta
 from ..trajectory import adept_cycle
+from .good import design_good_test
 from . import operating as OP  # rtmode: the "R(t) along the cycle" operating mode
 
 __all__ = ["DesignerProblem", "DESIGN_METRICS", "DESIGN_UNITS", "DESIGN_SENSE", "CONSTRAINT_NAMES",
@@ -307,13 +308,11 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True, draw
         j = jnp.arange(pb.n_R_operating, dtype=dt) / max(pb.n_R_operating - 1, 1)
         Rc = design.R_min + j * (design.R_max - design.R_min)
         Rs = design.R_samples() if regular else jnp.zeros((0,), dt)
-        plate = design.R_max + pb.links.plate_overhang
-        at = design.at
     else:
         Rc = robot0.base_radius[None]
         Rs = jnp.zeros((0,), dt)
-        plate = robot0.base_radius + pb.links.plate_overhang
-        at = robot0.with_base_radius
+    gt = design_good_test(design, pb.good, pb.links.plate_overhang)
+    at = gt.at
 
     def rates(Rs):   # the cycle's rate at each of the operating-R candidates ``Rs``
         return jax.vmap(lambda R: C.cycle_rate(at(R), pb.cycle, pb.motor, gear, dwell=pb.dwell,
@@ -332,8 +331,7 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True, draw
     n_t = tp.shape[0]
     # each good test where a consumer reads it: the operating-R candidates at the task and cycle samples (their
     # constraints choose the operating R); the regular workspace (rays or grid, below) tests its own pairs
-    cand = jax.vmap(lambda R: jax.vmap(lambda p: C.good_point(at(R), p, pb.good, plate_radius=plate))(
-        jnp.concatenate([tp, cp])))(Rc)                                         # (nc, P)
+    cand = jax.vmap(lambda R: jax.vmap(lambda p: gt.point(R, p))(jnp.concatenate([tp, cp])))(Rc)    # (nc, P)
     t_sl, c_sl = slice(0, n_t), slice(n_t, None)
     rate = rates(Rc) if sel is None else jax.tree_util.tree_map(lambda x: x[sel], rate_all)
     cands = {
@@ -362,14 +360,9 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True, draw
     out["arm_sum"] = arm_sum
     nan = jnp.asarray(jnp.nan, dt)
 
-    def good_at(R, p):   # the good test's flag (every regular-workspace measure below)
-        return C.good_point(at(R), p, pb.good, plate_radius=plate).good
-
-    def decided(R, p):   # the good test's flag where its closed-form plate and joint tests settle it (the search
-        return C.good_point_decided(at(R), p, pb.good, plate_radius=plate)   # grid, its refinement, the rays)
-
-    def possible(R, p):  # its cheap necessary condition (every user of the good test skips pairs where it fails)
-        return C.good_point_possible(at(R), p, pb.good, plate_radius=plate)
+    # the good test (flag; settled where its closed-form plate and joint tests decide it: the search grid, its
+    # refinement, the rays; its cheap necessary condition: every user skips pairs where it fails)
+    good_at, decided, possible = gt.good, gt.decided, gt.possible
 
     if rays:   # every ray search of both good sets (R per point; the operating R) in one call of the good test
         from .rays import RayDensity, ray_cylinders

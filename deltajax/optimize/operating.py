@@ -63,6 +63,7 @@ from ..geometry import ReconfigurableDelta
 from ..motion import AGGREGATES, path_dp, path_tables, with_R
 from ..motion_refine import spline_basis
 from ..trajectory import Cycle
+from .good import design_good_test
 
 __all__ = ["MODES", "MECHANISM_NAMES", "OperatingError", "OperatingSpec", "OPERATING_UNITS", "OPERATING_SENSE",
            "FIXED_VARIANT_METRICS", "spec_from_settings", "path_operating", "not_evaluated",
@@ -243,7 +244,7 @@ def path_operating(pb, design, R_op, T_plan, task_joint_margin, task_interferenc
                        pb.cycle.ddx.astype(dt), T_plan))
     K, M, n = cyc.x.shape[0], spec.segments, spec.n_R
     h = T_plan / M
-    plate = design.R_max + pb.links.plate_overhang
+    gt = design_good_test(design, pb.good, pb.links.plate_overhang)
 
     # (1) plan: the exact DP on the control points (proxy samples at u = m / M, m = 0..M, closed) x window R grid
     R_lo, dR, m_op = _window(spec, design, R_op, h)
@@ -252,7 +253,7 @@ def path_operating(pb, design, R_op, T_plan, task_joint_margin, task_interferenc
     sub = Cycle(u=cyc.u[idx], x=cyc.x[idx], dx=cyc.dx[idx], ddx=cyc.ddx[idx], duration=T_plan, space=cyc.space)
     tab = path_tables(win, sub, pb.good.index, beta=pb.good.beta)
     Rk = tab.R
-    chk = jax.vmap(lambda R: jax.vmap(lambda p: C.good_point(design.at(R), p, pb.good, plate_radius=plate))(sub.x))(Rk)
+    chk = jax.vmap(lambda R: jax.vmap(lambda p: gt.point(R, p))(sub.x))(Rk)
     cell_ok = jnp.ones((M + 1, n), bool)
     if "passive_joints" in pb.enabled:
         cell_ok = cell_ok & (chk.joint_margin.T >= 0)
@@ -276,14 +277,14 @@ def path_operating(pb, design, R_op, T_plan, task_joint_margin, task_interferenc
     B, B1, B2 = (jnp.asarray(x, dt) for x in periodic_basis(K, M))
     ctrl = R_lo + plan[:M].astype(dt) * dR
     consts = jnp.broadcast_to(Rk[:, None], (n, K))
-    pcc = _cycle_checks(pb, design, plate, cyc.x, consts)
+    pcc = _cycle_checks(gt, cyc.x, consts)
     ok_c, integ_c, crit_c = _criterion(pb, spec, pcc, K, dt)
     best_c = jnp.argmax(jnp.where(ok_c, crit_c, -jnp.inf))           # ties: the smaller R
     zero = jnp.zeros((K,), dt)
     rows = jnp.stack([B @ ctrl, consts[m_op], consts[best_c]])         # (3, K)
     rows_u = jnp.stack([B1 @ ctrl, zero, zero])
     rows_uu = jnp.stack([B2 @ ctrl, zero, zero])
-    pcs = _cycle_checks(pb, design, plate, cyc.x, rows[:1])
+    pcs = _cycle_checks(gt, cyc.x, rows[:1])
     ok_s, integ_s, _ = _criterion(pb, spec, pcs, K, dt)
     ok_row = jnp.stack([ok_s[0] & planned, ok_c[m_op], ok_c[best_c]])
     integ = jnp.stack([integ_s[0], integ_c[m_op], integ_c[best_c]])
@@ -330,10 +331,10 @@ def _nanmin(a):
     return jnp.where(jnp.any(jnp.isnan(a)), jnp.nan, jnp.min(a))
 
 
-def _cycle_checks(pb, design, plate, x, rows):
-    """:func:`deltajax.constraints.good_point` at (x_j, rows[i, j]) for every row i: (rows, K) fields."""
-    return jax.vmap(lambda Rrow: jax.vmap(lambda p, r: C.good_point(design.at(r), p, pb.good, plate_radius=plate))(
-        x, Rrow))(rows)
+def _cycle_checks(gt, x, rows):
+    """The design's good test ``gt`` (:func:`deltajax.constraints.good_point`) at (x_j, rows[i, j]) for every row i:
+    (rows, K) fields."""
+    return jax.vmap(lambda Rrow: jax.vmap(lambda p, r: gt.point(r, p))(x, Rrow))(rows)
 
 
 def _criterion(pb, spec, pc, K, dt):
