@@ -576,7 +576,17 @@ def test_certify_design_takes_the_first_densitys_regular_workspace_from_the_veri
     first["regular_volume"] = 1.0
     out = CE.certify_design(_Problem(), _Design(), 0.2, task_samples=(3, 5, 7), cycle_samples=9, regular_first=first)
     assert calls == [-9, 17, 33] and out["doublings"] == 2
-    assert out["regular_volume_first"] == 1.0 and out["regular_volume"] == 1.021
+    assert out["regular_volume_first"] == 1.0 and out["regular_volume"] == 1.021 and out["regular_certified"]
+    # regular=False: no ray search at any density; the doublings settle the task and cycle figures alone and the
+    # regular figures are the verification's, their change NaN (the certify stage's first step for a design)
+    calls.clear()
+    out = CE.certify_design(_Problem(), _Design(), 0.2, task_samples=(3, 5, 7), cycle_samples=9, regular_first=first,
+                            regular=False)
+    assert calls == [-9, -17] and out["doublings"] == 1 and out["converged"] and not out["regular_certified"]
+    assert all(out[k] == first[k] for k in CE.REGULAR_FIGURES) and np.isnan(out["regular_volume_change"])
+    assert "regular_volume 1 (the verification's, not certified)" in CE.describe(out)
+    with pytest.raises(ValueError, match="regular=False takes the regular-workspace figures from regular_first"):
+        CE.certify_design(_Problem(), _Design(), 0.2, task_samples=(3, 5, 7), cycle_samples=9, regular=False)
     with pytest.raises(ValueError, match="regular_first lacks regular_diameter, .*regular_diameter_fixed"):
         CE.certify_design(_Problem(), _Design(), 0.2, regular_first={"regular_volume": 1.0}, cycle_samples=9,
                           task_samples=(3, 5, 7))
@@ -728,3 +738,37 @@ def test_ray_cylinders_with_a_necessary_condition_or_a_cheaper_test_give_the_sam
         for k in ("volume", "diameter", "height", "z_top"):
             assert float(getattr(a, k)) == float(getattr(b, k)) == float(getattr(c, k))
     assert float(full[0].volume) > 0
+
+
+def test_certify_by_rule_runs_rays_only_for_the_baseline_and_the_designs_the_rule_stays_with():
+    # three candidates: verified picks/min 10, 9, 8; their task-and-cycle certification lowers them to 7, 8.5 and 7.9;
+    # design 2's rays put it under the volume floor (allowed: every design holds it by its verified volume)
+    from deltajax.optimize.certify import certify_by_rule
+
+    picks = {0: 5.0, 1: 10.0, 2: 9.0, 3: 8.0}
+    floor_ok = {0: True, 1: True, 2: True, 3: True}
+    cheap, rays = {1: 7.0, 2: 8.5, 3: 7.9}, {2: False}
+    calls = []
+
+    def certify(i, regular):
+        calls.append((i, regular))
+        picks[i] = cheap.get(i, picks[i])
+        if regular:
+            floor_ok[i] = rays.get(i, floor_ok[i])
+
+    def choose():
+        ok = [i for i in (1, 2, 3) if floor_ok[i]]
+        return max(ok, key=lambda i: picks[i]) if ok else -1
+
+    rec, done = certify_by_rule(choose, certify)
+    assert rec == 3 and done == {0: True, 1: False, 2: True, 3: True}
+    assert calls == [(0, True), (1, False), (2, False), (2, True), (3, False), (3, True)]
+    # without design 2's volume dropping: its rays confirm it, and design 3 is never certified
+    picks.update({1: 10.0, 2: 9.0, 3: 8.0}), floor_ok.update({2: True}), rays.clear(), calls.clear()
+    assert certify_by_rule(choose, certify) == (2, {0: True, 1: False, 2: True})
+    # at most max_full designs with their rays besides the baseline: the last of them is the answer
+    picks.update({1: 10.0, 2: 9.0, 3: 8.0}), floor_ok.update({2: True}), rays.update({2: False}), calls.clear()
+    assert certify_by_rule(choose, certify, max_full=1) == (2, {0: True, 1: False, 2: True})
+    # no candidate: the baseline alone
+    floor_ok.update({1: False, 2: False, 3: False}), calls.clear()
+    assert certify_by_rule(choose, certify) == (-1, {0: True}) and calls == [(0, True)]

@@ -132,3 +132,19 @@ def test_toy_run_log_has_no_warning_that_the_verified_table_contradicts(toy_run)
             assert "authoritative" in line
     # the table is the certified one (the certify stage), and says so per design
     assert "baseline certified: " in text and "recommended certified: feasible" in text
+
+
+def test_certify_lines_say_which_designs_regular_workspace_is_certified():
+    nan = float("nan")
+    Cg = {"row": np.array([0, 3]), "design_name": np.array(["baseline", "pareto_1"], dtype=object),
+          "regular_volume": np.array([0.022, 0.0279]), "regular_volume_change": np.array([0.0011, nan]),
+          "peak_utilisation_change": np.array([1e-7, 2e-5]), "doublings": np.array([1, 2]),
+          "regular_certified": np.array([1, 0], np.uint8),
+          "attrs": {"tolerance_regular_volume": 0.005, "tolerance_peak_utilisation": 1e-4}}
+    base, left = R.certify_lines(Cg)
+    assert base == ("  certified baseline: regular volume 22 L (doubling the density moved it 0.11 %, tolerance 0.5 %);"
+                    " every figure within its tolerance")
+    assert left == ("  certified pareto_1: task and cycle figures (regular volume 27.9 L: the verification's; the rule "
+                    "moved on before its rays were doubled); every figure within its tolerance")
+    Cg["peak_utilisation_change"][1] = 3e-4          # a figure that did not settle is named, the regular one never
+    assert R.certify_lines(Cg)[1].endswith("; NOT within tolerance: peak_utilisation")

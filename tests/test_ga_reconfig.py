@@ -76,7 +76,13 @@ def test_toy_run_front_feasible_summary_and_units(full_run):
     assert Cg["feasible"][j] == 1
     # certified at twice the density: the change is stated, with the tolerances as attributes
     assert Cg["attrs"]["tolerance_regular_volume"] == 0.005 and Cg["attrs"]["tolerance_joint_margin_deg"] == 0.05
-    assert np.all(np.isfinite(Cg["regular_volume_change"])) and np.all(Cg["peak_utilisation_change"] >= 0)
+    assert np.all(Cg["peak_utilisation_change"] >= 0)
+    # the baseline's and the recommendation's regular workspace certified (rays doubled); a design the rule left
+    # after its task and cycle figures were certified keeps the verification's regular figures, their change NaN
+    reg = np.asarray(Cg["regular_certified"]).astype(bool)
+    assert reg[rows.index(0)] and reg[j]
+    assert np.all(np.isfinite(Cg["regular_volume_change"][reg])) and np.all(np.isnan(Cg["regular_volume_change"][~reg]))
+    np.testing.assert_array_equal(Cg["regular_volume"][~reg], np.asarray(V["regular_volume"])[np.asarray(rows)[~reg]])
     # doubled again while a figure moved more than its tolerance: the density reached is stored, within the cap
     nd, cap = np.asarray(Cg["doublings"]), int(Cg["attrs"]["max_extra_doublings"])
     assert np.all((nd >= 1) & (nd <= 1 + cap)) and np.all(Cg["converged"][nd < 1 + cap] == 1)

@@ -162,7 +162,8 @@ def store_certify(res, names, cert: dict, feas, marg: dict, front, Fv, rec: int,
     res.put_axis(g, "design", np.arange(n), units="1")
     res.put_axis(g, "certified_design", np.arange(len(rows)), units="1")
     res.put(g, "certified", np.asarray([i in cert for i in range(n)], np.uint8), units="1", dims=("design",),
-            attrs={"meaning": "1: the design's figures are certified (worst cases searched, doubling checked)"})
+            attrs={"meaning": "1: the design's figures are certified (worst cases searched, doubling checked; "
+                              "the regular workspace's too where certified_design's regular_certified is 1)"})
     for k, v in marg.items():
         res.put(g, f"margin_{k}", np.asarray(v, float), units=MARGIN_UNITS[k], dims=("design",),
                 attrs={"meaning": "margin to the constraint (>= 0: met by that much); the certified figures where "
@@ -184,6 +185,11 @@ def store_certify(res, names, cert: dict, feas, marg: dict, front, Fv, rec: int,
                                   + (" (relative)" if k == "regular_volume" else "")})
     res.put(g, "converged", np.asarray([cert[i]["converged"] for i in rows], np.uint8), units="1",
             dims=("certified_design",), attrs={"meaning": "1: every change of the last doubling within its tolerance"})
+    res.put(g, "regular_certified", np.asarray([cert[i]["regular_certified"] for i in rows], np.uint8), units="1",
+            dims=("certified_design",),
+            attrs={"meaning": "1: the regular-workspace figures certified too (rays at doubled density); 0: the "
+                              "verification's (the rule moved on once this design's task and cycle figures were "
+                              "certified), their change NaN"})
     res.put(g, "doublings", np.asarray([cert[i]["doublings"] for i in rows], int), units="1",
             dims=("certified_design",),
             attrs={"meaning": "times the first density was doubled (1: the first doubling settled every figure; "

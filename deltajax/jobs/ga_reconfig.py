@@ -390,7 +390,9 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
     """The certify stage (:mod:`deltajax.optimize.certify`): the baseline and the recommendation certified (worst
     cases searched at the verification's density and at twice it, the change stated); the recommendation re-derived
     by the job's rule from the verified metrics with the certified ones in place (floor from the certified
-    baseline), and certified in turn, until the rule's answer is a certified design (at most ``max_rounds``).
+    baseline), and certified in turn, until the rule's answer is a certified design
+    (:func:`deltajax.optimize.certify.certify_by_rule`: a design's task and cycle figures first, its regular
+    workspace only if the rule stays with it; at most ``max_rounds`` designs with their regular workspace).
     Group ``certify`` (:func:`deltajax.jobs.designer_store.store_certify`); ``verify``'s ``recommended`` becomes
     the certified recommendation (``recommended_verified`` keeps the verification's)."""
     import jax.numpy as jnp
@@ -417,35 +419,33 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
     path = s.reconfig.get("mode", "per_task") == "path"
     bar = ctx.progress(total=2, desc="certify (worst cases, doubled density)")
 
-    def run(i):
-        if i in cert or i < 0:
-            return
+    def certify(i, regular):
         resize_bar(bar, max(bar.total, len(cert) + 1))   # the rule may move on to more designs than planned
         # the first density's rays: the verification's (same problem, rays, operating R; in mv until certified)
         c = CE.certify_design(pb, space_v.decode(jnp.asarray(genes[i])), R_op[i],
                               regular_first={k: mv[k][i] for k in CE.REGULAR_FIGURES},
-                              max_extra_doublings=int(s.verify.certify_doublings))
+                              max_extra_doublings=int(s.verify.certify_doublings), regular=regular)
         release_memory()                 # each design's densest programs free ~1 GiB that glibc would keep
+        if i not in cert:
+            bar.update(1)
         cert[i] = c
-        bar.update(1)
         for k in CE.CERTIFIED_METRICS:
             if not (path and k in CE.CYCLE_METRICS):    # mode=path: the cycle's certified figures are the fixed R's
                 mv[k][i] = c[k]
         feas[i] = bool(CE.feasible_certified({k: np.asarray(v[i]) for k, v in mv.items()}, pb))
         ctx.log(f"certified {names[i]}: {CE.describe(c)}" + ("" if feas[i] else "; infeasible once certified"))
 
-    run(0)
-    rec, front, Fv = rec0, np.zeros((0,), int), None
-    for _ in range(max_rounds):
+    def choose():
+        nonlocal front, Fv
         bv = np.asarray([mv[o][0] for o in objs])
         Fv = W.objective_matrix(mv, objs, sense / np.abs(np.where(bv != 0, bv, 1.0)))
         ok = np.flatnonzero(feas & np.all(np.isfinite(Fv), axis=1))
         nd = ok[non_dominated(Fv[ok])] if len(ok) else np.zeros((0,), int)
         front = nd[np.lexsort(Fv[nd].T[::-1])] if len(nd) else nd
-        rec = W.recommend(Fv, front, s.recommend, jp, band=s.recommend_band, floor=s.recommend_floor, sense=sense)
-        if rec < 0 or rec in cert:
-            break
-        run(rec)
+        return W.recommend(Fv, front, s.recommend, jp, band=s.recommend_band, floor=s.recommend_floor, sense=sense)
+
+    front, Fv = np.zeros((0,), int), None
+    rec, _ = CE.certify_by_rule(choose, certify, max_full=max_rounds)
     resize_bar(bar, len(cert))           # fewer than planned when the baseline was the answer
     bar.close()
     forget("certified")         # no later stage calls the certify programs: their compiled code goes (~0.3 GiB each)

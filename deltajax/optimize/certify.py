@@ -49,7 +49,7 @@ import numpy as np
 __all__ = ["TOLERANCES", "RAY_DENSITY", "RAY_PASSES", "RayDensity", "ray_cylinders", "ray_cylinder",
            "worst_in_cylinder", "certify_design", "certified_program", "design_margins", "MARGIN_UNITS", "cycle_at",
            "grid_cylinder_bounds", "CERTIFIED_METRICS", "CYCLE_METRICS", "feasible_certified", "overlay",
-           "MAX_EXTRA_DOUBLINGS", "SHARED_DOUBLINGS", "cycle_path", "describe", "REGULAR_FIGURES"]
+           "MAX_EXTRA_DOUBLINGS", "SHARED_DOUBLINGS", "cycle_path", "describe", "REGULAR_FIGURES", "certify_by_rule"]
 
 #: Stated accuracy of a certified figure: doubling the density moves it by no more than this.
 #: regular_volume: relative; joint margin: deg; clearance: m; utilisations: ratio (relative to 1).
@@ -187,7 +187,7 @@ def certified_program(pb, density: RayDensity, task_samples: tuple, cycle_sample
 def certify_design(pb, design, R_operating=None, *, density=None, task_samples=None,
                    cycle_samples=None, reference: Mapping[str, float] = None,
                    regular_first: Mapping[str, float] = None,
-                   max_extra_doublings: int = MAX_EXTRA_DOUBLINGS) -> dict:
+                   max_extra_doublings: int = MAX_EXTRA_DOUBLINGS, regular: bool = True) -> dict:
     """Certified figures of one design (a :class:`deltajax.Delta` or :class:`deltajax.ReconfigurableDelta`) on
     the designer's problem ``pb`` (:class:`deltajax.optimize.designer.DesignerProblem`) at its operating R
     (``R_operating``; None: the one :func:`deltajax.optimize.designer.evaluate_designer` chooses): every figure
@@ -203,17 +203,24 @@ def certify_design(pb, design, R_operating=None, *, density=None, task_samples=N
     the change the last doubling made (relative for the volume, in the figure's units otherwise),
     ``<name>_tolerance``, ``doublings`` (how many times the first density was doubled: 1 when the first doubling
     settled every figure), ``cycle_samples`` (the cycle samples reached) and ``converged`` (every change of the
-    last doubling within :data:`TOLERANCES`; False only when even the last allowed doubling moved a figure more).
+    last doubling within :data:`TOLERANCES`; False only when even the last allowed doubling moved a figure more) and
+    ``regular_certified`` (the regular-workspace figures certified too; see ``regular``).
     The cycle is evaluated at its fastest feasible duration at each density. ``reference``: the figures already
     evaluated at the first density (e.g. by an earlier call): then only the doubled evaluations run.
     ``regular_first``: the regular-workspace figures (:data:`REGULAR_FIGURES`) already found by the same ray search
     at the first density and the same operating R (the verification's, :func:`deltajax.optimize.designer.
     evaluate_designer` on the same problem: its ``rw_rays`` are the first density): then the first evaluation
-    runs without the ray searches and takes them from it. Host function (numpy floats); jitted inside: the ray
+    runs without the ray searches and takes them from it. ``regular=False`` (with ``regular_first``): the task
+    cylinder's and the cycle's figures alone are certified (no ray search at any density; the doublings settle
+    those figures) and the regular-workspace figures are ``regular_first``'s, their change NaN; the certify stage
+    certifies a design so first and runs its rays only if the rule stays with it. ``regular_certified`` says
+    which. Host function (numpy floats); jitted inside: the ray
     searches one program per density, the task cylinder and the cycle one program for the first density and its
     first :data:`SHARED_DOUBLINGS` doublings (each evaluation its own samples in it), one per further doubling."""
     if not (isinstance(max_extra_doublings, int) and max_extra_doublings >= 0):
         raise ValueError(f"max_extra_doublings must be an integer >= 0, got {max_extra_doublings!r}")
+    if not regular and regular_first is None:
+        raise ValueError("regular=False takes the regular-workspace figures from regular_first, which is missing")
     dt = (design.robot if hasattr(design, "robot") else design).upper_arm.dtype
     if R_operating is None:
         from .designer import evaluate_designer
@@ -239,13 +246,17 @@ def certify_design(pb, design, R_operating=None, *, density=None, task_samples=N
     else:
         a = {k: float(v) for k, v in certified_program(pb, d, t, c, padded_to=size)(design, R_op).items()}
     first = {k: float(a[k]) for k in TOLERANCES}
+    settled = {k: tol for k, tol in TOLERANCES.items() if regular or k not in REGULAR_FIGURES}   # doubled here
     for doublings in range(1, 2 + max_extra_doublings):
         d, t, c = d.doubled(), tuple(2 * n - 1 for n in t), 2 * c - 1
-        b = certified_program(pb, d, t, c, padded_to=size if doublings <= shared else None)(design, R_op)
+        b = certified_program(pb, d, t, c, rays=regular, padded_to=size if doublings <= shared else None)(
+            design, R_op)
         b = {k: float(v) for k, v in b.items()}
-        change = {k: _change(k, float(a[k]), b[k]) for k in TOLERANCES}
-        ok = all(change[k] <= tol for k, tol in TOLERANCES.items())
-        if ok or all(change[k] <= tol or (math.isnan(a[k]) and math.isnan(b[k])) for k, tol in TOLERANCES.items()):
+        if not regular:
+            b.update({k: a[k] for k in REGULAR_FIGURES})
+        change = {k: _change(k, float(a[k]), b[k]) if k in settled else math.nan for k in TOLERANCES}
+        ok = all(change[k] <= tol for k, tol in settled.items())
+        if ok or all(change[k] <= tol or (math.isnan(a[k]) and math.isnan(b[k])) for k, tol in settled.items()):
             break           # NaN at both densities (e.g. unreachable): a denser search cannot settle it
         a = b
     out = dict(b)
@@ -254,16 +265,50 @@ def certify_design(pb, design, R_operating=None, *, density=None, task_samples=N
         out[f"{k}_change"] = change[k]
         out[f"{k}_tolerance"] = tol
     out["converged"] = ok
+    out["regular_certified"] = bool(regular)
     out["doublings"] = doublings
     out["cycle_samples"] = c
     out["R_operating"] = float(R_op)
     return out
 
 
+def certify_by_rule(choose: Callable[[], int], certify: Callable[[int, bool], None], *, max_full: int = 4
+                    ) -> tuple[int, dict]:
+    """The certify stage's loop: the baseline (row 0) certified with its regular workspace (its certified volume
+    sets the floor rule's floor), then the rule's answer ``choose()`` (a row; -1: none; the figures certified so
+    far in place) certified until it is a fully certified design: a design the rule picks is first certified
+    without its ray searches (``certify(i, False)``: its task and cycle figures, ~0.1 CPU-s, which often move the
+    rule on, e.g. a lower certified picks/min), and with them (``certify(i, True)``: ~4-20 CPU-s) only when the
+    rule still picks it. At most ``max_full`` designs besides the baseline are certified with their regular
+    workspace; the last of them is the answer even if the rule would move again. Returns (the answer, {row:
+    whether its regular workspace is certified}) for every design certified."""
+    done = {}
+
+    def run(i, regular):
+        certify(i, regular)
+        done[i] = regular
+
+    run(0, True)
+    full = 0
+    while True:
+        rec = choose()
+        if rec < 0 or done.get(rec):
+            return rec, done
+        if rec not in done:
+            run(rec, False)          # the cheap figures first: they may move the rule on
+            continue
+        run(rec, True)
+        full += 1
+        if full >= max_full:
+            return rec, done
+
+
 def describe(c: Mapping[str, Any]) -> str:
     """One line of a :func:`certify_design` result: each figure with the change the last doubling made and its
     tolerance, the density reached, and whether every figure settled."""
+    reg = c.get("regular_certified", True)
     return (", ".join(f"{k} {c[k]:.5g} (doubling moved it {c[k + '_change']:.2g}, tolerance {c[k + '_tolerance']:g})"
+                      if reg or k not in REGULAR_FIGURES else f"{k} {c[k]:.5g} (the verification's, not certified)"
                       for k in TOLERANCES) + f"; density doubled {c['doublings']}x (cycle {c['cycle_samples']} samples)"
             + ("" if c["converged"] else "; NOT within every tolerance"))
 
