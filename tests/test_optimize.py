@@ -231,17 +231,19 @@ def designer_small():
 
 # -- a design's good test ------------------------------------------------------------------------------------------
 
-def test_design_good_test_is_the_constraints_good_test_of_the_robot_at_R_with_the_designs_plate():
+def test_design_good_test_is_the_constraints_good_test_of_the_robot_at_R_with_the_designs_plate(monkeypatch):
     # every consumer (evaluator, rays, certify, R(t) mode, report) builds the good test here: its robot at R, its R
-    # samples and its base plate (the largest R plus the overhang), and each of its four tests is the same traced
-    # computation as constraints' own called with that robot and plate
-    import jax
-
+    # samples and its base plate (the largest R plus the overhang), and each of its four tests is constraints' own
+    # function called with that robot, the spec and that plate
     from deltajax import constraints as C
     from deltajax.optimize.good import design_good_test
 
     spec = C.GoodSpec(joints=C.JointModel(limit=np.radians(50), platform_neutral=np.radians(40)),
                       links=C.LinkModel(), threshold=0.3)
+    calls = []
+    for name in ("good_point", "good_point_possible", "good_point_decided"):
+        monkeypatch.setattr(C, name, lambda robot, p, s, *, plate_radius, name=name: calls.append(
+            (name, float(robot.base_radius), p, s, float(plate_radius))) or C.PointCheck(*(name,) * 5))
     recon = SPACE.decode(jnp.full((SPACE.dim,), 0.5))
     fixed = recon.at(0.25)
     p = jnp.asarray([0.1, 0.05, 0.6])
@@ -250,12 +252,10 @@ def test_design_good_test_is_the_constraints_good_test_of_the_robot_at_R_with_th
         assert gt.reconfigurable == (design is recon)
         assert float(gt.plate) == float(top) + 0.02
         np.testing.assert_array_equal(gt.R_samples(), Rs)
-        R = Rs[-1]
-        assert float(gt.at(R).base_radius) == float(R)
-        at = design.at if design is recon else design.with_base_radius
-        plate = gt.plate    # its value asserted above
-        for mine, theirs in ((gt.point, C.good_point), (gt.possible, C.good_point_possible),
-                             (gt.decided, C.good_point_decided),
-                             (gt.good, lambda *a, **k: C.good_point(*a, **k).good)):
-            assert str(jax.make_jaxpr(mine)(R, p)) == str(jax.make_jaxpr(
-                lambda R, p, f=theirs: f(at(R), p, spec, plate_radius=plate))(R, p))
+        R = float(Rs[-1])
+        assert float(gt.at(R).base_radius) == R and float(gt.at(R).upper_arm) == float(recon.robot.upper_arm)
+        calls.clear()
+        assert gt.point(R, p).good == "good_point" and gt.good(R, p) == "good_point"
+        gt.possible(R, p), gt.decided(R, p)
+        assert [c[0] for c in calls] == ["good_point", "good_point", "good_point_possible", "good_point_decided"]
+        assert all(c[1] == R and c[2] is p and c[3] is spec and c[4] == float(top) + 0.02 for c in calls)
