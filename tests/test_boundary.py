@@ -103,6 +103,7 @@ def test_methods_agree_on_star_rays(searches):
         assert np.all(np.asarray(res.radius_out)[star] >= fe - dr)
 
 
+@pytest.mark.slow
 def test_continuation_call_counts(searches):
     """First ray per azimuth: the bisection count; later rays: 1 + number of eps steps, bracket width eps."""
     _, cont, _ = searches
@@ -119,6 +120,7 @@ def test_continuation_call_counts(searches):
     np.testing.assert_array_equal(calls[:, 1:], 1 + steps)
 
 
+@pytest.mark.slow
 def test_non_star_rays_detected(reach, searches):
     """Rays that leave and re-enter: a reachable point beyond a first exit that is unreachable."""
     conti, _, prof = searches

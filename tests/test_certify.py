@@ -91,6 +91,7 @@ def _nested_first_bad(good, r_hi, n0, n1, levels):
 @settings(max_examples=25, deadline=None)
 @given(st.floats(0.02, 0.4), st.lists(st.tuples(st.floats(0.0, 0.4), st.floats(1e-4, 0.05)), min_size=3, max_size=3),
        st.booleans())
+@pytest.mark.slow
 def test_first_bad_with_nested_searches_of_their_own_size_is_the_nested_search(edge, islands, possible):
     # a first level of 17 samples, then two nested searches of 5 (the doubled density's shape): every ray's first
     # bad radius is the reference's, through the full test or the necessary-condition path
@@ -181,6 +182,7 @@ def test_a_limiting_dip_that_moves_in_phi_with_z_is_found_and_converges():
     assert float(one.volume) <= bf["upper"]
 
 
+@pytest.mark.slow
 def test_old_sampled_measure_overstates_where_a_bad_island_slips_between_its_samples(synthetic):
     _, one, _ = synthetic
     pts_old, r_old, z_old = C.polar_grid(R_MAX, Z0, Z1, 32, 3, 43)
@@ -230,6 +232,7 @@ def test_worst_in_cylinder_finds_a_minimum_between_the_samples():
     assert float(best) < 1e-4 and float(jnp.linalg.norm(at - p0)) < 2e-3
 
 
+@pytest.mark.slow
 def test_worst_in_cylinder_at_traced_counts_is_the_search_at_those_counts_bit_for_bit():
     # one program sized for the densest samples serves every sparser count (the certify stage's first density and
     # its doubling): the same samples, the same worst starts, the same golden sections

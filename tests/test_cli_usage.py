@@ -162,6 +162,7 @@ def test_console_logging_goes_through_tqdm_and_keeps_routing():
         root.handlers = saved
 
 
+@pytest.mark.slow
 def test_import_creates_no_arrays():
     """Importing deltajax must not start a JAX backend (sweep workers set XLA threads and host devices after the
     import, and a default built at import would freeze the float precision before the caller chooses it)."""
@@ -198,6 +199,7 @@ def test_composition_errors_are_one_line_listing_valid_keys(args, expected):
         assert part in line, (part, line)
 
 
+@pytest.mark.slow
 def test_composition_check_passes_good_command_lines():
     from deltajax.run import check_overrides
 

@@ -67,6 +67,7 @@ SEG = jax.jit(C.segment_distance)
 
 @settings(deadline=None, max_examples=25)
 @given(st.lists(st.floats(-1, 1), min_size=12, max_size=12), st.booleans())
+@pytest.mark.slow
 def test_segment_distance_against_dense_sampling(v, parallel):
     p0, p1, q0, q1 = (np.asarray(v[3 * i:3 * i + 3]) for i in range(4))
     if parallel:
@@ -268,6 +269,7 @@ def _ball(c, rho):
     return lambda p: jnp.sum((p - jnp.asarray([0.0, 0.0, c])) ** 2) <= rho * rho
 
 
+@pytest.mark.slow
 def test_refined_cylinder_in_a_ball_and_a_cone_against_closed_forms():
     # independent closed forms: a ball of radius rho holds the cylinder with (D/2)^2 + (H/2)^2 = rho^2, H = lam D;
     # the frustum r <= a + b (z - z0), z <= z2 (radius growing downward) the one touching z2 and the top rim:
@@ -330,6 +332,7 @@ def test_search_settings_of_the_refined_cylinder_against_closed_forms():
     assert np.max(np.abs(Dg - d_exact)) > 5 * np.max(err)           # the grid's answer alone is much coarser
 
 
+@pytest.mark.slow
 def test_refine_cylinder_each_distinct_sample_once_and_all_good_give_the_same_answer():
     # refine_cylinder tests the centre once per centre and drops repeated samples (the axis ring repeats one point
     # per angle): the answer must be that of the samples as given, repeats and all; an ``all_good`` computing the

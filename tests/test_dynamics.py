@@ -129,6 +129,7 @@ def _power_and_dEdt(t, base):
 
 
 @pytest.mark.parametrize("model", ["rigid_rod", "point_split", "heavy_rod"])
+@pytest.mark.slow
 def test_instantaneous_power_balance(model):
     """tau . thetadot + F_R Rdot = dE/dt at many instants, R moving; E incl. the rods' rotational energy.
 
@@ -191,6 +192,7 @@ def _with_model(robot, model):
 
 
 @pytest.mark.parametrize("model", ["rigid_rod", "point_split"])
+@pytest.mark.slow
 def test_static_holding_torque_closed_form(model):
     """On the axis, every arm holds g s cos(th) plus a third of the platform weight through its forearm.
 
@@ -276,6 +278,7 @@ def test_time_scaling_law_and_min_cycle_time():
     assert bool(weak.reachable) and not bool(weak.ok) and math.isinf(float(weak.cycle_time))
 
 
+@pytest.mark.slow
 def test_unreachable_cycle_is_masked_not_raised():
     """vmap over trajectories: an unreachable cycle gives ok=False and NaN metrics, no exception."""
     robot = dj.presets.franco2026(fixed_R=0.2, with_mass=True)
@@ -338,6 +341,7 @@ def test_vmap_over_designs_no_retrace_and_finite_gradient():
     assert np.isfinite(float(g)) and abs(float(g) - float(fd)) < 1e-4 * abs(float(fd))
 
 
+@pytest.mark.slow
 def test_reconfiguration_force_static():
     """At rest the R actuator carries the radial components of the forearm forces: sum_i Jq_i0 y_i."""
     rec = dj.presets.franco2026(with_mass=True)
@@ -499,6 +503,7 @@ def test_newton_euler_reference_moving_R(model):
     _ne_check(ROBOTS[model], cycle, has_R=True)
 
 
+@pytest.mark.slow
 def test_rigid_rod_special_cases_and_difference():
     """rigid_rod with the two-end-mass inertia s (1 - s) is the point split; uniform rods need less torque."""
     robot = dj.presets.industrial()

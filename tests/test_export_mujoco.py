@@ -108,6 +108,7 @@ CASES = [("industrial", "rigid_rod", False), ("industrial", "point_split", False
 
 
 @pytest.mark.parametrize("name, forearm_model, R_moving", CASES)
+@pytest.mark.slow
 def test_mujoco_inverse_dynamics_matches_cycle_profile(name, forearm_model, R_moving):
     robot = industrial(forearm_model) if name == "industrial" else franco(R_moving, forearm_model)
     cycle = tr.adept_cycle(CENTRES[name], duration=0.4, n_samples=9)

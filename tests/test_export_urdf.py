@@ -12,6 +12,7 @@ import deltajax as dj
 @pytest.mark.parametrize("robot, p", [(dj.presets.industrial(), (0.1, -0.05, 0.7)),
                                       (dj.presets.franco2026(with_mass=True), (0.05, 0.08, 0.4))],
                          ids=["industrial", "franco2026"])
+@pytest.mark.slow
 def test_urdf_loads_and_loops_close(tmp_path, robot, p):
     import yourdfpy  # here, not at collection: ~1 s of imports (trimesh, scipy.spatial) in every xdist worker
 

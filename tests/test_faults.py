@@ -117,6 +117,7 @@ def test_fresh_true_is_the_explicit_way_to_start_over(tmp_path):
     assert dio.load(path)["workspace"]["reachable"].shape == (17, 17, 13)
 
 
+@pytest.mark.slow
 def test_results_without_a_manifest_are_not_overwritten(tmp_path, reference_grid):
     d = tmp_path / "run"
     d.mkdir()
@@ -153,6 +154,7 @@ def test_refused_cli_rerun_keeps_hydra_files(tmp_path):
 
 
 # -- 2. checkpoints: damaged or tampered files are refused -------------------------------------------------------
+@pytest.mark.slow
 def test_unreadable_results_file_is_refused_on_resume(tmp_path, partial_grid):
     d = _partial(tmp_path, partial_grid)
     (d / "results.h5").write_bytes(b"garbage" * 100)
@@ -561,6 +563,7 @@ def test_fuzzed_points_never_raise_and_non_finite_points_are_not_ok(points):
 @settings(max_examples=8, deadline=None)
 @given(st.lists(st.tuples(st.floats(-1, 1), st.floats(-0.5, 1), st.floats(-1, 1), st.floats(-1, 1)),
                 min_size=1, max_size=8))
+@pytest.mark.slow
 def test_fuzzed_designs_in_a_batch_never_raise(designs):
     """Designs with negative or zero lengths inside a vmapped batch: no exception, shapes kept (whether such
     designs come back ok=False is the core's item 7, asserted there)."""

@@ -96,6 +96,7 @@ def test_solve_floor_stops_after_its_rounds_and_finds_nothing_without_a_start(pr
     assert len(fo.starts) == 0 and len(fo.genes) == 0 and problem.calls == [] and sum(ticks) == 5
 
 
+@pytest.mark.slow
 def test_floor_solve_config_is_checked_before_anything_runs():
     from hydra import compose, initialize_config_dir
 

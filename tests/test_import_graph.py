@@ -60,6 +60,7 @@ def graph() -> dict[Path, set[Path]]:
     return {p: _imports(p) for p in PKG.rglob("*.py")}
 
 
+@pytest.mark.slow
 def test_no_import_circles(graph):
     """No set of modules imports each other in a loop (package faces ``__init__.py`` only hand names on and are
     left out, as farm-studio does)."""

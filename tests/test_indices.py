@@ -151,6 +151,7 @@ def test_k_tilde_nan_stays_nan():
     assert np.isnan(float(sigma_tilde(jnp.nan, 1.0, 2.0)))
 
 
+@pytest.mark.slow
 def test_singularity_types_2_3_4():
     # Type 2: R = r + ... forearms vertical: R - r + L1 cos(theta) = 0 -> theta = acos((r - R)/L1), on the axis
     R = 0.2

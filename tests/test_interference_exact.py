@@ -33,6 +33,7 @@ def _assert_exact(d, q0, q1, radius):
     assert np.all(d >= dense - step - 1e-12)     # and below it by at most the sample spacing
 
 
+@pytest.mark.slow
 def test_segment_disc_distance_against_dense_sampling():
     rng = np.random.default_rng(7)
     n = 120
@@ -66,6 +67,7 @@ def test_forearm_crossing_the_plate_plane_through_the_disc():
     assert float(out.base_plate) < -0.02 and float(out.margin) < 0
 
 
+@pytest.mark.slow
 def test_interference_plate_clearance_exact_over_random_configurations():
     rng = np.random.default_rng(3)
     n = 60
@@ -116,6 +118,7 @@ def _bisected_plate(q0, q1, radius, steps=60):
     return np.sqrt(h)
 
 
+@pytest.mark.slow
 def test_segment_disc_distance_equals_a_full_bisection_on_grazing_segments():
     """The Newton search (closed-form pieces, PLATE_NEWTON_STEPS steps) reaches the minimum of a 60-step bisection
     to 1e-13 m on segments that graze the rim nearly in the plate plane (where Newton from a far start crawls)
@@ -142,6 +145,7 @@ def test_segment_disc_distance_equals_a_full_bisection_on_grazing_segments():
     assert np.max(np.abs(d[unsigned] - ref[unsigned])) <= 1e-13
 
 
+@pytest.mark.slow
 def test_plate_blocks_only_where_the_exact_plate_clearance_fails():
     """constraints.plate_blocks (closed form; the search's necessary condition good_point_possible rules a point
     out with it) is True only where the exact clearance of some forearm to the plate is below forearm_radius +

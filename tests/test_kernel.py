@@ -82,6 +82,7 @@ def test_invalid_designs_in_a_vmapped_batch_give_ok_false():
     assert not np.asarray(fwd.ok)[:-1].any() and bool(fwd.ok[-1])
 
 
+@pytest.mark.slow
 def test_fk_flags_joint_limit_violations():
     p = jnp.array([0.05, -0.1, 0.45])
     theta = dj.ik(ROBOT, p).theta

@@ -52,6 +52,7 @@ _JACOBI_TAIL = jax.jit(lambda jx, d: singular_values(tuple(jx.ravel()), tuple(d)
 
 
 @pytest.mark.parametrize("scale", [1.0, 1e-4])  # scale < 1: nearly singular Jq, the Jx side of the S/T choice
+@pytest.mark.slow
 def test_tail_reciprocals_match_svd(scale):
     rng = np.random.default_rng(7)
     for _ in range(20):
@@ -65,6 +66,7 @@ def test_tail_reciprocals_match_svd(scale):
         np.testing.assert_allclose(t.inv_omega, 1.0 / np.prod(ref), rtol=1e-10)
 
 
+@pytest.mark.slow
 def test_tail_singular_jx_is_inf_with_finite_gradient():
     """det Jx = 0 exactly: s1 = omega = inf, 1/s1 = 0, and the gradient of a finite output stays finite."""
     jx = (1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 1.0)  # two equal rows

@@ -156,6 +156,7 @@ def _fk_and_inv_cond(q):
 
 
 @given(t0=angles, t1=angles, t2=angles, R=radii)
+@pytest.mark.slow
 def test_analytic_jacobian_matches_autodiff_of_fk(t0, t1, t2, R):
     q = jnp.array([R, t0, t1, t2])
     f, inv_cond = _fk_and_inv_cond(q)
@@ -187,6 +188,7 @@ def test_passive_angles_meaning():
                                atol=1e-12)
 
 
+@pytest.mark.slow
 def test_new_parameter_values_do_not_retrace():
     traces = []
 

@@ -99,6 +99,7 @@ def test_module_declares_all_and_its_names_exist(f, modname):
     assert not [x for x in names if _private(x)], f"{modname}.__all__ lists private names"
 
 
+@pytest.mark.slow
 def test_no_private_name_is_imported_across_modules():
     bad = []
     for f, modname in MODULES:
@@ -130,6 +131,7 @@ def test_results_and_config_libraries_only_in_io_and_the_application():
     assert not bad, "\n".join(bad)
 
 
+@pytest.mark.slow
 def test_imports_run_core_to_engines_to_application():
     rank = {"core": 0, "engine": 1, "app": 2}
     bad = []
@@ -152,6 +154,7 @@ def test_imports_run_core_to_engines_to_application():
 CONFIG_READERS = ("deltajax.config", "deltajax.run")
 
 
+@pytest.mark.slow
 def test_the_configuration_is_read_in_one_place():
     bad = []
     for f, modname in MODULES:

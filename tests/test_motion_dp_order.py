@@ -41,6 +41,7 @@ def test_dp_order_equals_brute_force_over_many_seeds(aggregate):
                 _check_path(tab, res, bf, w, a, fmax, aggregate)
 
 
+@pytest.mark.slow
 def test_min_order_with_traced_speed_and_accel_limits():
     """path_optimum's form (wide static bands, the limits traced per design; three programs): the lexicographic
     (min, integral) optimum of brute force with the bands those limits give, and a path that achieves it

@@ -206,7 +206,8 @@ def _traced_drive(n_rows):
     return jax.jit(jax.vmap(one))(n, rated), np.asarray([c[2] for c in rows])
 
 
-@pytest.mark.parametrize("n_rows", [1, 8, pytest.param(BIG, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("n_rows", [1, 8, BIG])
+@pytest.mark.slow
 def test_traced_invalid_motor_or_gear_is_nan(n_rows):
     out, valid = _traced_drive(n_rows)
     ppm, ok = np.asarray(out.picks_per_min), np.asarray(out.loads.ok)
@@ -214,6 +215,7 @@ def test_traced_invalid_motor_or_gear_is_nan(n_rows):
     assert np.all(np.isfinite(ppm[valid]) & (ppm[valid] > 0)) and ok[valid].all()
 
 
+@pytest.mark.slow
 def test_traced_invalid_limits_give_no_cycle_time():
     """Limits checks concrete values; traced ones (a batch of limits) that are NaN or <= 0 give a NaN cycle time
     and ok=False, never 0 cycles/min or a number."""

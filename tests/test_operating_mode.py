@@ -57,6 +57,7 @@ def test_bad_settings_are_one_line_errors(override, words):
     assert "\n" not in msg and all(w in msg for w in words), msg
 
 
+@pytest.mark.slow
 def test_defaults_are_per_task_and_path_builds_a_spec():
     s, _, pb = _problem([])
     assert pb.mode == "per_task" and s.reconfig["mode"] == "per_task"
@@ -188,6 +189,7 @@ def test_path_mode_at_least_as_good_as_fixed_R_and_per_task(small):
     assert checked >= 1
 
 
+@pytest.mark.slow
 def test_dp_with_traced_limits_equals_bands_and_brute_force():
     """motion.path_dp with the traced speed/accel masks inside wide static bands = the DP with the exact bands
     (w, a) from the same limits = brute force over every sample path (tiny instance)."""

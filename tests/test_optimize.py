@@ -79,6 +79,7 @@ def sphere(genes):
 CFG = GAConfig(algorithm="simple_ga", population_size=8, generations=16, checkpoint_every=8, sigma=0.2, seed=3)
 
 
+@pytest.mark.slow
 def test_ga_converges_stays_in_bounds_and_is_reproducible():
     a = run_ga(sphere, 4, CFG)
     b = run_ga(sphere, 4, CFG)
@@ -94,6 +95,7 @@ def test_ga_converges_stays_in_bounds_and_is_reproducible():
     assert not np.array_equal(a.history["gen_best_genes"], c.history["gen_best_genes"])
 
 
+@pytest.mark.slow
 def test_kill_and_resume_is_bit_identical(tmp_path):
     """Killed after its first checkpoint (committed into results.h5 through the stage engine, as the main job does)
     and resumed in a new process: the very same result."""
@@ -137,6 +139,7 @@ def test_second_ga_selectable():
         ga_config({"algorithm": "cmaes"})
 
 
+@pytest.mark.slow
 def test_ga_seeded_with_several_designs_keeps_the_best_seed():
     seeds = np.asarray([[0.3, 0.3, 0.3, 0.31], [0.9, 0.9, 0.9, 0.9], [0.1, 0.2, 0.3, 0.4]])
     cfg = GAConfig(**{**CFG.__dict__, "generations": 2, "checkpoint_every": 2})

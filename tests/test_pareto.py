@@ -10,6 +10,7 @@ REF = np.array([1.1, 1.1])
 
 
 @pytest.mark.parametrize("name", ["zdt1", "zdt2"])
+@pytest.mark.slow
 def test_nsga2_finds_the_zdt_front(name):
     f = jax.jit(zdt(name))
     res = nsga2(lambda X: (np.asarray(f(X)), None), 10, 2, pop_size=40, n_gen=120, seed=1, ref=REF)

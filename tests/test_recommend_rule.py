@@ -55,6 +55,7 @@ def test_bad_recommend_and_search_refine_settings_are_one_line(override, match):
         ga_reconfig_settings(cfg.experiment)
 
 
+@pytest.mark.slow
 def test_search_and_verification_problems_carry_their_refine_settings():
     from hydra import compose, initialize_config_dir
 

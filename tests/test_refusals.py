@@ -20,6 +20,7 @@ def _cli(*args, cwd):
                           text=True, timeout=300)
 
 
+@pytest.mark.slow
 def test_rerun_of_a_finished_run_does_not_rewrite_its_hydra_files(toy_run):
     from hydra import compose, initialize_config_dir
     from toy_jobs import overrides

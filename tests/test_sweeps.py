@@ -197,6 +197,7 @@ def test_worker_keeps_freed_memory_only_before_jax_starts():
     assert out.stdout.split("\n")[:2] == ["freed memory kept for reuse", "3.0"], out.stdout
 
 
+@pytest.mark.slow
 def test_worker_gives_one_host_device_whatever_its_cpus():
     """A job's process has one JAX host device by default however many CPUs it gets (XLA's cache keys every
     executable by the device count: jobs, in-process runs and the tests then share their compiled programs); more

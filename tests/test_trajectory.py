@@ -122,6 +122,7 @@ def _joint_rates_both_ways(R, p, pd, pdd, Rd, Rdd):
        pd=st.lists(st.floats(-2.0, 2.0), min_size=3, max_size=3),
        pdd=st.lists(st.floats(-30.0, 30.0), min_size=3, max_size=3),
        R=st.floats(0.15, 0.35), Rd=st.floats(-0.5, 0.5), Rdd=st.floats(-5.0, 5.0))
+@pytest.mark.slow
 def test_joint_motion_matches_autodiff_of_ik_and_round_trips(xy, z, pd, pdd, R, Rd, Rdd):
     p = jnp.asarray([xy[0], xy[1], z])
     m, thd, thdd, back = _joint_rates_both_ways(R, p, jnp.asarray(pd), jnp.asarray(pdd), Rd, Rdd)

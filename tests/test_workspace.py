@@ -126,6 +126,7 @@ def test_fast_equals_exact_on_coarse_grid(criterion, beta):
     np.testing.assert_array_equal(fast.indices[fast.ok, col], fast.value[fast.ok])
 
 
+@pytest.mark.slow
 def test_grid_jobs_fast_equal_exact(fixed20):
     a = ws.redundancy_grid(REC, G20, mask=fixed20.ok, mode="fast", chunk_size=5000)
     b = ws.redundancy_grid(REC, G20, mask=fixed20.ok, mode="exact", chunk_size=9000)

@@ -70,8 +70,8 @@ def assert_bitwise(ok, vals, ref_ok, ref_vals):
 GRID = make_grid((-0.36, 0.36), (-0.36, 0.36), (0.0, 0.56), h=0.04)  # 19 x 19 x 15, mirror-symmetric
 
 
-@pytest.mark.parametrize("block", [pytest.param(8, marks=pytest.mark.slow), 64,
-                                   pytest.param(4096, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("block", [8, 64, 4096])
+@pytest.mark.slow
 def test_box_fields_is_the_kernel_bit_for_bit(block):
     """Compaction in blocks of any (vector-width) size (8: many loop trips; 4096: one padded block) gives the
     kernel's values at every point and ok=False / NaN everywhere else."""
@@ -102,6 +102,7 @@ def test_box_fields_without_candidates_is_all_masked():
     assert not np.asarray(_candidate(ROBOT, np.stack(np.meshgrid(x, y, z, indexing="ij"), -1).reshape(-1, 3))).any()
 
 
+@pytest.mark.slow
 def test_reach_candidate_keeps_every_reachable_point_and_drops_most_others():
     """The pre-test is a superset of the kernel's ok on a dense random cloud (the compaction's premise), and
     it is selective (else the compaction would save nothing)."""
@@ -161,8 +162,8 @@ def _evaluate(grid, mirror):
     return np.concatenate(oks).reshape(grid.shape), np.concatenate(vals).reshape(grid.shape + (len(FIELD_NAMES),))
 
 
-@pytest.mark.parametrize("grid, mirror", [(GRID, True), pytest.param(GRID, False, marks=pytest.mark.slow),
-                                          pytest.param(ASYM, True, marks=pytest.mark.slow)])
+@pytest.mark.parametrize("grid, mirror", [(GRID, True), (GRID, False), (ASYM, True)])
+@pytest.mark.slow
 def test_grid_evaluator_is_the_kernel_bit_for_bit(grid, mirror):
     """The job's JAX evaluator (mirror half when the grid allows it, compaction, chunks of x-planes with a
     padded last chunk) equals the kernel at every point of the grid, bit for bit."""
@@ -222,6 +223,7 @@ def _float32(robot):
 
 
 @pytest.mark.parametrize("forearm, tmax", [(0.4, 1.92), (0.3, 0.8), (0.5, 1.9)])
+@pytest.mark.slow
 def test_reach_candidate_is_a_superset_in_float32(forearm, tmax):
     """precision=float32 (the throughput mode): roundings 1e9 x larger than in float64, so its own slacks
     (CANDIDATE_SLACK_F32); superset on both sides of the boundary (bisected in float32) and on a random cloud."""
