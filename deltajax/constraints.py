@@ -59,8 +59,9 @@ from .regular import (REFINE_BISECT, REFINE_GOLDEN, REFINE_SAMPLES, RegularWorks
 
 __all__ = ["JointModel", "LinkModel", "GoodSpec", "JointAngles", "Interference", "PointCheck", "ConstraintError",
            "joint_angles", "joint_margin", "segment_distance", "segment_disc_distance", "interference", "good_point",
-           "good_point_possible", "good_point_decided", "plate_blocks", "JOINT_BAND", "largest_cylinder",
-           "regular_workspace", "RegularWorkspace", "polar_grid", "cylinder_samples", "refine_cylinder",
+           "good_point_possible", "good_point_decided", "good_point_settle", "GoodState", "plate_blocks",
+           "JOINT_BAND", "largest_cylinder", "regular_workspace", "RegularWorkspace", "polar_grid", "cylinder_samples",
+           "refine_cylinder",
            # deltajax.drive's, re-exported
            "Motor", "DriveLoads", "CycleRate", "with_drive", "motor_side", "drive_ok", "drive_loads", "cycle_rate",
            "cycle_rate_refined", "min_cycle_time", "picks_per_minute"]
@@ -300,6 +301,11 @@ def _interference(robot: Delta, p, theta, ok, links: LinkModel, plate_radius) ->
     ``ok``): each consumer of one configuration guards it once (:func:`good_point`)."""
     B, C, ff, fu = _link_clearances(robot, p, theta, links)
     Rp, ok = _plate_radius(robot, links, plate_radius, ok, B.dtype)
+    return _interference_of(p, B, C, ff, fu, Rp, ok, links)
+
+
+def _interference_of(p, B, C, ff, fu, Rp, ok, links: LinkModel) -> Interference:
+    """:func:`_interference` from the link clearances (:func:`_link_clearances`) and the guarded plate radius."""
     plate = jnp.stack([segment_disc_distance(B[i], C[i], Rp) for i in range(3)])
     bp = jnp.minimum(jnp.min(plate) - links.forearm_radius, p[2])
     margin = jnp.minimum(jnp.minimum(ff, fu), bp) - links.clearance
@@ -436,7 +442,37 @@ def good_point(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, plate_radi
     return PointCheck(good=good, reachable=ok, index=v, joint_margin=jm, interference_margin=im)
 
 
-def good_point_decided(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, plate_radius=None
+class GoodState(NamedTuple):
+    """What :func:`good_point_decided` solved at one point (with ``state=True``), for :func:`good_point_settle`:
+    the IK's ok and the index value, the guarded configuration (:func:`deltajax.kinematics.
+    guarded_configuration`: robot, p, theta, ok), the elbows B and forearm ends C (base frame), the link
+    clearances (m) and the guarded plate radius and its ok."""
+
+    ok: Bool[Array, ""]
+    index: Float[Array, ""]
+    robot: Delta
+    p: Float[Array, "3"]
+    theta: Float[Array, "3"]
+    ok_g: Bool[Array, ""]
+    B: Float[Array, "3 3"]
+    C: Float[Array, "3 3"]
+    ff: Float[Array, ""]
+    fu: Float[Array, ""]
+    Rp: Float[Array, ""]
+    ok_p: Bool[Array, ""]
+
+
+def good_point_settle(st: GoodState, spec: GoodSpec) -> Bool[Array, ""]:
+    """:func:`good_point`'s ``good`` from the configuration :func:`good_point_decided` solved (``state=True``): the
+    terms it did not compute (the joint margins, the forearms' exact plate clearances), by the same functions on the
+    same configuration, so the IK, the index and the link distances are not solved a second time where the decided
+    test leaves a point undecided (:func:`deltajax.optimize.rays.settle_good`)."""
+    jm = _joint_margin(st.robot, st.p, st.theta, st.ok_g, spec.joints)
+    im = _interference_of(st.p, st.B, st.C, st.ff, st.fu, st.Rp, st.ok_p, spec.links).margin
+    return st.ok & (st.index >= spec.threshold) & (jm >= 0) & (im >= 0)
+
+
+def good_point_decided(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, plate_radius=None, state: bool = False
                        ) -> tuple[Bool[Array, ""], Bool[Array, ""]]:
     """(good, decided): :func:`good_point`'s ``good`` (same ``plate_radius``) wherever ``decided``, at about half its
     cost: the forearms' exact plate clearances (a Newton search each) are replaced by closed-form tests
@@ -448,7 +484,7 @@ def good_point_decided(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, pl
     :func:`good_point` (:func:`deltajax.optimize.rays.settle_good`). Every other term is computed by the same
     functions on the same configuration as in :func:`good_point`, ``margin >= 0`` splits exactly into its terms,
     and the closed-form tests decide only outside a margin wider than both computations' rounding, so the flag is
-    the exact one."""
+    the exact one. ``state=True``: also the :class:`GoodState` that :func:`good_point_settle` finishes from."""
     ok, v, cos, sin, robot_g, p_g, theta_g, ok_g = _solved(robot, p, spec)
     if spec.joints.kind == "ball":
         j_in, j_dec = _ball_joints_decided(robot_g, p_g, cos, sin, spec.joints)
@@ -461,4 +497,5 @@ def good_point_decided(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, pl
     clear = _plate_clear(B, C, Rp, spec.links)
     blocked = _plate_blocked(B, C, Rp, spec.links)
     # decided: a term certainly fails, or every term certainly holds
-    return rest & j_in & clear, ~rest | (j_dec & ~j_in) | blocked | (j_in & clear)
+    out = rest & j_in & clear, ~rest | (j_dec & ~j_in) | blocked | (j_in & clear)
+    return out + (GoodState(ok, v, robot_g, p_g, theta_g, ok_g, B, C, ff, fu, Rp, ok_p),) if state else out

@@ -123,7 +123,7 @@ def _good_any_traced(design, Rs, P, plate, good):
     gt = DesignGoodTest(design, good, plate)
     nR, nP = Rs.shape[0], P.shape[0]
     return any_good_where_possible(gt.good, gt.possible, jnp.repeat(Rs, nP), jnp.tile(P, (nR, 1)), ((nP, nR),),
-                                   -(-nR * nP // GOOD_ANY_ROUNDS), decided_R=gt.decided)
+                                   -(-nR * nP // GOOD_ANY_ROUNDS), decided_R=gt.decided_settle)
 
 
 def _motor_points(design, reconfigurable: bool, R_op: float, T: float, pb):

@@ -671,7 +671,7 @@ def test_good_only_where_possible_is_the_full_test_and_skips_what_cannot_be_good
     # both packings give the full test's answer (per pair, and any over each point's R), and the full test runs in
     # rounds of ``chunk`` lanes over the possible pairs only (it records every lane it computes, padding included):
     # at most ceil(possible pairs / chunk) rounds, none when nothing is possible
-    from deltajax.optimize.rays import any_good_where_possible, good_where_possible
+    from deltajax.optimize.rays import Decided, any_good_where_possible, good_where_possible
 
     rng = np.random.default_rng(seed)
     good = rng.random((n_pts, n_R)) < 0.3
@@ -717,6 +717,23 @@ def test_good_only_where_possible_is_the_full_test_and_skips_what_cannot_be_good
     jax.effects_barrier()
     und = {(i, j) for i, j in zip(*np.nonzero(possible & ~np.asarray(decided)))}
     assert set(asked) <= und                  # padding lanes repeat an undecided pair
+    # a Decided hands its state to its settle (the good test: the IK solved once per pair): the same answers, the
+    # full test never called, settle only at undecided pairs, from the state decide left there
+    settled = []
+
+    def decide(R, p):
+        return decided_R(R, p) + ((p[0].astype(int), R.astype(int)),)
+
+    def settle(ij):
+        jax.debug.callback(lambda i, j: settled.append((int(i), int(j))), *ij)
+        return G[ij]
+
+    asked.clear()
+    per_pair = jax.jit(lambda: good_where_possible(good_logged, possible_R, jnp.asarray(Rf), jnp.asarray(Pf), chunk,
+                                                   Decided(decide, settle)))()
+    np.testing.assert_array_equal(np.asarray(per_pair), good.reshape(-1))
+    jax.effects_barrier()
+    assert asked == [] and set(settled) <= und and bool(settled) == bool(und)
 
 
 @pytest.mark.slow

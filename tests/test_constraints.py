@@ -380,13 +380,14 @@ def test_good_point_possible_is_necessary():
 
 
 @pytest.mark.slow
-def test_good_point_decided_is_the_full_test_wherever_it_decides():
+def test_good_point_decided_is_the_full_test_wherever_it_decides_and_its_state_settles_the_rest():
     # the closed-form plate tests settle all but the forearms that pass near the rim at the required clearance;
     # plate radii swept so that some do (those must come back undecided), and wherever it decides, the flag is
-    # good_point's, bit for bit
+    # good_point's, bit for bit; good_point_settle of the state it solved is good_point's flag at every point
+    # (unreachable and NaN points included)
     # (ball joints: a sign test instead of the cone angles; universal joints: their exact margin)
     pts, _, _ = C.polar_grid(0.4, 0.1, 0.8, 8, 3, 10)
-    P = jnp.asarray(pts).reshape(-1, 3)
+    P = jnp.concatenate([jnp.asarray(pts).reshape(-1, 3), jnp.asarray([[jnp.nan, 0.0, 0.5], [0.0, 0.0, 5.0]])])
     plates = jnp.linspace(0.2, 0.45, 26)
     for kind, limit in (("ball", 50), ("universal", 40)):
         spec = C.GoodSpec(joints=C.JointModel(limit=math.radians(limit), platform_neutral=math.radians(40), kind=kind),
@@ -394,11 +395,12 @@ def test_good_point_decided_is_the_full_test_wherever_it_decides():
 
         def both(P, Rp, spec=spec):
             check = jax.vmap(lambda p: C.good_point(ROBOT, p, spec, plate_radius=Rp))(P)
-            g, dec = jax.vmap(lambda p: C.good_point_decided(ROBOT, p, spec, plate_radius=Rp))(P)
-            return check.good, g, dec, check.joint_margin
+            g, dec, state = jax.vmap(lambda p: C.good_point_decided(ROBOT, p, spec, plate_radius=Rp, state=True))(P)
+            return check.good, g, dec, check.joint_margin, jax.vmap(lambda s: C.good_point_settle(s, spec))(state)
 
-        full, g, dec, jm = (np.asarray(a) for a in jax.jit(jax.vmap(lambda r: both(P, r)))(plates))
+        full, g, dec, jm, settled = (np.asarray(a) for a in jax.jit(jax.vmap(lambda r: both(P, r)))(plates))
         assert np.array_equal(g[dec], full[dec])
+        assert np.array_equal(settled, full) and not full[:, -2:].any()
         assert 0 < int((~dec).sum()) < 0.05 * dec.size          # some undecided (rim grazing), few
         assert full.any() and not full.all()
         assert np.any(jm < 0) and np.any(jm > 0)                # the joints' limit is crossed on this grid

@@ -362,7 +362,7 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True, draw
 
     # the good test (flag; settled where its closed-form plate and joint tests decide it: the search grid, its
     # refinement, the rays; its cheap necessary condition: every user skips pairs where it fails)
-    good_at, decided, possible = gt.good, gt.decided, gt.possible
+    good_at, decided, possible = gt.good, gt.decided_settle, gt.possible
 
     if rays:   # every ray search of both good sets (R per point; the operating R) in one call of the good test
         from .rays import RayDensity, ray_cylinders

@@ -7,6 +7,7 @@ R(t) operating mode, the run report's workspace figure) builds it here::
     gt.good(R, p)       # its flag
     gt.possible(R, p)   # its cheap necessary condition (good_point_possible)
     gt.decided(R, p)    # (flag, decided): good_point_decided, the flag wherever decided
+    gt.decided_settle   # the same, handing its configuration to the full test (rays.settle_good)
 
 The robot at R is :meth:`deltajax.ReconfigurableDelta.at` (a fixed design: :meth:`deltajax.Delta.
 with_base_radius`), its R samples the design's (a fixed design: its own R) and the base plate's radius the largest R
@@ -19,6 +20,7 @@ from typing import Any, NamedTuple
 
 from .. import constraints as C
 from ..geometry import ReconfigurableDelta
+from .rays import Decided
 
 __all__ = ["DesignGoodTest", "design_good_test"]
 
@@ -54,6 +56,18 @@ class DesignGoodTest(NamedTuple):
 
     def decided(self, R, p):
         return C.good_point_decided(self.at(R), p, self.spec, plate_radius=self.plate)
+
+    def decided_state(self, R, p):
+        return C.good_point_decided(self.at(R), p, self.spec, plate_radius=self.plate, state=True)
+
+    def settle(self, state: C.GoodState):
+        return C.good_point_settle(state, self.spec)
+
+    @property
+    def decided_settle(self) -> Decided:
+        """The decided test that hands its configuration to the full test where it leaves a pair undecided
+        (:func:`deltajax.optimize.rays.settle_good`): the same answers, the IK solved once per pair."""
+        return Decided(self.decided_state, self.settle)
 
 
 def design_good_test(design, spec: C.GoodSpec, plate_overhang) -> DesignGoodTest:

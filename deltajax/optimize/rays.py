@@ -31,7 +31,7 @@ from ..regular import RegularWorkspace
 
 __all__ = ["RAY_DENSITY", "RAY_PASSES", "RAY_BATCH", "POSSIBLE_CHUNKS", "RayDensity", "ray_cylinders", "ray_cylinder",
            "worst_in_cylinder", "padded_linspace", "golden_min", "good_where_possible", "any_good_where_possible",
-           "UNDECIDED_CHUNKS", "settle_good", "first_open"]
+           "UNDECIDED_CHUNKS", "settle_good", "Decided", "first_open"]
 
 _GOLD = (math.sqrt(5.0) - 1.0) / 2.0
 
@@ -152,14 +152,29 @@ def first_open(mask, size: int):
     return pick, jnp.arange(size) < jnp.sum(m)
 
 
-def settle_good(good_R: Callable, decided_R: Optional[Callable], R, P, live):
+class Decided(NamedTuple):
+    """A decided test that hands its work on: ``decide(R, p) -> (good, decided, state)`` and ``settle(state) ->
+    good``, the full test's answer from that state (e.g. :func:`deltajax.constraints.good_point_decided` with
+    ``state=True`` and :func:`deltajax.constraints.good_point_settle`: the IK is solved once per pair)."""
+
+    decide: Callable
+    settle: Callable
+
+
+def settle_good(good_R: Callable, decided_R: Optional[Callable | Decided], R, P, live):
     """``good_R`` at the pairs (R, P) of one chunk: without ``decided_R`` the full test at every pair; with it
-    (``(R, p) -> (good, decided)``, e.g. :func:`deltajax.constraints.good_point_decided`) its answer where it
-    decides, and the full test, packed, only at the live pairs it leaves undecided (a loop of chunks of
-    1/:data:`UNDECIDED_CHUNKS` of the chunk that does not run at all when none is)."""
+    (``(R, p) -> (good, decided)``, e.g. :func:`deltajax.constraints.good_point_decided`, or a :class:`Decided`)
+    its answer where it decides, and the full test, packed, only at the live pairs it leaves undecided (a loop of
+    chunks of 1/:data:`UNDECIDED_CHUNKS` of the chunk that does not run at all when none is): ``good_R`` there, or
+    a :class:`Decided`'s ``settle`` of the state its ``decide`` left at those pairs."""
     if decided_R is None:
         return jax.vmap(good_R)(R, P)
-    g, dec = jax.vmap(decided_R)(R, P)
+    if isinstance(decided_R, Decided):
+        g, dec, state = jax.vmap(decided_R.decide)(R, P)
+        full = lambda idx: jax.vmap(decided_R.settle)(jax.tree_util.tree_map(lambda x: x[idx], state))  # noqa: E731
+    else:
+        g, dec = jax.vmap(decided_R)(R, P)
+        full = lambda idx: jax.vmap(good_R)(R[idx], P[idx])  # noqa: E731
     K = R.shape[0]
     k2 = max(K // UNDECIDED_CHUNKS, 1)
     order, n = _packed(live & ~dec, k2)
@@ -167,7 +182,7 @@ def settle_good(good_R: Callable, decided_R: Optional[Callable], R, P, live):
     def body(st):
         c, g = st
         idx = jax.lax.dynamic_slice(order, (c * k2,), (k2,))
-        gf = jax.vmap(good_R)(R[idx], P[idx])
+        gf = full(idx)
         return c + 1, g.at[jnp.where(c * k2 + jnp.arange(k2) < n, idx, K)].set(gf, mode="drop")
 
     return jax.lax.while_loop(lambda st: st[0] * k2 < n, body, (jnp.int32(0), g))[1]
@@ -401,7 +416,7 @@ def ray_cylinders(good_R: Callable, R_sets: Sequence, r_max: float, z_min: float
     e.g. :func:`deltajax.constraints.good_point_possible`); the full test then runs only where it holds
     (:func:`any_good_where_possible`), with the same answer. ``decided_R(R, p) -> (good, decided)`` (with
     ``possible_R``): a cheaper test whose answer is taken where it decides (:func:`settle_good`), e.g.
-    :func:`deltajax.constraints.good_point_decided`."""
+    :func:`deltajax.constraints.good_point_decided`, or a :class:`Decided` that hands its state to the full test."""
     dt = jnp.result_type(float) if dtype is None else dtype
     n = density
     nz, nphi = n.n_z, n.n_phi
