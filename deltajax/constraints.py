@@ -473,7 +473,7 @@ def good_point_settle(st: GoodState, spec: GoodSpec) -> Bool[Array, ""]:
 
 
 def good_point_decided(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, plate_radius=None, state: bool = False
-                       ) -> tuple[Bool[Array, ""], Bool[Array, ""]]:
+                       ) -> tuple[Bool[Array, ""], ...]:
     """(good, decided): :func:`good_point`'s ``good`` (same ``plate_radius``) wherever ``decided``, at about half its
     cost: the forearms' exact plate clearances (a Newton search each) are replaced by closed-form tests
     (:func:`plate_blocks` and its converse) that settle them except where a forearm passes within a margin of the
