@@ -433,20 +433,19 @@ def _solved(robot: Delta, p, spec: GoodSpec):
 @traced_once
 def good_point(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, plate_radius=None) -> PointCheck:
     """Is ``p`` (m, base frame) in the good workspace of ``robot`` (R frozen)? Margins NaN if unreachable."""
-    ok, v, _, _, robot_g, p_g, theta_g, ok_g = _solved(robot, p, spec)
-    jm = _joint_margin(robot_g, p_g, theta_g, ok_g, spec.joints)
-    im = _interference(robot_g, p_g, theta_g, ok_g, spec.links, plate_radius).margin
+    st = _good_state(robot, p, spec, plate_radius)[2]
+    jm, im = _margins(st, spec)
     nan = jnp.asarray(jnp.nan, jm.dtype)
-    v, jm, im = (jnp.where(ok, x, nan) for x in (v, jm, im))
-    good = ok & (v >= spec.threshold) & (jm >= 0) & (im >= 0)
-    return PointCheck(good=good, reachable=ok, index=v, joint_margin=jm, interference_margin=im)
+    v, jm, im = (jnp.where(st.ok, x, nan) for x in (st.index, jm, im))
+    return PointCheck(good=_good_flag(st, jm, im, spec), reachable=st.ok, index=v, joint_margin=jm,
+                      interference_margin=im)
 
 
 class GoodState(NamedTuple):
-    """What :func:`good_point_decided` solved at one point (with ``state=True``), for :func:`good_point_settle`:
-    the IK's ok and the index value, the guarded configuration (:func:`deltajax.kinematics.
-    guarded_configuration`: robot, p, theta, ok), the elbows B and forearm ends C (base frame), the link
-    clearances (m) and the guarded plate radius and its ok."""
+    """The configuration at one point solved once for every term of the good test (:func:`good_point`; with
+    ``state=True`` :func:`good_point_decided` returns it for :func:`good_point_settle`): the IK's ok and the index
+    value, the guarded configuration (:func:`deltajax.kinematics.guarded_configuration`: robot, p, theta, ok), the
+    elbows B and forearm ends C (base frame), the link clearances (m) and the guarded plate radius and its ok."""
 
     ok: Bool[Array, ""]
     index: Float[Array, ""]
@@ -462,14 +461,31 @@ class GoodState(NamedTuple):
     ok_p: Bool[Array, ""]
 
 
+def _good_state(robot: Delta, p, spec: GoodSpec, plate_radius):
+    """(cos, sin, :class:`GoodState`): the actuated angles' cos and sin (the kernel's) and the state at ``p``."""
+    ok, v, cos, sin, robot_g, p_g, theta_g, ok_g = _solved(robot, p, spec)
+    B, C, ff, fu = _link_clearances(robot_g, p_g, theta_g, spec.links)
+    Rp, ok_p = _plate_radius(robot_g, spec.links, plate_radius, ok_g, B.dtype)
+    return cos, sin, GoodState(ok, v, robot_g, p_g, theta_g, ok_g, B, C, ff, fu, Rp, ok_p)
+
+
+def _margins(st: GoodState, spec: GoodSpec):
+    """The joint margin (rad) and the interference margin (m) of the state (NaN where its guard is not ok)."""
+    jm = _joint_margin(st.robot, st.p, st.theta, st.ok_g, spec.joints)
+    return jm, _interference_of(st.p, st.B, st.C, st.ff, st.fu, st.Rp, st.ok_p, spec.links).margin
+
+
+def _good_flag(st: GoodState, jm, im, spec: GoodSpec) -> Bool[Array, ""]:
+    """The good test's flag from the state and its margins (a NaN compares False)."""
+    return st.ok & (st.index >= spec.threshold) & (jm >= 0) & (im >= 0)
+
+
 def good_point_settle(st: GoodState, spec: GoodSpec) -> Bool[Array, ""]:
     """:func:`good_point`'s ``good`` from the configuration :func:`good_point_decided` solved (``state=True``): the
     terms it did not compute (the joint margins, the forearms' exact plate clearances), by the same functions on the
-    same configuration, so the IK, the index and the link distances are not solved a second time where the decided
-    test leaves a point undecided (:func:`deltajax.optimize.rays.settle_good`)."""
-    jm = _joint_margin(st.robot, st.p, st.theta, st.ok_g, spec.joints)
-    im = _interference_of(st.p, st.B, st.C, st.ff, st.fu, st.Rp, st.ok_p, spec.links).margin
-    return st.ok & (st.index >= spec.threshold) & (jm >= 0) & (im >= 0)
+    same state as :func:`good_point`, so the IK, the index and the link distances are not solved a second time
+    where the decided test leaves a point undecided (:func:`deltajax.optimize.rays.settle_good`)."""
+    return _good_flag(st, *_margins(st, spec), spec)
 
 
 def good_point_decided(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, plate_radius=None, state: bool = False
@@ -485,17 +501,15 @@ def good_point_decided(robot: Delta, p: Float[Array, "3"], spec: GoodSpec, *, pl
     functions on the same configuration as in :func:`good_point`, ``margin >= 0`` splits exactly into its terms,
     and the closed-form tests decide only outside a margin wider than both computations' rounding, so the flag is
     the exact one. ``state=True``: also the :class:`GoodState` that :func:`good_point_settle` finishes from."""
-    ok, v, cos, sin, robot_g, p_g, theta_g, ok_g = _solved(robot, p, spec)
+    cos, sin, st = _good_state(robot, p, spec, plate_radius)
     if spec.joints.kind == "ball":
-        j_in, j_dec = _ball_joints_decided(robot_g, p_g, cos, sin, spec.joints)
+        j_in, j_dec = _ball_joints_decided(st.robot, st.p, cos, sin, spec.joints)
     else:
-        j_in, j_dec = _joint_margin(robot_g, p_g, theta_g, ok_g, spec.joints) >= 0, jnp.asarray(True)
-    B, C, ff, fu = _link_clearances(robot_g, p_g, theta_g, spec.links)
-    Rp, ok_p = _plate_radius(robot_g, spec.links, plate_radius, ok_g, B.dtype)
+        j_in, j_dec = _joint_margin(st.robot, st.p, st.theta, st.ok_g, spec.joints) >= 0, jnp.asarray(True)
     cl = spec.links.clearance
-    rest = ok & ok_p & (v >= spec.threshold) & (ff >= cl) & (fu >= cl) & (p_g[2] >= cl)
-    clear = _plate_clear(B, C, Rp, spec.links)
-    blocked = _plate_blocked(B, C, Rp, spec.links)
+    rest = st.ok & st.ok_p & (st.index >= spec.threshold) & (st.ff >= cl) & (st.fu >= cl) & (st.p[2] >= cl)
+    clear = _plate_clear(st.B, st.C, st.Rp, spec.links)
+    blocked = _plate_blocked(st.B, st.C, st.Rp, spec.links)
     # decided: a term certainly fails, or every term certainly holds
     out = rest & j_in & clear, ~rest | (j_dec & ~j_in) | blocked | (j_in & clear)
-    return out + (GoodState(ok, v, robot_g, p_g, theta_g, ok_g, B, C, ff, fu, Rp, ok_p),) if state else out
+    return out + (st,) if state else out
