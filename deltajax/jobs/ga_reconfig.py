@@ -331,7 +331,7 @@ def _floor_step(st, cand, names, mv, Fv, nd, pb_fine, space_v, scale_v):
     bar = ctx.progress(total=s.floor_solve.rounds + 1, desc="floor step")
     fo = solve_floor(st.pb, st.space, cand, Fv, nd, st.objs, st.scale, st.primary,
                      W.floor_limits(len(st.objs), st.jp, s.recommend_floor, st.sense), evaluate=st.ev,
-                     evaluate_cheap=st.ev_cheap, evaluate_fine=W.batch_evaluator(pb_fine, space_v, 8),
+                     evaluate_cheap=st.ev_cheap, evaluate_fine=W.batch_evaluator(pb_fine, space_v, W.VERIFY_BATCH),
                      steps=s.refine.steps, learning_rate=s.refine.learning_rate,
                      penalty=s.refine.penalty, rounds=s.floor_solve.rounds,
                      n_fine=s.floor_solve.candidates, progress=bar.update)

@@ -42,7 +42,7 @@ __all__ = ["SetupError", "setup", "designer_problem", "required_margins", "scree
            "pareto_eval",
            "refine_designs", "RefineOutcome", "descent_paths", "verify", "floor_limits", "recommend",
            "RECOMMEND_RULES", "DESCENT_ROWS", "design_metrics", "batch_evaluator", "objective_matrix",
-           "STORED_METRIC"]
+           "STORED_METRIC", "VERIFY_BATCH"]
 
 RECOMMEND_RULES = ("floor", "band", "knee", "primary")   # the rules of :func:`recommend`
 
@@ -257,7 +257,13 @@ def pareto_eval(evaluate: Callable[[np.ndarray], dict], objs: Sequence[str], sca
 
 
 
-def verify(pb_fine, space, cand: np.ndarray, *, batch: int = 8,
+#: Designs per call of the verification's evaluator (verify and the floor step share its program): its ray searches
+#: loop until the slowest design of a call is done, so fewer per call wait less; on the default run's 42
+#: candidates 4 cost ~20 % fewer CPU-seconds than 8, and 2 or 1 no fewer (docs/BENCHMARKS.md)
+VERIFY_BATCH = 4
+
+
+def verify(pb_fine, space, cand: np.ndarray, *, batch: int = VERIFY_BATCH,
            progress: Optional[Callable[[int], Any]] = None) -> dict:
     """Every metric of every candidate on the fine grids (``progress`` gets the number of designs per batch)."""
     ev = batch_evaluator(pb_fine, space, batch)
