@@ -23,8 +23,7 @@ jax.config.update("jax_numpy_rank_promotion", "raise")
 # (configs/config.yaml compilation_cache) also serves the tests, in-process and in CLI subprocesses, so a rerun
 # compiles only what changed. Cached executables are keyed by the HLO, JAX version and flags, never stale;
 # DELTAJAX_TEST_JAX_CACHE=<dir> picks another folder (an empty one measures a cold start).
-from toy_jobs import JAX_CACHE  # noqa: E402
-JAX_CACHE_MIN_S = 0.1  # small compilations too: the other xdist worker reuses them (the CLI alone: over 1 s)
+from toy_jobs import JAX_CACHE, JAX_CACHE_MIN_S  # noqa: E402
 jax.config.update("jax_compilation_cache_dir", JAX_CACHE)
 jax.config.update("jax_persistent_cache_min_compile_time_secs", JAX_CACHE_MIN_S)
 # every CLI run the tests start (toy runs, SLURM and joblib sweep jobs, kill/resume, the wheel's CLI) inherits

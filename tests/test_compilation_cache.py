@@ -5,7 +5,7 @@ import os
 
 from omegaconf import OmegaConf
 
-from toy_jobs import JAX_CACHE
+from toy_jobs import JAX_CACHE, JAX_CACHE_MIN_S
 
 
 def _compose(*overrides):
@@ -54,7 +54,8 @@ def test_run_keeps_jaxs_own_cache_threshold_when_set(monkeypatch, tmp_path):
     from deltajax.config import ConfigError
     from deltajax.run import execute
 
-    assert os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] == "0.1"  # what the CLI subprocesses inherit
+    # what the CLI subprocesses inherit
+    assert os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] == str(JAX_CACHE_MIN_S)
     cfg = _compose("experiment.grid.h=0", f"compilation_cache={tmp_path / 'xla'}")
     before = (jax.config.jax_compilation_cache_dir, jax.config.jax_persistent_cache_min_compile_time_secs)
     try:
