@@ -662,78 +662,102 @@ def test_all_any_good_is_the_full_all_any_whatever_it_skips(seed, shape):
     assert bool(out) == bool(good.any(axis=1).all())
 
 
-@pytest.mark.slow   # ~5 s: each shape compiles both programs
+#: per shape (points, R samples, chunk): the four programs of the test below, the tables their arguments, so that
+#: the examples of one shape share one compilation each (each example compiled its own: ~15 s of the suite)
+_WHERE_POSSIBLE = {}
+#: what the programs' full test and settle were asked, (point, R) pairs, appended by their debug callbacks
+_ASKED, _SETTLED = [], []
+
+
+def _where_possible_programs(n_pts, n_R, chunk):
+    from deltajax.optimize.rays import Decided, any_good_where_possible, good_where_possible
+
+    Rf = jnp.asarray(np.tile(np.arange(n_R, dtype=float), n_pts))                      # pairs point-major, R inner
+    Pf = jnp.asarray(np.repeat(np.arange(n_pts, dtype=float), n_R)[:, None] * np.ones((1, 3)))
+    Rm = jnp.asarray(np.repeat(np.arange(n_R, dtype=float), n_pts))    # R-major: every point's first R, then ...
+    Pm3 = jnp.asarray(np.tile(np.arange(n_pts, dtype=float), n_R)[:, None] * np.ones((1, 3)))
+
+    def at(R, p):
+        return p[0].astype(int), R.astype(int)
+
+    def tests(G, Pm, D):
+        def good_R(R, p):
+            return G[at(R, p)]
+
+        def good_logged(R, p):
+            jax.debug.callback(lambda r, q: _ASKED.append((int(q[0]), int(r))), R, p)
+            return good_R(R, p)
+
+        def possible_R(R, p):
+            return Pm[at(R, p)]
+
+        def decided_R(R, p):    # decides where D, and answers wrongly where it does not
+            ij = at(R, p)
+            return jnp.where(D[ij], G[ij], ~G[ij]), D[ij]
+
+        def settle(ij):
+            jax.debug.callback(lambda i, j: _SETTLED.append((int(i), int(j))), *ij)
+            return G[ij]
+
+        return good_R, good_logged, possible_R, decided_R, Decided(lambda R, p: decided_R(R, p) + (at(R, p),),
+                                                                   settle)
+
+    def per_pair(G, Pm, D):
+        good_R, _, possible_R, _, _ = tests(G, Pm, D)
+        return good_where_possible(good_R, possible_R, Rf, Pf, chunk)
+
+    def any_R(G, Pm, D):
+        _, good_logged, possible_R, _, _ = tests(G, Pm, D)
+        return any_good_where_possible(good_logged, possible_R, Rm, Pm3, [(n_pts, n_R)], chunk)
+
+    def per_pair_decided(G, Pm, D):
+        _, good_logged, possible_R, decided_R, _ = tests(G, Pm, D)
+        return good_where_possible(good_logged, possible_R, Rf, Pf, chunk, decided_R)
+
+    def per_pair_settled(G, Pm, D):
+        _, good_logged, possible_R, _, decided = tests(G, Pm, D)
+        return good_where_possible(good_logged, possible_R, Rf, Pf, chunk, decided)
+
+    return tuple(jax.jit(f) for f in (per_pair, any_R, per_pair_decided, per_pair_settled))
+
+
+@pytest.mark.slow   # each shape compiles four programs
 @settings(max_examples=8)
 @given(st.integers(0, 2 ** 31 - 1), st.sampled_from([(1, 4, 4), (7, 3, 5), (40, 5, 64), (13, 1, 2)]))
 def test_good_only_where_possible_is_the_full_test_and_skips_what_cannot_be_good(seed, shape):
-    n_pts, n_R, chunk = shape
     # a random good set and a random necessary condition of it (possible where good, and at some other pairs):
     # both packings give the full test's answer (per pair, and any over each point's R), and the full test runs in
     # rounds of ``chunk`` lanes over the possible pairs only (it records every lane it computes, padding included):
     # at most ceil(possible pairs / chunk) rounds, none when nothing is possible
-    from deltajax.optimize.rays import Decided, any_good_where_possible, good_where_possible
-
+    n_pts, n_R, chunk = shape
+    if shape not in _WHERE_POSSIBLE:
+        _WHERE_POSSIBLE[shape] = _where_possible_programs(*shape)
+    per_pair, any_R, per_pair_decided, per_pair_settled = _WHERE_POSSIBLE[shape]
     rng = np.random.default_rng(seed)
     good = rng.random((n_pts, n_R)) < 0.3
     possible = good | (rng.random((n_pts, n_R)) < 0.4)
-    Rf = np.tile(np.arange(n_R, dtype=float), n_pts)                  # pairs point-major, R inner
-    Pf = np.repeat(np.arange(n_pts, dtype=float), n_R)[:, None] * np.ones((1, 3))
-    G, Pm = jnp.asarray(good), jnp.asarray(possible)
-
-    def good_R(R, p):
-        return G[p[0].astype(int), R.astype(int)]
-
-    def possible_R(R, p):
-        return Pm[p[0].astype(int), R.astype(int)]
-
-    per_pair = jax.jit(lambda: good_where_possible(good_R, possible_R, jnp.asarray(Rf), jnp.asarray(Pf), chunk))()
-    np.testing.assert_array_equal(np.asarray(per_pair), good.reshape(-1))
-    asked = []
-
-    def good_logged(R, p):
-        jax.debug.callback(lambda r, q: asked.append((int(q[0]), int(r))), R, p)
-        return good_R(R, p)
-
-    Rm = np.repeat(np.arange(n_R, dtype=float), n_pts)               # R-major: every point's first R, then ...
-    Pm3 = np.tile(np.arange(n_pts, dtype=float), n_R)[:, None] * np.ones((1, 3))
-    any_R = any_good_where_possible(good_logged, possible_R, jnp.asarray(Rm), jnp.asarray(Pm3), [(n_pts, n_R)],
-                                    chunk)
-    np.testing.assert_array_equal(np.asarray(any_R), good.any(axis=1))
+    # with a cheaper test that decides most pairs (and answers wrongly where it does not decide)
+    decided = rng.random((n_pts, n_R)) < 0.8
+    tables = (jnp.asarray(good), jnp.asarray(possible), jnp.asarray(decided))
+    np.testing.assert_array_equal(np.asarray(per_pair(*tables)), good.reshape(-1))
+    _ASKED.clear()
+    np.testing.assert_array_equal(np.asarray(any_R(*tables)), good.any(axis=1))
     jax.effects_barrier()
     k = min(chunk, n_pts * n_R)
-    assert len(asked) <= k * -(-int(possible.sum()) // k)
-    # with a cheaper test that decides most pairs (and answers wrongly where it does not decide): the same answers,
-    # and the full test runs only at undecided pairs
-    decided = jnp.asarray(rng.random((n_pts, n_R)) < 0.8)
-
-    def decided_R(R, p):
-        i, j = p[0].astype(int), R.astype(int)
-        return jnp.where(decided[i, j], G[i, j], ~G[i, j]), decided[i, j]
-
-    asked.clear()
-    per_pair = jax.jit(lambda: good_where_possible(good_logged, possible_R, jnp.asarray(Rf), jnp.asarray(Pf), chunk,
-                                                   decided_R))()
-    np.testing.assert_array_equal(np.asarray(per_pair), good.reshape(-1))
+    assert len(_ASKED) <= k * -(-int(possible.sum()) // k)
+    # the decided test: the same answers, and the full test runs only at undecided pairs
+    _ASKED.clear()
+    np.testing.assert_array_equal(np.asarray(per_pair_decided(*tables)), good.reshape(-1))
     jax.effects_barrier()
-    und = {(i, j) for i, j in zip(*np.nonzero(possible & ~np.asarray(decided)))}
-    assert set(asked) <= und                  # padding lanes repeat an undecided pair
+    und = {(i, j) for i, j in zip(*np.nonzero(possible & ~decided))}
+    assert set(_ASKED) <= und                  # padding lanes repeat an undecided pair
     # a Decided hands its state to its settle (the good test: the IK solved once per pair): the same answers, the
     # full test never called, settle only at undecided pairs, from the state decide left there
-    settled = []
-
-    def decide(R, p):
-        return decided_R(R, p) + ((p[0].astype(int), R.astype(int)),)
-
-    def settle(ij):
-        jax.debug.callback(lambda i, j: settled.append((int(i), int(j))), *ij)
-        return G[ij]
-
-    asked.clear()
-    per_pair = jax.jit(lambda: good_where_possible(good_logged, possible_R, jnp.asarray(Rf), jnp.asarray(Pf), chunk,
-                                                   Decided(decide, settle)))()
-    np.testing.assert_array_equal(np.asarray(per_pair), good.reshape(-1))
+    _ASKED.clear()
+    _SETTLED.clear()
+    np.testing.assert_array_equal(np.asarray(per_pair_settled(*tables)), good.reshape(-1))
     jax.effects_barrier()
-    assert asked == [] and set(settled) <= und and bool(settled) == bool(und)
+    assert _ASKED == [] and set(_SETTLED) <= und and bool(_SETTLED) == bool(und)
 
 
 @pytest.mark.slow
