@@ -264,7 +264,6 @@ def test_cancelled_ga_job_resubmitted_finishes_bit_identical(cluster):
     generations = int(next(o for o in over if o.startswith("experiment.ga.generations=")).split("=")[1])
     tmp = cluster["tmp"]
     ref_sweep, sweep = tmp / "ga_ref", tmp / "ga_cut"
-    ref = _cli(cluster, ["-m", *over, f"hydra.sweep.dir={ref_sweep}"])
     cut = _cli(cluster, ["-m", *over, f"hydra.sweep.dir={sweep}"])
     results = sweep / "0" / "results.h5"
     deadline = time.monotonic() + TIMEOUT
@@ -274,6 +273,10 @@ def test_cancelled_ga_job_resubmitted_finishes_bit_identical(cluster):
         time.sleep(0.2)
     job = _job(sweep / "0")
     subprocess.run(["scancel", job["SLURM_JOB_ID"]], env=cluster["env"], check=True, timeout=30)
+    # the uninterrupted reference runs while the cancelled sweep's submitter waits (SLURM kills the step ~5 s after
+    # scancel; submitit then notices the job's end and waits 15 s for a result it will not get): on a core that
+    # would otherwise be idle, rather than beside the cut job and the rest of the suite
+    ref = _cli(cluster, ["-m", *over, f"hydra.sweep.dir={ref_sweep}"])
     out = _finish(cut, "cancelled sweep", ok=False)
     assert cut.returncode != 0 and "has not produced any output (state: CANCELLED" in out
     done_at_cancel = _generations_done(results)
