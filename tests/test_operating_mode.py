@@ -2,6 +2,7 @@
 "R(t) along the cycle" under the R drive's limits (deltajax/optimize/operating.py)."""
 
 import math
+from pathlib import Path
 
 import h5py
 import jax
@@ -19,6 +20,7 @@ from deltajax.motion_refine import spline_basis
 from deltajax.optimize import operating as OP
 from deltajax.optimize.designer import DESIGN_UNITS, evaluate_designer
 from deltajax.run import CONFIG_DIR, run_experiment
+from deltajax.trajectory import Cycle
 
 from toy_jobs import overrides
 
@@ -98,16 +100,45 @@ def test_periodic_basis_is_periodic_and_reproduces_constants():
 TORQUE = 1.0  # N m, the screw motor's limit in these tests
 
 
+#: the array fields of a cartesian :class:`deltajax.trajectory.Cycle`
+CYCLE_FIELDS = ("u", "x", "dx", "ddx", "duration", "R", "dR", "ddR")
+
+
+def _kept(fn, kind, *content):
+    """``fn`` (jitted), its traced program read back from the program cache where an earlier session kept it
+    (:func:`deltajax.tracing.persistent`: the same program, so the same numbers), keyed by the content of the
+    problem it closes over and by this file's text (the package's source is in every program's key already)."""
+    import hashlib
+
+    from deltajax.tracing import persistent, stable_key
+
+    key = stable_key(*content)
+    assert key is not None, "the problem's content must be known by value"
+    return persistent(fn, kind, key + hashlib.sha256(Path(__file__).read_bytes()).hexdigest())
+
+
 @pytest.fixture(scope="module")
 def small():
     s, space, pb = _problem(SMALL + ["experiment.reconfig.mechanism=screw_linkage",
                                      f"experiment.reconfig.motor_torque={TORQUE}"])
     _, _, pb0 = _problem([o for o in SMALL if "reconfig.mode" not in o])
-    per_task = jax.jit(lambda g: evaluate_designer(pb0, space.decode(g), regular=False))
+    # both programs kept across sessions by the content of their problem, as the job keeps its own
+    # (deltajax.tracing.persistent): tracing the path mode is most of this fixture's ~16 s
+    per_task = _kept(jax.jit(lambda g: evaluate_designer(pb0, space.decode(g), regular=False)), "test_per_task",
+                     pb0, space)
 
     @jax.jit
+    def path_fields(g, R_op, T_plan):   # the profile's cycle as its fields: the kept program's outputs are read
+        # back through pickle, which does not keep equinox's field sentinels (a Cycle read back would not unflatten)
+        m, prof = OP.path_operating(pb, space.decode(g), R_op, T_plan, jnp.nan, jnp.nan, return_profile=True)
+        assert prof["cycle"].space == "cartesian"
+        return m, {**prof, "cycle": {k: getattr(prof["cycle"], k) for k in CYCLE_FIELDS}}
+
+    path_fields = _kept(path_fields, "test_path_operating", pb, space)
+
     def path(g, R_op, T_plan):
-        return OP.path_operating(pb, space.decode(g), R_op, T_plan, jnp.nan, jnp.nan, return_profile=True)
+        m, prof = path_fields(g, R_op, T_plan)
+        return m, {**prof, "cycle": Cycle(**prof["cycle"])}
 
     # two designs feasible at these sizes: the baseline with a 0.39 m forearm (with its 0.40 m one, the task samples
     # on the mirror planes fail -- task and interference -- at all 4 per-task R candidates) and a faster design
