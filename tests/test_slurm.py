@@ -106,131 +106,55 @@ def _assert_identical(a_path, b_path, skip_attrs=()):
     assert_identical(a_path, b_path, skip_attrs=skip_attrs)
 
 
-# -- (a) an array job -----------------------------------------------------------------------------------
-@pytest.mark.slow
-def test_two_point_sweep_is_one_array_job(cluster):
-    sweep = cluster["tmp"] / "array"
-    t0 = time.perf_counter()
-    out = _finish(_cli(cluster, ["-m", *TINY, "robot.forearm=0.35,0.4", *SLURM, "hydra.launcher.cpus_per_task=1",
-                                 "hydra.launcher.mem_gb=1", f"hydra.sweep.dir={sweep}"]), "array sweep")
-    wall = time.perf_counter() - t0
-    jobs = [_job(sweep / r) for r in ("0", "1")]
-    # one array job, one task per sweep point
-    assert jobs[0]["SLURM_ARRAY_JOB_ID"] == jobs[1]["SLURM_ARRAY_JOB_ID"]
-    assert [j["SLURM_ARRAY_TASK_ID"] for j in jobs] == ["0", "1"]
-    array = jobs[0]["SLURM_ARRAY_JOB_ID"]
-    script = (sweep / ".submitit" / array / f"{array}_submission.sh").read_text()
-    assert "#SBATCH --array=0-1%" in script
-    for j, task in zip(jobs, "01"):
-        rec = _slurm_record(cluster, j["SLURM_JOB_ID"])  # what SLURM itself recorded
-        assert (rec["ArrayJobId"], rec["ArrayTaskId"], rec["JobState"]) == (array, task, "COMPLETED")
-        assert "cpu=1," in rec["Tres"] and "mem=1G" in rec["Tres"]
-        # logs where docs/CLUSTER.md says: <sweep>/.submitit/<array id>_<task>/<array id>_<task>_0_log.{out,err}
-        log_dir = sweep / ".submitit" / f"{array}_{task}"
-        assert j["stdout"] == str(log_dir / f"{array}_{task}_0_log.out")
-        assert j["stderr"] == str(log_dir / f"{array}_{task}_0_log.err")
-        log = Path(j["stdout"]).read_text()
-        assert "[deltajax] worker: 1 CPUs (SLURM_CPUS_PER_TASK)" in log and "wrote " in log
-        assert j["status"] == "ok"
-    rows = _rows(sweep)
-    assert [(r["run"], r["status"], r["overrides"]["robot.forearm"]) for r in rows] == [("0", "ok", "0.35"),
-                                                                                        ("1", "ok", "0.4")]
-    csv = (sweep / "summary.csv").read_text().splitlines()
-    assert len(csv) == 3 and csv[1].startswith("0,run,ok,") and csv[2].startswith("1,run,ok,")
-    assert rows[0]["metrics"]["workspace/count"] < rows[1]["metrics"]["workspace/count"] == 79
-    print(f"array sweep of 2 points: submit to finish {wall:.1f} s wall", file=sys.stderr)
-    assert "sweep summary" in out
-
-
-# -- (b) shards merged exactly, and the CPUs of the job reach JAX, XLA and Numba ---------------------------
-@pytest.mark.slow
-def test_sharded_grid_merges_to_single_run_and_cpus_reach_the_worker(cluster):
-    tmp = cluster["tmp"]
-    single = tmp / "single"
-    ref = _cli(cluster, [*TINY, f"hydra.run.dir={single}"])  # one local process, all CPUs
-    sweep = tmp / "shards"
-    _finish(_cli(cluster, ["-m", *TINY, "n_shards=3", "shard=0,1,2", *SLURM, "hydra.launcher.cpus_per_task=2",
-                           "hydra.launcher.mem_gb=2", "hydra.callbacks.worker_env.host_devices=2",
-                           f"hydra.sweep.dir={sweep}"]), "sharded sweep")
-    _finish(ref, "single run")
-    merged = sweep / "merged" / "workspace_grid" / "results.h5"
-    _assert_identical(merged, single / "results.h5")
-    with h5py.File(merged, "r") as f:
-        assert f.attrs["merged_n_shards"] == 3
-    for s in ("0", "1", "2"):
-        job = _job(sweep / s)
-        assert job["SLURM_CPUS_PER_TASK"] == "2"
-        rec = _slurm_record(cluster, job["SLURM_JOB_ID"])
-        assert rec["JobState"] == "COMPLETED" and "cpu=2," in rec["Tres"] and "mem=2G" in rec["Tres"]
-        with h5py.File(sweep / s / "results.h5", "r") as f:
-            env = json.loads(f.attrs["worker_env"])
-            device = str(f.attrs["device"])
-        # SLURM_CPUS_PER_TASK=2 -> 2 XLA threads and 2 Numba threads in the job's process; 2 JAX host devices as
-        # asked (the default is one: tests/test_sweeps.py), the merge bit-identical to the single run's one device
-        assert env["cpus_from"] == "SLURM_CPUS_PER_TASK" and env["cpus"] == 2
-        assert env["PJRT_NPROC"] == "2" and env["host_devices"] == 2 and env["numba_threads"] == 2
-        assert device.endswith(" x2"), device
-    rows = _rows(sweep)
-    assert [(r["kind"], r["status"]) for r in rows] == [("run", "ok")] * 3 + [("merged", "ok")]
-
-
-# -- (d) a failing sweep point --------------------------------------------------------------------------
-@pytest.mark.slow
-def test_failed_point_is_reported_others_merge_and_merge_cli_recovers(cluster):
-    sweep = cluster["tmp"] / "failing"
-    out = _finish(_cli(cluster, ["-m", *TINY, "robot.forearm=0.4,-1", "n_shards=2", "shard=0,1", *SLURM,
-                                 "hydra.launcher.cpus_per_task=1", "hydra.launcher.mem_gb=1",
-                                 f"hydra.sweep.dir={sweep}"]), "failing sweep", ok=False)
-    assert "forearm must be > 0 m, got -1.0" in out
-    rows = _rows(sweep)  # written although Hydra raised (SweepSummary's exit hook)
-    status = {r["run"]: r["status"] for r in rows}
-    assert status["0"] == status["1"] == "ok"
-    for r in ("2", "3"):
-        assert status[r].startswith("failed: ConfigError: robot.forearm must be > 0 m, got -1.0 m"), status[r]
-    merged = sweep / "merged" / "robot.forearm=0.4" / "results.h5"
-    assert status["merged/robot.forearm=0.4"] == "ok" and len(rows) == 5
-    before = {k: v.data for k, v in read(merged).variables["workspace"].items()}
-    csv_before = (sweep / "summary.csv").read_text()
-    assert "failed: ConfigError" in csv_before
-    # as if the submitting process had died before its summary: the merge command rebuilds both
-    shutil.rmtree(sweep / "merged")
-    for f in ("summary.csv", "summary.json"):
-        (sweep / f).unlink()
-    res = subprocess.run([sys.executable, "-m", "deltajax.merge", str(sweep)], cwd=cluster["tmp"], env=cluster["env"],
-                         capture_output=True, text=True, timeout=TIMEOUT)
-    assert res.returncode == 0, res.stderr
-    assert f"merged -> {merged}" in res.stdout
-    after = {k: v.data for k, v in read(merged).variables["workspace"].items()}
-    assert before.keys() == after.keys()
-    assert all(np.array_equal(before[k], after[k], equal_nan=before[k].dtype.kind == "f") for k in before)
-    assert (sweep / "summary.csv").read_text() == csv_before
-
-
-# -- mem_gb is enforced by SLURM ------------------------------------------------------------------------
-@pytest.mark.slow
-def test_mem_gb_is_enforced_and_reported(cluster):
-    """A point that needs more than mem_gb (a 2.5 mm grid, 24.8e6 points, storing 5 index fields: ~1.0 GB of
-    arrays allocated up front, ~1.4 GB with the interpreter) is killed by SLURM (OverMemoryKill: the step's RSS
-    is polled every second); the other point completes."""
+def _sweeps(tmp) -> dict:
+    """The CLI calls of the tests that submit a sweep and wait for it, by name (the memory sweep's field names
+    come from the package)."""
     from deltajax.workspace import FIELD_NAMES
 
-    sweep = cluster["tmp"] / "memory"
-    store = "[" + ",".join(FIELD_NAMES[:5]) + "]"
-    out = _finish(_cli(cluster, ["-m", *TINY, "experiment.grid.h=0.1,0.0025", f"experiment.store={store}", *SLURM,
-                                 "hydra.launcher.cpus_per_task=1", "hydra.launcher.mem_gb=1",
-                                 f"hydra.sweep.dir={sweep}"]), "memory sweep", ok=False)
-    status = {r["run"]: r["status"] for r in _rows(sweep)}
-    assert status["0"] == "ok"
-    # OverMemoryKill (.ci/slurm-up's default) or the cgroup OOM killer (DELTAJAX_SLURM_CGROUP=1)
-    assert re.match(r"killed: slurmstepd\S*: error: (StepId=\S+ exceeded memory limit \(\d+ > 1073741824\), being "
-                    r"killed|Detected \d+ oom-kill event)", status["1"]), status["1"]
-    job = _job(sweep / "1")
-    rec = _slurm_record(cluster, job["SLURM_JOB_ID"])
-    assert "mem=1G" in rec["Tres"] and rec["JobState"] in ("FAILED", "OUT_OF_MEMORY", "CANCELLED"), rec
-    assert "has not produced any output" in out  # submitit saw the job end without a result
+    one = [*SLURM, "hydra.launcher.cpus_per_task=1", "hydra.launcher.mem_gb=1"]
+    return {
+        # first, so that SLURM starts its job first: the GA job that test (c) cancels and resubmits
+        "cut": ["-m", *_ga_overrides(), *GA_SLURM, f"hydra.sweep.dir={tmp / 'ga_cut'}"],
+        "array": ["-m", *TINY, "robot.forearm=0.35,0.4", *one, f"hydra.sweep.dir={tmp / 'array'}"],
+        "single": [*TINY, f"hydra.run.dir={tmp / 'single'}"],       # one local process, all CPUs
+        "shards": ["-m", *TINY, "n_shards=3", "shard=0,1,2", *SLURM, "hydra.launcher.cpus_per_task=2",
+                   "hydra.launcher.mem_gb=2", "hydra.callbacks.worker_env.host_devices=2",
+                   f"hydra.sweep.dir={tmp / 'shards'}"],
+        "failing": ["-m", *TINY, "robot.forearm=0.4,-1", "n_shards=2", "shard=0,1", *one,
+                    f"hydra.sweep.dir={tmp / 'failing'}"],
+        "memory": ["-m", *TINY, "experiment.grid.h=0.1,0.0025", "experiment.store=[" + ",".join(FIELD_NAMES[:5]) + "]",
+                   *one, f"hydra.sweep.dir={tmp / 'memory'}"],
+    }
 
 
-# -- (c) a GA job cancelled mid-way, resubmitted into its run directory -----------------------------------
+#: which of :func:`_sweeps` each test reads (test (a), the first to run, starts them all)
+SWEEPS_OF = {"test_cancelled_ga_job_resubmitted_finishes_bit_identical": ("cut",),
+             "test_two_point_sweep_is_one_array_job": ("array",),
+             "test_sharded_grid_merges_to_single_run_and_cpus_reach_the_worker": ("single", "shards"),
+             "test_failed_point_is_reported_others_merge_and_merge_cli_recovers": ("failing",),
+             "test_mem_gb_is_enforced_and_reported": ("memory",)}
+
+
+@pytest.fixture(scope="module")
+def started(cluster, request):
+    """{name: the running CLI} of every sweep a selected test of this file reads, all started by the first of
+    them to run (the GA job that test (a) cancels first, so that SLURM starts it first): their jobs share the
+    node and their submitters wait together (sacct's polling, SLURM's ~5 s kill delay, submitit's 15 s wait for
+    the result of a job SLURM killed), instead of one after the other with a core left idle (the file took
+    ~120 s of one worker, ~60 s of it waiting). A submitter still running at the end of the module (its test
+    failed first) is killed."""
+    selected = {item.originalname for item in request.session.items if item.module is request.module}
+    calls = _sweeps(cluster["tmp"])
+    procs = {name: _cli(cluster, calls[name]) for test, names in SWEEPS_OF.items() if test in selected
+             for name in names}
+    yield procs
+    for proc in procs.values():
+        if proc.poll() is None:
+            proc.kill()
+            proc.communicate()
+
+
+# -- (a) a GA job cancelled mid-way, resubmitted into its run directory (first: it starts the sweeps) ------
 def _ga_overrides():
     """A toy GA: population, generations, seed; a checkpoint every 10 generations (a checkpoint rewrites
     results.h5 atomically, tens of CPU-ms and an fsync: one after each of the 3000 generations cost minutes
@@ -249,6 +173,11 @@ def _ga_overrides():
             "experiment.tolerance.enabled=false", *GA_STAGES_OFF]
 
 
+#: the GA job's resources: the toy main job peaks at 2.1-2.2 GiB (docs/BENCHMARKS.md): 2 GB killed the resumed
+#: job at 2.18 GB
+GA_SLURM = [*SLURM, "hydra.launcher.cpus_per_task=1", "hydra.launcher.mem_gb=3"]
+
+
 def _generations_done(path):
     try:
         with h5py.File(path, "r") as f:
@@ -258,13 +187,12 @@ def _generations_done(path):
 
 
 @pytest.mark.slow
-def test_cancelled_ga_job_resubmitted_finishes_bit_identical(cluster):
-    # the toy main job peaks at 2.1-2.2 GiB (docs/BENCHMARKS.md): 2 GB killed the resumed job at 2.18 GB
-    over = [*_ga_overrides(), *SLURM, "hydra.launcher.cpus_per_task=1", "hydra.launcher.mem_gb=3"]
+def test_cancelled_ga_job_resubmitted_finishes_bit_identical(cluster, started):
+    over = [*_ga_overrides(), *GA_SLURM]
     generations = int(next(o for o in over if o.startswith("experiment.ga.generations=")).split("=")[1])
     tmp = cluster["tmp"]
     ref_sweep, sweep = tmp / "ga_ref", tmp / "ga_cut"
-    cut = _cli(cluster, ["-m", *over, f"hydra.sweep.dir={sweep}"])
+    cut = started["cut"]
     results = sweep / "0" / "results.h5"
     deadline = time.monotonic() + TIMEOUT
     while _generations_done(results) < 1:  # the first checkpoint
@@ -294,6 +222,115 @@ def test_cancelled_ga_job_resubmitted_finishes_bit_identical(cluster):
     # every dataset bit-identical to the uninterrupted run; attributes too, but timings and the resume point
     _assert_identical(results, ref_sweep / "0" / "results.h5", skip_attrs=(r"time_.*", "resumed_from"))
     assert [r["status"] for r in _rows(sweep)] == ["ok"]
+
+
+# -- (b) an array job -----------------------------------------------------------------------------------
+@pytest.mark.slow
+def test_two_point_sweep_is_one_array_job(cluster, started):
+    sweep = cluster["tmp"] / "array"
+    out = _finish(started["array"], "array sweep")
+    jobs = [_job(sweep / r) for r in ("0", "1")]
+    # one array job, one task per sweep point
+    assert jobs[0]["SLURM_ARRAY_JOB_ID"] == jobs[1]["SLURM_ARRAY_JOB_ID"]
+    assert [j["SLURM_ARRAY_TASK_ID"] for j in jobs] == ["0", "1"]
+    array = jobs[0]["SLURM_ARRAY_JOB_ID"]
+    script = (sweep / ".submitit" / array / f"{array}_submission.sh").read_text()
+    assert "#SBATCH --array=0-1%" in script
+    for j, task in zip(jobs, "01"):
+        rec = _slurm_record(cluster, j["SLURM_JOB_ID"])  # what SLURM itself recorded
+        assert (rec["ArrayJobId"], rec["ArrayTaskId"], rec["JobState"]) == (array, task, "COMPLETED")
+        assert "cpu=1," in rec["Tres"] and "mem=1G" in rec["Tres"]
+        # logs where docs/CLUSTER.md says: <sweep>/.submitit/<array id>_<task>/<array id>_<task>_0_log.{out,err}
+        log_dir = sweep / ".submitit" / f"{array}_{task}"
+        assert j["stdout"] == str(log_dir / f"{array}_{task}_0_log.out")
+        assert j["stderr"] == str(log_dir / f"{array}_{task}_0_log.err")
+        log = Path(j["stdout"]).read_text()
+        assert "[deltajax] worker: 1 CPUs (SLURM_CPUS_PER_TASK)" in log and "wrote " in log
+        assert j["status"] == "ok"
+    rows = _rows(sweep)
+    assert [(r["run"], r["status"], r["overrides"]["robot.forearm"]) for r in rows] == [("0", "ok", "0.35"),
+                                                                                        ("1", "ok", "0.4")]
+    csv = (sweep / "summary.csv").read_text().splitlines()
+    assert len(csv) == 3 and csv[1].startswith("0,run,ok,") and csv[2].startswith("1,run,ok,")
+    assert rows[0]["metrics"]["workspace/count"] < rows[1]["metrics"]["workspace/count"] == 79
+    assert "sweep summary" in out
+
+
+# -- (c) shards merged exactly, and the CPUs of the job reach JAX, XLA and Numba ---------------------------
+@pytest.mark.slow
+def test_sharded_grid_merges_to_single_run_and_cpus_reach_the_worker(cluster, started):
+    tmp = cluster["tmp"]
+    single, sweep = tmp / "single", tmp / "shards"
+    _finish(started["shards"], "sharded sweep")
+    _finish(started["single"], "single run")
+    merged = sweep / "merged" / "workspace_grid" / "results.h5"
+    _assert_identical(merged, single / "results.h5")
+    with h5py.File(merged, "r") as f:
+        assert f.attrs["merged_n_shards"] == 3
+    for s in ("0", "1", "2"):
+        job = _job(sweep / s)
+        assert job["SLURM_CPUS_PER_TASK"] == "2"
+        rec = _slurm_record(cluster, job["SLURM_JOB_ID"])
+        assert rec["JobState"] == "COMPLETED" and "cpu=2," in rec["Tres"] and "mem=2G" in rec["Tres"]
+        with h5py.File(sweep / s / "results.h5", "r") as f:
+            env = json.loads(f.attrs["worker_env"])
+            device = str(f.attrs["device"])
+        # SLURM_CPUS_PER_TASK=2 -> 2 XLA threads and 2 Numba threads in the job's process; 2 JAX host devices as
+        # asked (the default is one: tests/test_sweeps.py), the merge bit-identical to the single run's one device
+        assert env["cpus_from"] == "SLURM_CPUS_PER_TASK" and env["cpus"] == 2
+        assert env["PJRT_NPROC"] == "2" and env["host_devices"] == 2 and env["numba_threads"] == 2
+        assert device.endswith(" x2"), device
+    rows = _rows(sweep)
+    assert [(r["kind"], r["status"]) for r in rows] == [("run", "ok")] * 3 + [("merged", "ok")]
+
+
+# -- (d) a failing sweep point --------------------------------------------------------------------------
+@pytest.mark.slow
+def test_failed_point_is_reported_others_merge_and_merge_cli_recovers(cluster, started):
+    sweep = cluster["tmp"] / "failing"
+    out = _finish(started["failing"], "failing sweep", ok=False)
+    assert "forearm must be > 0 m, got -1.0" in out
+    rows = _rows(sweep)  # written although Hydra raised (SweepSummary's exit hook)
+    status = {r["run"]: r["status"] for r in rows}
+    assert status["0"] == status["1"] == "ok"
+    for r in ("2", "3"):
+        assert status[r].startswith("failed: ConfigError: robot.forearm must be > 0 m, got -1.0 m"), status[r]
+    merged = sweep / "merged" / "robot.forearm=0.4" / "results.h5"
+    assert status["merged/robot.forearm=0.4"] == "ok" and len(rows) == 5
+    before = {k: v.data for k, v in read(merged).variables["workspace"].items()}
+    csv_before = (sweep / "summary.csv").read_text()
+    assert "failed: ConfigError" in csv_before
+    # as if the submitting process had died before its summary: the merge command rebuilds both
+    shutil.rmtree(sweep / "merged")
+    for f in ("summary.csv", "summary.json"):
+        (sweep / f).unlink()
+    res = subprocess.run([sys.executable, "-m", "deltajax.merge", str(sweep)], cwd=cluster["tmp"], env=cluster["env"],
+                         capture_output=True, text=True, timeout=TIMEOUT)
+    assert res.returncode == 0, res.stderr
+    assert f"merged -> {merged}" in res.stdout
+    after = {k: v.data for k, v in read(merged).variables["workspace"].items()}
+    assert before.keys() == after.keys()
+    assert all(np.array_equal(before[k], after[k], equal_nan=before[k].dtype.kind == "f") for k in before)
+    assert (sweep / "summary.csv").read_text() == csv_before
+
+
+# -- (e) mem_gb is enforced by SLURM --------------------------------------------------------------------
+@pytest.mark.slow
+def test_mem_gb_is_enforced_and_reported(cluster, started):
+    """A point that needs more than mem_gb (a 2.5 mm grid, 24.8e6 points, storing 5 index fields: ~1.0 GB of
+    arrays allocated up front, ~1.4 GB with the interpreter) is killed by SLURM (OverMemoryKill: the step's RSS
+    is polled every second); the other point completes."""
+    sweep = cluster["tmp"] / "memory"
+    out = _finish(started["memory"], "memory sweep", ok=False)
+    status = {r["run"]: r["status"] for r in _rows(sweep)}
+    assert status["0"] == "ok"
+    # OverMemoryKill (.ci/slurm-up's default) or the cgroup OOM killer (DELTAJAX_SLURM_CGROUP=1)
+    assert re.match(r"killed: slurmstepd\S*: error: (StepId=\S+ exceeded memory limit \(\d+ > 1073741824\), being "
+                    r"killed|Detected \d+ oom-kill event)", status["1"]), status["1"]
+    job = _job(sweep / "1")
+    rec = _slurm_record(cluster, job["SLURM_JOB_ID"])
+    assert "mem=1G" in rec["Tres"] and rec["JobState"] in ("FAILED", "OUT_OF_MEMORY", "CANCELLED"), rec
+    assert "has not produced any output" in out  # submitit saw the job end without a result
 
 
 # -- the summary's statuses from the jobs' own records (no cluster needed) ------------------------------------
