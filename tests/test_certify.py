@@ -16,6 +16,8 @@ from hypothesis import strategies as st
 from deltajax import constraints as C
 from deltajax.optimize import certify as CE
 
+from _programs import kept
+
 # a good set with a known shape: a barrel on the axis (radius 0.25 - 1.2 (z - 0.45)^2 for z in [0.2, 0.7]) minus a
 # bad island at 38-52 deg, rho >= 0.15, z in [0.35, 0.55] -- between the 0/30/60 deg samples of the old measure,
 # like the forearm that crosses the base plate in the default problem's baseline
@@ -341,11 +343,14 @@ def test_task_worst_joint_margin_within_tolerance_of_a_dense_scan(default_proble
         return C.good_point(d.at(R), p, pb.good, plate_radius=plate).interference_margin
 
     args = (t.diameter, t.height, t.z_top, 4, 9, 7)
-    found_j, _ = jax.jit(lambda: CE.worst_in_cylinder(jm, *args))()
-    found_i, _ = jax.jit(lambda: CE.worst_in_cylinder(im, *args))()
     pts = C.polar_grid(t.diameter / 2, t.z_top, t.z_top + t.height, 31, 121, 41)[0].reshape(-1, 3)
-    dense_j = float(jnp.min(jax.jit(jax.vmap(jm))(jnp.asarray(pts))))
-    dense_i = float(jnp.min(jax.jit(jax.vmap(im))(jnp.asarray(pts))))
+
+    def worst_and_dense(pts):       # one program, kept across sessions (tests/_programs.py)
+        return (CE.worst_in_cylinder(jm, *args)[0], CE.worst_in_cylinder(im, *args)[0],
+                jnp.min(jax.vmap(jm)(pts)), jnp.min(jax.vmap(im)(pts)))
+
+    found_j, found_i, dense_j, dense_i = (float(v) for v in kept(jax.jit(worst_and_dense), "task_worst", __file__,
+                                                                   s, space, pb)(jnp.asarray(pts)))
     assert float(found_j) <= dense_j + CE.TOLERANCES["joint_margin_deg"]
     assert float(found_j) >= dense_j - 0.5                       # a real point of the cylinder, not a bound
     assert float(found_i) <= dense_i + CE.TOLERANCES["interference_margin"]
@@ -491,25 +496,30 @@ def test_cycle_worst_agrees_with_a_64x_denser_scan_and_is_never_better_than_its_
 
     K = pb.cycle.n_samples
     dur = float(pb.settings["cycle"]["duration"])
-    cw = jax.jit(lambda: cycle_worst(rob, CE.cycle_path(pb), K, dur, fields, motor, n, **kw))()
     dense = CE.cycle_at(pb, 64 * (K - 1) + 1)
-    r64 = jax.jit(lambda: C.cycle_rate(rob, dense, motor, n, **kw))()
-    f64 = jax.jit(jax.vmap(fields))(dense.x)
-    jm64, im64 = float(jnp.min(f64[0])), float(jnp.min(f64[1]))
-    s = cw.sampled
+
+    def refined_and_dense(x):       # one program, kept across sessions (tests/_programs.py): figures only
+        cw = cycle_worst(rob, CE.cycle_path(pb), K, dur, fields, motor, n, **kw)
+        f64 = jax.vmap(fields)(x)
+        return ({"joint_margin": cw.joint_margin, "interference_margin": cw.interference_margin,
+                 "cycle_time": cw.rate.cycle_time, "peak_utilisation": cw.rate.loads.peak_utilisation},
+                dict(cw.sampled), C.cycle_rate(rob, dense, motor, n, **kw).cycle_time, jnp.min(f64[0]),
+                jnp.min(f64[1]))
+
+    cw, s, T64, jm64, im64 = jax.tree_util.tree_map(
+        float, kept(jax.jit(refined_and_dense), "cycle_worst", __file__, space, pb)(dense.x))
     # never better than the samples
-    assert float(cw.joint_margin) <= float(s["joint_margin"])
-    assert float(cw.interference_margin) <= float(s["interference_margin"])
-    assert float(cw.rate.cycle_time) >= float(s["cycle_time"])
-    assert float(cw.rate.loads.peak_utilisation) >= float(s["peak_utilisation"]) - 1e-12
+    assert cw["joint_margin"] <= float(s["joint_margin"])
+    assert cw["interference_margin"] <= float(s["interference_margin"])
+    assert cw["cycle_time"] >= float(s["cycle_time"])
+    assert cw["peak_utilisation"] >= float(s["peak_utilisation"]) - 1e-12
     # the refined figures at 1x agree with the 64x scan within the stated tolerances (and are at least as bad)
-    assert abs(np.rad2deg(float(cw.joint_margin)) - np.rad2deg(jm64)) <= CE.TOLERANCES["joint_margin_deg"]
-    assert float(cw.joint_margin) <= jm64 + 1e-12
-    assert abs(float(cw.interference_margin) - im64) <= CE.TOLERANCES["interference_margin"]
-    assert float(cw.interference_margin) <= im64 + 1e-12
-    T64 = float(r64.cycle_time)
-    assert float(cw.rate.cycle_time) >= T64 * (1.0 - 1e-9)
-    assert float(cw.rate.cycle_time) <= T64 * (1.0 + CE.TOLERANCES["peak_utilisation"])
+    assert abs(np.rad2deg(cw["joint_margin"]) - np.rad2deg(jm64)) <= CE.TOLERANCES["joint_margin_deg"]
+    assert cw["joint_margin"] <= jm64 + 1e-12
+    assert abs(cw["interference_margin"] - im64) <= CE.TOLERANCES["interference_margin"]
+    assert cw["interference_margin"] <= im64 + 1e-12
+    assert cw["cycle_time"] >= T64 * (1.0 - 1e-9)
+    assert cw["cycle_time"] <= T64 * (1.0 + CE.TOLERANCES["peak_utilisation"])
     # the samples alone are faster than the 64x scan allows; the refined time is not
     assert float(s["cycle_time"]) < T64
 

@@ -14,6 +14,8 @@ import deltajax as dj
 from deltajax import constraints as C
 from deltajax.indices import point_kernel
 
+from _programs import kept
+
 ROBOT = dj.presets.franco2026(fixed_R=0.2, with_mass=True)
 POINTS = np.array([[0.0, 0.0, 0.45], [0.15, 0.0, 0.4], [0.0, 0.15, 0.5], [-0.12, 0.07, 0.42], [0.05, -0.1, 0.3]])
 MOTOR = C.Motor(peak_torque=3.8, rated_torque=1.27, max_speed=628.0, corner_speed=400.0, rotor_inertia=3.4e-5,
@@ -370,8 +372,10 @@ def test_good_point_possible_is_necessary():
     pts, _, _ = C.polar_grid(0.45, 0.1, 0.9, 12, 3, 12)
     P = jnp.asarray(pts).reshape(-1, 3)
     for plate in (None, 0.33):       # the plate's closed-form test (plate_blocks) rules points out too
-        good = jax.jit(jax.vmap(lambda p: C.good_point(ROBOT, p, spec, plate_radius=plate).good))(P)
-        maybe = jax.jit(jax.vmap(lambda p: C.good_point_possible(ROBOT, p, spec, plate_radius=plate)))(P)
+        # both tests in one program, kept across sessions (tests/_programs.py)
+        good, maybe = kept(jax.jit(jax.vmap(lambda p: (C.good_point(ROBOT, p, spec, plate_radius=plate).good,
+                                                      C.good_point_possible(ROBOT, p, spec, plate_radius=plate)))),
+                           f"good_point_possible_{plate}", __file__)(P)
         assert np.all(np.asarray(maybe) | ~np.asarray(good))
         assert 0 < int(np.sum(good)) and int(np.sum(maybe)) < P.shape[0]   # neither test trivial on this grid
     reach = jax.jit(jax.vmap(lambda p: (k := point_kernel(ROBOT, p, beta=spec.beta)).ok
@@ -398,7 +402,8 @@ def test_good_point_decided_is_the_full_test_wherever_it_decides_and_its_state_s
             g, dec, state = jax.vmap(lambda p: C.good_point_decided(ROBOT, p, spec, plate_radius=Rp, state=True))(P)
             return check.good, g, dec, check.joint_margin, jax.vmap(lambda s: C.good_point_settle(s, spec))(state)
 
-        full, g, dec, jm, settled = (np.asarray(a) for a in jax.jit(jax.vmap(lambda r: both(P, r)))(plates))
+        program = kept(jax.jit(jax.vmap(lambda r: both(P, r))), f"good_point_decided_{kind}", __file__)
+        full, g, dec, jm, settled = (np.asarray(a) for a in program(plates))
         assert np.array_equal(g[dec], full[dec])
         assert np.array_equal(settled, full) and not full[:, -2:].any()
         assert 0 < int((~dec).sum()) < 0.05 * dec.size          # some undecided (rim grazing), few

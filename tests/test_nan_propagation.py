@@ -20,6 +20,8 @@ import deltajax as dj
 from deltajax import constraints as C
 from deltajax.indices import point_kernel
 
+from _programs import kept
+
 BASE = dj.presets.franco2026(fixed_R=0.2)
 LINKS = C.LinkModel(plate_overhang=0.03)
 SPEC = C.GoodSpec(joints=C.JointModel(limit=1.2), links=LINKS)
@@ -98,8 +100,9 @@ def _per_row(names, dtype):
 
 @functools.lru_cache(maxsize=None)
 def _compiled(dtype):
-    """Every function in one program per dtype (one compilation), called at 4096 rows."""
-    return jax.jit(_per_row(tuple(FUNCS), dtype))
+    """Every function in one program per dtype (one compilation), called at 4096 rows; kept across sessions
+    (tests/_programs.py: tracing and lowering it took ~6 s of each session)."""
+    return kept(jax.jit(_per_row(tuple(FUNCS), dtype)), f"nan_every_function_{jnp.dtype(dtype).name}", __file__)
 
 
 def _check_all(out, valid, n):

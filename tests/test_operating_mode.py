@@ -2,7 +2,6 @@
 "R(t) along the cycle" under the R drive's limits (deltajax/optimize/operating.py)."""
 
 import math
-from pathlib import Path
 
 import h5py
 import jax
@@ -22,6 +21,7 @@ from deltajax.optimize.designer import DESIGN_UNITS, evaluate_designer
 from deltajax.run import CONFIG_DIR, run_experiment
 from deltajax.trajectory import Cycle
 
+from _programs import kept
 from toy_jobs import overrides
 
 # the designer's toy sizes (tests/test_ga_reconfig.py), with n_R = 7 so that the 4 per-task candidates are R samples
@@ -104,28 +104,15 @@ TORQUE = 1.0  # N m, the screw motor's limit in these tests
 CYCLE_FIELDS = ("u", "x", "dx", "ddx", "duration", "R", "dR", "ddR")
 
 
-def _kept(fn, kind, *content):
-    """``fn`` (jitted), its traced program read back from the program cache where an earlier session kept it
-    (:func:`deltajax.tracing.persistent`: the same program, so the same numbers), keyed by the content of the
-    problem it closes over and by this file's text (the package's source is in every program's key already)."""
-    import hashlib
-
-    from deltajax.tracing import persistent, stable_key
-
-    key = stable_key(*content)
-    assert key is not None, "the problem's content must be known by value"
-    return persistent(fn, kind, key + hashlib.sha256(Path(__file__).read_bytes()).hexdigest())
-
-
 @pytest.fixture(scope="module")
 def small():
     s, space, pb = _problem(SMALL + ["experiment.reconfig.mechanism=screw_linkage",
                                      f"experiment.reconfig.motor_torque={TORQUE}"])
     _, _, pb0 = _problem([o for o in SMALL if "reconfig.mode" not in o])
-    # both programs kept across sessions by the content of their problem, as the job keeps its own
-    # (deltajax.tracing.persistent): tracing the path mode is most of this fixture's ~16 s
-    per_task = _kept(jax.jit(lambda g: evaluate_designer(pb0, space.decode(g), regular=False)), "test_per_task",
-                     pb0, space)
+    # both programs kept across sessions (tests/_programs.py): tracing the path mode was most of this
+    # fixture's ~16 s
+    per_task = kept(jax.jit(lambda g: evaluate_designer(pb0, space.decode(g), regular=False)), "per_task",
+                    __file__, pb0, space)
 
     @jax.jit
     def path_fields(g, R_op, T_plan):   # the profile's cycle as its fields: the kept program's outputs are read
@@ -134,7 +121,7 @@ def small():
         assert prof["cycle"].space == "cartesian"
         return m, {**prof, "cycle": {k: getattr(prof["cycle"], k) for k in CYCLE_FIELDS}}
 
-    path_fields = _kept(path_fields, "test_path_operating", pb, space)
+    path_fields = kept(path_fields, "path_operating", __file__, pb, space)
 
     def path(g, R_op, T_plan):
         m, prof = path_fields(g, R_op, T_plan)
