@@ -12,6 +12,7 @@ from deltajax.config import ConfigError
 from deltajax.tolerance import Tolerances, ToleranceError
 
 from _config_helpers import compose
+from _programs import kept
 
 TOY_PROBLEM = ["experiment.design.n_R=3", "experiment.task.n_r=1", "experiment.task.n_phi=3", "experiment.task.n_z=2",
                "experiment.cycle.n_samples=11", "experiment.cycle.n_R_operating=2",
@@ -117,7 +118,9 @@ def _samples(pb, space, genes, n, **kw):
         p, des = dj.tolerance.perturb(pb, space.decode(g), d)
         return evaluate_designer(p, des, regular=False, **kw)
 
-    return {k: np.asarray(v) for k, v in jax.jit(jax.vmap(one))(rows, dev).items()}
+    # kept across sessions (tests/_programs.py): tracing the designer's evaluation took seconds per program
+    program = kept(jax.jit(jax.vmap(one)), "tolerance_evaluate", __file__, pb, space, tuple(sorted(kw.items())))
+    return {k: np.asarray(v) for k, v in program(rows, dev).items()}
 
 
 @pytest.mark.slow   # compiles the designer's program twice (~20 CPU-s)
