@@ -363,13 +363,18 @@ def test_cycle_peak_and_rms_converge_at_the_certification_density(default_proble
     rob = d.at(jnp.asarray(0.16))
     n0 = pb.cycle.n_samples - 1
     dense = CE.cycle_at(pb, 64 * n0 + 1)
-    out = []
-    for n in (8 * n0 + 1, 16 * n0 + 1):       # certify_design's first density and its double
-        r = C.cycle_rate(rob, CE.cycle_at(pb, n), pb.motor, rob.mass.gear_ratio, dwell=pb.dwell,
-                         payload_mass=pb.payload)
-        ld = C.drive_loads(rob, dense, pb.motor, rob.mass.gear_ratio, duration=r.cycle_time, dwell=pb.dwell,
-                           payload_mass=pb.payload)
-        out.append((float(r.loads.peak_utilisation), float(ld.peak_utilisation), float(ld.rms_utilisation)))
+
+    def figures():          # one program, kept across sessions (tests/_programs.py)
+        out = []
+        for n in (8 * n0 + 1, 16 * n0 + 1):       # certify_design's first density and its double
+            r = C.cycle_rate(rob, CE.cycle_at(pb, n), pb.motor, rob.mass.gear_ratio, dwell=pb.dwell,
+                             payload_mass=pb.payload)
+            ld = C.drive_loads(rob, dense, pb.motor, rob.mass.gear_ratio, duration=r.cycle_time, dwell=pb.dwell,
+                               payload_mass=pb.payload)
+            out.append(jnp.stack([r.loads.peak_utilisation, ld.peak_utilisation, ld.rms_utilisation]))
+        return jnp.stack(out)
+
+    out = np.asarray(kept(jax.jit(figures), "cycle_peak_rms", __file__, space, pb)()).tolist()
     # the sampled peak is within the tolerance of the dense one at both densities, and so is the RMS
     for peak, peak_dense, rms_dense in out:
         assert abs(peak - peak_dense) <= CE.TOLERANCES["peak_utilisation"]
@@ -463,8 +468,11 @@ def test_cycle_worst_at_a_traced_sample_count_is_the_one_at_that_count(default_p
     path, n = CE.cycle_path(pb), rob.mass.gear_ratio
     K = 2 * (pb.cycle.n_samples - 1) + 1
     k = pb.cycle.n_samples           # the first density's count in the doubling's size
-    want = jax.jit(lambda: cycle_worst(rob, path, k, dur, fields, pb.motor, n, **kw))()
-    got = jax.jit(lambda k: cycle_worst(rob, path, K, dur, fields, pb.motor, n, n_valid=k, **kw))(jnp.asarray(k))
+    # both programs kept across sessions (tests/_programs.py)
+    want = kept(jax.jit(lambda: cycle_worst(rob, path, k, dur, fields, pb.motor, n, **kw)), "cycle_worst_at_count",
+                __file__, space, pb)()
+    got = kept(jax.jit(lambda k: cycle_worst(rob, path, K, dur, fields, pb.motor, n, n_valid=k, **kw)),
+               "cycle_worst_traced_count", __file__, space, pb)(jnp.asarray(k))
     for a, b in zip(jax.tree_util.tree_leaves(want), jax.tree_util.tree_leaves(got)):
         # the RMS integral sums the same terms in another order (padding zeros): its last bit may move
         np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-13, atol=0)
