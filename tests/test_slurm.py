@@ -113,7 +113,7 @@ def _sweeps(tmp) -> dict:
 
     one = [*SLURM, "hydra.launcher.cpus_per_task=1", "hydra.launcher.mem_gb=1"]
     return {
-        # first, so that SLURM starts its job first: the GA job that test (c) cancels and resubmits
+        # first, so that SLURM starts its job first: the GA job that test (a) cancels and resubmits
         "cut": ["-m", *_ga_overrides(), *GA_SLURM, f"hydra.sweep.dir={tmp / 'ga_cut'}"],
         "array": ["-m", *TINY, "robot.forearm=0.35,0.4", *one, f"hydra.sweep.dir={tmp / 'array'}"],
         "single": [*TINY, f"hydra.run.dir={tmp / 'single'}"],       # one local process, all CPUs
