@@ -4,6 +4,7 @@ density doubles, with one traced copy of the good test; the worst point of a tas
 the margins in units."""
 
 import dataclasses
+import functools
 import math
 
 import jax
@@ -680,14 +681,15 @@ def test_all_any_good_is_the_full_all_any_whatever_it_skips(seed, shape):
     assert bool(out) == bool(good.any(axis=1).all())
 
 
-#: per shape (points, R samples, chunk): the four programs of the test below, the tables their arguments, so that
-#: the examples of one shape share one compilation each (each example compiled its own: ~15 s of the suite)
-_WHERE_POSSIBLE = {}
 #: what the programs' full test and settle were asked, (point, R) pairs, appended by their debug callbacks
 _ASKED, _SETTLED = [], []
 
 
+@functools.lru_cache(maxsize=None)
 def _where_possible_programs(n_pts, n_R, chunk):
+    """The four programs of the test below for one shape (points, R samples, chunk), the tables their arguments,
+    so that the examples of one shape share one compilation each (each example compiled its own: ~15 s of the
+    suite)."""
     from deltajax.optimize.rays import Decided, any_good_where_possible, good_where_possible
 
     Rf = jnp.asarray(np.tile(np.arange(n_R, dtype=float), n_pts))                      # pairs point-major, R inner
@@ -748,9 +750,7 @@ def test_good_only_where_possible_is_the_full_test_and_skips_what_cannot_be_good
     # rounds of ``chunk`` lanes over the possible pairs only (it records every lane it computes, padding included):
     # at most ceil(possible pairs / chunk) rounds, none when nothing is possible
     n_pts, n_R, chunk = shape
-    if shape not in _WHERE_POSSIBLE:
-        _WHERE_POSSIBLE[shape] = _where_possible_programs(*shape)
-    per_pair, any_R, per_pair_decided, per_pair_settled = _WHERE_POSSIBLE[shape]
+    per_pair, any_R, per_pair_decided, per_pair_settled = _where_possible_programs(*shape)
     rng = np.random.default_rng(seed)
     good = rng.random((n_pts, n_R)) < 0.3
     possible = good | (rng.random((n_pts, n_R)) < 0.4)
