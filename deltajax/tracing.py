@@ -72,9 +72,12 @@ _ARRAY = _ArrayMarker()
 # designer's evaluators that was most of a warm run's program-building time. :func:`persistent` keeps the lowered
 # program itself (``jax.export``'s serialisation) on disk, keyed by everything that determines it: the caller's
 # key (the content of the problem it closes over), the input shapes and dtypes, this package's source, the
-# versions of the libraries that trace it, and the numerics settings. A process that finds it deserialises it and
-# only compiles it (a persistent-cache hit); the numbers are the exported program's in every process, the first
-# one included (a test checks them against the program traced in place, bit for bit).
+# versions of the libraries that trace it, and the numerics settings. Beside it goes the program compiled for this
+# machine (``jax.experimental.serialize_executable``): a process that finds that deserialises it and runs it; one
+# that finds only the exported program compiles it once and keeps the executable. The numbers are the exported
+# program's in every process, the first one included (a test checks them against the program traced in place,
+# bit for bit). JAX's cache alone would still lower each kept program and hash it in every process (~2.7 CPU-s
+# of a warm default run of the main job).
 
 def _source_fingerprint() -> str:
     import hashlib
@@ -139,8 +142,8 @@ def persistent(fn: Callable, kind: str, key: str) -> Callable:
     """``fn`` (a jitted function of pytrees of arrays) built once for all processes: each call with a new input
     structure looks for its exported program under ``kind`` / ``key`` (the content of whatever ``fn`` closes
     over, a string) and the input structure and shapes; if none is on disk it traces and exports ``fn`` and
-    writes the program (atomically). Either way the exported program runs, so every process computes the same
-    numbers. Inputs and outputs may be any registered pytrees (equinox modules, the GA's evosax state): the
+    writes the program (atomically), and its compiled executable for this machine beside it. Either way the
+    exported program runs, so every process computes the same numbers. Inputs and outputs may be any registered pytrees (equinox modules, the GA's evosax state): the
     program itself takes and returns their leaves. With no :func:`program_cache_dir`, ``fn`` itself runs."""
     import hashlib
 
@@ -154,7 +157,7 @@ def persistent(fn: Callable, kind: str, key: str) -> Callable:
         h = h.hexdigest()[:32]
         prog = _LOADED.get((kind, h))
         if prog is None:
-            prog = _load_or_export(fn, in_tree, spec, root / kind / f"{h}.jaxexport")
+            prog = _load_or_compile(fn, in_tree, spec, root / kind / f"{h}.jaxexport")
             _LOADED[(kind, h)] = prog
         run, out_tree = prog
         return jax.tree_util.tree_unflatten(out_tree, run(*leaves))
@@ -163,10 +166,93 @@ def persistent(fn: Callable, kind: str, key: str) -> Callable:
 
 
 _MAGIC = b"deltajax-program-1\n"
+_EXEC_MAGIC = b"deltajax-executable-1\n"
+#: a compile option that changes nothing but the key in JAX's compilation cache (it formats XLA's debug dumps,
+#: which only ``xla_dump_to`` turns on): a kept program is compiled under it with the cache's writes off, so it
+#: is always compiled afresh -- an executable JAX read back from its cache serialises without its kernels
+_FRESH_COMPILE = {"xla_dump_large_constants": True}
+
+
+@functools.lru_cache(maxsize=None)
+def _machine_key() -> str:
+    """What a compiled executable depends on beyond the exported program: the XLA backend's version and this
+    machine's instruction set (XLA:CPU compiles for the host's CPU features)."""
+    import hashlib
+    import platform
+
+    flags = ""
+    try:
+        with open("/proc/cpuinfo") as f:
+            flags = next((ln for ln in f if ln.startswith(("flags", "Features"))), "")
+    except OSError:
+        pass
+    parts = [platform.machine(), platform.processor(), flags, jax.devices()[0].client.platform_version]
+    return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:16]
+
+
+def _write_atomic(path, blob: bytes, what: str) -> None:
+    import os
+    import warnings
+
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp.write_bytes(blob)
+        os.replace(tmp, path)
+        _evict(path.parent)
+    except OSError as err:   # a read-only or full cache folder: this process runs the program all the same
+        try:
+            tmp.unlink(missing_ok=True)
+        except OSError:
+            pass
+        warnings.warn(f"cannot keep the {what} {path} ({err}); later processes will build it again", stacklevel=4)
+
+
+def _compile_fresh(run, spec):
+    """``run`` (a jitted function) compiled for ``spec`` by XLA, not read from JAX's compilation cache (see
+    :data:`_FRESH_COMPILE`), and not written to it (the caller keeps it)."""
+    key = "jax_persistent_cache_min_compile_time_secs"
+    before = getattr(jax.config, key)
+    jax.config.update(key, float("inf"))
+    try:
+        return run.lower(*spec).compile(compiler_options=_FRESH_COMPILE)
+    finally:
+        jax.config.update(key, before)
+
+
+def _load_or_compile(fn: Callable, in_tree, spec, path):
+    """(call of the leaves, output tree) of the exported program at ``path`` (:func:`_load_or_export`), run as a
+    compiled executable kept beside it for this machine (``<hash>.<machine>.xlaexec``): a process that finds it
+    deserialises it and calls it, without lowering the exported program or computing JAX's cache key (both paid
+    per process for every kept program) -- the same executable, so the same numbers in every process."""
+    import pickle
+    import warnings
+
+    from jax.experimental import serialize_executable as se
+
+    exe = path.with_name(f"{path.stem}.{_machine_key()}.xlaexec")
+    if exe.is_file():
+        try:
+            data = exe.read_bytes()
+            if not data.startswith(_EXEC_MAGIC):
+                raise ValueError("not a deltajax executable file")
+            n = int.from_bytes(data[len(_EXEC_MAGIC):len(_EXEC_MAGIC) + 8], "little")
+            head = len(_EXEC_MAGIC) + 8
+            in_c, out_c, out_tree = pickle.loads(data[head:head + n])
+            compiled = se.deserialize_and_load(data[head + n:], in_c, out_c)
+            STATS["loaded"] += 1
+            return compiled, out_tree
+        except Exception as err:  # noqa: BLE001 - a damaged cache entry is rebuilt (it holds no results)
+            warnings.warn(f"rebuilding the cached program {exe} ({type(err).__name__}: {err})", stacklevel=3)
+    run, out_tree = _load_or_export(fn, in_tree, spec, path)
+    compiled = _compile_fresh(run, spec)
+    payload, in_c, out_c = se.serialize(compiled)
+    head = pickle.dumps((in_c, out_c, out_tree))
+    _write_atomic(exe, _EXEC_MAGIC + len(head).to_bytes(8, "little") + head + payload, "executable")
+    return compiled, out_tree
 
 
 def _load_or_export(fn: Callable, in_tree, spec, path):
-    import os
     import pickle
     import warnings
 
@@ -193,30 +279,22 @@ def _load_or_export(fn: Callable, in_tree, spec, path):
 
     program = export.export(jax.jit(flat))(*spec).serialize()
     head = pickle.dumps(trees["out"])
-    blob = _MAGIC + len(head).to_bytes(8, "little") + head + program
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp.write_bytes(blob)
-        os.replace(tmp, path)
-        _evict(path.parent)
-    except OSError as err:   # a read-only or full cache folder: this process runs the program all the same
-        try:
-            tmp.unlink(missing_ok=True)
-        except OSError:
-            pass
-        warnings.warn(f"cannot keep the program {path} ({err}); later processes will build it again", stacklevel=3)
+    _write_atomic(path, _MAGIC + len(head).to_bytes(8, "little") + head + program, "program")
     STATS["exported"] += 1
     return jax.jit(export.deserialize(bytearray(program)).call), trees["out"]
 
 
 def _evict(folder) -> None:
-    files = sorted(folder.glob("*.jaxexport"), key=lambda p: p.stat().st_mtime)
-    for p in files[:max(len(files) - PROGRAMS_KEPT, 0)]:
+    for pattern in ("*.jaxexport", "*.xlaexec"):
         try:
-            p.unlink()
-        except OSError:   # another process removed it first
-            pass
+            files = sorted(folder.glob(pattern), key=lambda p: p.stat().st_mtime)
+        except OSError:   # a file removed by another process meanwhile: evict the next time
+            continue
+        for p in files[:max(len(files) - PROGRAMS_KEPT, 0)]:
+            try:
+                p.unlink()
+            except OSError:   # another process removed it first
+                pass
 
 
 # -- programs shared by content within a process --------------------------------------------------------------

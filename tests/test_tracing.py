@@ -109,13 +109,45 @@ def test_a_damaged_program_is_rebuilt_with_a_warning(program_cache):
     f = jax.jit(_fn)
     x = np.ones(3)
     T.persistent(f, "demo", "k")(x, x)
-    (path,) = (program_cache / "demo").glob("*.jaxexport")
-    path.write_bytes(b"not a program")
+    paths = sorted((program_cache / "demo").glob("*"), key=lambda p: p.suffix)   # exported program, executable
+    assert [p.suffix for p in paths] == [".jaxexport", ".xlaexec"]
+    for p in paths:
+        p.write_bytes(b"not a program")
     T._LOADED.clear()
-    with pytest.warns(UserWarning, match="rebuilding the cached program"):
+    with pytest.warns(UserWarning, match="rebuilding the cached program") as caught:
         out = T.persistent(f, "demo", "k")(x, x)
+    assert len(caught) == 2
     np.testing.assert_array_equal(np.asarray(out["s"]), np.asarray(f(x, x)["s"]))
-    assert path.read_bytes() != b"not a program"
+    assert all(p.read_bytes() != b"not a program" for p in paths)
+
+
+def test_the_kept_executable_runs_without_the_exported_program_and_a_damaged_one_is_compiled_again(program_cache):
+    f = jax.jit(_fn)
+    x, y = np.linspace(0, 3, 7), np.linspace(1, 2, 7)
+    first = T.persistent(f, "demo", "k")(x, y)
+    (exported,) = (program_cache / "demo").glob("*.jaxexport")
+    (executable,) = (program_cache / "demo").glob("*.xlaexec")
+    kept = exported.read_bytes()
+    exported.unlink()                                           # only the executable is left
+    T._LOADED.clear()                                           # as a new process
+    before = dict(T.STATS)
+    again = T.persistent(f, "demo", "k")(x, y)
+    assert T.STATS == {"exported": before["exported"], "loaded": before["loaded"] + 1}
+    assert not exported.exists()                                # run from the executable alone
+    for k in first:
+        np.testing.assert_array_equal(np.asarray(again[k]), np.asarray(first[k]))
+    # a damaged executable is compiled again from the exported program, which is not traced again
+    exported.write_bytes(kept)
+    executable.write_bytes(b"damaged")
+    T._LOADED.clear()
+    before = dict(T.STATS)
+    with pytest.warns(UserWarning, match="rebuilding the cached program"):
+        out = T.persistent(f, "demo", "k")(x, y)
+    assert T.STATS == {"exported": before["exported"], "loaded": before["loaded"] + 1}
+    np.testing.assert_array_equal(np.asarray(out["s"]), np.asarray(first["s"]))
+    assert executable.read_bytes() != b"damaged"
+    T._LOADED.clear()                                           # and it runs in the next process
+    np.testing.assert_array_equal(np.asarray(T.persistent(f, "demo", "k")(x, y)["s"]), np.asarray(first["s"]))
 
 
 def test_an_unwritable_cache_folder_warns_and_runs_the_program(tmp_path, monkeypatch):
@@ -124,8 +156,9 @@ def test_an_unwritable_cache_folder_warns_and_runs_the_program(tmp_path, monkeyp
     monkeypatch.setenv("DELTAJAX_PROGRAM_CACHE", str(blocked))
     T._LOADED.clear()
     x = np.arange(3.0)
-    with pytest.warns(UserWarning, match="cannot keep the program"):
+    with pytest.warns(UserWarning, match="cannot keep the (program|executable)") as caught:
         out = T.persistent(jax.jit(_fn), "demo", "k")(x, x)
+    assert sorted(str(w.message).split()[3] for w in caught) == ["executable", "program"]
     np.testing.assert_array_equal(np.asarray(out["s"]), np.asarray(_fn(x, x)["s"]))
     T._LOADED.clear()
 
