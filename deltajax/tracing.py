@@ -143,8 +143,9 @@ def persistent(fn: Callable, kind: str, key: str) -> Callable:
     structure looks for its exported program under ``kind`` / ``key`` (the content of whatever ``fn`` closes
     over, a string) and the input structure and shapes; if none is on disk it traces and exports ``fn`` and
     writes the program (atomically), and its compiled executable for this machine beside it. Either way the
-    exported program runs, so every process computes the same numbers. Inputs and outputs may be any registered pytrees (equinox modules, the GA's evosax state): the
-    program itself takes and returns their leaves. With no :func:`program_cache_dir`, ``fn`` itself runs."""
+    exported program runs, so every process computes the same numbers. Inputs and outputs may be any registered
+    pytrees (equinox modules, the GA's evosax state): the program itself takes and returns their leaves. With no
+    :func:`program_cache_dir`, ``fn`` itself runs."""
     import hashlib
 
     def call(*args):
@@ -190,10 +191,27 @@ def _machine_key() -> str:
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:16]
 
 
-def _write_atomic(path, blob: bytes, what: str) -> None:
+def _read_kept(path, magic: bytes, what: str):
+    """(header, payload) of a kept file: ``magic``, the pickled header's length (8 bytes), the header, the payload."""
+    import pickle
+
+    data = path.read_bytes()
+    if not data.startswith(magic):
+        raise ValueError(f"not a deltajax {what} file")
+    n = int.from_bytes(data[len(magic):len(magic) + 8], "little")
+    head = len(magic) + 8
+    return pickle.loads(data[head:head + n]), data[head + n:]
+
+
+def _write_kept(path, magic: bytes, header, payload: bytes, what: str) -> None:
+    """Write a kept file (:func:`_read_kept`'s layout) atomically; a folder that cannot hold it warns and the
+    process runs the program all the same."""
     import os
+    import pickle
     import warnings
 
+    head = pickle.dumps(header)
+    blob = magic + len(head).to_bytes(8, "little") + head + payload
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -225,7 +243,6 @@ def _load_or_compile(fn: Callable, in_tree, spec, path):
     compiled executable kept beside it for this machine (``<hash>.<machine>.xlaexec``): a process that finds it
     deserialises it and calls it, without lowering the exported program or computing JAX's cache key (both paid
     per process for every kept program) -- the same executable, so the same numbers in every process."""
-    import pickle
     import warnings
 
     from jax.experimental import serialize_executable as se
@@ -233,13 +250,8 @@ def _load_or_compile(fn: Callable, in_tree, spec, path):
     exe = path.with_name(f"{path.stem}.{_machine_key()}.xlaexec")
     if exe.is_file():
         try:
-            data = exe.read_bytes()
-            if not data.startswith(_EXEC_MAGIC):
-                raise ValueError("not a deltajax executable file")
-            n = int.from_bytes(data[len(_EXEC_MAGIC):len(_EXEC_MAGIC) + 8], "little")
-            head = len(_EXEC_MAGIC) + 8
-            in_c, out_c, out_tree = pickle.loads(data[head:head + n])
-            compiled = se.deserialize_and_load(data[head + n:], in_c, out_c)
+            (in_c, out_c, out_tree), payload = _read_kept(exe, _EXEC_MAGIC, "executable")
+            compiled = se.deserialize_and_load(payload, in_c, out_c)
             STATS["loaded"] += 1
             return compiled, out_tree
         except Exception as err:  # noqa: BLE001 - a damaged cache entry is rebuilt (it holds no results)
@@ -247,26 +259,19 @@ def _load_or_compile(fn: Callable, in_tree, spec, path):
     run, out_tree = _load_or_export(fn, in_tree, spec, path)
     compiled = _compile_fresh(run, spec)
     payload, in_c, out_c = se.serialize(compiled)
-    head = pickle.dumps((in_c, out_c, out_tree))
-    _write_atomic(exe, _EXEC_MAGIC + len(head).to_bytes(8, "little") + head + payload, "executable")
+    _write_kept(exe, _EXEC_MAGIC, (in_c, out_c, out_tree), payload, "executable")
     return compiled, out_tree
 
 
 def _load_or_export(fn: Callable, in_tree, spec, path):
-    import pickle
     import warnings
 
     from jax import export
 
     if path.is_file():
         try:
-            data = path.read_bytes()
-            if not data.startswith(_MAGIC):
-                raise ValueError("not a deltajax program file")
-            n = int.from_bytes(data[len(_MAGIC):len(_MAGIC) + 8], "little")
-            head = len(_MAGIC) + 8
-            out_tree = pickle.loads(data[head:head + n])
-            exp = export.deserialize(bytearray(data[head + n:]))
+            out_tree, payload = _read_kept(path, _MAGIC, "program")
+            exp = export.deserialize(bytearray(payload))
             STATS["loaded"] += 1
             return jax.jit(exp.call), out_tree
         except Exception as err:  # noqa: BLE001 - a damaged cache entry is rebuilt (it holds no results)
@@ -278,8 +283,7 @@ def _load_or_export(fn: Callable, in_tree, spec, path):
         return out
 
     program = export.export(jax.jit(flat))(*spec).serialize()
-    head = pickle.dumps(trees["out"])
-    _write_atomic(path, _MAGIC + len(head).to_bytes(8, "little") + head + program, "program")
+    _write_kept(path, _MAGIC, trees["out"], program, "program")
     STATS["exported"] += 1
     return jax.jit(export.deserialize(bytearray(program)).call), trees["out"]
 
