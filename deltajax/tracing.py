@@ -238,11 +238,28 @@ def _compile_fresh(run, spec):
         jax.config.update(key, before)
 
 
+class _Kept:
+    """A kept program's call of the leaves: concrete inputs run the compiled executable; inputs traced by an
+    enclosing transformation (``jit``, ``vmap``, ``grad`` around the call) run the exported program's jitted call,
+    read when first needed (an executable is compiled for one signature and takes no tracers)."""
+
+    def __init__(self, compiled, traceable: Callable[[], Callable]):
+        self.compiled, self._traceable, self._jitted = compiled, traceable, None
+
+    def __call__(self, *leaves):
+        if any(isinstance(x, jax.core.Tracer) for x in leaves):
+            if self._jitted is None:
+                self._jitted = self._traceable()
+            return self._jitted(*leaves)
+        return self.compiled(*leaves)
+
+
 def _load_or_compile(fn: Callable, in_tree, spec, path):
-    """(call of the leaves, output tree) of the exported program at ``path`` (:func:`_load_or_export`), run as a
-    compiled executable kept beside it for this machine (``<hash>.<machine>.xlaexec``): a process that finds it
-    deserialises it and calls it, without lowering the exported program or computing JAX's cache key (both paid
-    per process for every kept program) -- the same executable, so the same numbers in every process."""
+    """(:class:`_Kept` call of the leaves, output tree) of the exported program at ``path``
+    (:func:`_load_or_export`), run as a compiled executable kept beside it for this machine
+    (``<hash>.<machine>.xlaexec``): a process that finds it deserialises it and calls it, without lowering the
+    exported program or computing JAX's cache key (both paid per process for every kept program) -- the same
+    executable, so the same numbers in every process."""
     import warnings
 
     from jax.experimental import serialize_executable as se
@@ -253,14 +270,14 @@ def _load_or_compile(fn: Callable, in_tree, spec, path):
             (in_c, out_c, out_tree), payload = _read_kept(exe, _EXEC_MAGIC, "executable")
             compiled = se.deserialize_and_load(payload, in_c, out_c)
             STATS["loaded"] += 1
-            return compiled, out_tree
+            return _Kept(compiled, lambda: _load_or_export(fn, in_tree, spec, path)[0]), out_tree
         except Exception as err:  # noqa: BLE001 - a damaged cache entry is rebuilt (it holds no results)
             warnings.warn(f"rebuilding the cached program {exe} ({type(err).__name__}: {err})", stacklevel=3)
     run, out_tree = _load_or_export(fn, in_tree, spec, path)
     compiled = _compile_fresh(run, spec)
     payload, in_c, out_c = se.serialize(compiled)
     _write_kept(exe, _EXEC_MAGIC, (in_c, out_c, out_tree), payload, "executable")
-    return compiled, out_tree
+    return _Kept(compiled, lambda: run), out_tree
 
 
 def _load_or_export(fn: Callable, in_tree, spec, path):
