@@ -86,7 +86,6 @@ def test_persistent_exports_once_reads_back_and_gives_the_numbers_of_the_program
     assert len(list((program_cache / "demo").glob("*.jaxexport"))) == 3
 
 
-
 def test_a_kept_program_runs_inside_a_transformation_of_its_caller(program_cache):
     # the caller jits around the kept program (the main job's resumed GA does): its inputs are tracers, which a
     # compiled executable does not take; the exported program's jitted call runs there, with the same numbers
@@ -95,9 +94,14 @@ def test_a_kept_program_runs_inside_a_transformation_of_its_caller(program_cache
     p = T.persistent(f, "demo", "k")
     want = np.asarray(p(x, y)["s"])
     T._LOADED.clear()                                           # a new process: the executable is read back
+    before = dict(T.STATS)
     p = T.persistent(f, "demo", "k")
+    np.testing.assert_array_equal(np.asarray(p(x, y)["s"]), want)
+    assert T.STATS == {"exported": before["exported"], "loaded": before["loaded"] + 1}
     np.testing.assert_array_equal(np.asarray(jax.jit(lambda a: p(a, y)["s"])(x)), want)
+    assert T.STATS["loaded"] == before["loaded"] + 2             # the exported program, read for the traced call
     np.testing.assert_array_equal(np.asarray(p(x, y)["s"]), want)   # and concrete calls still run the executable
+
 
 def test_forget_drops_one_kinds_programs_and_keeps_the_others(program_cache, monkeypatch):
     monkeypatch.setattr(T, "PROGRAMS", {})
