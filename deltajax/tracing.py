@@ -204,31 +204,29 @@ def _read_kept(path, magic: bytes, what: str):
 
 
 def _write_kept(path, magic: bytes, header, payload: bytes, what: str) -> None:
-    """Write a kept file (:func:`_read_kept`'s layout) atomically; a folder that cannot hold it warns and the
-    process runs the program all the same."""
+    """Write a kept file (:func:`_read_kept`'s layout) atomically (:func:`deltajax.io.write_atomic`); a folder
+    that cannot hold it warns and the process runs the program all the same."""
     import os
     import pickle
     import warnings
 
+    from deltajax.io import write_atomic
+
     head = pickle.dumps(header)
-    blob = magic + len(head).to_bytes(8, "little") + head + payload
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp.write_bytes(blob)
-        os.replace(tmp, path)
+        write_atomic(path, magic + len(head).to_bytes(8, "little") + head + payload)
         _evict(path.parent)
     except OSError as err:   # a read-only or full cache folder: this process runs the program all the same
-        try:
-            tmp.unlink(missing_ok=True)
-        except OSError:
-            pass
-        warnings.warn(f"cannot keep the {what} {path} ({err}); later processes will build it again", stacklevel=4)
+        cause = os.strerror(err.errno) if err.errno else str(err)
+        warnings.warn(f"cannot keep the {what} {path} ({cause}); later processes will build it again", stacklevel=4)
 
 
 def _compile_fresh(run, spec):
     """``run`` (a jitted function) compiled for ``spec`` by XLA, not read from JAX's compilation cache (see
-    :data:`_FRESH_COMPILE`), and not written to it (the caller keeps it)."""
+    :data:`_FRESH_COMPILE`), and not written to it (the caller keeps it). It raises the process-wide cache
+    threshold for the compile's duration, so it is not for concurrent threads: deltajax builds its programs
+    from the calling thread only (its only threads are the Numba drivers', which compile nothing in JAX)."""
     key = "jax_persistent_cache_min_compile_time_secs"
     before = getattr(jax.config, key)
     jax.config.update(key, float("inf"))
@@ -240,8 +238,10 @@ def _compile_fresh(run, spec):
 
 class _Kept:
     """A kept program's call of the leaves: concrete inputs run the compiled executable; inputs traced by an
-    enclosing transformation (``jit``, ``vmap``, ``grad`` around the call) run the exported program's jitted call,
-    read when first needed (an executable is compiled for one signature and takes no tracers)."""
+    enclosing ``jit`` (the resumed GA calls a kept program inside its own) run the exported program's jitted call,
+    read when first needed (an executable is compiled for one signature and takes no tracers). The exported
+    program is not differentiable and has no batching rule: ``grad`` or ``vmap`` around a kept program fails
+    with JAX's error, never with different numbers."""
 
     def __init__(self, compiled, traceable: Callable[[], Callable]):
         self.compiled, self._traceable, self._jitted = compiled, traceable, None

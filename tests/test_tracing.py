@@ -180,6 +180,27 @@ def test_an_unwritable_cache_folder_warns_and_runs_the_program(tmp_path, monkeyp
     T._LOADED.clear()
 
 
+def test_a_full_cache_disk_warns_leaves_no_partial_file_and_runs_the_program(tmp_path, monkeypatch):
+    import errno
+
+    import deltajax.io as dio
+
+    def full_disk(fd, data):   # half written, then no space
+        os.write(fd, bytes(data)[: len(data) // 2])
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setenv("DELTAJAX_PROGRAM_CACHE", str(tmp_path))
+    monkeypatch.setattr(dio, "_write_all", full_disk)
+    T._LOADED.clear()
+    x = np.arange(3.0)
+    with pytest.warns(UserWarning, match="cannot keep the (program|executable) .*No space left on device") as caught:
+        out = T.persistent(jax.jit(_fn), "demo", "k")(x, x)
+    assert sorted(str(w.message).split()[3] for w in caught) == ["executable", "program"]
+    assert not [p.name for p in tmp_path.rglob("*") if p.is_file()]    # neither a partial file nor a temporary
+    np.testing.assert_array_equal(np.asarray(out["s"]), np.asarray(_fn(x, x)["s"]))
+    T._LOADED.clear()
+
+
 def test_no_cache_folder_runs_the_function_itself(monkeypatch, tmp_path):
     monkeypatch.setenv("DELTAJAX_PROGRAM_CACHE", "")
     assert T.program_cache_dir() is None
