@@ -101,6 +101,12 @@ def test_a_kept_program_runs_inside_a_transformation_of_its_caller(program_cache
     np.testing.assert_array_equal(np.asarray(jax.jit(lambda a: p(a, y)["s"])(x)), want)
     assert T.STATS["loaded"] == before["loaded"] + 2             # the exported program, read for the traced call
     np.testing.assert_array_equal(np.asarray(p(x, y)["s"]), want)   # and concrete calls still run the executable
+    # vmap and grad around a kept program fail with JAX's error (the exported program has no batching rule and
+    # no VJP), never with other numbers
+    with pytest.raises(NotImplementedError, match="Batching rule"):
+        jax.vmap(lambda a: p(a, y)["s"])(np.stack([x, x]))
+    with pytest.raises(ValueError, match="No VJP"):
+        jax.grad(lambda a: p(a, y)["s"].sum())(x)
 
 
 def test_forget_drops_one_kinds_programs_and_keeps_the_others(program_cache, monkeypatch):
