@@ -6,7 +6,7 @@ Every function here is built on the public core (:func:`deltajax.ik`, :func:`del
 a utilisation ratio). A margin can be used as a constraint (``margin >= 0``) or as an objective (maximise it).
 Unreachable configurations give NaN margins (failure as data; a NaN margin never counts as satisfied).
 
-Models (explicit, documented; all frames: base frame, z down, chain i at angle 2 pi i / 3, SPEC §1):
+Models (explicit, documented; all frames: base frame, z down, chain i at angle 2 pi i / 3, docs/CONVENTIONS.md):
 
 * **Passive joints** (:class:`JointModel`). ``kind="ball"``: a spherical joint at each end of every forearm
   (the parallelogram as one rod) whose socket allows a *cone* of half-angle ``limit`` around a neutral axis

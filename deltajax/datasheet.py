@@ -1,9 +1,9 @@
-"""A vendor-style one-page datasheet of one Delta design with its drive (issue 29).
+"""A vendor-style one-page datasheet of one Delta design with its drive.
 
     ds = dj.datasheet(dj.presets.industrial(), dj.presets.servo_750w(), 20.0)
     ds.rows()                      # the picks/min-vs-payload table, one dict per payload, units in ds.UNITS
 
-What it holds (all SI units unless the field name says otherwise; frame: base frame, z down, SPEC §1):
+What it holds (all SI units unless the field name says otherwise; frame: base frame, z down, docs/CONVENTIONS.md):
 
 * **geometry and masses**: R, r, L1, L2 (m), the joint range (rad), the link masses (kg) of the robot's
   :class:`~deltajax.MassModel` and its forearm model.

@@ -156,7 +156,7 @@ def _validity(robot: Delta, u_local, d, tol):
 # ---------------------------------------------------------------------------------------------------------
 # Flat (scalar per chain) form: what cycle_profile / cycle_metrics run. Under vmap over samples and designs
 # every quantity here is one flat (P, K) array; nothing is a per-point (3,) vector or (3, 3) matrix
-# (XLA:CPU does not vectorise those; issue 9).
+# (XLA:CPU does not vectorise those: docs/BENCHMARKS.md).
 # ---------------------------------------------------------------------------------------------------------
 class _Chain(NamedTuple):
     """One chain at one instant (scalars): cos/sin theta, unit forearm u (chain frame), Jq entry d = L1 sin th2

@@ -1,13 +1,13 @@
-"""Take a design out of deltajax: MuJoCo MJCF and URDF (+ loop-closure sidecar) of one robot (issue 29).
+"""Take a design out of deltajax: MuJoCo MJCF and URDF (+ loop-closure sidecar) of one robot.
 
     xml = dj.export.mjcf(robot)                          # string; mjcf(robot, path="robot.xml") writes it
     dj.export.urdf(robot, path="robot.urdf")             # writes robot.urdf and robot.loops.json
     state = dj.export.joint_state(robot, p, p_dot, p_ddot, theta, ...)   # deltajax state -> MuJoCo joints
 
-**Frames.** deltajax works in its base frame with z pointing *down* (SPEC §1). Both exports use the z-up frame
-of :func:`deltajax.to_z_up`, the base frame rotated by pi about x: (x, y, z) -> (x, -y, -z) (right-handed; chain 0
-stays on +x, chain i lies at angle -alpha_i about +z, gravity is -z). Origin: the base centre. Every body
-frame is named after its part; lengths in m, masses in kg, inertias in kg m^2, angles in rad.
+**Frames.** deltajax works in its base frame with z pointing *down* (docs/CONVENTIONS.md). Both exports use
+the z-up frame of :func:`deltajax.to_z_up`, the base frame rotated by pi about x: (x, y, z) -> (x, -y, -z)
+(right-handed; chain 0 stays on +x, chain i lies at angle -alpha_i about +z, gravity is -z). Origin: the base
+centre. Every body frame is named after its part; lengths in m, masses in kg, inertias in kg m^2, angles in rad.
 
 **Model** (MJCF and URDF alike; the mass model is the robot's :class:`~deltajax.MassModel`, the same numbers
 the dynamics use):

@@ -1,6 +1,6 @@
 """Per-point arithmetic written for XLA:CPU's fusion rules: cheap-op reciprocal and square root, one-loop outputs.
 
-Why (measured, issue 9): XLA:CPU never duplicates a divide or square root into two consumers, and it gives every
+Why (measured): XLA:CPU never duplicates a divide or square root into two consumers, and it gives every
 output of a ``jit(vmap(kernel))`` its own loop. A kernel with a few dozen shared divides and ~10 outputs therefore
 becomes ~60-90 loops that store their intermediates to memory and recompute the cheap algebra between them.
 Two small tools remove both causes, so that the whole per-point kernel compiles to ONE loop:

@@ -1,6 +1,6 @@
 """Delta and reconfigurable-Delta robot models as frozen pytrees, with validation.
 
-Frame (SPEC §1): origin at the centre of the fixed platform, **z pointing down** toward the workspace.
+Frame (docs/CONVENTIONS.md): origin at the centre of the fixed platform, **z pointing down** toward the workspace.
 Chain i (i = 0, 1, 2) lies in the vertical plane at angle alpha_i = 2*pi*i/3 about z.
 
 Every geometric number is an array leaf, so that `jax.vmap` over a population of designs (a GA) works on

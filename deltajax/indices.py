@@ -1,7 +1,7 @@
 """Jacobian-based performance indices, the singularity-sensitive index k~, singularity classification.
 
 The paper's tabulated numbers (Franco-López 2026, Tables 2-8) are computed from the homogenised 3x3
-theta-block M = J^[:, 1:4] of the Jacobian with R frozen (SPEC §1), not from the 3x4 matrix its prose
+theta-block M = J^[:, 1:4] of the Jacobian with R frozen (docs/CONVENTIONS.md), not from the 3x4 matrix its prose
 describes; ``matrix="theta3x3"`` (default) does that, ``matrix="full3x4"`` uses the homogenised 3x4 J.
 
 Closed-form singular values (hot path). With D = diag(sin th2 sin th3) (the homogenised theta-block of Jq)

@@ -50,7 +50,7 @@ def jq_theta(ux, uz, c, s):
 def jx_det(j00, j01, j02, j10, j11, j12, j20, j21, j22):
     """Signed determinant of Jx given row-major as 9 scalars (explicit cofactor expansion, no LU).
 
-    ``det Jx == 0`` exactly is the rule redundancy resolution uses to skip a sample (SPEC §1).
+    ``det Jx == 0`` exactly is the rule redundancy resolution uses to skip a sample (docs/CONVENTIONS.md).
     """
     return (j00 * (j11 * j22 - j12 * j21)
             - j01 * (j10 * j22 - j12 * j20)

@@ -1,6 +1,6 @@
 """Inverse and forward kinematics of the Delta robot, single point (vmap for batches).
 
-Frame and conventions: SPEC §1 (z down, chain i at alpha_i = 2 pi i / 3, theta positive downward, elbow
+Frame and conventions: docs/CONVENTIONS.md (z down, chain i at alpha_i = 2 pi i / 3, theta positive downward, elbow
 B_i = (R + L1 cos theta, 0, L1 sin theta) in chain i's local frame). Failure is data: every result carries an
 ``ok`` mask and a reason code; nothing here raises on a bad point.
 

@@ -1,6 +1,6 @@
 """Mass model of a (reconfigurable) Delta robot, as a frozen pytree carried by ``Delta.mass``.
 
-Lumped-parameter model (per chain; the three chains are identical), frame z down (SPEC §1), so gravity
+Lumped-parameter model (per chain; the three chains are identical), frame z down (docs/CONVENTIONS.md), so gravity
 acts along +z and the potential energy of a mass m at height z is ``V = -m g z``:
 
 * **Upper arm** A_i B_i, a rigid body rotating about the motor axis (the chain's local y axis): mass

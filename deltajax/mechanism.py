@@ -16,7 +16,7 @@ effort of the drive. Single configuration; ``jax.vmap`` for profiles.
   - the *coupler* D-A' has length ``d2``:  (R_f + R_r cos a4 - d3)^2 + (d1 + p phi - R_r sin a4)^2 = d2^2  (Eq. 43);
   - the actuated joint A_i rides on a radial carriage driven by the rocker tip through a slot parallel to the
     screw axis, so R = R_f + R_r cos a4 (the paper writes R = R_f + R_r at a4 = 0). The slot is our reading:
-    the library's kinematics keep A_i in the base plane (SPEC §1), which a pin-jointed rocker tip would leave.
+    the library's kinematics keep A_i in the base plane (docs/CONVENTIONS.md), which a pinned rocker tip would leave.
 
   With a = R_f - d3, b = d1 + p phi, X = a + R_r cos a4, Y = b - R_r sin a4 (the coupler's components), Eq. 43
   is k1 sin a4 + k2 cos a4 = k3 with k1 = -2 R_r b, k2 = 2 R_r a, k3 = d2^2 - a^2 - b^2 - R_r^2 (the paper's

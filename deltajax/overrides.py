@@ -1,4 +1,4 @@
-"""The command line checked before Hydra runs it (issue 13): Hydra's composition errors as one line.
+"""The command line checked before Hydra runs it: Hydra's composition errors as one line.
 
 Hydra reports a mistyped key (``robot.forarm=0.4``) in five lines, suggests ``+robot.forarm=0.4`` (which would
 add a key no job reads) and exits 1. :func:`check_overrides` composes the command line's config first (Hydra's

@@ -2,7 +2,7 @@
 
 Tests, CLI jobs (which store them beside our values as ``paper_*`` datasets/attributes), benchmarks and
 docs/REPRODUCTION.md all read these; nothing else types a published number. Values are as printed, with
-minus signs and exponents restored where the text extraction of the paper lost them (SPEC §4). Misprints
+minus signs and exponents restored where the text extraction of the paper lost them (docs/REPRODUCTION.md). Misprints
 are flagged (:data:`FRANCO2026_MISPRINTS`), never corrected here: the tests show why they are wrong.
 
 Papers (texts in the project's shared ``papers/`` folder):
@@ -28,7 +28,7 @@ __all__ = [
 
 #: Franco-López 2026 Tables 2-5: one configuration each, R (m), platform point p (m), the printed arm angle
 #: theta_1 (deg; theta < 0 above the horizontal) and the printed indices. Table 2's R "0.4649" is a
-#: truncation of 0.46499 (SPEC §4).
+#: truncation of 0.46499 (docs/REPRODUCTION.md).
 FRANCO2026_EXAMPLES = {
     "table2": dict(R=0.46499, p=(0.0, 0.0, 0.200), theta_deg=90.000,
                    indices=dict(omega_v=6.1584e8, omega_f=1.6237e-9, sigma_min_v=8.1648e-1,
@@ -44,7 +44,7 @@ FRANCO2026_EXAMPLES = {
                                 sigma_min_f=1.6410e0, inv_cond=0.4127)),
 }
 
-#: Printed values contradicted by the paper's own other numbers (SPEC §4, docs/REPRODUCTION.md §1):
+#: Printed values contradicted by the paper's own other numbers (docs/REPRODUCTION.md §1):
 #: Table 4 sigma_min_f = (1/k) / sigma_min_v = 0.8829 / 0.46054 = 1.917, not 2.4592;
 #: Table 5 omega_v = 1 / omega_f = 1 / 25.9473 = 0.038540, not 0.038553.
 FRANCO2026_MISPRINTS = frozenset({("table4", "sigma_min_f"), ("table5", "omega_v")})

@@ -1,4 +1,4 @@
-"""Robots shipped with deltajax (SPEC §2). Each function returns a validated robot.
+"""Robots shipped with deltajax (the CLI's ``configs/robot/*.yaml``). Each function returns a validated robot.
 
 Numbers and their sources:
 

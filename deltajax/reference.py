@@ -7,7 +7,7 @@ baseline. It mirrors the JAX decomposition name for name (:func:`loop_closure`, 
 the angle itself (``arctan2``), Jx from the explicit rotation, singular values from ``numpy.linalg.svd`` of
 M = Jx^-1 diag(d) (no closed form), k~ from the paper's Eq. 15-17 written out.
 
-Conventions: SPEC §1 (z down, chain i at alpha_i = 2 pi i / 3, theta positive downward, outer elbow).
+Conventions: docs/CONVENTIONS.md (z down, chain i at alpha_i = 2 pi i / 3, theta positive downward, outer elbow).
 """
 
 from __future__ import annotations

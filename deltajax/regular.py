@@ -1,5 +1,5 @@
 """The regular workspace: the largest cylinder on the z axis, with a given height/diameter ratio, inside a set of
-good points (issue 12), on a polar sample grid (:func:`regular_workspace`, :func:`largest_cylinder`) and refined to
+good points, on a polar sample grid (:func:`regular_workspace`, :func:`largest_cylinder`) and refined to
 a continuous measure (:func:`refine_cylinder`: golden-section search of the centre height around the grid's answer,
 bisection on the diameter with the good test on a fixed set of samples scaled with the cylinder), so that the value
 moves continuously with the design instead of stepping between the grid's levels and rings.

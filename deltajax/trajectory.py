@@ -7,7 +7,7 @@ changes, which is what makes the minimum cycle time under torque and speed limit
 (:func:`deltajax.cycle.cycle_metrics`). Cycles are pytrees: stack them (``jax.tree.map(jnp.stack, ...)``)
 and ``jax.vmap`` over trajectories as over designs.
 
-Frame: base frame, z down (SPEC §1); "up" is -z.
+Frame: base frame, z down (docs/CONVENTIONS.md); "up" is -z.
 """
 
 from __future__ import annotations

@@ -33,7 +33,7 @@ PAPER_S = {"conti": BOUNDARY_SEARCH["time_conti_1deg_s"], "continuation": BOUNDA
 # -- NumPy baseline (one point at a time, like the paper's MATLAB loops) ----------------------------------------
 def make_test_pose_numpy(robot, half_space=True):
     """Test-Pose for one point with NumPy: the three chains' loop closure of the independent NumPy reference
-    (:func:`deltajax.reference.loop_closure`, SPEC §1 IK)."""
+    (:func:`deltajax.reference.loop_closure`, the IK of docs/CONVENTIONS.md)."""
     from deltajax import reference
 
     R, r = float(robot.base_radius), float(robot.platform_radius)

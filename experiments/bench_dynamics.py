@@ -1,4 +1,4 @@
-"""Benchmark: torque-profile evaluations per second over a population of designs (issues 4, 9).
+"""Benchmark: torque-profile evaluations per second over a population of designs.
 
 One evaluation = one (design, trajectory sample): IK, joint rates and accelerations, inverse dynamics.
 Compares in the same process (the machine is shared, ratios are what we report; CPU-seconds from

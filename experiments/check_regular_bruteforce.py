@@ -1,4 +1,4 @@
-"""Is the certified regular workspace right? A brute-force check on the default problem (issue 28).
+"""Is the certified regular workspace right? A brute-force check on the default problem.
 
     python experiments/check_regular_bruteforce.py                                   # the baseline
     python experiments/check_regular_bruteforce.py --results <run>/results.h5        # its baseline + recommendation

@@ -1,4 +1,4 @@
-"""Results-file sizes with and without compression (issue 13).
+"""Results-file sizes with and without compression.
 
 For each results.h5 given, writes a copy whose datasets are contiguous and unfiltered (what deltajax.io wrote
 before chunking + shuffle + gzip; same data and attributes, dimension-scale links left out) to a temporary

@@ -1,4 +1,4 @@
-"""GPU readiness check (issue 9 item 7): every job's JAX path on the default accelerator, checked against the
+"""GPU readiness check: every job's JAX path on the default accelerator, checked against the
 CPU and timed, then the main job end to end. Run it first whenever a GPU is available and record the figures
 in docs/BENCHMARKS.md.
 

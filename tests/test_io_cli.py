@@ -1,4 +1,4 @@
-"""HDF5 layout (SPEC §5), loader, xarray access, and the first experiment through the real CLI."""
+"""HDF5 layout (docs/results.md), loader, xarray access, and the first experiment through the real CLI."""
 
 import os
 import subprocess

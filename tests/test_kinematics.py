@@ -68,7 +68,7 @@ def test_ik_reference_point_and_branches():
     robot = FRANCO.at(0.20465)
     sol = dj.ik(robot, jnp.array([0.0, 0.0, 0.2]))
     np.testing.assert_allclose(np.degrees(np.asarray(sol.theta)), -3.39378, atol=5e-6)
-    # branch formula of SPEC §1 written with atan2/acos (independent of the algebraic form)
+    # branch formula of docs/CONVENTIONS.md written with atan2/acos (independent of the algebraic form)
     dx, pz, L1, L2 = 0.065 - 0.20465, 0.2, 0.2, 0.4
     K = dx * dx + pz * pz + L1 * L1 - L2 * L2
     rho = math.hypot(dx, pz)

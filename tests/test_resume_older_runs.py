@@ -21,7 +21,7 @@ def test_resume_without_screen_front_is_refused(toy_run, tmp_path):
     old = tmp_path / "old"
     shutil.copytree(done.parent, old)
     # killed after the screen stage by a version that did not store the NSGA-II seeds (screen/front_genes); written
-    # through ResultsFile, as a run writes it (an edited file is refused before the job reads it: issue 30)
+    # through ResultsFile, as a run writes it (an edited file is refused before the job reads it)
     stored = read(done, verify=True)
     res = ResultsFile(old / "results.h5")
     res.attrs.update({k: v for k, v in stored.attrs.items() if k != "start_time"}, ga_reconfig_stages="screen")

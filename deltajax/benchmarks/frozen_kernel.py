@@ -1,5 +1,5 @@
 """Frozen copy of the kernel as of main 9f54c88 (2026-12-01), the baseline of ``bench_kernel`` and
-the kernel benchmarks (issue 9: "keep a copy of the old kernel in the benchmark"). Not used by
+the kernel benchmarks (the old kernel kept as their yardstick). Not used by
 the library; do not fix or share code with it, it is the yardstick."""
 
 from __future__ import annotations

@@ -8,7 +8,7 @@ robot as a dict. Labels:
 * ``exact on reachable`` / ``fast on reachable``: the same on the reachable points only (the issue's figure);
 * ``minimal loop ceiling``: :func:`minimal_loop`, the same algebra stripped to the bone (reciprocals instead
   of divisions where the core divides, no input guards, no repeated-eigenvalue fix-up), the ceiling the
-  production loop is compared with (SPEC §7);
+  production loop is compared with (docs/BENCHMARKS.md);
 * ``minimal loop, FMA-only divide/sqrt``: :func:`minimal_loop_newton`, the same loop with every per-point divide
   and square root as multiplies and adds (bit-trick start + Newton steps): whether the divide/square-root units
   are what bounds the ceiling.

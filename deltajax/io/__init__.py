@@ -1,4 +1,4 @@
-"""HDF5 results (SPEC §5): one self-describing file per run, written atomically, and the one reader.
+"""HDF5 results (docs/results.md): one self-describing file per run, written atomically, and the one reader.
 
 The bottom of the import graph: this package imports nothing else from deltajax. This module is the writer
 (:class:`ResultsFile`, :func:`write_atomic`) and the package's face: every public name of its modules is
@@ -53,7 +53,7 @@ __all__ = ["ResultsFile", "ResultsWriteError", "ChecksumError", "ResultsGroupErr
 
 RESERVED_NAMES = ("attrs", "units")
 
-# Self-describing, compact files (issue 13): every dataset also gets a CF-style ``long_name`` (LONG_NAMES, or
+# Self-describing, compact files: every dataset also gets a CF-style ``long_name`` (LONG_NAMES, or
 # the writer's, or its name) and a ``z`` axis in m ``positive: "down"`` (the base frame's convention);
 # datasets of COMPRESS_MIN_ELEMENTS or more elements are chunked (about CHUNK_BYTES per chunk, whole trailing
 # axes first) and gzip-compressed with the shuffle filter, which every HDF5/netCDF reader decodes:

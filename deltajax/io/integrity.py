@@ -1,4 +1,4 @@
-"""Checksums and the integrity record of a results file (SPEC §5): what :func:`deltajax.io.read` checks with
+"""Checksums and the integrity record of a results file (docs/results.md): what :func:`deltajax.io.read` checks with
 ``verify=True``.
 
 Every dataset carries a ``checksum`` attribute (:func:`checksum`, ``sha256:<hex>`` of its dtype, shape and data),

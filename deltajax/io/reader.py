@@ -1,4 +1,4 @@
-"""The one reader of results files (SPEC §5): :func:`read` and its views.
+"""The one reader of results files (docs/results.md): :func:`read` and its views.
 
 :func:`read` returns a file (or the groups at and below one group) as :class:`Contents`, keeping every
 dataset's dimensions, units and attributes as a :class:`Variable`; with ``verify=True`` it checks what it reads
@@ -209,7 +209,7 @@ def load_groups(path: os.PathLike, names: Sequence[str], *, verify: bool = True)
 
 
 def open_xarray(path: os.PathLike, group: str, *, verify: bool = True):
-    """Open one group of a results file as an in-memory :class:`xarray.Dataset` (SPEC §5): a view of :func:`read`.
+    """Open one group of a results file as an in-memory :class:`xarray.Dataset`: a view of :func:`read`.
 
     Gridded datasets come with their named dimensions and coordinate axes (the HDF5 dimension scales), each
     variable with its ``units``, ``long_name`` and other attributes; scalars are 0-d variables; the group's

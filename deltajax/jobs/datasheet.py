@@ -1,4 +1,4 @@
-"""Vendor-style datasheets (issue 29): ``python -m deltajax.run experiment=datasheet source=<preset | run dir>``.
+"""Vendor-style datasheets: ``python -m deltajax.run experiment=datasheet source=<preset | run dir>``.
 
 ``source`` is a :data:`deltajax.presets.PRESETS` name (``franco2026``: its fixed variant at R = 0.200 m with the GA
 paper's masses, as in dynamics_cycle; the drive from ``experiment.motor`` / ``experiment.gear_ratio``) or a

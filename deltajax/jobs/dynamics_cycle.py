@@ -1,4 +1,4 @@
-"""Dynamics along the standard pick-and-place cycle and the GA paper's test motion (issue 4).
+"""Dynamics along the standard pick-and-place cycle and the GA paper's test motion.
 
 For the config robot and the presets listed in ``experiment.robots``: joint positions, speeds, accelerations
 and actuator torques along the standard 25/305/25 mm cycle (at its nominal duration and at the minimum cycle
@@ -7,7 +7,7 @@ time and cycles per minute; a Lagrange-vs-virtual-work cross-check on every prof
 config robot, the GA motion again with R moving, with the R actuator's force.
 
 Every robot and case is evaluated with both forearm models (:data:`deltajax.mass.FOREARM_MODELS`: the robot's
-own model drives the profiles, the other is the comparison), issue 16: peak and RMS torque and minimum cycle
+own model drives the profiles, the other is the comparison); peak and RMS torque and minimum cycle
 time of each, and the relative difference, in ``dynamics/<robot>/<case>_forearm_models`` and
 ``dynamics/forearm_models`` (one row per robot/case).
 

@@ -1,4 +1,4 @@
-"""Experiment ``reconfig_motion``: the reconfigurable robot's R(t) along trajectories (issue 14).
+"""Experiment ``reconfig_motion``: the reconfigurable robot's R(t) along trajectories.
 
 For each case (the standard pick-and-place cycle and a multi-point task, on the config robot, franco2026 by
 default) four ways to run the reconfiguration joint are compared:

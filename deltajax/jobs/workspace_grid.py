@@ -17,7 +17,7 @@ compiled code as in a single run, and the per-plane partial statistics are reduc
 shards (:func:`deltajax.sweeps.merge_shards`) equal a single run bit for bit. Chunks, shards and checkpoints
 run on the one engine (:mod:`deltajax.workspace.chunks`), with results.h5 as the checkpoint.
 
-Results, group ``workspace`` (dims x, y, z; SPEC §5):
+Results, group ``workspace`` (dims x, y, z; docs/results.md):
 ``reachable`` (uint8), the fields listed in ``experiment.store`` (NaN outside the workspace), per-plane
 statistics ``plane_count`` (x) and ``plane_n/_sum/_min/_max`` (x, index) over the reachable points with a
 finite value, and the scalars ``count``, ``volume`` (count h^3), ``volume_box`` (count / N V_box),

@@ -1,5 +1,5 @@
 """Worst cases found, not sampled: the regular workspace by rays, the worst points of the task cylinder and the
-cycle, with a convergence check at doubled density, and every constraint's margin in units (issue 28).
+cycle, with a convergence check at doubled density, and every constraint's margin in units.
 
 * :func:`ray_cylinders` / :func:`ray_cylinder`: the regular workspace (largest axis-centred cylinder with a given
   H/D inside a good set) from *rays*: a ray (phi, z) of the 60 deg wedge (the Delta's three-fold + mirror

@@ -4,7 +4,7 @@
 task and runs the cycle at one R, chosen among ``n_R_operating`` candidates by the designer's constraints
 (the most picks/min among the feasible ones).
 
-``path`` (:func:`path_operating`, issue 14 item 4): the robot moves R *during* the cycle, around that per-task R.
+``path`` (:func:`path_operating`): the robot moves R *during* the cycle, around that per-task R.
 For one design (pure, jit/vmap-able over a population):
 
 1. **Plan** (exact DP of :mod:`deltajax.motion`: :func:`deltajax.motion.path_tables` and its Viterbi ``path_dp``) on

@@ -1,7 +1,7 @@
 """Workspace boundary search along rays from a centre (the boundary-search paper), vmapped over all rays.
 
 A boundary point is searched on every ray ``p(rho) = C + rho d(phi, theta)`` from a centre ``C``, with
-``d = (sin phi cos theta, sin phi sin theta, cos phi)`` in the SPEC §1 base frame (z down, into the
+``d = (sin phi cos theta, sin phi sin theta, cos phi)`` in the base frame of docs/CONVENTIONS.md (z down, into the
 workspace): ``phi`` is the polar angle from +z (the paper's phi in [0, 180] deg), ``theta`` the azimuth
 from +x (the paper's theta in [0, 360] deg). The reachability test ("Test-Pose") of a point is the core IK,
 ``dj.ik_cos_sin(robot, p).ok.all()``, restricted to one side of the base plate (``z > 0``) when

@@ -1,6 +1,6 @@
 """Workspace grids and the per-point kernels evaluated on them (pure, jit/vmap-able).
 
-Grid rule (SPEC §1): inclusive end points, coordinates built from integer indices, never by accumulating a
+Grid rule (docs/CONVENTIONS.md): inclusive end points, coordinates built from integer indices, never by accumulating a
 float ``arange``. The franco2026 grid is x, y = -0.4 + 0.002 i (i = 0..400), z = 0.002 k (k = 0..299);
 we compute each coordinate as ``h * (i + i0)`` with the integer offset ``i0 = lo / h`` whenever ``lo`` is a
 whole number of steps, so that a grid symmetric about 0 is *bit-for-bit* symmetric (y -> -y maps grid
@@ -16,7 +16,7 @@ Public functions (single robot; vmap over a population of designs with ``in_axes
     index_fields(robot, points, ...)   -> (ok[N], {name: float[N]})  # NaN outside the workspace
 
 The kernel (:func:`mirrored_point_indices`) is the core :func:`deltajax.indices.point_kernel`, the algebraic
-one of SPEC §7: cos/sin of the actuated angles straight from
+form: cos/sin of the actuated angles straight from
 :func:`deltajax.ik_cos_sin` (no inverse trig), the homogenised theta-block M = Jx^-1 diag(sin th2 sin th3)
 and its singular values by :func:`deltajax.indices.singular_values` (no SVD). It agrees with
 ``dj.indices(robot, p, dj.ik(robot, p).theta)`` to rounding (tested), and it evaluates every point at its

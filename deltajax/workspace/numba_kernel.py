@@ -9,7 +9,7 @@ one straight-line body LLVM can vectorise. The drivers (:mod:`.numba_fields`) an
 (:mod:`.numba_screen`) are built from these functions only: the loop-closure algebra
 exists once in Numba.
 
-Conventions (SPEC §1): point P = (x, y, z) in the base frame (z down); chain i lies at angle alpha_i about z
+Conventions (docs/CONVENTIONS.md): point P = (x, y, z) in the base frame (z down); chain i lies at angle alpha_i about z
 (its frame rotation is passed as ``ca, sa`` = cos, sin alpha_i); the joint range is passed as
 ``lim = (cos mid, sin mid, cos half, has_limits)`` (:func:`limits_tuple`); k~ as ``kt = (a_v, b_v, a_f, b_f)``
 (:func:`kt_tuple`). The Jacobian blocks are homogenised by L1: Jx row i = unit forearm vector u_i (base

@@ -1,4 +1,4 @@
-"""Redundancy resolution of the reconfigurable Delta: the best base radius R per point (SPEC §1).
+"""Redundancy resolution of the reconfigurable Delta: the best base radius R per point (docs/CONVENTIONS.md).
 
 For each point the candidates are the R samples ``R_min + k R_step`` (k = 0..n_R-1). A sample is *feasible*
 when the IK succeeds for all chains within the joint limits and Jx is not exactly singular (det Jx != 0) and
@@ -56,7 +56,7 @@ Two implementations return the identical selection (tested):
      The three-fold rotation maps the Cartesian grid onto itself only for a few points (120 deg rotations
      of grid points are not grid points), so it is not used.
 
-Exact-singular Jx is detected by det Jx == 0 exactly (rank tolerance zero), as SPEC §1 asks.
+Exact-singular Jx is detected by det Jx == 0 exactly (rank tolerance zero), as docs/CONVENTIONS.md says.
 """
 
 from __future__ import annotations
