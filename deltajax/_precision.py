@@ -10,6 +10,10 @@ and nobody asked for float32 (the CLI's ``precision=float32`` asks; so does
 from __future__ import annotations
 
 import warnings
+import os
+import sys
+
+import numpy as np
 
 __all__ = ["Float32Warning", "warn_if_float32", "float32_requested"]
 
@@ -32,8 +36,6 @@ def warn_if_float32(dtype, where: str = "deltajax") -> bool:
     Returns:
         True if this call warned.
     """
-    import numpy as np
-
     if _state["warned"] or _state["requested"] or np.dtype(dtype) != np.float32:
         return False
     _state["warned"] = True
@@ -48,9 +50,6 @@ def warn_if_float32(dtype, where: str = "deltajax") -> bool:
 def _user_stacklevel() -> int:
     """The ``stacklevel`` of the first caller outside deltajax, equinox and jax, so the warning names the
     user's line (where the robot was built), not equinox's ``__check_init__`` machinery."""
-    import os
-    import sys
-
     inside = tuple(os.path.dirname(m.__file__) + os.sep for m in
                    (sys.modules.get("deltajax"), sys.modules.get("equinox"), sys.modules.get("jax"))
                    if m is not None and getattr(m, "__file__", None))

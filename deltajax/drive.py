@@ -32,6 +32,7 @@ from .cycle import cycle_profile, log_bisect
 from .fields import ConstraintError, check_range, float_leaf
 from .geometry import Delta
 from .mass import check_field
+from .trajectory import Cycle
 
 __all__ = ["Motor", "DriveLoads", "CycleRate", "with_drive", "motor_side", "drive_ok", "drive_loads",
            "cycle_rate", "cycle_rate_refined", "min_cycle_time", "picks_per_minute"]
@@ -349,8 +350,6 @@ def cycle_rate_refined(robot: Delta, cycle, path: Callable, refine: Callable, mo
     the rest copies of the last (one compiled program for several densities; ``refine`` must skip them too).
     Returns (the refined :class:`CycleRate`, the samples' T0, the samples' peak utilisation at T0).
     """
-    from .trajectory import Cycle
-
     motor, r, a, g, thd, ok, n, dw = _drive_profile(robot, cycle, motor, gear_ratio, dwell, payload_mass)
     T0 = jnp.where(ok, _bisect_time(a, g, thd, motor, n, dw, T_low, T_high, n_iter, n_valid), jnp.nan)
     T0l = jnp.where(jnp.isfinite(T0), T0, cycle.duration)

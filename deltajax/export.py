@@ -60,10 +60,12 @@ from typing import Optional, Sequence, Union
 from xml.sax.saxutils import quoteattr
 
 import numpy as np
+import equinox as eqx
 
 from .drive import Motor, with_drive
 from .geometry import CHAIN_ANGLES, Delta, ReconfigurableDelta
 from .kinematics import ik
+from .workspace.measure import reach_box
 
 __all__ = ["mjcf", "urdf", "joint_state", "urdf_configuration", "ExportError", "SPIN_INERTIA_FRACTION", "SIDECAR_FORMAT",
            "sidecar_path"]
@@ -167,14 +169,12 @@ def _drive(robot, motor: Optional[Motor], gear_ratio):
         if motor is not None:
             base = with_drive(base, motor, n)
         else:
-            import equinox as eqx
             base = eqx.tree_at(lambda d: d.mass.gear_ratio, base, mm.gear_ratio * 0 + n)
         mm = base.mass
     return base, recon, mm, float(mm.gear_ratio), float(mm.rotor_inertia)
 
 
 def _default_home(base: Delta) -> np.ndarray:
-    from .workspace.measure import reach_box
     (_, _), (_, _), (z0, z1) = reach_box(base)
     return np.array([0.0, 0.0, 0.5 * (max(z0, 0.0) + z1)])
 

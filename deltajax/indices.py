@@ -27,6 +27,7 @@ from .geometry import Delta
 from .jacobian import chain, resolve_length, homogenise, jq_diagonal, jq_theta, jx_det, jx_row
 from .kinematics import (branch_sign, from_chain_frames, design_ok, forearm_units, guarded_configuration, limit_terms,
                          passive_angles, safe_point)
+from .kinematics import ik_cos_sin
 
 __all__ = [
     "Indices",
@@ -489,8 +490,6 @@ def point_indices(robot: Delta, p: Float[Array, "3"], *, branch: str = "outer", 
     Returns:
         (``IKCosSin``, :class:`Indices`); the ``IKCosSin`` is exactly :func:`deltajax.ik_cos_sin`'s.
     """
-    from .kinematics import ik_cos_sin
-
     sign = branch_sign(branch)
     method = _resolve_sv_method(sv_method, "fast")
     if method == "svd":

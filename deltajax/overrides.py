@@ -11,8 +11,11 @@ from __future__ import annotations
 
 from pathlib import Path
 from typing import Iterable, Optional
+import itertools
 
 from omegaconf import DictConfig, OmegaConf
+
+from .config import valid_keys
 
 __all__ = ["check_overrides", "composition_error_line", "compose_config", "sweep_jobs"]
 
@@ -51,8 +54,6 @@ def composition_error_line(exc: Exception, overrides: Iterable[str], config_dir:
 
     from hydra.errors import MissingConfigException
     from omegaconf.errors import ConfigKeyError, OmegaConfBaseException
-
-    from .config import valid_keys
 
     overrides = list(overrides)
     cause = exc.__cause__
@@ -125,8 +126,6 @@ def sweep_jobs(args: Iterable[str]) -> Optional[list]:
     """The overrides of every job of a multirun command line (``-m``), in the basic sweeper's order (the product
     of every sweep's values); None when it is not a multirun, or holds a sweep only Hydra's sweeper can expand
     (a range, an interval, a glob)."""
-    import itertools
-
     from hydra.core.override_parser.overrides_parser import OverridesParser
 
     split = _split(args)
@@ -161,8 +160,6 @@ def check_overrides(args: Iterable[str], config_dir: str) -> Optional[str]:
         return f"cannot read the command line: {composition_error_line(e, overrides, config_dir)}"
     combos = [[]]
     if multirun:
-        import itertools
-
         fixed, choices = [], []
         for o in parsed:
             key = o.get_key_element()

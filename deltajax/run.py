@@ -17,13 +17,24 @@ import sys
 import time
 from pathlib import Path
 from typing import Any, Iterable, Optional
+import io
 
 import hydra
 from omegaconf import DictConfig, OmegaConf
+import jax
+import jax.numpy as jnp
 
-from .io import ResultsWriteError
+from .io import git_commit, ResultsFile, ResultsWriteError, write_atomic
 # BelowWarning and RunLogHandler: also named as deltajax.run.* by logging configs written before deltajax.runlog
 from .runlog import BelowWarning, RunLogHandler, api_logging, console_through_tqdm, run_log_open  # noqa: F401
+from .config import check_keys, ConfigError, register_schemas, robot_from_config, validate_config
+from .jobs import JOBS, load
+from ._precision import float32_requested
+from . import __version__
+from .rundir import claim, RunDirError
+from .geometry import GeometryError
+from .overrides import check_overrides as check, compose_config, composition_error_line as line, sweep_jobs
+from .jobs.stages import collecting_by_stage
 
 log = logging.getLogger("deltajax")
 
@@ -49,8 +60,6 @@ CONFIG_DIR = _config_dir()
 
 
 def _register_schemas() -> None:
-    from .config import register_schemas
-
     register_schemas()
 
 
@@ -98,8 +107,6 @@ class RunContext:
 
     @property
     def dtype(self):
-        import jax.numpy as jnp
-
         return jnp.float64 if self.cfg.precision == "float64" else jnp.float32
 
     def progress(self, iterable: Optional[Iterable] = None, *, total: Optional[int] = None, desc: str = ""):
@@ -117,8 +124,6 @@ class RunContext:
         ``crop``: cropped to what is drawn (``bbox_inches="tight"``, which lays the figure out twice); False for
         a page of fixed size (a datasheet's A4), saved as laid out.
         """
-        import io
-
         import matplotlib.pyplot as plt
 
         path = None
@@ -132,8 +137,6 @@ class RunContext:
 
     def write_figures(self) -> None:
         """Write the rendered figures (atomically, like results.h5)."""
-        from .io import write_atomic
-
         while self.figures:
             path, png = self.figures.pop(0)
             write_atomic(path, png)
@@ -144,8 +147,6 @@ class RunContext:
 
 
 def _validate_top(cfg: DictConfig) -> None:
-    from .config import ConfigError
-
     if cfg.get("precision") not in ("float64", "float32"):
         raise ConfigError(f"precision must be 'float64' or 'float32', got {cfg.get('precision')!r}")
     seed = cfg.get("seed")
@@ -157,8 +158,6 @@ def _validate_top(cfg: DictConfig) -> None:
 
 def list_experiments() -> dict[str, str]:
     """Experiments selectable with ``experiment=NAME`` (:data:`deltajax.jobs.JOBS`) -> one-line description."""
-    from .jobs import JOBS
-
     return {name: job.summary for name, job in JOBS.items()}
 
 
@@ -169,20 +168,15 @@ def _validated(cfg: DictConfig, run_dir: Optional[Path] = None):
     Raises:
         ConfigError: one line naming the field and the value; nothing has been compiled or written.
     """
-    from .config import ConfigError, check_keys, robot_from_config, validate_config
-
     _validate_top(cfg)
     name = cfg.experiment.name
-    from .jobs import JOBS, load
 
     if name not in JOBS:
         raise ConfigError(f"experiment.name={name!r} is not a job; choose one of {', '.join(JOBS)}")
     module = load(name)
-    import jax
 
     # Precision first: the robot's array leaves take the default float dtype when they are built.
     jax.config.update("jax_enable_x64", cfg.precision == "float64")
-    from ._precision import float32_requested
 
     float32_requested(cfg.precision == "float32")  # asked for: no float32 warning
     check_keys(cfg)  # unknown keys (also +key=value ones), before anything else reads the config
@@ -201,8 +195,6 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
         ConfigError: a user error (bad value, unknown experiment), raised before anything compiles where the
             value is known up front; the CLI prints it as one line and exits with status 2.
     """
-    import jax
-
     cache = cfg.get("compilation_cache")
     if cache:  # persistent XLA cache: reruns, resumes and sweep jobs skip most compilation (set before the checks,
         # some of which compile: a boundary search's centre is checked by inverse kinematics)
@@ -210,9 +202,6 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
         if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ:  # JAX's own setting wins if given
             jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
     name, module, robot, recon, settings = _validated(cfg, run_dir)  # every field, before the run dir is touched
-    from . import __version__
-    from .io import ResultsFile, git_commit
-    from .rundir import claim
 
     with contextlib.ExitStack() as stack:
         owner = stack.enter_context(claim(run_dir, name, OmegaConf.to_container(cfg, resolve=True),
@@ -239,7 +228,6 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
         results = ResultsFile(run_dir / "results.h5", attrs=attrs)
         ctx = RunContext(cfg=cfg, run_dir=run_dir, results=results, robot=robot, recon=recon, settings=settings)
         t0 = time.perf_counter()
-        from .jobs.stages import collecting_by_stage
 
         with console_through_tqdm(), collecting_by_stage():   # one scope for all of the job's stage runners
             module.run(ctx)
@@ -265,10 +253,6 @@ def _drop_checkpoints(ctx: RunContext) -> None:
 
 
 def _user_errors() -> tuple:
-    from .config import ConfigError
-    from .geometry import GeometryError
-    from .rundir import RunDirError
-
     return (ConfigError, GeometryError, RunDirError)  # RunDirError: busy, foreign or damaged run directory
 
 
@@ -364,8 +348,6 @@ def run_experiment(name: str, overrides: Iterable[str] = (), run_dir: Optional[o
 
     from hydra.errors import HydraException
 
-    from .config import ConfigError
-
     overrides = [f"experiment={name}", *overrides]
     try:
         with initialize_config_dir(config_dir=CONFIG_DIR, version_base="1.3"):
@@ -413,15 +395,11 @@ def help_text() -> str:
 
 def check_overrides(args: Iterable[str]) -> Optional[str]:
     """:func:`deltajax.overrides.check_overrides` against this CLI's configs (:data:`CONFIG_DIR`)."""
-    from .overrides import check_overrides as check
-
     return check(args, CONFIG_DIR)
 
 
 def composition_error_line(exc: Exception, overrides: Iterable[str]) -> str:
     """:func:`deltajax.overrides.composition_error_line` against this CLI's configs (:data:`CONFIG_DIR`)."""
-    from .overrides import composition_error_line as line
-
     return line(exc, overrides, CONFIG_DIR)
 
 
@@ -432,8 +410,6 @@ def check_sweep(args: Iterable[str]) -> Optional[str]:
     (:func:`_validated`), in a child process: this one stays without a JAX backend, which the sweep's
     worker callback configures per job. Sweeps only Hydra's sweeper can expand are left to the jobs."""
     import subprocess
-
-    from .overrides import sweep_jobs
 
     if sweep_jobs(args) is None:
         return None
@@ -451,8 +427,6 @@ def check_sweep(args: Iterable[str]) -> Optional[str]:
 def _check_sweep_main(args: list) -> int:
     """The child process of :func:`check_sweep`: each job's config composed and validated in turn."""
     from hydra.errors import HydraException
-
-    from .overrides import compose_config, sweep_jobs
 
     logging.getLogger().setLevel(logging.ERROR)  # the child's only output is the refusal
     for i, overrides in enumerate(sweep_jobs(args)):

@@ -36,6 +36,8 @@ import shutil
 from pathlib import Path
 from typing import Any, Mapping, Optional
 
+from .io import ChecksumError, read, verify_file, write_atomic
+
 __all__ = ["RunDirError", "CheckpointError", "RunDirectory", "claim", "config_differences", "describe_differences",
            "MANIFEST", "LOCK", "NEUTRAL", "recorded", "restage"]
 
@@ -162,8 +164,6 @@ def _lock(path: Path) -> int:
 
 
 def _write_manifest(path: Path, manifest: dict) -> None:
-    from .io import write_atomic
-
     write_atomic(path / MANIFEST, (json.dumps(manifest, indent=1, default=str, sort_keys=True) + "\n").encode())
 
 
@@ -184,8 +184,6 @@ def _check_results(results: Path, state: str) -> None:
     generations done, ...) and group against the file's integrity record (:func:`deltajax.io.verify_file`).
     Raises :class:`CheckpointError` (one line: the path, what is wrong, what to do) when it is damaged,
     edited, truncated or missing."""
-    from .io import ChecksumError, verify_file  # the one HDF5 reader (deltajax/io/reader.py)
-
     if state == "resume":
         head, todo = "cannot resume", "move it away to keep it, or add fresh=true to start over"
     else:
@@ -277,8 +275,6 @@ def recorded(path: Path, job: str) -> tuple[Optional[str], list]:
     """(fingerprint, finished stages) that job ``job`` recorded in the results file ``path``; (None, []) when
     there is no file. Its attributes are verified against the file's integrity record first (raises
     :class:`deltajax.io.ChecksumError`); raises OSError (with the path) when it exists but cannot be read."""
-    from .io import read
-
     if not Path(path).exists():
         return None, []
     attrs = read(path, max_elements=0, verify=True).attrs
@@ -291,8 +287,6 @@ def restage(res: Any, path: Path) -> None:
     that its next flush keeps it), verified first: data that does not match its checksums or the file's
     integrity record is never re-staged (the next flush would write fresh checksums over it). Raises
     :class:`deltajax.io.ChecksumError` (or OSError) then."""
-    from .io import read
-
     contents = read(path, verify=True)
     for k, v in contents.attrs.items():
         if k not in ("start_time",):

@@ -30,8 +30,18 @@ from pathlib import Path
 from typing import Any, Mapping
 
 import numpy as np
+import jax.numpy as jnp
+import jax
 
 from .tracing import shared_program
+from .optimize.good import design_good_test, DesignGoodTest
+from .workspace import make_grid
+from .optimize.rays import any_good_where_possible
+from . import constraints as C
+from .cycle import cycle_profile
+from .io import load, write_atomic
+from .optimize.designer import DESIGN_UNITS
+from .optimize.certify import MARGIN_UNITS, overlay
 
 __all__ = ["ReportError", "write_report", "report_path", "WORKSPACE_POINTS", "JOB"]
 
@@ -76,11 +86,6 @@ def _run_problem(data: Mapping[str, Any], path: Path):
 
 def _good_workspace(design, reconfigurable: bool, pb, n_xy: int):
     """(good grid points (n, 3) m, spacing h m, grid size): the design's good workspace, R chosen per point."""
-    import jax.numpy as jnp
-
-    from .optimize.good import design_good_test
-    from .workspace import make_grid
-
     reg = pb.settings["regular"]
     half, z0 = float(reg["r_max"]), float(reg["z_min"])
     h = 2.0 * half / (n_xy - 1)
@@ -99,8 +104,6 @@ def _good_any(design, reconfigurable: bool, Rs, P, plate, good):
     """Is each point of ``P`` good at any R of ``Rs``? (P,) bool. One program per process for every design of every
     report, kept across processes (:func:`deltajax.tracing.shared_program`): a new process reads it back instead
     of tracing the good test again."""
-    import jax
-
     prog = shared_program("report_good_any", None, None, (bool(reconfigurable),),
                           lambda: jax.jit(_good_any_traced), persist=True)
     return prog(design, Rs, P, plate, good)
@@ -115,11 +118,6 @@ def _good_any_traced(design, Rs, P, plate, good):
     any_good_where_possible`): the full test only where its cheap necessary condition holds and the point has no
     good R yet, mostly settled by the cheaper :func:`deltajax.constraints.good_point_decided`; the answer is the
     full test's at every pair."""
-    import jax.numpy as jnp
-
-    from .optimize.good import DesignGoodTest
-    from .optimize.rays import any_good_where_possible
-
     gt = DesignGoodTest(design, good, plate)
     nR, nP = Rs.shape[0], P.shape[0]
     return any_good_where_possible(gt.good, gt.possible, jnp.repeat(Rs, nP), jnp.tile(P, (nR, 1)), ((nP, nR),),
@@ -130,10 +128,6 @@ def _motor_points(design, reconfigurable: bool, R_op: float, T: float, pb):
     """(motor torque (K, 3) N m, motor speed (K, 3) rad/s, every sample reachable) along the verification cycle
     at the operating R ``R_op`` (m) and motion time ``T`` (s), with the job's payload and motor (one jitted
     program: run op by op, the inverse dynamics dispatched hundreds of small operations)."""
-    import jax.numpy as jnp
-
-    from . import constraints as C
-
     robot = design.at(R_op) if reconfigurable else design
     n = float(robot.mass.gear_ratio)
     dt = robot.upper_arm.dtype
@@ -145,18 +139,11 @@ def _motor_points(design, reconfigurable: bool, R_op: float, T: float, pb):
 def _along(driven, cycle, motor, n, T):
     """(motor torque, motor speed, every sample reachable) along ``cycle``: one program for the baseline's and the
     recommendation's cycles, kept across processes like :func:`_good_any`'s."""
-    import jax
-
     return shared_program("report_cycle", None, None, (), lambda: jax.jit(_along_traced), persist=True)(
         driven, cycle, motor, n, T)
 
 
 def _along_traced(driven, cycle, motor, n, T):
-    import jax.numpy as jnp
-
-    from . import constraints as C
-    from .cycle import cycle_profile
-
     prof = cycle_profile(driven, cycle, T)
     tau, om = C.motor_side(prof.tau, prof.theta_dot, motor, n)
     return tau, om, jnp.all(prof.ok)
@@ -178,12 +165,7 @@ def write_report(results_path, out_path=None, *, workspace_points: int = WORKSPA
         ReportError: bad ``workspace_points``, no results file there, not a ga_reconfig run, or its verification
             not finished (checked before anything compiles).
     """
-    import jax
-    import jax.numpy as jnp
-
     from . import plots as P
-    from .io import load, write_atomic
-    from .optimize.designer import DESIGN_UNITS
 
     if isinstance(workspace_points, bool) or not isinstance(workspace_points, int) or workspace_points < 5:
         raise ReportError(f"workspace_points must be an integer >= 5, got {workspace_points!r}")
@@ -201,7 +183,6 @@ def write_report(results_path, out_path=None, *, workspace_points: int = WORKSPA
         stages = data.get("attrs", {}).get("ga_reconfig_stages", "")
         raise ReportError(f"{path}: the run has not finished its verification (stages done: {stages or 'none'}); "
                           "resume it first")
-    from .optimize.certify import MARGIN_UNITS, overlay
 
     V = overlay(data)          # the certified figures and recommendation where the certify stage ran
     s, space, pb = _run_problem(data, path)

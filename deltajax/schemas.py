@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 from typing import Any, Dict, List, Optional
+import typing
 
 __all__ = ["register_schemas", "unknown_key", "schema_keys"]
 
@@ -31,16 +32,12 @@ def register_schemas(robot: Any, experiments: Dict[str, Any]) -> None:
 
 # ---- walking the schemas (deltajax.config turns the answers into ConfigError lines) ----
 def _schema_fields(schema) -> dict:
-    import typing
-
     hints = typing.get_type_hints(schema)
     return {f.name: hints[f.name] for f in dataclasses.fields(schema)}
 
 
 def _unwrap(tp):
     """The dataclass inside Optional[...] / Dict[str, ...] annotations: (dataclass or None, is_dict)."""
-    import typing
-
     args = typing.get_args(tp)
     origin = typing.get_origin(tp)
     if origin is typing.Union:

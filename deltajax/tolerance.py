@@ -49,6 +49,12 @@ import math
 from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
+import equinox as eqx
+import jax.numpy as jnp
+import jax
+
+from .geometry import ReconfigurableDelta
+from .optimize.designer import CONSTRAINT_NAMES, evaluate_designer, FEASIBILITY_TOL
 
 __all__ = ["Tolerances", "ToleranceError", "analyse", "perturb", "deviations",
            "describe", "design_summary", "select", "PER_DESIGN", "PARAMETERS", "PERCENTILES", "CONSTRAINT_METRICS", "DISTRIBUTIONS",
@@ -140,11 +146,6 @@ def perturb(pb, design, dev):
 
     Zero deviations give back the same numbers exactly (every change is ``x + 0`` or ``x * (1 + 0)``).
     """
-    import equinox as eqx
-    import jax.numpy as jnp
-
-    from .geometry import ReconfigurableDelta
-
     recon = isinstance(design, ReconfigurableDelta)
     robot = design.robot if recon else design
     d = {n: dev[i] for n, i in _COL.items()}
@@ -181,8 +182,6 @@ def perturb(pb, design, dev):
 def _frozen(pb, design, r_op, d_lo):
     """(problem, design) whose only operating-R candidate is ``r_op`` (the nominal operating R) moved by the
     R actuator's deviation ``d_lo``; the R range's top (hence the base plate) stays the sample's."""
-    import equinox as eqx
-
     top = design.R_max
     lo = r_op + d_lo
     design = eqx.tree_at(lambda r: (r.R_min, r.R_step), design, (lo, (top - lo) / max(design.n_R - 1, 1)))
@@ -202,10 +201,6 @@ def _program(pb, space, frozen: bool = False, candidates: int = 0):
     from .optimize.programs import shared_program
 
     def build():
-        import jax
-
-        from .optimize.designer import evaluate_designer
-
         def one(genes, dev, r_op):
             nominal = space.decode(genes)
             drawn = nominal.robot if space.reconfigurable else nominal
@@ -301,8 +296,6 @@ def analyse(pb, space, genes, tolerances: Optional[Tolerances] = None, *, sample
         (:data:`CONSTRAINT_METRICS`, NaN ranked worst); ``samples``, ``seed``, ``tolerances`` (a dict),
         ``deviations`` (samples, len(PARAMETERS)); ``constraint_names``, ``enabled`` (c,) bool.
     """
-    from .optimize.designer import CONSTRAINT_NAMES, FEASIBILITY_TOL
-
     tol = Tolerances() if tolerances is None else tolerances
     if isinstance(chunk, bool) or not isinstance(chunk, int) or chunk < 1:
         raise ToleranceError(f"chunk must be an integer >= 1, got {chunk!r}")

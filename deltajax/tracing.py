@@ -17,10 +17,21 @@ from __future__ import annotations
 import dataclasses
 import functools
 from typing import Any, Callable, Mapping, TypeVar
+import hashlib
+import importlib.metadata as md
+import os
+import platform
+import pickle
+import warnings
+from pathlib import Path
 
 import equinox as eqx
 import jax
 import numpy as np
+from jax.experimental import serialize_executable as se
+from jax import export
+
+from deltajax.io import write_atomic
 
 __all__ = ["traced_once", "persistent", "program_cache_dir", "STATS", "PROGRAMS_KEPT", "content_key",
            "stable_key", "shared_program", "PROGRAMS", "PROGRAMS_MAX", "forget", "kinds_in_use"]
@@ -80,9 +91,6 @@ _ARRAY = _ArrayMarker()
 # of a warm default run of the main job).
 
 def _source_fingerprint() -> str:
-    import hashlib
-    from pathlib import Path
-
     root = Path(__file__).resolve().parent
     h = hashlib.sha256()
     for p in sorted(root.rglob("*.py")):
@@ -93,9 +101,6 @@ def _source_fingerprint() -> str:
 
 @functools.lru_cache(maxsize=None)
 def _environment_key() -> str:
-    import importlib.metadata as md
-    import os
-
     parts = [_source_fingerprint()]
     for dist in ("jax", "jaxlib", "equinox", "numpy"):
         try:
@@ -112,9 +117,6 @@ def program_cache_dir():
     """Where :func:`persistent` keeps programs: ``$DELTAJAX_PROGRAM_CACHE`` (empty: nowhere), else ``programs/``
     beside JAX's persistent compilation cache (``compilation_cache`` of the run's config), else nowhere (each
     process then traces its programs, as before)."""
-    import os
-    from pathlib import Path
-
     env = os.environ.get("DELTAJAX_PROGRAM_CACHE")
     if env is not None:
         return Path(env).expanduser() if env else None
@@ -146,8 +148,6 @@ def persistent(fn: Callable, kind: str, key: str) -> Callable:
     exported program runs, so every process computes the same numbers. Inputs and outputs may be any registered
     pytrees (equinox modules, the GA's evosax state): the program itself takes and returns their leaves. With no
     :func:`program_cache_dir`, ``fn`` itself runs."""
-    import hashlib
-
     def call(*args):
         root = program_cache_dir()
         if root is None:
@@ -178,9 +178,6 @@ _FRESH_COMPILE = {"xla_dump_large_constants": True}
 def _machine_key() -> str:
     """What a compiled executable depends on beyond the exported program: the XLA backend's version and this
     machine's instruction set (XLA:CPU compiles for the host's CPU features)."""
-    import hashlib
-    import platform
-
     flags = ""
     try:
         with open("/proc/cpuinfo") as f:
@@ -193,8 +190,6 @@ def _machine_key() -> str:
 
 def _read_kept(path, magic: bytes, what: str):
     """(header, payload) of a kept file: ``magic``, the pickled header's length (8 bytes), the header, the payload."""
-    import pickle
-
     data = path.read_bytes()
     if not data.startswith(magic):
         raise ValueError(f"not a deltajax {what} file")
@@ -206,12 +201,6 @@ def _read_kept(path, magic: bytes, what: str):
 def _write_kept(path, magic: bytes, header, payload: bytes, what: str) -> None:
     """Write a kept file (:func:`_read_kept`'s layout) atomically (:func:`deltajax.io.write_atomic`); a folder
     that cannot hold it warns and the process runs the program all the same."""
-    import os
-    import pickle
-    import warnings
-
-    from deltajax.io import write_atomic
-
     head = pickle.dumps(header)
     try:
         path.parent.mkdir(parents=True, exist_ok=True)
@@ -260,10 +249,6 @@ def _load_or_compile(fn: Callable, in_tree, spec, path):
     (``<hash>.<machine>.xlaexec``): a process that finds it deserialises it and calls it, without lowering the
     exported program or computing JAX's cache key (both paid per process for every kept program) -- the same
     executable, so the same numbers in every process."""
-    import warnings
-
-    from jax.experimental import serialize_executable as se
-
     exe = path.with_name(f"{path.stem}.{_machine_key()}.xlaexec")
     if exe.is_file():
         try:
@@ -281,10 +266,6 @@ def _load_or_compile(fn: Callable, in_tree, spec, path):
 
 
 def _load_or_export(fn: Callable, in_tree, spec, path):
-    import warnings
-
-    from jax import export
-
     if path.is_file():
         try:
             out_tree, payload = _read_kept(path, _MAGIC, "program")
@@ -355,8 +336,6 @@ def content_key(x) -> Any:
 def stable_key(*objs) -> Any:
     """A string naming the content of ``objs`` in every process (:func:`content_key`'s value, hashed), or None
     when part of it is only known by identity (such a program is not kept across processes)."""
-    import hashlib
-
     def by_value(k) -> bool:
         if isinstance(k, tuple):
             if len(k) == 2 and k[0] == "id":

@@ -1,7 +1,8 @@
 """The package's layout rules, checked on the source (ast, nothing imported): every module declares its public
 names, no module imports another module's private names, the engines and the core never touch the results-file
-or configuration libraries (h5py, OmegaConf, Hydra) -- only :mod:`deltajax.io` and the application wing do -- and
-imports run core <- engines <- application, never upward."""
+or configuration libraries (h5py, OmegaConf, Hydra) -- only :mod:`deltajax.io` and the application wing do --,
+imports run core <- engines <- application, never upward, and a module imports the deltajax modules it uses at
+its top (the Numba backend, and the application wing seen from ``import deltajax``, load on first use)."""
 
 from __future__ import annotations
 
@@ -163,4 +164,61 @@ def test_the_configuration_is_read_in_one_place():
         for n in ast.walk(ast.parse(f.read_text())):
             if isinstance(n, ast.Attribute) and n.attr == "cfg":
                 bad.append(f"{modname}:{n.lineno} reads .cfg")
+    assert not bad, "\n".join(bad)
+
+
+#: loaded on first use: the Numba backend (importing it starts Numba; its kernels compile or load on first call)
+FIRST_USE = ("deltajax.workspace.numba_", "deltajax.benchmarks")
+
+
+def _loaded(node: ast.AST, modname: str, is_pkg: bool) -> set:
+    """The deltajax modules an import statement loads: the module, its packages, and submodules named in it."""
+    if isinstance(node, ast.ImportFrom):
+        mod = _resolve(modname, is_pkg, node)
+        names = [mod] + [f"{mod}.{a.name}" for a in node.names if f"{mod}.{a.name}" in dict(map(reversed, MODULES))]
+    else:
+        names = [a.name for a in node.names]
+    return {".".join(n.split(".")[:i]) for n in names if n.startswith("deltajax")
+            for i in range(1, len(n.split(".")) + 1)}
+
+
+def _function_level(tree: ast.AST):
+    """Import statements inside a function body (not under ``try``: an optional dependency)."""
+    for fn in ast.walk(tree):
+        if isinstance(fn, (ast.FunctionDef, ast.AsyncFunctionDef)):
+            stack = list(fn.body)
+            while stack:
+                n = stack.pop()
+                if isinstance(n, (ast.Import, ast.ImportFrom)):
+                    yield n
+                elif not isinstance(n, (ast.Try, ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+                    stack.extend(c for c in ast.iter_child_nodes(n) if isinstance(c, ast.stmt))
+
+
+def test_deltajax_modules_are_imported_at_module_level():
+    """A module imports the deltajax modules it uses at its top, where a reader sees its dependencies. Two kinds
+    load on first use: the Numba backend (:data:`FIRST_USE`), and a module that ``import deltajax`` does not load,
+    imported by one that it does (``import deltajax`` stays the library, not the application wing)."""
+    by_name = {m: (f, f.name == "__init__.py") for f, m in MODULES}
+    base, todo = set(), ["deltajax"]
+    while todo:                                  # what ``import deltajax`` loads: module-level imports, followed
+        m = todo.pop()
+        if m in base or m not in by_name:
+            continue
+        base.add(m)
+        f, is_pkg = by_name[m]
+        for n in ast.parse(f.read_text()).body:
+            if isinstance(n, (ast.Import, ast.ImportFrom)):
+                todo += sorted(_loaded(n, m, is_pkg))
+    assert {"deltajax.kinematics", "deltajax.io", "deltajax.workspace"} <= base and "deltajax.jobs" not in base
+    bad = []
+    for f, modname in MODULES:
+        is_pkg = f.name == "__init__.py"
+        for n in _function_level(ast.parse(f.read_text())):
+            mods = _loaded(n, modname, is_pkg)
+            if not mods or any(m.startswith(FIRST_USE) for m in mods):
+                continue
+            if modname in base and not mods <= base:
+                continue
+            bad.append(f"{modname}:{n.lineno} imports {sorted(mods)} inside a function")
     assert not bad, "\n".join(bad)

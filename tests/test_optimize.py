@@ -198,12 +198,12 @@ def test_refine_designs_accepts_only_feasible_improvements_and_fails_loudly(desi
     cache = os.environ.get("DELTAJAX_PROGRAM_CACHE")
     os.environ["DELTAJAX_PROGRAM_CACHE"] = ""   # ... and not from the programs kept on disk (same content)
     try:
-        D.evaluate_designer = broken
+        PR.evaluate_designer = broken   # the name the designer's programs call
         with pytest.raises(FloatingPointError, match="non-finite gradient of the designer's loss for design 0"):
             refine_designs(pb, space, g0[:1], objs, scale, "picks_per_min", steps=3, learning_rate=0.01,
                            penalty=10.0, evaluate=ev, evaluate_cheap=ev_cheap)
     finally:
-        D.evaluate_designer = real
+        PR.evaluate_designer = real
         if cache is None:
             os.environ.pop("DELTAJAX_PROGRAM_CACHE", None)
         else:

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 from deltajax import io as dio
+from deltajax.jobs import stages
 from deltajax.jobs.stages import Runner, Stage, State, Stop, resize_bar
 from deltajax.rundir import CheckpointError, RunDirError
 from deltajax.workspace.chunks import run_chunks, seal
@@ -73,8 +74,8 @@ def test_a_resume_reads_the_checkpoint_once(tmp_path, monkeypatch):
     part = tmp_path / "part.h5"
     assert not _job(part, stop_at=4)[0]
     reads = []
-    real = dio.load
-    monkeypatch.setattr(dio, "load", lambda path, group=None, **kw: (reads.append(group), real(path, group, **kw))[1])
+    real = dio.load          # the runner's reader (deltajax.io.load, as the stage engine names it)
+    monkeypatch.setattr(stages, "load", lambda path, group=None, **kw: (reads.append(group), real(path, group, **kw))[1])
     ok, runner = _job(part, resume="must")
     assert ok and reads.count("walk/checkpoint") == 1
 

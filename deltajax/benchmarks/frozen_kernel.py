@@ -8,6 +8,7 @@ import jax.numpy as jnp
 
 from ..geometry import CHAIN_ANGLES
 from ..indices import Indices, k_tilde
+from ..kinematics import IKCosSin
 
 import math
 
@@ -222,8 +223,6 @@ def mirrored_point_indices(robot, p, *, b_v=2.0, b_f=4.2, beta=0.5, sv_method=No
 
 def ik_cos_sin_result(robot, p, branch="outer"):
     """The old algebraic IK in the public IKCosSin shape (reason codes zero: the fitness never reads them)."""
-    from ..kinematics import IKCosSin
-
     cos, sin, ok = ik_cos_sin(robot, p)
     return IKCosSin(cos=cos, sin=sin, ok=ok, reason=jnp.zeros(3, jnp.int32))
 

@@ -9,6 +9,9 @@ import dataclasses
 from typing import Any
 
 from .readers import ConfigError, read_box, read_field, read_settings, read_vector, setting
+from ..workspace.grid import reachable_point
+from ..workspace import boundary as B
+from ..workspace.boundary import PREDICTORS, VOLUME_RULES
 
 __all__ = ["BoundarySearchSettings", "boundary_search_spec"]
 
@@ -18,7 +21,6 @@ def _search_centre(path: str, v: Any, centre: list, robot) -> None:
     volume); refused unless the inverse kinematics of ``centre`` succeeds within the joint limits."""
     if robot is None:
         return
-    from ..workspace.grid import reachable_point
 
     if not bool(reachable_point(robot, centre)):
         raise ConfigError(f"{path}={v!r} m puts the search centre {centre!r} m outside the robot's workspace (no "
@@ -30,8 +32,6 @@ def _centre(path: str, v: Any) -> list:
 
 
 def _steps_deg(path: str, v: Any) -> list:
-    from ..workspace import boundary as B
-
     steps = [read_field(f"{path}[{i}]", s, lo=0, lo_open=True, unit="deg") for i, s in enumerate(v or [])]
     if not steps:
         raise ConfigError(f"{path} must list at least one angular step (deg)")
@@ -48,14 +48,10 @@ def _heights(path: str, v: Any) -> tuple:
 
 
 def _predictors():
-    from ..workspace.boundary import PREDICTORS
-
     return PREDICTORS
 
 
 def _volume_rules():
-    from ..workspace.boundary import VOLUME_RULES
-
     return VOLUME_RULES
 
 

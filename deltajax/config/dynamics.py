@@ -9,24 +9,23 @@ from __future__ import annotations
 
 import dataclasses
 from typing import Any, Mapping, Optional
+import os
 
 from .ga_reconfig_run import ga_reconfig_build
 from .readers import ConfigError, check_fits, read_choice, read_field, read_settings, read_vector, setting
 from .robot import robot_from_config
+from .. import io, presets
+from ..trajectory import MOTION_LAWS
 
 __all__ = ["DynamicsCycleSettings", "dynamics_cycle_spec", "DatasheetSettings", "source_run", "datasheet_settings",
            "CycleSetupBlock", "GaMotionBlock", "DatasheetMotorBlock"]
 
 
 def _presets():
-    from .. import presets
-
     return presets.PRESETS
 
 
 def _motion_laws():
-    from ..trajectory import MOTION_LAWS
-
     return MOTION_LAWS
 
 
@@ -187,11 +186,7 @@ class DatasheetSettings:
 
 def source_run(src: str) -> tuple:
     """(design space, motor settings) of the ga_reconfig run in directory ``src`` (its stored config rebuilt)."""
-    import os
-
     import yaml
-
-    from .. import io
 
     try:
         attrs = io.read(os.path.join(src, "results.h5"), max_elements=0).attrs
@@ -213,10 +208,6 @@ def datasheet_settings(e, cfg=None, robot=None, recon=None) -> DatasheetSettings
     ``source``: a :data:`deltajax.presets.PRESETS` name (with ``experiment.motor`` and ``experiment.gear_ratio``) or
     a ga_reconfig run directory (its baseline and recommended designs with the run's own motor and gear ratios).
     """
-    import os
-
-    from .. import presets
-
     src = (cfg or {}).get("source")
     if src is None or str(src) == "":
         raise ConfigError("source is required: a preset name (" + ", ".join(sorted(presets.PRESETS))

@@ -11,6 +11,12 @@ import math
 from typing import Any, Mapping, Optional
 
 from .readers import ConfigError, check_fits, read_field, read_settings, setting
+from ..motion import AGGREGATES
+from ..optimize.operating import MECHANISM_NAMES, MODES
+from ..tolerance import ToleranceError, Tolerances
+from ..optimize.ga import GAConfig, GAError
+from ..indices import INDEX_NAMES, INDEX_RANGES
+from ..optimize.designer import OBJECTIVES
 
 __all__ = ["GaReconfigSettings", "ga_reconfig_settings", "DESIGN_POINT_BYTES", "RECOMMEND_RULES", "reconfig_settings",
            "RECONFIG_KEYS", "DRIVE_UNITS", "tolerances_of", "ga_config", "DesignBlock", "TaskBlock",
@@ -38,9 +44,6 @@ def reconfig_settings(block: Optional[Mapping[str, Any]], where: str = "experime
     Raises:
         ConfigError: one line naming the field and the value in its unit.
     """
-    from ..motion import AGGREGATES
-    from ..optimize.operating import MECHANISM_NAMES, MODES
-
     b = {} if block is None else block
     if not isinstance(b, Mapping):
         raise ConfigError(f"{where} must be a mapping, got {b!r}")
@@ -75,8 +78,6 @@ def reconfig_settings(block: Optional[Mapping[str, Any]], where: str = "experime
 
 def tolerances_of(block: "ToleranceBlock"):
     """The :class:`deltajax.tolerance.Tolerances` of a checked ``experiment.tolerance`` block (mm, deg, %)."""
-    from ..tolerance import ToleranceError, Tolerances
-
     try:
         return Tolerances(length=float(block.length_mm) * 1e-3, joint_offset_deg=float(block.joint_offset_deg),
                           mass=float(block.mass_percent) / 100.0, motor=float(block.motor_percent) / 100.0,
@@ -88,8 +89,6 @@ def tolerances_of(block: "ToleranceBlock"):
 def ga_config(block: Mapping[str, Any], seed: int = 0):
     """The :class:`deltajax.optimize.GAConfig` of ``experiment.ga`` (unknown keys refused; its invariants checked
     by :meth:`GAConfig.validate`, named here by their config path)."""
-    from ..optimize.ga import GAConfig, GAError
-
     known = {f.name for f in dataclasses.fields(GAConfig)} - {"seed"}
     extra = set(block) - known
     if extra:
@@ -118,8 +117,6 @@ from ..optimize.workflow import RECOMMEND_RULES  # noqa: E402  the one list (the
 
 
 def _index_names():
-    from ..indices import INDEX_NAMES
-
     return INDEX_NAMES
 
 
@@ -139,8 +136,6 @@ def _int_list(n: int, lo: int):
 
 
 def _objective_names(path: str, v: Any) -> tuple:
-    from ..optimize.designer import OBJECTIVES
-
     if not isinstance(v, (list, tuple)) or not v:
         raise ConfigError(f"{path} must be a non-empty list from {list(OBJECTIVES)}, got {v!r}")
     for nm in v:
@@ -196,8 +191,6 @@ class GoodWorkspaceBlock:
     beta: float = setting(lo=0, hi=1)
 
     def _check(self, path: str) -> None:
-        from ..indices import INDEX_RANGES
-
         lo, hi = INDEX_RANGES[self.index]  # a threshold outside the index's range selects every point or none
         read_field(f"{path}.threshold", self.threshold, lo=lo, hi=hi)
 
@@ -466,8 +459,6 @@ class GaReconfigSettings:
         return (rw.search_refine_steps, rw.search_refine_samples) if rw.search_refine else ()
 
     def _check(self, path: str) -> "GaReconfigSettings":
-        from ..indices import INDEX_RANGES
-
         task, rw, gw = self.task, self.regular_workspace, self.good_workspace
         if task.z_top + task.height > rw.z_max or task.z_top < rw.z_min or task.diameter / 2 > rw.r_max:
             raise ConfigError(f"{path}.task (z {task.z_top!r}..{task.z_top + task.height!r} m, radius "

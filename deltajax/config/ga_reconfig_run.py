@@ -12,10 +12,12 @@ from typing import Any, Mapping, Optional
 
 import numpy as np
 
-from ..rundir import config_differences, recorded
+from ..rundir import config_differences, describe_differences, recorded
 from ..workspace.chunks import fingerprint
 from .ga_reconfig import GaReconfigSettings, ga_reconfig_settings
 from .readers import ConfigError
+from ..io import load
+from ..optimize.workflow import setup, SetupError
 
 __all__ = ["GaReconfigSetup", "ga_reconfig_build", "validate_ga_reconfig", "validate_ga_reconfig_run_dir",
            "job_fingerprint", "BUDGET_SETTINGS", "problem_differences", "EarlierRun", "continued_file",
@@ -86,9 +88,6 @@ def earlier_run(where: str, cfg) -> EarlierRun:
     import yaml
     from omegaconf import OmegaConf
 
-    from ..io import load
-    from ..rundir import describe_differences
-
     key = "experiment.continue_from"
     p = continued_file(where)
     if not p.is_file():
@@ -150,8 +149,6 @@ def validate_ga_reconfig(e, cfg, robot, recon) -> GaReconfigSetup:
 def validate_ga_reconfig_run_dir(e, run_dir) -> None:
     """The run directory is not the run that ``experiment.continue_from`` reads (with fresh=true its claim would
     delete what this run continues)."""
-    from pathlib import Path
-
     cont = e.get("continue_from")
     if cont is not None and continued_file(cont).resolve() == (Path(run_dir) / "results.h5").resolve():
         raise ConfigError(f"experiment.continue_from={cont} is this run's own directory; continue into another "
@@ -161,8 +158,6 @@ def validate_ga_reconfig_run_dir(e, run_dir) -> None:
 def ga_reconfig_build(ectx: Mapping[str, Any], robot, recon, *, n_R: Optional[int] = None):
     """(settings, design space, coarse problem, GA config) of experiment=ga_reconfig, validated (one ConfigError
     line naming the field and the value)."""
-    from ..optimize.workflow import SetupError, setup
-
     s = ga_reconfig_settings(ectx)
     try:
         space, pb = setup(s, robot, recon, n_R=n_R)

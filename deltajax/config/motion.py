@@ -8,40 +8,37 @@ import dataclasses
 import math
 from typing import Any, Mapping, Optional
 
+import jax.numpy as jnp
+
 from ..geometry import GeometryError, ReconfigurableDelta
-from .readers import ConfigError, check_fits, read_settings, read_vector, setting
+from .readers import check_fits, ConfigError, read_choice, read_settings, read_vector, setting
+from ..indices import INDEX_NAMES
+from ..motion import AGGREGATES, BOUNDARIES, RDriveLimits
+from ..mechanism import DirectRadial, example_screw_linkage, MECHANISMS
+from ..trajectory import MOTION_LAWS
+from .. import trajectory as tr
 
 __all__ = ["MECHANISM_FIELDS", "ReconfigMotionSettings", "reconfig_motion_spec", "DriveBlock", "MechanismBlock",
            "RefineBlock", "AdeptCaseBlock", "TaskCaseBlock"]
 
 
 def _index_names():
-    from ..indices import INDEX_NAMES
-
     return INDEX_NAMES
 
 
 def _aggregates():
-    from ..motion import AGGREGATES
-
     return AGGREGATES
 
 
 def _boundaries():
-    from ..motion import BOUNDARIES
-
     return BOUNDARIES
 
 
 def _mechanisms():
-    from ..mechanism import MECHANISMS
-
     return MECHANISMS
 
 
 def _motion_laws():
-    from ..trajectory import MOTION_LAWS
-
     return MOTION_LAWS
 
 
@@ -60,8 +57,6 @@ class DriveBlock:
 
 
 def _drive(path: str, v: Any):
-    from ..motion import RDriveLimits
-
     return RDriveLimits(**dataclasses.asdict(read_settings(DriveBlock, v, path)))
 
 
@@ -143,8 +138,6 @@ class TaskCaseBlock:
 
 
 def _cases(path: str, v: Any) -> dict:
-    from .readers import read_choice
-
     if not isinstance(v, Mapping) or not v:
         raise ConfigError(f"{path} must list at least one case")
     out = {}
@@ -188,11 +181,6 @@ def reconfig_motion_spec(e, cfg=None, robot=None, recon=None, dtype=None) -> Rec
     """``experiment.*`` of reconfig_motion (:class:`ReconfigMotionSettings`), with what needs the robot: its R
     samples at ``R_step``, the mechanism over its R range, each case's Cartesian cycle (``dtype``) and the DP's
     memory."""
-    import jax.numpy as jnp
-
-    from .. import trajectory as tr
-    from ..mechanism import DirectRadial, example_screw_linkage
-
     if recon is None:
         raise ConfigError("experiment=reconfig_motion needs a reconfigurable robot: robot.R_range is null")
     if recon.robot.mass is None:

@@ -7,6 +7,7 @@ import copy
 import dataclasses
 import typing
 from typing import Any, Callable, Mapping, Optional
+import os
 
 
 __all__ = ["ConfigError", "read_field", "read_choice", "read_names", "read_vector", "read_box", "memory_bytes", "check_fits",
@@ -238,8 +239,6 @@ def schema_of(cls, name: Optional[str] = None):
 def memory_bytes() -> int:
     """Memory this process may use (bytes): the machine's physical memory, or the cgroup's limit where lower (a
     container, a SLURM allocation). The cap that a grid, a population or a batch must fit in."""
-    import os
-
     cap = int(os.sysconf("SC_PHYS_PAGES")) * int(os.sysconf("SC_PAGE_SIZE"))
     for f in ("/sys/fs/cgroup/memory.max", "/sys/fs/cgroup/memory/memory.limit_in_bytes"):
         try:

@@ -18,9 +18,16 @@ from __future__ import annotations
 import dataclasses
 import math
 from typing import Any, Mapping, Optional
+import importlib.util
+
+import jax
 
 from .readers import ConfigError, check_fits, read_field, read_names, read_box, read_settings, read_vector, setting
 from .robot import n_steps
+from ..indices import INDEX_NAMES
+from ..workspace import franco2026_grid, make_grid
+from ..workspace.driver import reach_box
+from ..workspace.chunks import ShardPlan
 
 __all__ = ["workspace_grid_from_config", "paper_grid_from_config", "WorkspaceGridSettings", "GridBlock", "grid_plan",
            "workspace_grid_settings", "PaperGridSettings", "paper_grid_settings", "ReconfigIndicesSettings",
@@ -29,8 +36,6 @@ __all__ = ["workspace_grid_from_config", "paper_grid_from_config", "WorkspaceGri
 
 
 def _index_names():
-    from ..indices import INDEX_NAMES
-
     return INDEX_NAMES
 
 
@@ -82,9 +87,6 @@ class GridBlock:
 def _grid_of(g: GridBlock, robot, bytes_per_point: float, path: str = "experiment.grid"):
     """The :class:`deltajax.workspace.Grid` of a checked ``experiment.grid`` block (null axes from the robot's
     reach bound), refused before it is built when it does not fit in memory."""
-    from ..workspace import make_grid
-    from ..workspace.driver import reach_box
-
     h = g.h
     box = reach_box(robot) if robot is not None else None
 
@@ -118,8 +120,6 @@ def workspace_grid_from_config(g: Mapping[str, Any], robot=None, bytes_per_point
 
 
 def _paper_grid(path: str, h: float, bytes_per_point: float):
-    from ..workspace import franco2026_grid
-
     _grid_fits(path, h, ((-0.4, 0.4), (-0.4, 0.4), (0.0, 0.6 - h)), bytes_per_point)
     try:
         return franco2026_grid(h)
@@ -178,8 +178,6 @@ class WorkspaceGridSettings:
 def grid_plan(shape, chunk_points: int, n_devices: int, shard: int, n_shards: int):
     """The :class:`deltajax.workspace.chunks.ShardPlan` of a workspace grid job; its refusals are
     :class:`ConfigError` (they name a setting)."""
-    from ..workspace.chunks import ShardPlan
-
     try:
         return ShardPlan(shape, chunk_points, n_devices, shard, n_shards)
     except ValueError as e:
@@ -187,10 +185,6 @@ def grid_plan(shape, chunk_points: int, n_devices: int, shard: int, n_shards: in
 
 
 def workspace_grid_settings(e, cfg, robot, recon) -> WorkspaceGridSettings:
-    import importlib.util
-
-    import jax
-
     s = read_settings(WorkspaceGridSettings, e, "experiment")
     f64 = cfg.get("precision") == "float64"
     shard, n_shards = int(cfg.get("shard", 0)), int(cfg.get("n_shards", 1))

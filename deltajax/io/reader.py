@@ -15,6 +15,7 @@ import dataclasses
 import os
 from pathlib import Path
 from typing import Any, Mapping, Optional, Sequence
+import fnmatch
 
 import h5py
 import numpy as np
@@ -262,8 +263,6 @@ def differences(path_a: os.PathLike, path_b: os.PathLike, *, ignore: Sequence[st
     its subgroups (the file's root attributes left out). Both files are read verified (``verify=False``: as they
     are, e.g. to compare a file edited outside deltajax).
     """
-    import fnmatch
-
     a, b = read(path_a, verify=verify), read(path_b, verify=verify)
 
     def skip(name: str) -> bool:

@@ -22,6 +22,7 @@ import numpy as np
 from .. import reference
 from ..indices import map_points, point_indices
 from ..benchmarks import frozen_kernel as _kernel_baseline
+from ..plots import bench_rates_from_results
 
 __all__ = ["run", "fusion_count"]
 
@@ -120,8 +121,6 @@ def run(ctx) -> None:
     for line in lines:
         ctx.log(line)
     if ctx.plots:
-        from ..plots import bench_rates_from_results
-
         ctx.savefig(bench_rates_from_results(res, f"kernel throughput (IK + Jacobian + indices), {n} points, "
                                                   f"{jax.device_count()} {jax.default_backend()} device(s)"),
                     "bench_kernel")

@@ -28,6 +28,7 @@ import numpy as np
 from ..papers import BOUNDARY_SEARCH as PAPER
 from ..workspace import boundary as B
 from .stages import Runner, Stage, State
+from .. import plots
 
 __all__ = ["run"]
 
@@ -190,8 +191,6 @@ def _plots(st: State) -> None:
 
 
 def _plot(ctx, robot, p, conti, cont, step):
-    from .. import plots
-
     res_c, prof_c = conti
     res_n, _ = cont
     polar, azimuth = np.asarray(res_c.polar), np.asarray(res_c.azimuth)

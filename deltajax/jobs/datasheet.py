@@ -18,18 +18,17 @@ import os
 
 import numpy as np
 
-from .. import plots
+from .. import io, plots
 from ..config import ConfigError
 from ..drive import Motor
 from ..datasheet import MOTOR_FIELDS, ROW_FIELDS, UNITS, datasheet
+from .dynamics_cycle import preset_robot
 
 __all__ = ["run", "run_designs", "write", "save"]
 
 
 def _designs_from_run(spec, ctx):
     """[(name, robot, motor, gear ratio, R)] of a ga_reconfig run's baseline and recommended designs."""
-    from .. import io
-
     S = io.load_groups(os.path.join(spec.source, "results.h5"), ("summary",)).get("summary") or {}
     if "recommended_params" not in S:
         raise ConfigError(f"source={spec.source!r}: the run has no recommendation (group summary; unfinished run or "
@@ -79,8 +78,6 @@ def write(ctx, designs, **kwargs) -> None:
 
 
 def _designs_from_preset(name: str, spec):
-    from .dynamics_cycle import preset_robot   # the presets with a mass model, as the dynamics job analyses them
-
     robot = preset_robot(name)
     if robot is None:
         raise ConfigError(f"source={name!r}: the preset has no mass model, a datasheet needs one")

@@ -7,6 +7,13 @@ from typing import Sequence
 
 import numpy as np
 
+from ..optimize.certify import MARGIN_UNITS, overlay
+from ..optimize.designer import DESIGN_SENSE, DESIGN_UNITS, FEASIBILITY_TOL
+from ..optimize.workflow import floor_limits, required_margins, STORED_METRIC
+from .. import plots as P
+from ..config.ga_reconfig import tolerances_of as of
+from ..tolerance import PERCENTILES
+
 __all__ = ["SUMMARY_METRICS", "FIXED_R_METRIC", "summary", "change_text", "print_summary", "plots", "tolerances_of",
            "headline_lines", "cost_lines", "summary_attrs", "certify_lines", "rule_text", "robust_text", "floor_line",
            "margins_text"]
@@ -36,9 +43,6 @@ def _fixed_value(V, m: str, i: int) -> float:  # rtmode
 def summary(ctx, res, data, space, objs, s) -> None:
     """Stage baseline vs recommended design, per metric with units and direction, and the parameters of each
     design (``data``: the results file as loaded after the verify stage)."""
-    from ..optimize.certify import MARGIN_UNITS, overlay
-    from ..optimize.designer import DESIGN_SENSE, DESIGN_UNITS
-
     V = overlay(data)          # the certified figures where the certify stage ran
     rec = int(V["attrs"]["recommended"])
     if rec < 0:
@@ -101,8 +105,6 @@ def summary(ctx, res, data, space, objs, s) -> None:
 
 def margins_text(s) -> str:
     """``experiment.robust.margins`` in words ("none": the constraints as stated)."""
-    from ..optimize.workflow import required_margins
-
     m = required_margins(s)
     parts = [f"index threshold +{m['index']:g}" if m["index"] else "",
              f"passive joints' limit -{m['joint_deg']:g} deg" if m["joint_deg"] else "",
@@ -130,9 +132,6 @@ def change_text(baseline: float, recommended: float, sense: int) -> str:
 
 
 def print_summary(ctx, data) -> None:
-    from ..optimize.designer import DESIGN_SENSE, FEASIBILITY_TOL
-    from ..optimize.workflow import STORED_METRIC
-
     S = data.get("summary")
     if not S or "metric_name" not in S:
         return
@@ -150,7 +149,6 @@ def print_summary(ctx, data) -> None:
     for n, u, d, x, y, xf, yf in zip(names, units, dirs, b, r, bf, rf):
         ch = change_text(x, y, DESIGN_SENSE.get(n, 0))
         ctx.log(f"  {n:20s} {u:6s} {x:9.4g} {y:11.4g} {ch:>15s} | {xf:9.4g} {yf:9.4g}  {d}")
-    from ..optimize.certify import overlay
 
     V = overlay(data)
     if V is not None and "feasible" in V:   # on the same fine grids as the table (the search grids may differ)
@@ -197,8 +195,6 @@ def plots(ctx, data, objs, s) -> None:
     ``plots=false``."""
     if not ctx.plots:
         return
-    from .. import plots as P
-    from ..optimize.designer import DESIGN_UNITS
 
     G = data.get("ga", {})
     # the GA minimises -picks/min / |baseline picks/min| when picks/min is its only objective
@@ -213,7 +209,6 @@ def plots(ctx, data, objs, s) -> None:
     fig = P.ga_convergence(G, picks_per_fitness=scale, seeds=", ".join(seeds) + ", random members")
     if fig is not None:
         ctx.savefig(fig, "ga_convergence")
-    from ..optimize.certify import overlay
 
     V = overlay(data)          # the certified figures, front and margins where the certify stage ran
     fig = P.ga_pareto(V, objs, s, DESIGN_UNITS, floor=floor_line(V, objs, s) if V is not None else None)
@@ -226,9 +221,6 @@ def floor_line(V, objs, s):
     its own units (the verified baseline's value times ``recommend_floor`` if maximised, divided if minimised: the
     rule's :func:`deltajax.optimize.workflow.floor_limits` in the objective's units); None for another rule or when
     the primary is not one of the two plotted objectives."""
-    from ..optimize.designer import DESIGN_SENSE
-    from ..optimize.workflow import floor_limits
-
     if s.recommend != "floor" or s.objectives.primary not in objs[:2] or len(objs) < 2:
         return None
     o = objs[1] if s.objectives.primary == objs[0] else objs[0]
@@ -291,16 +283,12 @@ def certify_lines(Cg) -> list:
 
 def tolerances_of(s):
     """The :class:`deltajax.tolerance.Tolerances` of the validated settings' ``tolerance`` block."""
-    from ..config.ga_reconfig import tolerances_of as of
-
     return of(s.tolerance)
 
 
 def headline_lines(T, roles: Sequence[str]) -> list:
     """Printed lines of the ``tolerance`` group (as loaded): for each of ``roles`` the probability that every
     constraint holds and the picks/min percentiles."""
-    from ..tolerance import PERCENTILES
-
     q = list(PERCENTILES)
     tr = [str(x) for x in T["role"]]
     out = []
@@ -328,8 +316,6 @@ def headline_lines(T, roles: Sequence[str]) -> list:
 def summary_attrs(T) -> dict:
     """The ``summary`` group's attributes of the ``tolerance`` group (as loaded): per role the probability that
     every constraint holds and the picks/min p5 / p50 / p95."""
-    from ..tolerance import PERCENTILES
-
     q = list(PERCENTILES)
     out = {}
     for i, who in enumerate(str(x) for x in T["role"]):

@@ -7,8 +7,14 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Sequence
 
 import numpy as np
+import jax
+import jax.numpy as jnp
 
 from .designer_report import rule_text
+from ..optimize.designer import CONSTRAINT_NAMES, DESIGN_UNITS
+from ..optimize.workflow import STORED_METRIC
+from ..optimize.certify import CERTIFIED_METRICS, MARGIN_UNITS, RAY_PASSES, TOLERANCES
+from ..tolerance import CONSTRAINT_METRICS, PARAMETERS, PERCENTILES
 
 if TYPE_CHECKING:
     from ..optimize.robust import RobustChoice
@@ -22,8 +28,6 @@ def store_ga(res, gres, space, ga_cfg, ga_what: str, base_genes, seeds, baseline
     """Group ``ga``: the GA's per-generation history, its best design (genes and parameters), the gene bounds and
     the run's settings (:func:`deltajax.optimize.run_ga`'s result ``gres``; ``fingerprint``: the run's, which its
     checkpoint carried)."""
-    from ..optimize.designer import DESIGN_UNITS
-
     res.put_axis("ga", "generation", np.arange(1, gres.generations_done + 1), units="1")
     for k, v in gres.history.items():
         if k == "gen_best_genes":
@@ -103,12 +107,6 @@ def store_floor(res, fo, names, first: int, objs, s) -> None:
 def store_verify(res, space, cand, names, mv, Fv, nd, rec, hv, hv_base, ref, objs, s) -> None:
     """Group ``verify``: every candidate's fine-grid metrics, constraint values, parameters, the front, the
     recommendation and the hypervolume with its reference."""
-    import jax
-    import jax.numpy as jnp
-
-    from ..optimize.designer import CONSTRAINT_NAMES, DESIGN_UNITS
-    from ..optimize.workflow import STORED_METRIC
-
     res.put_axis("verify", "design", np.arange(len(cand)), units="1")
     res.put_axis("verify", "gene", np.arange(space.dim), units="1")
     res.put_axis("verify", "constraint", np.arange(len(CONSTRAINT_NAMES)), units="1")
@@ -153,9 +151,6 @@ def store_certify(res, names, cert: dict, feas, marg: dict, front, Fv, rec: int,
     first density's figure, the change doubling made and whether every change is within its tolerance; the front
     and the normalised objectives with the certified figures in place; attributes: the tolerances, the method, the
     certified recommendation."""
-    from ..optimize.certify import CERTIFIED_METRICS, MARGIN_UNITS, RAY_PASSES, TOLERANCES
-    from ..optimize.designer import DESIGN_UNITS
-
     g = "certify"
     n = len(names)
     rows = sorted(cert)
@@ -223,9 +218,6 @@ def store_certify(res, names, cert: dict, feas, marg: dict, front, Fv, rec: int,
 
 def _put_design_block(res, group: str, names, rows, a: dict, tol_text: str, roles=None) -> None:
     """One :func:`deltajax.tolerance.analyse` result (designs ``names`` at verify ``rows``) into ``group``."""
-    from ..tolerance import CONSTRAINT_METRICS, PARAMETERS, PERCENTILES
-    from ..optimize.designer import DESIGN_UNITS
-
     cn = list(a["constraint_names"])
     res.put_axis(group, "design", np.arange(len(names)), units="1")
     res.put_axis(group, "constraint", np.arange(len(cn)), units="1")

@@ -28,12 +28,25 @@ The GA paper's claims are *not* compared here (different metrics); see docs/REPR
 from __future__ import annotations
 
 import dataclasses
+import json
 
 import numpy as np
+import jax.numpy as jnp
 
 from ..config import ConfigError, GaReconfigSettings as Settings, ga_reconfig_build, ga_reconfig_settings
-from . import designer_state as ST
+from . import designer_report as R, designer_state as ST, designer_store as DS
 from .stages import Runner, Stage, State, Stop, release_memory, resize_bar
+from ..optimize.designer import CONSTRAINT_NAMES, DESIGN_SENSE, DESIGN_UNITS, FEASIBILITY_TOL
+from ..io import load, load_groups, write_atomic
+from ..optimize import certify as CE, GAError, robust as RB, run_ga, workflow as W
+from ..rundir import CheckpointError
+from ..optimize.pareto import hypervolume, non_dominated, nsga2
+from ..optimize.floor import solve_floor
+from ..tracing import forget
+from .. import export, tolerance as TL
+from ..optimize.certify import overlay
+from .datasheet import run_designs, write
+from ..runreport import report_path, write_report
 
 __all__ = ["run", "build", "settings_from_config", "Settings", "STAGES"]
 
@@ -46,8 +59,6 @@ build = ga_reconfig_build
 def run(ctx) -> None:
     """The main job: its settings and problem built once, then the two lists of stages (:data:`SEARCH`, whose
     stages hand on in memory, and :data:`ANSWER`, whose stages read the results file) on the stage engine."""
-    from ..optimize.designer import DESIGN_SENSE
-
     setup = ctx.settings                     # built and checked once, before anything compiled
     s, space, earlier = setup.settings, setup.space, setup.earlier
     runner, path, fp = Runner(ctx, "ga_reconfig"), ctx.run_dir / "results.h5", setup.fingerprint
@@ -72,8 +83,6 @@ def run(ctx) -> None:
 
 
 def _stored(path, done) -> dict:
-    from ..io import load
-
     return load(path, verify=True) if path.exists() and done else {}
 
 
@@ -81,9 +90,6 @@ def _stored(path, done) -> dict:
 
 def _prepare(st: State) -> None:
     """The evaluators and the baseline on the search grids (it normalises the objectives)."""
-    from ..optimize import workflow as W
-    from ..optimize.designer import CONSTRAINT_NAMES, FEASIBILITY_TOL
-
     ctx, s, space, pb, objs = st.ctx, st.s, st.space, st.pb, st.objs
     st.ev = W.batch_evaluator(pb, space, max(s.pareto.population_size, 2))
     st.ev_cheap = W.batch_evaluator(pb, space, 64, regular=False)   # screen, refinement (no regular workspace)
@@ -112,9 +118,6 @@ def _prepare(st: State) -> None:
 def _screen(st: State) -> None:
     """Sobol designs without the regular workspace; the best feasible ones seed the GA, the feasible non-dominated
     ones (regular workspace evaluated for them only) seed NSGA-II."""
-    from ..optimize import workflow as W
-    from ..optimize.designer import DESIGN_UNITS
-
     ctx, res, s, space, primary = st.ctx, st.res, st.s, st.space, st.primary
     bar = ctx.progress(total=2 ** s.screen.log2_size, desc="screen (Sobol)")
     sc = W.screen(st.ev_cheap, space, primary, st.sense[st.jp], s.screen.log2_size, seed=st.seed,
@@ -142,8 +145,6 @@ def _screen(st: State) -> None:
 
 
 def _screen_load(st: State) -> None:
-    from ..rundir import CheckpointError
-
     scr = st.stored["screen"]
     if "front_genes" not in scr:  # staged by a deltajax before the NSGA-II seeding
         raise CheckpointError(f"{st.res.path}: its finished screen stage has no screen/front_genes (written by an "
@@ -156,9 +157,6 @@ def _ga_result(st: State, finished: bool) -> None:
     """The GA on the primary objective (or the weighted sum), run or resumed from its checkpoint in the results
     file (the runner's: verified, of this run, committed every ``checkpoint_every`` generations; a finished GA is
     read back from it); :class:`Stop` after ``experiment.stop_after`` generations."""
-    from ..optimize import GAError, run_ga
-    from ..optimize import workflow as W
-
     ctx, s, space, objs, primary, ga_cfg = st.ctx, st.s, st.space, st.objs, st.primary, st.ga_cfg
     wvec = (np.asarray([s.objectives.weights.get(o, 0.0) for o in objs]) * st.scale if s.objectives.mode == "weighted"
             else np.where(np.asarray(objs) == primary, st.scale, 0.0))
@@ -188,10 +186,6 @@ def _ga_result(st: State, finished: bool) -> None:
 
 
 def _ga(st: State) -> None:
-    import jax.numpy as jnp
-
-    from . import designer_store as DS
-
     _ga_result(st, finished=False)
     DS.store_ga(st.res, st.gres, st.space, st.ga_cfg, st.ga_what, st.base_genes, st.seeds,
                float(st.base[st.primary]), np.asarray(st.space.to_params(jnp.asarray(st.best))), st.fp)
@@ -201,11 +195,6 @@ def _ga(st: State) -> None:
 def _pareto(st: State) -> None:
     """NSGA-II on the job's objectives, seeded with the baseline, the GA's best and final population, a continued
     run's front and the screen's non-dominated designs."""
-    from . import designer_store as DS
-    from ..optimize import workflow as W
-    from ..optimize.designer import CONSTRAINT_NAMES
-    from ..optimize.pareto import nsga2
-
     s, space = st.s, st.space
     bar = st.ctx.progress(total=s.pareto.generations, desc="NSGA-II")
     front = nsga2(W.pareto_eval(st.ev, st.objs, st.scale), space.dim, len(st.objs), n_constr=len(CONSTRAINT_NAMES),
@@ -230,9 +219,6 @@ def _pareto_load(st: State) -> None:
 
 def _refine(st: State) -> None:
     """optax refinement of the winners: the GA's best and the front's best on the primary objective."""
-    from . import designer_store as DS
-    from ..optimize import workflow as W
-
     s, sense, jp, primary = st.s, st.sense, st.jp, st.primary
     bar = st.ctx.progress(total=2, desc="refine (optax)")
     # the front is sorted by the first objective: its best on the primary objective
@@ -258,11 +244,6 @@ def _refine_load(st: State) -> None:
 def _verify(st: State) -> None:
     """Every candidate on the fine grids (the regular workspace found by rays), a continued run's front joined with
     the metrics it verified, the floor step, and the recommendation by the job's rule."""
-    from . import designer_report as R
-    from . import designer_store as DS
-    from ..optimize import workflow as W
-    from ..optimize.pareto import hypervolume
-
     ctx, s, space, earlier, carried = st.ctx, st.s, st.space, st.earlier, st.carried
     space_v = dataclasses.replace(space, n_R=s.verify.n_R) if space.reconfigurable else space
     pb_fine = W.designer_problem(s, fine=True)
@@ -311,9 +292,6 @@ def _verify(st: State) -> None:
 
 def _front_of(mv, objs, scale_v):
     """(objective matrix, feasible rows with finite objectives, their non-dominated rows in lexicographic order)."""
-    from ..optimize import workflow as W
-    from ..optimize.pareto import non_dominated
-
     Fv = W.objective_matrix(mv, objs, scale_v)
     ok = np.flatnonzero(mv["feasible"].astype(bool) & np.all(np.isfinite(Fv), axis=1))
     nd = ok[non_dominated(Fv[ok])] if len(ok) else np.zeros((0,), int)
@@ -323,10 +301,6 @@ def _front_of(mv, objs, scale_v):
 def _floor_step(st, cand, names, mv, Fv, nd, pb_fine, space_v, scale_v):
     """The floor rule's answer solved for (:func:`deltajax.optimize.floor.solve_floor`): descents from the verified
     front points that meet the floor, their iterates verified on the fine grids and joined to the candidates."""
-    from . import designer_store as DS
-    from ..optimize import workflow as W
-    from ..optimize.floor import solve_floor
-
     s, ctx = st.s, st.ctx
     bar = ctx.progress(total=s.floor_solve.rounds + 1, desc="floor step")
     fo = solve_floor(st.pb, st.space, cand, Fv, nd, st.objs, st.scale, st.primary,
@@ -357,17 +331,11 @@ def _floor_step(st, cand, names, mv, Fv, nd, pb_fine, space_v, scale_v):
 # -- the answer: stages that read the results file ------------------------------------------------------------------
 
 def _results(st: State) -> None:
-    from ..io import load
-    from . import designer_report as R
-
     R.summary(st.ctx, st.res, load(st.path), st.space, st.objs, st.s)
     st.res.set_attrs("ga_reconfig", **{f"time_{k}_s": v for k, v in st.runner.timings.items()})
 
 
 def _plots(st: State) -> None:
-    from ..io import load
-    from . import designer_report as R
-
     data = load(st.path)
     R.print_summary(st.ctx, data)
     R.plots(st.ctx, data, st.objs, st.s)
@@ -395,15 +363,6 @@ def _certify(st: State, *, max_rounds: int = 4) -> None:
     workspace only if the rule stays with it; at most ``max_rounds`` designs with their regular workspace).
     Group ``certify`` (:func:`deltajax.jobs.designer_store.store_certify`); ``verify``'s ``recommended`` becomes
     the certified recommendation (``recommended_verified`` keeps the verification's)."""
-    import jax.numpy as jnp
-
-    from ..io import load
-    from . import designer_store as DS
-    from ..optimize import certify as CE
-    from ..optimize import workflow as W
-    from ..optimize.pareto import non_dominated
-    from ..tracing import forget
-
     ctx, res, s, space, objs, sense, jp = st.ctx, st.res, st.s, st.space, st.objs, st.sense, st.jp
     V = load(st.path, "verify")
     space_v = dataclasses.replace(space, n_R=s.verify.n_R) if space.reconfigurable else space
@@ -467,14 +426,6 @@ def _tolerance(st: State) -> None:
     baseline and the recommendation on the verification problem (group ``tolerance``) and, with ``experiment.robust.enabled``, the robust
     recommendation (group ``tolerance/robust``; ``verify``'s ``recommended`` becomes it, ``recommended_nominal``
     keeps the nominal one)."""
-    from .. import tolerance as TL
-    from ..io import load_groups
-    from . import designer_report as R
-    from . import designer_store as DS
-    from ..optimize import robust as RB
-    from ..optimize import workflow as W
-    from ..optimize.certify import overlay
-
     ctx, res, s, space, sense, jp = st.ctx, st.res, st.s, st.space, st.sense, st.jp
     V = overlay(load_groups(st.path, ("verify", "certify")))   # what verify and certify stored
     space_v = dataclasses.replace(space, n_R=s.verify.n_R) if space.reconfigurable else space
@@ -548,12 +499,6 @@ def _export(st: State) -> None:
     """The baseline's and the recommendation's datasheets (group ``datasheet``, ``datasheet_<design>.png``, each at
     its operating R) and the recommendation's models: ``recommended.xml`` (MJCF), ``recommended.urdf`` and its
     loop-closure sidecar ``recommended.loops.json`` (:mod:`deltajax.export`)."""
-    import json
-
-    from .. import export
-    from ..io import load_groups, write_atomic
-    from .datasheet import run_designs, write
-
     ctx = st.ctx
     summary = load_groups(st.path, ("summary",)).get("summary") or {}
     if "metric_name" not in summary:     # the results stage found no feasible design: nothing to take out
@@ -580,8 +525,6 @@ def _export(st: State) -> None:
 
 def _report(st: State) -> None:
     """The run report (``report.html`` beside results.h5), drawn from the results on disk."""
-    from ..runreport import report_path, write_report
-
     st.ctx.log(f"report -> {write_report(st.path, report_path(st.ctx.run_dir))}")
 
 

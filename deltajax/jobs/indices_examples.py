@@ -14,6 +14,7 @@ import numpy as np
 from ..indices import INDEX_NAMES, indices
 from ..kinematics import ik
 from ..papers import FRANCO2026_EXAMPLE_INDICES, FRANCO2026_EXAMPLES, FRANCO2026_MISPRINTS
+from ..plots import plot_index_curves
 
 __all__ = ["run", "SCALAR_INDICES", "UNITS"]
 
@@ -89,8 +90,6 @@ def run(ctx) -> None:
     res.set_attrs("curves", note="argmax over finite values with ties to the smallest R; omega_v is "
                   "unbounded at Jx-singular R (e.g. R = 0.465 at z = 0.2, singularity type 1)")
     if ctx.plots:
-        from ..plots import plot_index_curves
-
         bar.set_postfix_str("plot")
         ctx.savefig(plot_index_curves(R, pts, {k: np.asarray(getattr(ind, k)) for k in SCALAR_INDICES}, ok,
                                       argmax), "index_curves")

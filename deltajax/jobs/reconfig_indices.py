@@ -19,6 +19,11 @@ import numpy as np
 
 from ..indices import INDEX_NAMES
 from .stages import Runner, Stage, State
+from ..workspace import fixed_workspace, redundancy_grid
+from ..workspace.driver import computed_points, face_count
+from ..papers import FRANCO2026_INDEX_STATS as PAPER_TABLES
+from ..workspace.redundancy import resolve_redundancy_host
+from .. import plots
 
 __all__ = ["run", "STATS"]
 
@@ -43,9 +48,6 @@ def _settings(ctx) -> dict:
 def _odr(st: State) -> None:
     """The fixed robot's workspace and indices on the grid (only the stored and sliced fields kept; statistics
     accumulated chunk by chunk; checkpointed under ``<run_dir>/checkpoint/odr``)."""
-    from ..workspace import fixed_workspace
-    from ..workspace.driver import computed_points
-
     s = st.s
     st.t0 = time.perf_counter()
     with st.ctx.progress(total=computed_points(s.grid), desc="ODR fields") as bar:
@@ -59,9 +61,6 @@ def _odr(st: State) -> None:
 def _rdr(st: State) -> None:
     """R* (the sample maximising ``experiment.criterion``) over the fixed robot's workspace, and the indices there;
     the statistics of both robots over that workspace."""
-    from ..workspace import redundancy_grid
-    from ..workspace.driver import computed_points
-
     s = st.s
     st.work = {}
     with st.ctx.progress(total=computed_points(s.grid, s.mode == "fast"), desc=f"RDR R* ({s.mode})") as bar:
@@ -79,9 +78,6 @@ def _store(st: State) -> None:
     """Group ``workspace``: the fields, the statistics table of both robots and the paper's (NaN where it has no
     value), the workspace's count and its points on the box faces (warned: the statistics then miss part of
     it); the table logged against the paper."""
-    from ..papers import FRANCO2026_INDEX_STATS as PAPER_TABLES
-    from ..workspace.driver import face_count
-
     ctx, res, grid, odr, rdr, s_odr, s_rdr = st.ctx, st.res, st.s.grid, st.odr, st.rdr, st.s_odr, st.s_rdr
     g = "workspace"
     for name, ax in (("x", grid.x), ("y", grid.y), ("z", grid.z)):
@@ -125,8 +121,6 @@ def _store(st: State) -> None:
 def _slices(st: State) -> None:
     """Fig 8's data, group ``workspace/slices``: ``experiment.slice_index`` and R* on whole planes z (the RDR
     solved on the whole plane: it reaches beyond the ODR workspace) beside the fixed robot's."""
-    from ..workspace.redundancy import resolve_redundancy_host
-
     ctx, res, grid = st.ctx, st.res, st.s.grid
     zs = [float(v) for v in st.s.slices_z]
     st.kz = kz = [int(np.argmin(np.abs(grid.z - v))) for v in zs]
@@ -151,8 +145,6 @@ def _slices(st: State) -> None:
 
 def _plots(st: State) -> None:
     """Figure ``fig8_<index>_slices``: the slices of both robots."""
-    from .. import plots
-
     grid = st.s.grid
     fig = plots.index_slices(grid.x, grid.y, grid.z[st.kz],
                              {"RDR (R* by " + st.s.criterion + ")": st.sl_rdr,

@@ -11,15 +11,14 @@ from __future__ import annotations
 import numpy as np
 
 from ..papers import FRANCO2026_VOLUMES as PAPER
+from .. import plots
+from ..workspace import fixed_workspace, reconfigurable_workspace
+from ..workspace.driver import computed_points, face_count
 
 __all__ = ["run"]
 
 
 def run(ctx) -> None:
-    from .. import plots
-    from ..workspace import fixed_workspace, reconfigurable_workspace
-    from ..workspace.driver import computed_points, face_count
-
     s = ctx.settings                                   # checked before the run (config.paper_grid_settings)
     grid, h, chunk = s.grid, s.grid.h, s.chunk_points
     ck = ctx.run_dir / "checkpoint" if s.checkpoint else None

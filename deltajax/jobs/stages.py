@@ -39,8 +39,13 @@ import time
 import types
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Optional
+import gc
 
 import numpy as np
+
+from ..io import ChecksumError, load, ResultsGroupError
+from ..rundir import CheckpointError, recorded, restage, RunDirError
+from ..workspace.chunks import seal
 
 __all__ = ["Stage", "State", "Stop", "Runner", "Checkpoint", "ChunkCheckpoint", "release_memory", "collecting_by_stage",
            "resize_bar"]
@@ -65,8 +70,6 @@ def collecting_by_stage():
     main-job run that traces its programs held 2.5 M) and a full collection walked them all at every stage end,
     ~1.4 s each. What is alive on entering the outermost scope (the imports, an earlier run's caches in the same
     process) is frozen too. On leaving it everything is unfrozen (the next collection sees it all again)."""
-    import gc
-
     if not _SCOPES[0]:
         gc.freeze()
     _SCOPES[0] += 1
@@ -85,7 +88,6 @@ def release_memory() -> None:
     later stage's peak stacked on the last). Nothing where the C library is not glibc. Inside
     :func:`collecting_by_stage`, the survivors are frozen for the collections after this one."""
     import ctypes
-    import gc
 
     gc.collect()
     if _SCOPES[0]:
@@ -185,9 +187,6 @@ class Runner:
                 ``resume="must"`` finds nothing to resume (one line, nothing changed).
             deltajax.rundir.CheckpointError: the file fails its checksums (``fresh=true`` starts over).
         """
-        from ..io import ChecksumError
-        from ..rundir import CheckpointError, RunDirError, recorded, restage
-
         self.fingerprint = fingerprint
         path = Path(self.ctx.results.path)
         try:
@@ -324,14 +323,10 @@ class Checkpoint:
 
     def refuse(self, problem: str) -> Exception:
         """The one-line refusal (:class:`deltajax.rundir.CheckpointError`) of this checkpoint."""
-        from ..rundir import CheckpointError
-
         return CheckpointError(f"cannot resume the {self.what} in {self.path}: {problem}; {self.remedy}")
 
     def _group(self) -> Optional[dict]:
         """The checkpoint's group read back verified, or None when the file or the group is not there."""
-        from ..io import ChecksumError, ResultsGroupError, load
-
         path = self.path
         if not path.exists():
             return None
@@ -435,8 +430,6 @@ class ChunkCheckpoint(Checkpoint):
         self.arrays, self.span, self.check, self.done_attr = dict(arrays), span, check, done_attr
 
     def open(self, n_items: int, chunk_size: int, outputs: dict) -> tuple[dict, int]:
-        from ..workspace.chunks import seal
-
         missing = [n for n in outputs if n not in self.arrays]
         if missing:
             raise ValueError(f"ChunkCheckpoint has no arrays for outputs {missing}")

@@ -40,6 +40,8 @@ from .stages import Runner, Stage, State
 from ..workspace.evaluators import (make_evaluator, make_grid_evaluator,  # (the job's kernels; also benchmarked)
                                 make_numba_evaluator)
 from ..workspace.chunks import CheckpointMismatch, plane_statistics, plane_summary, run_chunks, seal
+from ..workspace import FIELD_NAMES
+from .. import plots
 
 GROUP = "workspace"
 #: the registered shard reducer (deltajax.sweeps.reducers) of group ``workspace``
@@ -63,8 +65,6 @@ def _settings(ctx) -> dict:
     """What the stages read besides the job's settings ``s`` (checked before the run:
     config.workspace_grid_settings; the stages read them as ``st.s``): the resume key and the arrays the chunks
     fill (this shard's x-planes). RunDirError when a results file exists and experiment.resume=false."""
-    from ..workspace import FIELD_NAMES
-
     s = ctx.settings                 # checked before the run (config.workspace_grid_settings)
     grid, store, params, backend, plan = s.built_grid, list(s.store), s.params, s.backend, s.plan
     nx, ny, nz = grid.shape
@@ -93,8 +93,6 @@ def _settings(ctx) -> dict:
 def _store_grid(st: State, planes_done: int) -> None:
     """Stage this shard's arrays, statistics and attributes into the results (what the grid stage's checkpoint
     commits too): ``planes_done`` x-planes of ``st.n_local`` are finished."""
-    from ..workspace import FIELD_NAMES
-
     r, grid, plan, planes, params = st.ctx.results, st.s.built_grid, st.s.plan, st.planes, st.s.params
     key = st.runner.fingerprint          # the run's identity, which the grid stage's checkpoint carries
     r.put_axis(GROUP, "x", grid.x[plan.x_start:plan.x_stop], units="m")
@@ -132,8 +130,6 @@ def _check(data, done: int) -> str:
 def _chunk(st: State, la: int, lb: int) -> dict:
     """One chunk: this shard's x-planes ``la:lb`` evaluated, as the arrays the chunk engine stores (and times the
     first chunk, which includes compilation)."""
-    from ..workspace import FIELD_NAMES
-
     plan, timing, (_, ny, nz) = st.s.plan, st.timing, st.s.built_grid.shape
     a, b = plan.x_start + la, plan.x_start + lb  # global x-planes of this chunk
     n = (b - a) * plan.plane
@@ -202,8 +198,6 @@ def _grid(st: State) -> None:
 def _store(st: State) -> None:
     """The shard's results and the run's evaluation figures; a stopped run (``experiment.stop_after``) is marked
     incomplete (resumable)."""
-    from ..workspace import FIELD_NAMES
-
     ctx, grid, plan, done, first_chunk_s = st.ctx, st.s.built_grid, st.s.plan, st.done, st.timing["first_s"]
     _store_grid(st, done)
     # points_evaluated: the work of the whole run (every finished x-plane, those of the processes before a resume
@@ -228,8 +222,6 @@ def _store(st: State) -> None:
 
 def _plots(st: State) -> None:
     """The reachable set's figure (a single run only: a shard holds part of the grid)."""
-    from .. import plots
-
     st.ctx.savefig(plots.workspace_grid(st.s.built_grid, st.reach), "workspace_grid")
 
 

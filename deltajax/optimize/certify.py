@@ -45,6 +45,10 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from ..trajectory import adept_cycle, adept_path
+from ..tracing import shared_program
+from .designer import evaluate_designer, FEASIBILITY_TOL
+
 
 __all__ = ["TOLERANCES", "RAY_DENSITY", "RAY_PASSES", "RayDensity", "ray_cylinders", "ray_cylinder",
            "worst_in_cylinder", "certify_design", "certified_program", "design_margins", "MARGIN_UNITS", "cycle_at",
@@ -73,8 +77,6 @@ from .rays import (RAY_DENSITY, RAY_PASSES, RayDensity, ray_cylinder, ray_cylind
 
 def cycle_at(pb, n_samples: int):
     """The problem's cycle resampled with ``n_samples`` (same path, law and duration)."""
-    from ..trajectory import adept_cycle
-
     cyc = pb.settings["cycle"]
     return adept_cycle(pb.settings["cycle_centre"], duration=float(cyc["duration"]), n_samples=int(n_samples),
                        law=str(cyc["law"]))
@@ -83,8 +85,6 @@ def cycle_at(pb, n_samples: int):
 def cycle_path(pb) -> Callable:
     """The problem's cycle path at any normalised times: ``u (k,) -> (x, x', x'')`` (the path :func:`cycle_at`
     samples, :func:`deltajax.trajectory.adept_path`)."""
-    from ..trajectory import adept_path
-
     centre, law = pb.settings["cycle_centre"], str(pb.settings["cycle"]["law"])
     return lambda u: adept_path(u, centre, law=law)
 
@@ -154,8 +154,6 @@ def certified_program(pb, density: RayDensity, task_samples: tuple, cycle_sample
     (:func:`deltajax.tracing.shared_program`), kept across processes: the baseline and the recommendation (and
     any design re-derived later) share each compilation. ``rays=False``: without the ray searches (the
     regular-workspace figures NaN)."""
-    from ..tracing import shared_program
-
     task, cycle = tuple(int(n) for n in task_samples), int(cycle_samples)
     shape_t, shape_c = (task, cycle) if padded_to is None else (tuple(int(n) for n in padded_to[0]),
                                                                    int(padded_to[1]))
@@ -223,7 +221,6 @@ def certify_design(pb, design, R_operating=None, *, density=None, task_samples=N
         raise ValueError("regular=False takes the regular-workspace figures from regular_first, which is missing")
     dt = (design.robot if hasattr(design, "robot") else design).upper_arm.dtype
     if R_operating is None:
-        from .designer import evaluate_designer
         R_operating = jax.jit(lambda d: evaluate_designer(pb, d, regular=False)["R_operating"])(design)
     R_op = jnp.asarray(R_operating, dt)
     d, t, c = _densities(pb, density, task_samples, cycle_samples)
@@ -396,8 +393,6 @@ CERTIFIED_METRICS = REGULAR_FIGURES + ("task_index_min", "joint_margin_deg", "in
 def feasible_certified(m: Mapping[str, np.ndarray], pb) -> np.ndarray:
     """Every enabled constraint met by the metrics ``m`` (certified figures: the worst index instead of the good
     fraction; NaN: not met), up to :data:`deltajax.optimize.designer.FEASIBILITY_TOL`."""
-    from .designer import FEASIBILITY_TOL
-
     ok = np.ones(np.shape(m["picks_per_min"]), bool)
     en = set(pb.enabled)
     with np.errstate(invalid="ignore"):

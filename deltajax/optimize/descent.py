@@ -9,8 +9,12 @@ import dataclasses
 from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
+import jax
+import jax.numpy as jnp
 
 from .programs import batch_evaluator, design_metrics, objective_matrix, shared_program
+from .designer import FEASIBILITY_TOL
+from .pareto import padded_batch
 
 __all__ = ["DESCENT_ROWS", "RefineOutcome", "descent_paths", "refine_designs"]
 
@@ -43,13 +47,8 @@ def descent_paths(pb, space, genes: np.ndarray, objs: Sequence[str], scale: np.n
     One compiled program per (problem, space, settings), run in padded batches of :data:`DESCENT_ROWS` rows (the
     refinement and :func:`deltajax.optimize.floor.solve_floor` share it). Raises ``FloatingPointError`` on any
     non-finite gradient (never zeroed)."""
-    import jax
-    import jax.numpy as jnp
     import optax
     from optax import projections
-
-    from .designer import FEASIBILITY_TOL
-    from .pareto import padded_batch
 
     genes = np.clip(np.asarray(genes, float).reshape(-1, space.dim), 0.0, 1.0)
     sp = float(scale[list(objs).index(primary)])

@@ -38,6 +38,7 @@ from typing import Any, Mapping, Optional, Sequence, Union
 import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float
+import equinox as eqx
 
 from ..geometry import Delta, GeometryError, ReconfigurableDelta
 
@@ -66,7 +67,6 @@ def _scale_mass(mass: Any, s_upper: Any, s_fore: Any) -> Any:
     """Rod masses scaled with their lengths (see the module docstring); ``None`` stays ``None``."""
     if mass is None or not hasattr(mass, "upper_arm_mass"):
         return mass
-    import equinox as eqx
 
     return eqx.tree_at(lambda m: (m.upper_arm_mass, m.forearm_mass), mass,
                        (mass.upper_arm_mass * s_upper, mass.forearm_mass * s_fore))
@@ -245,8 +245,6 @@ class DesignSpace:
                   theta_max=jnp.deg2rad(get("theta_max_deg")) if "theta_max_deg" in v else b.theta_max.astype(dt))
         mass = _scale_mass(b.mass, kw["upper_arm"] / b.upper_arm, kw["forearm"] / b.forearm)
         if "gear_ratio" in v:
-            import equinox as eqx
-
             mass = eqx.tree_at(lambda m: m.gear_ratio, mass, v["gear_ratio"])
         if not self.reconfigurable:
             R = get("base_radius")

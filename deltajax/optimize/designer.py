@@ -52,6 +52,7 @@ from ..geometry import ReconfigurableDelta
 from ..trajectory import adept_cycle
 from .good import design_good_test
 from . import operating as OP  # rtmode: the "R(t) along the cycle" operating mode
+from .rays import first_open, good_where_possible, ray_cylinders, RayDensity, settle_good
 
 __all__ = ["DesignerProblem", "DESIGN_METRICS", "DESIGN_UNITS", "DESIGN_SENSE", "CONSTRAINT_NAMES",
            "evaluate_designer", "knee_point", "cylinder_points"]
@@ -229,8 +230,6 @@ def _good_where_possible(good, possible, Rs, pts, decided=None):
     cheap necessary condition ``possible(R, p)`` holds (:func:`deltajax.optimize.rays.good_where_possible` on the
     R-major pairs, 1/GRID_CHUNKS of them per call): on the default problem's grid 6-56 % of the pairs are possible,
     28 % on average over Sobol designs (reach and the index exclude the rest)."""
-    from .rays import good_where_possible
-
     nR, nP = Rs.shape[0], pts.shape[0]
     M = nR * nP
     iR = jnp.repeat(jnp.arange(nR), nP)
@@ -247,8 +246,6 @@ def _all_any_good(good, possible, Rs, pts, decided=None):
     as every point has a good R (True) or a point has none left (False). The answer does not depend on which
     pairs are tested or in what order (the good test is pure), so it is the full any/all's. ``decided``: a cheaper
     test deciding most pairs (:func:`deltajax.optimize.rays.settle_good`)."""
-    from .rays import first_open, settle_good
-
     nS, nR = pts.shape[0], Rs.shape[0]
     M = nS * nR
     maybe = jax.vmap(lambda p: jax.vmap(lambda R: possible(R, p))(Rs))(pts)       # (nS, nR): point-major order
@@ -365,8 +362,6 @@ def evaluate_designer(pb: DesignerProblem, design, *, regular: bool = True, draw
     good_at, decided, possible = gt.good, gt.decided_settle, gt.possible
 
     if rays:   # every ray search of both good sets (R per point; the operating R) in one call of the good test
-        from .rays import RayDensity, ray_cylinders
-
         sets = [Rs, Rc[k][None]] if recon else [Rc[k][None]]
         cyl = ray_cylinders(good_at, sets,
                             float(pb.rw_r[-1]), float(pb.rw_z[0]), float(pb.rw_z[-1]), pb.hd_ratio,

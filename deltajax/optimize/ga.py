@@ -23,6 +23,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from .design import reflect_unit
+from ..tracing import persistent
 
 __all__ = ["GAConfig", "GAResult", "ALGORITHMS", "make_strategy", "run_ga", "GAError", "state_to_arrays",
            "arrays_to_state"]
@@ -221,8 +222,6 @@ def _engine(fitness_fn, d: int, cfg: GAConfig, program_key: Optional[str] = None
     chunk_cache: dict[int, Callable] = {}
     kept = None if program_key is None else f"{program_key}|{cfg!r}|{d}"
     if kept is not None:
-        from ..tracing import persistent
-
         init_fn = persistent(init_fn, "ga_init", kept)
 
     def chunk(n):

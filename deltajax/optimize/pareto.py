@@ -16,6 +16,8 @@ import dataclasses
 from typing import Any, Callable, Optional
 
 import numpy as np
+import jax
+import jax.numpy as jnp
 
 __all__ = ["ParetoResult", "nsga2", "hypervolume", "non_dominated", "zdt", "zdt_front", "padded_batch"]
 
@@ -71,8 +73,6 @@ def non_dominated(F: np.ndarray) -> np.ndarray:
 def padded_batch(fn: Callable[[np.ndarray], Any], batch: int) -> Callable[[np.ndarray], Any]:
     """Wrap a jitted batch function so that it always sees ``batch`` rows (compile once), padding with the
     first row and cutting the outputs (a pytree of arrays with leading axis) back to the true size."""
-    import jax
-
     def call(X):
         X = np.asarray(X)
         n = len(X)
@@ -162,8 +162,6 @@ def nsga2(eval_fn: Callable[[np.ndarray], tuple[np.ndarray, Optional[np.ndarray]
 
 def zdt(name: str):
     """The ZDT1 / ZDT2 objective function ``x (n, d) in [0,1]^d -> F (n, 2)`` (JAX, vmapped)."""
-    import jax.numpy as jnp
-
     if name not in ("zdt1", "zdt2"):
         raise ValueError(f"zdt name must be 'zdt1' or 'zdt2', got {name!r}")
 

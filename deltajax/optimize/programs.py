@@ -14,8 +14,11 @@ from __future__ import annotations
 from typing import Callable, Mapping, Sequence
 
 import numpy as np
+import jax
 
 from ..tracing import PROGRAMS, content_key, shared_program, stable_key
+from .designer import evaluate_designer
+from .pareto import padded_batch
 
 # the content-keyed program store lives in deltajax.tracing (certify uses it too without importing the designer)
 __all__ = ["design_metrics", "batch_evaluator", "objective_matrix", "shared_program", "content_key", "stable_key",
@@ -30,10 +33,6 @@ def design_metrics(pb, space, *, regular: bool = True) -> Callable:
     caller, so every compiled program computes exactly what it did with the designer traced in place (a nested,
     not inlined call inside the GA's scan changed its fitness history in the last bit)."""
     def build():
-        import jax
-
-        from .designer import evaluate_designer
-
         return jax.jit(lambda g: evaluate_designer(pb, space.decode(g), regular=regular), inline=True)
 
     return shared_program("design_metrics", pb, space, (bool(regular),), build)
@@ -43,10 +42,6 @@ def batch_evaluator(pb, space, batch: int, *, regular: bool = True) -> Callable[
     """``genes (n, d) -> {metric: (n,)}`` host arrays, compiled once for ``batch`` rows (and shared by every
     evaluator of the same problem, space and settings in this process)."""
     def build():
-        import jax
-
-        from .pareto import padded_batch
-
         f = shared_program("batch_program", pb, space, (bool(regular),),
                            lambda: jax.jit(jax.vmap(design_metrics(pb, space, regular=regular))), persist=True)
         call = padded_batch(f, batch)

@@ -24,6 +24,8 @@ from typing import Any, Callable, Optional, Sequence
 
 import numpy as np
 
+from .pareto import non_dominated
+
 __all__ = ["robust_choice", "RobustChoice"]
 
 
@@ -63,8 +65,6 @@ def robust_choice(analyse_rows: Callable[[Sequence[int], int], dict], F: np.ndar
         probability: required probability that every constraint holds.
         known: ``{row: result of analyse_rows([row], seed)}`` already computed (reused, same seed).
     """
-    from .pareto import non_dominated
-
     ok = np.asarray(feasible, bool) & np.all(np.isfinite(F), axis=1)
     out_rows, p_sel, p_conf, results = [], [], [], dict(known or {})
     wanting: set = set()

@@ -31,11 +31,21 @@ import math
 from typing import Any, Callable, Mapping, Optional, Sequence
 
 import numpy as np
+import equinox as eqx
+import jax.numpy as jnp
+import jax
 
 # the compiled programs and the refine descent live in their own modules; these names stay importable from here
 from .descent import DESCENT_ROWS, RefineOutcome, descent_paths, refine_designs
 from .programs import (batch_evaluator, content_key, design_metrics, objective_matrix, shared_program,
                        stable_key)
+from .. import constraints as C
+from .designer import DesignerProblem, FEASIBILITY_TOL, knee_point
+from .certify import RAY_DENSITY
+from .operating import OperatingError, spec_from_settings
+from ..constraints import ConstraintError
+from . import DesignSpace, DesignSpaceError
+from .pareto import non_dominated
 
 
 __all__ = ["SetupError", "setup", "designer_problem", "required_margins", "screen", "screen_front", "ga_fitness", "ga_fitness_key",
@@ -70,9 +80,6 @@ def designer_problem(s, *, fine: bool = False, nominal: bool = False):
     raised, the passive joints' limit lowered, the links' clearance raised, the motor's peak and rated torque
     derated), unless ``nominal``: the constraints as stated (what the tolerance stage's Monte Carlo judges a built
     robot by). With no margin set both are the same problem."""
-    from .. import constraints as C
-    from .designer import DesignerProblem
-
     mg = {k: 0.0 for k in required_margins(s)} if nominal else required_margins(s)
     links_kw = dataclasses.asdict(s.links)
     if mg["clearance_mm"]:
@@ -94,7 +101,6 @@ def designer_problem(s, *, fine: bool = False, nominal: bool = False):
     # (experiment.regular_workspace.search_refine) on the search grids, or the grid's measure there
     # the verification finds it by rays (deltajax.optimize.certify.ray_cylinders; verify.rw_n_phi rays per level,
     # verify.rw_n_z levels per pass, verify.rw_n_r samples along a ray)
-    from .certify import RAY_DENSITY
 
     v = s.verify
     rays = tuple(RAY_DENSITY._replace(n_phi=v.rw_n_phi, n_z=v.rw_n_z, n_along=v.rw_n_r))
@@ -119,8 +125,6 @@ def designer_problem(s, *, fine: bool = False, nominal: bool = False):
 
 def operating_spec(s):  # rtmode: the screw linkage is sized for the design space's R range
     """The R(t) operating spec of ``experiment.reconfig`` (None in the default per-task mode)."""
-    from .operating import OperatingError, spec_from_settings
-
     b = s.design.bounds
     rr = (b["R_min"][0], b["R_max"][1]) if "R_min" in b and "R_max" in b else None
     try:
@@ -133,12 +137,6 @@ def setup(s, robot, recon, *, n_R: Optional[int] = None):
     """(design space, coarse problem) for settings ``s``. The baseline is the configured robot
     (reconfigurable if it has an R range) with the motor's rotor inertia and the gear ratio
     ``motor.gear_ratio`` in its mass model. Raises :class:`SetupError` (one line naming the field)."""
-    import equinox as eqx
-    import jax.numpy as jnp
-
-    from ..constraints import ConstraintError
-    from . import DesignSpace, DesignSpaceError
-
     base = recon if recon is not None else robot
     rob = base.robot if recon is not None else base
     if rob.mass is None:
@@ -192,8 +190,6 @@ def screen_front(evaluate: Callable[[np.ndarray], dict], sc: Mapping[str, Any], 
     then the front of the rest, ...; each layer sorted by the first objective). It seeds NSGA-II, whose other
     seeds (the GA's population) crowd the primary's end.
     """
-    from .pareto import non_dominated
-
     X = np.asarray(sc["X"])[np.asarray(sc["order"])[:cap]]
     if len(X) == 0:
         return np.zeros((0, np.asarray(sc["X"]).shape[1]))
@@ -216,9 +212,6 @@ def ga_fitness(pb, space, objs: Sequence[str], wvec: np.ndarray):
     """GA fitness ``genes (P, d) -> (fitness, aux)``: the weighted objectives ``wvec`` (normalised, minimised),
     feasibility first (Deb's rules: infeasible = 1e3 + violation). The regular workspace is computed only when
     a regular-workspace objective has a non-zero weight."""
-    import jax
-    import jax.numpy as jnp
-
     objs, wvec = tuple(objs), np.asarray(wvec, float)
     regular = any(o.startswith("regular") and w != 0 for o, w in zip(objs, wvec))
 
@@ -247,8 +240,6 @@ def ga_fitness_key(pb, space, objs: Sequence[str], wvec: np.ndarray):
 
 def pareto_eval(evaluate: Callable[[np.ndarray], dict], objs: Sequence[str], scale: np.ndarray):
     """pymoo's ``X -> (F, G)`` from a batch evaluator (G <= 0 feasible, up to the feasibility tolerance)."""
-    from .designer import FEASIBILITY_TOL
-
     def f(X):
         m = evaluate(np.asarray(X))
         return objective_matrix(m, objs, scale), np.asarray(m["g"]) - FEASIBILITY_TOL
@@ -304,8 +295,6 @@ def recommend(F: np.ndarray, front: np.ndarray, rule: str, j_primary: int, *, ba
     * ``primary``: the best primary objective.
     -1 when the front is empty.
     """
-    from .designer import knee_point
-
     front = np.asarray(front, int).reshape(-1)
     if len(front) == 0:
         return -1

@@ -16,14 +16,13 @@ from pathlib import Path
 from .layout import find_runs
 from .merge import ShardError, merge_shards, merge_sweep
 from .summary import summarize_sweep
+from ..rundir import MANIFEST
 
 __all__ = ["main"]
 
 
 def _not_a_sweep(path: Path, prog: str):
     """Why ``path`` is not a sweep directory (a single run's directory, or no runs at all), or None."""
-    from ..rundir import MANIFEST
-
     own = [n for n in (MANIFEST, "results.h5") if (path / n).exists()]
     if own:
         return (f"{path} is a run directory (it holds {' and '.join(own)}), not a sweep directory; merge shard "

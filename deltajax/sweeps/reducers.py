@@ -14,6 +14,8 @@ from __future__ import annotations
 
 from typing import Any, Callable, Mapping, Sequence
 
+from ..workspace.chunks import reduce_plane_shards
+
 __all__ = ["ShardError", "REDUCERS", "LEGACY", "register_reducer", "get_reducer"]
 
 Reducer = Callable[[Mapping[str, Any], Sequence[Mapping[str, Any]]], tuple]
@@ -48,8 +50,6 @@ def register_reducer(name: str, fn: Reducer) -> Reducer:
 
 
 def _register_builtin() -> None:
-    from ..workspace.chunks import reduce_plane_shards
-
     REDUCERS.setdefault("workspace_planes", reduce_plane_shards)
 
 

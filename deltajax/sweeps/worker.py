@@ -17,6 +17,10 @@ from __future__ import annotations
 import json
 import os
 from typing import Any, Mapping, Optional
+import sys
+
+import jax
+from jax._src import xla_bridge
 
 from .layout import Callback
 
@@ -88,7 +92,6 @@ def apply_worker_env(cpus: int, host_devices: Optional[int] = 1, gpu_preallocate
         env.setdefault(var, str(cpus))
     if not gpu_preallocate:
         env.setdefault("XLA_PYTHON_CLIENT_PREALLOCATE", "false")
-    import sys
 
     if "numba" in sys.modules and environ is None:  # a reused worker: NUMBA_NUM_THREADS was read at its import
         import numba
@@ -102,8 +105,6 @@ def apply_worker_env(cpus: int, host_devices: Optional[int] = 1, gpu_preallocate
         import numba
 
         applied["numba_threads"] = int(numba.get_num_threads())
-    import jax
-    from jax._src import xla_bridge
 
     if xla_bridge.backends_are_initialized():
         applied["host_devices"] = f"unchanged (backend already initialised: {jax.local_device_count()})"
@@ -128,8 +129,6 @@ def keep_freed_memory() -> str:
     thread arenas are made then); what the stage engine frees between stages still goes back
     (:func:`deltajax.jobs.stages.release_memory`). Returns what was done, for the log."""
     import ctypes
-
-    from jax._src import xla_bridge
 
     if xla_bridge.backends_are_initialized():
         return "unchanged (backend already initialised)"

@@ -41,6 +41,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from ..geometry import Delta
 from ..kinematics import ik_cos_sin
+from .grid import make_grid
 
 __all__ = [
     "BoundaryResult",
@@ -570,8 +571,6 @@ def grid_volume(robot: Delta, h: float, bounds: Sequence[Sequence[float]], *, ha
         chunk: points per evaluation (memory bound).
         progress: optional wrapper ``progress(iterable, total=)`` (e.g. ``ctx.progress``).
     """
-    from .grid import make_grid
-
     if not (isinstance(h, (int, float)) and math.isfinite(h) and h > 0):
         raise ValueError(f"grid step h must be a positive number (m), got {h!r}")
     for name, (lo, hi) in zip("xyz", bounds):

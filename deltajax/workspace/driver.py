@@ -35,6 +35,8 @@ from ..geometry import Delta, ReconfigurableDelta
 from ..indices import INDEX_NAMES
 from .chunks import CheckpointMismatch, run_chunks
 from .grid import Grid
+from .redundancy import nb_params, reach_k_range_host, resolve_redundancy_host, SCREEN_MARGIN
+from .stats import stats_from_partials
 
 __all__ = ["GridJob", "run_chunks", "fixed_workspace", "reconfigurable_workspace", "redundancy_grid", "computed_points",
            "CheckpointMismatch", "reach_box", "face_count"]
@@ -157,8 +159,6 @@ class _ChunkStats:
             self.parts.flush()  # before run_chunks records the chunk as done
 
     def result(self, complete: bool) -> Optional[dict]:
-        from .stats import stats_from_partials
-
         if not complete:
             return None
         missing = np.flatnonzero(np.isnan(self.parts[:, 0, 3]))
@@ -336,7 +336,6 @@ def reconfigurable_workspace(recon: ReconfigurableDelta, grid: Grid, *, chunk_si
     Each point tests only the samples of its closed-form reach range and stops at the first feasible one.
     """
     from . import numba_fields
-    from .redundancy import nb_params, reach_k_range_host
 
     lay = _Layout(grid, mirror)
     q = nb_params(recon)
@@ -395,8 +394,6 @@ def redundancy_grid(recon: ReconfigurableDelta, grid: Grid, *, mask: Optional[np
         :class:`GridJob`: ``ok`` (a feasible sample exists), fields: every index at R*, ``"R_star"`` (m),
         ``"k_star"`` (int32, -1 where none) -- those in ``keep``.
     """
-    from .redundancy import SCREEN_MARGIN, resolve_redundancy_host
-
     if screen_margin is None:
         screen_margin = SCREEN_MARGIN
     all_fields = {"k_star": (np.int32, -1), "R_star": (R_dtype, np.nan)}

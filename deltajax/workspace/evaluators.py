@@ -13,9 +13,12 @@ import functools
 from typing import Optional
 
 import numpy as np
+import jax
+import jax.numpy as jnp
+from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
 
 from .driver import fixed_workspace
-from .grid import Grid
+from .grid import box_fields, FIELD_NAMES, Grid, index_fields
 
 __all__ = ["make_evaluator", "make_grid_evaluator", "make_numba_evaluator", "GRID_BLOCK"]
 
@@ -30,12 +33,6 @@ def make_evaluator(n_devices: int, *, b_v: float, b_f: float, beta: float):
     ``n`` must be a multiple of ``n_devices``; the points are split along their first axis, the robot is
     replicated. Per-point results do not depend on the split (elementwise kernel).
     """
-    import jax
-    import jax.numpy as jnp
-    from jax.sharding import Mesh, NamedSharding, PartitionSpec as P
-
-    from .grid import FIELD_NAMES, index_fields
-
     devices = jax.local_devices()[:n_devices]
     mesh = Mesh(np.asarray(devices), ("d",))
     rows = NamedSharding(mesh, P("d", None))
@@ -57,8 +54,6 @@ def make_evaluator(n_devices: int, *, b_v: float, b_f: float, beta: float):
 
 def _shard_map(f, mesh, in_specs, out_specs):
     """``shard_map`` without the replication check (each device's loop runs its own trip count)."""
-    import jax
-
     if hasattr(jax, "shard_map"):
         return jax.shard_map(f, mesh=mesh, in_specs=in_specs, out_specs=out_specs, check_vma=False)
     from jax.experimental.shard_map import shard_map  # jax < 0.7
@@ -72,12 +67,6 @@ def _half_box_program(n_devices: int, j0: int, block: int, b_v: float, b_f: floa
     ``xs`` split over ``n_devices`` devices (``K`` a multiple of it), each device evaluating its planes' half
     y >= 0 with :func:`deltajax.workspace.grid.box_fields` and copying the other half from it (rows
     ``j < j0`` are the images of rows ``ny - 1 - j``; ``j0 = 0``: no mirror half)."""
-    import jax
-    import jax.numpy as jnp
-    from jax.sharding import Mesh, PartitionSpec as P
-
-    from .grid import box_fields
-
     mesh = Mesh(np.asarray(jax.local_devices()[:n_devices]), ("d",))
 
     def local(robot, xs, ys, zs):
@@ -111,10 +100,6 @@ def make_grid_evaluator(grid: Grid, n_devices: int, *, planes: int, b_v: float, 
     shapes: one compilation serves every chunk; unchanged on a GPU). Unreachable points stay ``ok=False`` and
     NaN.
     """
-    import jax
-
-    from jax.sharding import NamedSharding, PartitionSpec as P
-
     nx, ny, nz = grid.shape
     j0 = ny // 2 if (mirror and grid.mirror_symmetric) else 0
     if block is None:
@@ -138,8 +123,6 @@ def make_grid_evaluator(grid: Grid, n_devices: int, *, planes: int, b_v: float, 
 def make_numba_evaluator(grid, *, b_v: float, b_f: float, beta: float):
     """The Numba kernel of ``workspace_grid``: ``f(robot, a, b) -> (ok[n], values[n, n_index])`` for the x-planes
     ``a:b`` of ``grid``, on the CPU threads of :func:`fixed_workspace` (Numba, ``NUMBA_NUM_THREADS``; float64)."""
-    from .grid import FIELD_NAMES
-
     def evaluate(robot, a: int, b: int):
         # the same coordinate values as the full grid (sliced, not rebuilt), so shards see identical points
         sub = Grid(x=grid.x[a:b], y=grid.y, z=grid.z, h=grid.h, bounds=grid.bounds)

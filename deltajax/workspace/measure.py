@@ -19,8 +19,9 @@ from typing import Optional, Union
 import numpy as np
 
 from ..geometry import Delta, ReconfigurableDelta
-from .driver import reach_box as driver_reach_box
+from .driver import fixed_workspace, reach_box as driver_reach_box, reconfigurable_workspace
 from .grid import Grid, make_grid
+from .stats import index_stats
 
 __all__ = ["WorkspaceVolume", "volume", "reach_box", "MAX_POINTS"]
 
@@ -91,9 +92,6 @@ def volume(robot: Union[Delta, ReconfigurableDelta], h: float = 0.005, *, stats:
         ValueError: h not a positive number, a grid of more than :data:`MAX_POINTS` points, or ``stats`` for
             a reconfigurable robot (use :func:`deltajax.workspace.redundancy_grid`).
     """
-    from .driver import fixed_workspace, reconfigurable_workspace
-    from .stats import index_stats
-
     h = float(h)
     if not (math.isfinite(h) and h > 0):
         raise ValueError(f"h must be a positive grid spacing in m, got {h!r}")

@@ -13,6 +13,7 @@ omega_f, k_tilde, manipulability, imi).
 from __future__ import annotations
 
 import math
+import os
 
 import numba as nb
 import numpy as np
@@ -232,7 +233,6 @@ def parallel(block_fn, n: int, n_threads: int | None = None) -> None:
     so there is no shared mutable state (numba's ``prange`` dropped iterations of these loops in our tests,
     so we parallelise by hand). Results do not depend on the number of threads.
     """
-    import os
     from concurrent.futures import ThreadPoolExecutor
 
     if n_threads is None:

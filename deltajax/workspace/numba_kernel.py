@@ -21,6 +21,8 @@ sin theta_i3. The paper's matrix M = Jx^-1 Jq; its singular values come from the
 from __future__ import annotations
 
 import math
+import hashlib
+from pathlib import Path
 
 import numba as nb
 import numpy as np
@@ -39,9 +41,6 @@ def _drop_stale_cache() -> None:
     """Numba's on-disk cache checks only the file that defines a function, but the drivers (:mod:`.numba_fields`,
     :mod:`.numba_screen`) inline this module's functions: after an edit here their cached machine code would be
     stale. Key the cache on every such source and drop it when they change."""
-    import hashlib
-    from pathlib import Path
-
     here = Path(__file__).parent
     sources = ("numba_kernel.py", "numba_screen.py", "numba_fields.py")
     digest = hashlib.sha256(b"".join((here / f).read_bytes() for f in sources if (here / f).exists())).hexdigest()
