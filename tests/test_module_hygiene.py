@@ -169,13 +169,15 @@ def test_the_configuration_is_read_in_one_place():
 
 #: loaded on first use: the Numba backend (importing it starts Numba; its kernels compile or load on first call)
 FIRST_USE = ("deltajax.workspace.numba_", "deltajax.benchmarks")
+#: module name -> its file
+FILES = {m: f for f, m in MODULES}
 
 
 def _loaded(node: ast.AST, modname: str, is_pkg: bool) -> set:
     """The deltajax modules an import statement loads: the module, its packages, and submodules named in it."""
     if isinstance(node, ast.ImportFrom):
         mod = _resolve(modname, is_pkg, node)
-        names = [mod] + [f"{mod}.{a.name}" for a in node.names if f"{mod}.{a.name}" in dict(map(reversed, MODULES))]
+        names = [mod] + [f"{mod}.{a.name}" for a in node.names if f"{mod}.{a.name}" in FILES]
     else:
         names = [a.name for a in node.names]
     return {".".join(n.split(".")[:i]) for n in names if n.startswith("deltajax")
@@ -199,17 +201,15 @@ def test_deltajax_modules_are_imported_at_module_level():
     """A module imports the deltajax modules it uses at its top, where a reader sees its dependencies. Two kinds
     load on first use: the Numba backend (:data:`FIRST_USE`), and a module that ``import deltajax`` does not load,
     imported by one that it does (``import deltajax`` stays the library, not the application wing)."""
-    by_name = {m: (f, f.name == "__init__.py") for f, m in MODULES}
     base, todo = set(), ["deltajax"]
     while todo:                                  # what ``import deltajax`` loads: module-level imports, followed
         m = todo.pop()
-        if m in base or m not in by_name:
+        if m in base or m not in FILES:
             continue
         base.add(m)
-        f, is_pkg = by_name[m]
-        for n in ast.parse(f.read_text()).body:
+        for n in ast.parse(FILES[m].read_text()).body:
             if isinstance(n, (ast.Import, ast.ImportFrom)):
-                todo += sorted(_loaded(n, m, is_pkg))
+                todo += sorted(_loaded(n, m, FILES[m].name == "__init__.py"))
     assert {"deltajax.kinematics", "deltajax.io", "deltajax.workspace"} <= base and "deltajax.jobs" not in base
     bad = []
     for f, modname in MODULES:

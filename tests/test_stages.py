@@ -75,7 +75,8 @@ def test_a_resume_reads_the_checkpoint_once(tmp_path, monkeypatch):
     assert not _job(part, stop_at=4)[0]
     reads = []
     real = dio.load          # the runner's reader (deltajax.io.load, as the stage engine names it)
-    monkeypatch.setattr(stages, "load", lambda path, group=None, **kw: (reads.append(group), real(path, group, **kw))[1])
+    monkeypatch.setattr(stages, "load",
+                        lambda path, group=None, **kw: (reads.append(group), real(path, group, **kw))[1])
     ok, runner = _job(part, resume="must")
     assert ok and reads.count("walk/checkpoint") == 1
 
