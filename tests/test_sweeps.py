@@ -197,6 +197,69 @@ def test_worker_keeps_freed_memory_only_before_jax_starts():
     assert out.stdout.split("\n")[:2] == ["freed memory kept for reuse", "3.0"], out.stdout
 
 
+_WIDE_PROBE = """
+import os, sys
+from deltajax.sweeps.worker import apply_worker_env, host_has_avx512
+a = apply_worker_env(1, wide=sys.argv[1] == "wide")
+import numba, numpy as np
+
+@numba.njit
+def axpy(a, x, y):
+    for i in range(x.shape[0]):
+        y[i] += a * x[i]
+
+x = np.ones(64)
+axpy(2.0, x, x)
+asm = next(iter(axpy.inspect_asm().values()))
+print(host_has_avx512(), "|", a["vectors"], "|", os.environ.get("XLA_FLAGS", ""), "|", "zmm" in asm)
+"""
+
+
+@pytest.mark.slow
+def test_worker_asks_for_wide_vectors_where_the_cpu_has_them():
+    """A fresh worker process on a CPU with AVX-512 asks XLA:CPU for 512-bit vectors (XLA_FLAGS, before its backend
+    starts) and Numba's LLVM too: a loop then runs on 512-bit (zmm) registers, which it does not with
+    ``wide_vectors=false`` (LLVM's default on these CPUs is 256 bits). On a CPU without AVX-512 nothing changes."""
+    import subprocess
+    import sys
+
+    from deltajax.sweeps.worker import host_has_avx512
+
+    env = {k: v for k, v in os.environ.items() if k not in ("XLA_FLAGS", "NUMBA_CPU_NAME", "NUMBA_CPU_FEATURES")}
+    lines = {}
+    for mode in ("wide", "default"):
+        out = subprocess.run([sys.executable, "-c", _WIDE_PROBE, mode], capture_output=True, text=True, timeout=120,
+                             env=env)
+        assert out.returncode == 0, out.stderr[-2000:]
+        lines[mode] = [f.strip() for f in out.stdout.strip().split("\n")[-1].split("|")]
+    if host_has_avx512():
+        assert lines["wide"] == ["True", "XLA 512-bit, Numba 512-bit", "--xla_cpu_prefer_vector_width=512", "True"]
+        assert lines["default"] == ["True", "the compilers' defaults (wide_vectors=false)", "", "False"]
+    else:
+        assert lines["wide"] == ["False", "the compilers' defaults (no AVX-512)", "", "False"]
+
+
+def test_wide_vectors_keep_an_explicit_setting_and_a_running_backend():
+    """An XLA_FLAGS that already names the vector width wins; with no AVX-512 or a backend already running (this
+    process), the flags are left as they are; the answer says which."""
+    from deltajax.sweeps.worker import host_has_avx512, wide_vectors
+
+    import jax
+
+    jax.numpy.zeros(1).block_until_ready()                       # this process: the backend is up
+    mine = {"XLA_FLAGS": "--xla_cpu_prefer_vector_width=256"}
+    said = wide_vectors(mine)
+    assert mine == {"XLA_FLAGS": "--xla_cpu_prefer_vector_width=256"}
+    bare = {"XLA_FLAGS": "--xla_force_host_platform_device_count=1"}
+    said_bare = wide_vectors(bare)
+    assert bare == {"XLA_FLAGS": "--xla_force_host_platform_device_count=1"}
+    if host_has_avx512():
+        assert said == "XLA as XLA_FLAGS says"
+        assert said_bare == "XLA unchanged (backend already initialised)"
+    else:
+        assert said == said_bare == "the compilers' defaults (no AVX-512)"
+
+
 @pytest.mark.slow
 def test_worker_gives_one_host_device_whatever_its_cpus():
     """A job's process has one JAX host device by default however many CPUs it gets (XLA's cache keys every

@@ -4,7 +4,8 @@
 each job's process from its scheduler's allocation (:func:`resolve_worker_cpus`) and applies it
 (:func:`apply_worker_env`): one XLA thread pool per job sized to the job's CPUs (``PJRT_NPROC``), one JAX host
 device unless more are asked for (``jax_num_cpu_devices``, over which ``workspace_grid``'s JAX backend can shard),
-and no GPU memory preallocation (``XLA_PYTHON_CLIENT_PREALLOCATE=false``) when several jobs share a GPU.
+no GPU memory preallocation (``XLA_PYTHON_CLIENT_PREALLOCATE=false``) when several jobs share a GPU, and the
+CPU's full vector width for XLA:CPU and Numba where it has AVX-512 (:func:`wide_vectors`).
 
 One host device by default, whatever the CPUs: XLA's persistent compilation cache keys every executable by the
 number of devices, so a process with another count (a SLURM task with other ``cpus_per_task``, a joblib worker,
@@ -24,7 +25,8 @@ from jax._src import xla_bridge
 
 from .layout import Callback
 
-__all__ = ["WorkerEnv", "resolve_worker_cpus", "apply_worker_env", "keep_freed_memory", "MALLOC_REUSE"]
+__all__ = ["WorkerEnv", "resolve_worker_cpus", "apply_worker_env", "keep_freed_memory", "MALLOC_REUSE",
+           "wide_vectors", "host_has_avx512", "WIDE_VECTOR_BITS"]
 
 
 def _available_cpus() -> int:
@@ -67,7 +69,8 @@ def resolve_worker_cpus(launcher_cfg: Optional[Mapping[str, Any]], environ: Mapp
 
 
 def apply_worker_env(cpus: int, host_devices: Optional[int] = 1, gpu_preallocate: bool = False,
-                     environ: Optional[dict] = None, malloc_reuse: bool = True) -> dict[str, Any]:
+                     environ: Optional[dict] = None, malloc_reuse: bool = True,
+                     wide: bool = True) -> dict[str, Any]:
     """Set the environment of this process for ``cpus`` CPUs, before JAX creates its backend.
 
     * ``PJRT_NPROC=cpus``: XLA's CPU client sizes its thread pool from it (default: all cores of the node,
@@ -78,7 +81,8 @@ def apply_worker_env(cpus: int, host_devices: Optional[int] = 1, gpu_preallocate
     * ``XLA_PYTHON_CLIENT_PREALLOCATE=false`` unless ``gpu_preallocate``: several jobs can share one GPU;
     * with ``malloc_reuse``, glibc's allocator told to keep freed memory for reuse (:func:`keep_freed_memory`,
       before XLA's threads start): a batch program's outputs then land in memory already mapped instead of fresh
-      pages the kernel must fault in on every call (docs/BENCHMARKS.md: the JAX kernel 1.4-1.7x per CPU-second).
+      pages the kernel must fault in on every call (docs/BENCHMARKS.md: the JAX kernel 1.4-1.7x per CPU-second);
+    * with ``wide``, 512-bit vectors for XLA:CPU and Numba where the CPU has AVX-512 (:func:`wide_vectors`).
 
     Values already present in the environment win (an explicit user setting is kept). In a reused worker
     process (joblib) whose backend already exists nothing JAX-side can change; this is reported.
@@ -105,6 +109,7 @@ def apply_worker_env(cpus: int, host_devices: Optional[int] = 1, gpu_preallocate
         import numba
 
         applied["numba_threads"] = int(numba.get_num_threads())
+    applied["vectors"] = wide_vectors(environ) if wide else "the compilers' defaults (wide_vectors=false)"
 
     if xla_bridge.backends_are_initialized():
         applied["host_devices"] = f"unchanged (backend already initialised: {jax.local_device_count()})"
@@ -140,6 +145,67 @@ def keep_freed_memory() -> str:
     return "freed memory kept for reuse" if ok else "unchanged (mallopt refused)"
 
 
+#: the vector width (bits) :func:`wide_vectors` asks XLA:CPU and Numba's LLVM to prefer
+WIDE_VECTOR_BITS = 512
+
+
+def host_has_avx512() -> bool:
+    """Whether this machine's CPU has AVX-512 (``avx512f`` among ``/proc/cpuinfo``'s flags; False elsewhere)."""
+    try:
+        with open("/proc/cpuinfo") as fh:
+            return any(line.startswith("flags") and "avx512f" in line.split() for line in fh)
+    except OSError:
+        return False
+
+
+def wide_vectors(environ: Optional[dict] = None) -> str:
+    """Let XLA:CPU and Numba use the CPU's 512-bit vectors where it has AVX-512.
+
+    Both compilers prefer 256-bit vectors by default on such CPUs (XLA's ``xla_cpu_prefer_vector_width`` is 256;
+    LLVM's tuning for Intel's AVX-512 cores is ``prefer-256-bit``). The kernels of deltajax are straight-line
+    arithmetic over points or samples, where 512 bits measured faster on a 2-core Intel Xeon (docs/BENCHMARKS.md:
+    the JAX kernel 1.4-1.7x per CPU-second, the Table-6 job's Numba R screen 1.2x), with the same answers (the
+    operations act lane by lane; the reductions are not vectorised in either compiler without fast-math).
+
+    * XLA: ``--xla_cpu_prefer_vector_width=512`` added to ``XLA_FLAGS`` of ``environ`` (default: this process's
+      environment), only while no JAX backend exists (the flags are read when it starts) and unless the flag is
+      already there (an explicit setting wins). The flags are part of every compiled program's cache key (JAX's
+      and :mod:`deltajax.tracing`'s), so the programs compiled either way never mix.
+    * Numba (this process only, when ``environ`` is None): the host's CPU features with ``-prefer-256-bit``
+      (``numba.config.CPU_FEATURES``), unless ``NUMBA_CPU_NAME`` or ``NUMBA_CPU_FEATURES`` is set, and only before
+      Numba has built its code generator (importing deltajax's Numba backend builds it); not through the
+      environment, which child processes on other machines would inherit (their CPUs may lack a feature); its code
+      generator is built at once, with them (a few milliseconds).
+
+    Returns what was done, for the log and the results' attributes.
+    """
+    env = os.environ if environ is None else environ
+    if not host_has_avx512():
+        return "the compilers' defaults (no AVX-512)"
+    flags = env.get("XLA_FLAGS", "")
+    if "xla_cpu_prefer_vector_width" in flags:
+        xla = "XLA as XLA_FLAGS says"
+    elif xla_bridge.backends_are_initialized():
+        xla = "XLA unchanged (backend already initialised)"
+    else:
+        env["XLA_FLAGS"] = f"{flags} --xla_cpu_prefer_vector_width={WIDE_VECTOR_BITS}".strip()
+        xla = f"XLA {WIDE_VECTOR_BITS}-bit"
+    if environ is not None:
+        return xla
+    import llvmlite.binding as llvm
+    from numba.core import config as numba_config, registry
+
+    if "NUMBA_CPU_NAME" in env or "NUMBA_CPU_FEATURES" in env:
+        nb = "Numba as NUMBA_CPU_NAME / NUMBA_CPU_FEATURES say"
+    elif "_toplevel_target_context" in vars(registry.cpu_target):   # its code generator fixed its features
+        nb = "Numba unchanged (already compiling)"
+    else:   # the code generator built now keeps them (numba re-reads its config on a change of NUMBA_* variables)
+        numba_config.CPU_FEATURES = f"{llvm.get_host_cpu_features().flatten()},-prefer-256-bit"
+        registry.cpu_target.target_context
+        nb = f"Numba {WIDE_VECTOR_BITS}-bit"
+    return f"{xla}, {nb}"
+
+
 class WorkerEnv(Callback):
     """Hydra callback: prepare each job's process (threads, host devices, GPU memory) before it runs.
 
@@ -147,15 +213,17 @@ class WorkerEnv(Callback):
     ``hydra.callbacks.worker_env.cpus=8`` (default: see :func:`resolve_worker_cpus`),
     ``hydra.callbacks.worker_env.host_devices=4`` (default 1; ``null``: one JAX host device per CPU),
     ``hydra.callbacks.worker_env.gpu_preallocate=true``, ``hydra.callbacks.worker_env.malloc_reuse=false``
-    (glibc's defaults: freed buffers unmapped at once).
+    (glibc's defaults: freed buffers unmapped at once), ``hydra.callbacks.worker_env.wide_vectors=false`` (the
+    compilers' default vector width: :func:`wide_vectors`).
     """
 
     def __init__(self, cpus: Optional[int] = None, host_devices: Optional[int] = 1,
-                 gpu_preallocate: bool = False, malloc_reuse: bool = True) -> None:
+                 gpu_preallocate: bool = False, malloc_reuse: bool = True, wide_vectors: bool = True) -> None:
         self.cpus = cpus
         self.host_devices = host_devices
         self.gpu_preallocate = bool(gpu_preallocate)
         self.malloc_reuse = bool(malloc_reuse)
+        self.wide_vectors = bool(wide_vectors)
 
     def on_job_start(self, config, **kwargs: Any) -> None:
         from omegaconf import OmegaConf
@@ -168,7 +236,9 @@ class WorkerEnv(Callback):
             cpus, why = int(self.cpus), "hydra.callbacks.worker_env.cpus"
         else:
             cpus, why = resolve_worker_cpus(launcher)
-        applied = apply_worker_env(cpus, self.host_devices, self.gpu_preallocate, malloc_reuse=self.malloc_reuse)
+        applied = apply_worker_env(cpus, self.host_devices, self.gpu_preallocate, malloc_reuse=self.malloc_reuse,
+                                   wide=self.wide_vectors)
         os.environ["DELTAJAX_WORKER_ENV"] = json.dumps({**applied, "cpus_from": why})
         print(f"[deltajax] worker: {cpus} CPUs ({why}); XLA threads PJRT_NPROC={applied['PJRT_NPROC']}, "
-              f"host devices {applied['host_devices']}; malloc: {applied['malloc']}", flush=True)
+              f"host devices {applied['host_devices']}; malloc: {applied['malloc']}; vectors: {applied['vectors']}",
+              flush=True)
