@@ -35,6 +35,10 @@ os.environ["DELTAJAX_JAX_CACHE"] = JAX_CACHE
 # A warm toy ga_reconfig CLI run (screen, Pareto, refine off: the SLURM test's job): 45.0, 39.7 -> 36.9, 38.4
 # CPU-s (load 3-4, 2026-12-02)
 os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] = str(JAX_CACHE_MIN_S)
+# the CLI worker's vector width (512 bits where the CPU has AVX-512: deltajax.sweeps.worker.wide_vectors) for the
+# tests' own programs and, through XLA_FLAGS, every CLI run they start: one width, one set of compiled programs
+from deltajax.sweeps.worker import wide_vectors  # noqa: E402
+wide_vectors()
 
 from hypothesis import settings  # noqa: E402
 
