@@ -164,8 +164,8 @@ def wide_vectors(environ: Optional[dict] = None) -> str:
     Both compilers prefer 256-bit vectors by default on such CPUs (XLA's ``xla_cpu_prefer_vector_width`` is 256;
     LLVM's tuning for Intel's AVX-512 cores is ``prefer-256-bit``). The kernels of deltajax are straight-line
     arithmetic over points or samples, where 512 bits measured faster on a 2-core Intel Xeon (docs/BENCHMARKS.md:
-    the JAX kernel 1.4-1.7x per CPU-second, the Table-6 job's Numba R screen 1.2x), with the same answers (the
-    operations act lane by lane; the reductions are not vectorised in either compiler without fast-math).
+    the JAX kernel 1.4-1.7x per CPU-second, the Table-6 job's Numba R screen 1.2x) and gave the same answers
+    (the kernel's outputs, the main job's and the Table-6 job's results files bit for bit).
 
     * XLA: ``--xla_cpu_prefer_vector_width=512`` added to ``XLA_FLAGS`` of ``environ`` (default: this process's
       environment), only while no JAX backend exists (the flags are read when it starts) and unless the flag is
