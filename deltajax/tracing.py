@@ -33,7 +33,7 @@ from jax import export
 
 from deltajax.io import write_atomic
 
-__all__ = ["traced_once", "persistent", "program_cache_dir", "STATS", "PROGRAMS_KEPT", "content_key",
+__all__ = ["traced_once", "persistent", "program_cache_dir", "cpu_flags", "STATS", "PROGRAMS_KEPT", "content_key",
            "stable_key", "shared_program", "PROGRAMS", "PROGRAMS_MAX", "forget", "kinds_in_use"]
 
 F = TypeVar("F", bound=Callable)
@@ -175,16 +175,21 @@ _FRESH_COMPILE = {"xla_dump_large_constants": True}
 
 
 @functools.lru_cache(maxsize=None)
+def cpu_flags() -> str:
+    """This machine's CPU features as ``/proc/cpuinfo`` lists them: its first ``flags`` line (``Features`` on Arm),
+    empty where there is none."""
+    try:
+        with open("/proc/cpuinfo") as f:
+            return next((ln for ln in f if ln.startswith(("flags", "Features"))), "")
+    except OSError:
+        return ""
+
+
+@functools.lru_cache(maxsize=None)
 def _machine_key() -> str:
     """What a compiled executable depends on beyond the exported program: the XLA backend's version and this
     machine's instruction set (XLA:CPU compiles for the host's CPU features)."""
-    flags = ""
-    try:
-        with open("/proc/cpuinfo") as f:
-            flags = next((ln for ln in f if ln.startswith(("flags", "Features"))), "")
-    except OSError:
-        pass
-    parts = [platform.machine(), platform.processor(), flags, jax.devices()[0].client.platform_version]
+    parts = [platform.machine(), platform.processor(), cpu_flags(), jax.devices()[0].client.platform_version]
     return hashlib.sha256("\n".join(parts).encode()).hexdigest()[:16]
 
 

@@ -23,6 +23,7 @@ import sys
 import jax
 from jax._src import xla_bridge
 
+from ..tracing import cpu_flags
 from .layout import Callback
 
 __all__ = ["WorkerEnv", "resolve_worker_cpus", "apply_worker_env", "keep_freed_memory", "MALLOC_REUSE",
@@ -150,12 +151,8 @@ WIDE_VECTOR_BITS = 512
 
 
 def host_has_avx512() -> bool:
-    """Whether this machine's CPU has AVX-512 (``avx512f`` among ``/proc/cpuinfo``'s flags; False elsewhere)."""
-    try:
-        with open("/proc/cpuinfo") as fh:
-            return any(line.startswith("flags") and "avx512f" in line.split() for line in fh)
-    except OSError:
-        return False
+    """Whether this machine's CPU has AVX-512 (``avx512f`` among its flags, :func:`deltajax.tracing.cpu_flags`)."""
+    return "avx512f" in cpu_flags().split()
 
 
 def wide_vectors(environ: Optional[dict] = None) -> str:
