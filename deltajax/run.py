@@ -41,6 +41,12 @@ log = logging.getLogger("deltajax")
 #: Exit status of a run stopped by a user error (bad config value, unknown experiment): one line on stderr.
 EXIT_USER_ERROR = 2
 
+#: JAX's persistent-cache threshold for the CLI's runs (seconds of compilation; unless
+#: ``JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS`` is set): every program is kept, the ~150 single operations a job
+#: dispatches eagerly while it builds its problem, cycles and exports included (~30 ms each to compile, ~2 ms to
+#: read back: ~4 CPU-s of a warm run of the main job; docs/BENCHMARKS.md)
+CACHE_MIN_COMPILE_S = 0.0
+
 
 def _config_dir() -> str:
     """Where the Hydra configs are: ``DELTAJAX_CONFIG_DIR``, else the repository's top-level ``configs/`` (a
@@ -67,7 +73,7 @@ _register_schemas()  # before Hydra composes (configs/config.yaml names schema/r
 
 __all__ = ["RunContext", "main", "cli", "run_experiment", "execute", "list_experiments", "CONFIG_DIR",
            "check_overrides", "check_sweep", "composition_error_line",
-           "EXIT_USER_ERROR"]
+           "EXIT_USER_ERROR", "CACHE_MIN_COMPILE_S"]
 
 
 @dataclasses.dataclass
@@ -200,7 +206,7 @@ def execute(cfg: DictConfig, run_dir: Path, on_claimed=None) -> Path:
         # some of which compile: a boundary search's centre is checked by inverse kinematics)
         jax.config.update("jax_compilation_cache_dir", os.path.expanduser(str(cache)))
         if "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS" not in os.environ:  # JAX's own setting wins if given
-            jax.config.update("jax_persistent_cache_min_compile_time_secs", 1.0)
+            jax.config.update("jax_persistent_cache_min_compile_time_secs", CACHE_MIN_COMPILE_S)
     name, module, robot, recon, settings = _validated(cfg, run_dir)  # every field, before the run dir is touched
 
     with contextlib.ExitStack() as stack:

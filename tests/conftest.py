@@ -123,7 +123,7 @@ def toy_run(tmp_path_factory):
             return d / "results.h5"
         try:
             return run_experiment(name, overrides(name, *extra), run_dir=d)
-        finally:  # the job sets the CLI's threshold (1 s) if JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS is unset
+        finally:  # the job sets the CLI's threshold (run.CACHE_MIN_COMPILE_S) unless JAX's variable is set
             jax.config.update("jax_persistent_cache_min_compile_time_secs", JAX_CACHE_MIN_S)
 
     return run

@@ -46,13 +46,14 @@ def test_run_uses_the_cache_the_environment_names(monkeypatch, tmp_path):
 
 
 def test_run_keeps_jaxs_own_cache_threshold_when_set(monkeypatch, tmp_path):
-    """The CLI's persistent-cache threshold (1 s) applies unless JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS is set
-    (JAX reads it at import; the tests set it for their CLI subprocesses: tests/conftest.py)."""
+    """The CLI's persistent-cache threshold (``deltajax.run.CACHE_MIN_COMPILE_S``) applies unless
+    JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS is set (JAX reads it at import; the tests set it for their CLI
+    subprocesses: tests/conftest.py)."""
     import jax
     import pytest
 
     from deltajax.config import ConfigError
-    from deltajax.run import execute
+    from deltajax.run import CACHE_MIN_COMPILE_S, execute
 
     # what the CLI subprocesses inherit
     assert os.environ["JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"] == str(JAX_CACHE_MIN_S)
@@ -66,7 +67,7 @@ def test_run_keeps_jaxs_own_cache_threshold_when_set(monkeypatch, tmp_path):
         monkeypatch.delenv("JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS")
         with pytest.raises(ConfigError, match="experiment.grid.h must be > 0"):
             execute(cfg, tmp_path / "run")
-        assert jax.config.jax_persistent_cache_min_compile_time_secs == 1.0  # the CLI's default
+        assert jax.config.jax_persistent_cache_min_compile_time_secs == CACHE_MIN_COMPILE_S  # the CLI's default
     finally:
         jax.config.update("jax_compilation_cache_dir", before[0])
         jax.config.update("jax_persistent_cache_min_compile_time_secs", before[1])

@@ -11,9 +11,10 @@ import os
 #: the persistent XLA cache of the test session (tests/conftest.py) and of the toy runs; DELTAJAX_TEST_JAX_CACHE
 #: picks another folder (an empty one measures a cold start)
 JAX_CACHE = os.path.expanduser(os.environ.get("DELTAJAX_TEST_JAX_CACHE", "~/.cache/deltajax/jax"))
-#: the tests' persistent-cache threshold (the CLI's own is 1 s): every program, the smallest eager operation
-#: included. Most of the fast tier's compilations are programs of a few operations (~30 ms each, ~580 per
-#: session) that a warm session reads back in a few ms instead (docs/BENCHMARKS.md, Test suite)
+#: the tests' persistent-cache threshold (the CLI's too, ``deltajax.run.CACHE_MIN_COMPILE_S``): every program,
+#: the smallest eager operation included. Most of the fast tier's compilations are programs of a few operations
+#: (~30 ms each, ~580 per session) that a warm session reads back in a few ms instead (docs/BENCHMARKS.md, Test
+#: suite)
 JAX_CACHE_MIN_S = 0.0
 #: plots on (a job's figures are part of its end-to-end run)
 COMMON = ["progress=false", f"compilation_cache={JAX_CACHE}"]
