@@ -291,7 +291,9 @@ def test_a_second_process_of_the_main_job_builds_no_new_program(toy_run, tmp_pat
         print("KINDS", *T.kinds_in_use())
     """)
     env = {k: v for k, v in os.environ.items() if k != "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS"}
-    env["DELTAJAX_PROGRAM_CACHE"] = str(T.program_cache_dir())   # the session's kept programs
+    kept = T.program_cache_dir()
+    assert kept is not None, "the session keeps no programs (DELTAJAX_PROGRAM_CACHE is empty)"
+    env["DELTAJAX_PROGRAM_CACHE"] = str(kept)   # the session's kept programs
     results = []
     for run in ("first", "second"):
         r = subprocess.run([sys.executable, "-c", script, str(tmp_path / run)], env=env, capture_output=True,
